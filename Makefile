@@ -1,0 +1,30 @@
+# Two commands do everything on a fresh machine: `make run` and `make test`.
+# Both create .venv and install the project (uv when available, pip otherwise).
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+PYTHON ?= python3
+
+.PHONY: run test bench plan-demo clean
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -m pip install -q uv >/dev/null 2>&1 || true
+	@if $(PYTHON) -m uv --version >/dev/null 2>&1; then \
+	    $(PYTHON) -m uv venv -q --allow-existing $(VENV) && \
+	    $(PYTHON) -m uv pip install -q --python $(PY) -e '.[dev]'; \
+	else \
+	    $(PYTHON) -m venv $(VENV) && $(PY) -m pip install -q -e '.[dev]'; \
+	fi
+	@touch $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/twb plan --env room --start 0.3,0.3,0 --goal 1.5,1.5,90 --planner fm2 --format json
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(PY) bench/planners.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache

@@ -1,0 +1,186 @@
+"""One entry point for planning: validate, plan in the configuration space, post-process, time.
+
+:func:`plan_path` is what the command line, the server and users call; it
+treats built-in and plug-in planners the same way and guarantees that the
+returned path starts at the start, ends at the goal and never enters an
+obstacle dilated by the robot radius.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy import ndimage
+
+from .environment import Environment, load_environment
+from .errors import InvalidPose, NoPathFound, PlanningError
+from .grid import ConfigSpace, config_space
+from .postprocess import postprocess
+from .registry import get_planner
+
+__all__ = ["DEFAULT_ROBOT_RADIUS", "PlanResult", "components", "parse_pose", "plan_path"]
+
+#: Radius (m) of the BeBot profile, the default robot; planners import nothing
+#: from robot_agent, so the value is repeated here and checked by a test.
+DEFAULT_ROBOT_RADIUS = 0.045
+
+
+@dataclass
+class PlanResult:
+    """A planned path and how it was obtained.
+
+    ``path`` is ``(N, 3)``: x, y (m), heading (rad), post-processed and ready
+    to send; ``raw_path`` ``(M, 2)`` is the planner's own output.
+    ``planning_time_s`` covers the planner and post-processing, not building
+    the (cached) grid, which ``grid_time_s`` reports when it happened.
+    """
+
+    planner: str
+    path: np.ndarray
+    raw_path: np.ndarray
+    length_m: float
+    planning_time_s: float
+    seed: int
+    params: dict[str, Any]
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (DESIGN §8): ``path``, ``length_m``, ``planning_time_s`` and details."""
+        return {
+            "planner": self.planner,
+            "path": np.round(self.path, 6).tolist(),
+            "length_m": round(self.length_m, 6),
+            "planning_time_s": round(self.planning_time_s, 6),
+            "seed": self.seed,
+            "params": self.params,
+            "raw_points": int(len(self.raw_path)),
+            "info": self.info,
+        }
+
+
+def parse_pose(value: Sequence[float], what: str) -> np.ndarray:
+    """``(x, y[, theta])`` as a float array of length 3 (theta NaN when not given)."""
+    try:
+        arr = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise InvalidPose(f"{what} must be numbers x, y[, theta], got {value!r}") from None
+    if arr.size not in (2, 3):
+        raise InvalidPose(f"{what} must have 2 or 3 numbers (x, y[, theta]), got {arr.size}")
+    if not np.isfinite(arr).all():
+        raise InvalidPose(f"{what} must be finite, got {arr.tolist()}")
+    return np.r_[arr, np.nan] if arr.size == 2 else arr
+
+
+def _check_pose(space: ConfigSpace, pose: np.ndarray, what: str) -> None:
+    env = space.env
+    x, y = pose[:2]
+    if not (0 <= x <= env.width and 0 <= y <= env.height):
+        raise InvalidPose(
+            f"{what} ({x:g}, {y:g}) is outside the field 0..{env.width:g} x 0..{env.height:g} m"
+        )
+    if not space.is_free(pose[None, :2])[0]:
+        raise InvalidPose(
+            f"{what} ({x:g}, {y:g}) is inside an obstacle or closer than the robot radius "
+            f"{space.radius:g} m to one"
+        )
+
+
+def components(space: ConfigSpace) -> np.ndarray:
+    """Label of the 4-connected free region of every cell (0 where occupied), cached per space."""
+    labels = space.__dict__.get("_labels")
+    if labels is None:
+        labels, _ = ndimage.label(space.free)
+        object.__setattr__(space, "_labels", labels)
+    return labels
+
+
+def plan_path(
+    env: Environment | str,
+    start: Sequence[float],
+    goal: Sequence[float],
+    planner: str = "fmm",
+    *,
+    robot_radius: float = DEFAULT_ROBOT_RADIUS,
+    resolution: float = 0.01,
+    params: Mapping[str, Any] | None = None,
+    seed: int = 0,
+    max_spacing: float = 0.1,
+    tolerance: float = 0.005,
+) -> PlanResult:
+    """Plan a collision-free path from ``start`` to ``goal`` with the planner called ``planner``.
+
+    Poses are ``(x, y[, theta])`` in metres/radians; ``robot_radius`` and
+    ``resolution`` in metres; ``max_spacing`` is the largest distance (m)
+    between consecutive points of the returned path; ``tolerance`` (m) the
+    largest deviation allowed when dropping points of the raw path.
+
+    Raises :class:`~planners.errors.PlanningError` subclasses with a clear
+    message: unknown planner, invalid environment or parameters, start/goal
+    outside the field or not free, and no path.
+    """
+    env = load_environment(env)
+    impl = get_planner(planner)
+    try:
+        checked = impl.validate_params(params)
+        if not (isinstance(seed, int) and not isinstance(seed, bool)) or not 0 <= seed < 2**63:
+            raise ValueError(f"`seed` must be an integer in [0, 2**63), got {seed!r}")
+        t0 = time.perf_counter()
+        space = config_space(env, robot_radius, resolution)
+        grid_time = time.perf_counter() - t0
+    except PlanningError:
+        raise
+    except ValueError as exc:
+        raise PlanningError(str(exc)) from exc
+    s, g = parse_pose(start, "start"), parse_pose(goal, "goal")
+    _check_pose(space, s, "start")
+    _check_pose(space, g, "goal")
+    labels = components(space)
+    (sy, gy), (sx, gx) = space.grid.cell_of(np.array([s[:2], g[:2]]))
+    if labels[sy, sx] != labels[gy, gx]:
+        raise NoPathFound(
+            f"the goal ({g[0]:g}, {g[1]:g}) cannot be reached from the start ({s[0]:g}, {s[1]:g}): "
+            f"they are in separate free regions for a robot of radius {robot_radius:g} m"
+        )
+    t0 = time.perf_counter()
+    try:
+        out = impl.solve(space, s[:2].copy(), g[:2].copy(), checked, seed)
+    except PlanningError:
+        raise
+    except ValueError as exc:
+        raise PlanningError(str(exc)) from exc
+    raw, info = out if isinstance(out, tuple) else (out, {})
+    raw = _check_raw(impl.name, np.asarray(raw, dtype=float), s, g, space)
+    final = None if math.isnan(g[2]) else float(g[2])
+    path = postprocess(raw, space=space, tolerance=tolerance, max_spacing=max_spacing, final_heading=final)
+    elapsed = time.perf_counter() - t0
+    if not space.path_free(path):  # postprocess keeps chords free; this is a safety net
+        raise PlanningError(f"internal error: post-processed {impl.name} path leaves free space")
+    info = dict(info)
+    if grid_time > 1e-3:
+        info["grid_time_s"] = round(grid_time, 6)
+    length = float(np.hypot(*np.diff(path[:, :2], axis=0).T).sum())
+    return PlanResult(impl.name, path, raw, length, elapsed, seed, checked, info)
+
+
+def _check_raw(name: str, raw: np.ndarray, s: np.ndarray, g: np.ndarray, space: ConfigSpace) -> np.ndarray:
+    """Refuse a planner result that is malformed, misses the ends or collides (plug-ins included)."""
+    if raw.ndim != 2 or raw.shape[1] not in (2, 3) or len(raw) < 2:
+        raise PlanningError(f"planner {name!r} returned an array of shape {raw.shape}, expected (N>=2, 2)")
+    raw = raw[:, :2]
+    if not np.isfinite(raw).all():
+        raise PlanningError(f"planner {name!r} returned a path with NaN or inf")
+    tol = space.resolution * 1e-6
+    if np.hypot(*(raw[0] - s[:2])) > tol or np.hypot(*(raw[-1] - g[:2])) > tol:
+        raise PlanningError(f"planner {name!r} returned a path that does not run from start to goal")
+    bad = ~space.segments_free(raw[:-1], raw[1:])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise PlanningError(
+            f"planner {name!r} returned a path whose segment {i} ({raw[i][0]:.3f}, {raw[i][1]:.3f}) -> "
+            f"({raw[i + 1][0]:.3f}, {raw[i + 1][1]:.3f}) enters an obstacle"
+        )
+    return raw

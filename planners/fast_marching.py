@@ -1,0 +1,245 @@
+"""Fast-marching travel times and the descent that turns them into paths.
+
+Shared by FMM (unit speed) and FM² (speed from obstacle clearance).  The
+arrival time ``T`` is computed from the goal with ``skfmm.travel_time`` over
+the free cells of a :class:`~planners.grid.ConfigSpace` (occupied cells are
+masked); the path is the descent of ``T`` from the start, at sub-cell
+resolution, ending exactly at the goal.
+
+In open space the descent follows the gradient of the bilinear interpolant
+of ``T``; next to obstacles it follows the interpolated *upwind* gradient
+(one-sided differences towards the smaller neighbour, as the fast-marching
+scheme itself uses), which never points into a blocked cell, and a step that
+would still enter one falls back to the discrete steepest-descent neighbour.
+Gradients are read lazily around the path only, so the cost beyond
+``skfmm.travel_time`` is a few microseconds per step (see docs/performance.md).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import skfmm
+
+from .errors import NoPathFound
+from .grid import ConfigSpace
+
+__all__ = ["descend", "travel_time"]
+
+_CIRCLE = [complex(math.cos(a), math.sin(a)) for a in np.linspace(0, 2 * math.pi, 32, endpoint=False)]
+_RIDGE_WATCH = 8  # steps checked for a ridge after the start, a fallback or a ridge step
+_RIDGE_DIVERGENCE = 0.3  # 1/cell; about the angle (rad) between the two ways round on a ridge
+_RIDGE_CHECKS = [k / 6 for k in range(1, 7)]  # a 2-cell step sampled every h/3
+_NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
+
+
+def travel_time(space: ConfigSpace, goal: np.ndarray, speed: np.ndarray | None = None) -> np.ndarray:
+    """Arrival time (s, or m at unit speed) of a front started at ``goal`` (m), ``(ny, nx)``.
+
+    Occupied and unreachable cells are ``+inf``.  ``speed`` (m/s, ``(ny, nx)``,
+    > 0 on free cells) defaults to 1.  Inside the one-cell circle around the
+    goal where the front starts, ``T`` is minus the distance to that circle, so
+    ``T`` keeps decreasing all the way to the goal.
+    """
+    h = space.resolution
+    ny, nx = space.free.shape
+    xs = (np.arange(nx) + 0.5) * h - goal[0]
+    ys = (np.arange(ny) + 0.5) * h - goal[1]
+    # zero level set: a circle of one cell around the goal, so it always crosses cell centres
+    level = np.hypot(xs[None, :], ys[:, None]) - h
+    phi = np.ma.MaskedArray(level, mask=~space.free)
+    if speed is None:
+        speed = np.ones((ny, nx))
+    out = skfmm.travel_time(phi, speed, dx=h)
+    t = np.where(np.ma.getmaskarray(out), np.inf, np.ma.getdata(out))
+    inside = (level < 0) & space.free
+    t[inside] = level[inside]
+    return t
+
+
+_BIG = 1e30  # arrival time standing for "blocked": finite, so bilinear weights of 0 stay 0
+
+
+def _up(c: float, lo: float, hi: float) -> float:
+    """Upwind difference at a cell of time ``c`` with neighbours ``lo`` (before) and ``hi`` (after)."""
+    if c >= _BIG:
+        return 0.0
+    if lo <= hi:
+        return c - lo if c > lo else 0.0
+    return hi - c if c > hi else 0.0
+
+
+class _Descent:
+    """Scalar reads of a padded, flattened arrival-time grid.
+
+    The grid is padded by two blocked cells so that the 4 x 4 stencil around
+    any interpolation quad exists without clamping; ``k = row * W + col`` is
+    the flat index of the padded grid.  The upwind gradient is evaluated
+    lazily at the four corners of the quad the path is in (12 reads), which
+    on large grids is far cheaper than computing it everywhere.
+    """
+
+    def __init__(self, space: ConfigSpace, t: np.ndarray) -> None:
+        h = space.resolution
+        self.h, self.inv_h = h, 1.0 / h
+        ny, nx = self.ny, self.nx = t.shape
+        self.W = nx + 4
+        tp = np.full((ny + 4, nx + 4), _BIG)
+        np.minimum(t, _BIG, out=tp[2:-2, 2:-2])
+        self.t = tp.ravel().item
+
+    def cell(self, x: float, y: float) -> int:
+        """Padded flat index of the cell containing (x, y) (m), inside the field."""
+        return int(y * self.inv_h + 2.0) * self.W + int(x * self.inv_h + 2.0)
+
+    def is_free(self, x: float, y: float) -> bool:
+        return 0.0 <= x < self.nx * self.h and 0.0 <= y < self.ny * self.h and self.t(self.cell(x, y)) < _BIG
+
+    def segment_free(self, x: float, y: float, sx: float, sy: float, fractions: list[float]) -> bool:
+        """The points (x, y) + f (sx, sy) for f in ``fractions`` are all in free cells."""
+        for f in fractions:
+            if not self.is_free(x + sx * f, y + sy * f):
+                return False
+        return True
+
+    def t_at(self, x: float, y: float) -> float:
+        """Bilinear arrival time at (x, y) (m)."""
+        u, v = x * self.inv_h + 1.5, y * self.inv_h + 1.5
+        j, i = int(u), int(v)
+        fu, fv = u - j, v - i
+        k, ti, W = i * self.W + j, self.t, self.W
+        return (1 - fv) * ((1 - fu) * ti(k) + fu * ti(k + 1)) + fv * ((1 - fu) * ti(k + W) + fu * ti(k + W + 1))
+
+    def gradient(self, k: int) -> tuple[float, float, float, float, float, float, float, float, bool]:
+        """Upwind gradient at the quad with lower-left padded index ``k``: (gx0..3, gy0..3, near).
+
+        Corners are 0 = (i, j), 1 = (i, j+1), 2 = (i+1, j), 3 = (i+1, j+1);
+        ``near`` tells whether any cell of the stencil is blocked.
+        """
+        ti, W = self.t, self.W
+        c0, c1, c2, c3 = ti(k), ti(k + 1), ti(k + W), ti(k + W + 1)
+        l0, r1, l2, r3 = ti(k - 1), ti(k + 2), ti(k + W - 1), ti(k + W + 2)
+        d0, d1, u2, u3 = ti(k - W), ti(k - W + 1), ti(k + 2 * W), ti(k + 2 * W + 1)
+        near = max(c0, c1, c2, c3, l0, r1, l2, r3, d0, d1, u2, u3) >= _BIG
+        return (
+            _up(c0, l0, c1), _up(c1, c0, r1), _up(c2, l2, c3), _up(c3, c2, r3),
+            _up(c0, d0, c2), _up(c1, d1, c3), _up(c2, c0, u2), _up(c3, c1, u3),
+            near,
+        )
+
+
+def descend(
+    space: ConfigSpace,
+    t: np.ndarray,
+    start: np.ndarray,
+    goal: np.ndarray,
+    *,
+    step: float = 0.5,
+) -> tuple[np.ndarray, dict[str, int]]:
+    """Descend ``t`` from ``start`` to ``goal``; returns the ``(N, 2)`` path (m) and counters.
+
+    ``step`` is the step length in cells, in (0, 1].  The direction is the
+    bilinearly interpolated upwind gradient.  Away from obstacles (the 3 x 3
+    cells around the point all free) a step is taken as is; near obstacles a
+    step must keep the dense samples that :meth:`ConfigSpace.segments_free`
+    checks free and strictly decrease the interpolated arrival time, else the
+    descent moves to the neighbouring cell centre with the lowest arrival
+    time, so it never enters an occupied cell.  On a ridge of T (two equally
+    fast ways round an obstacle: the unit descent directions at the quad's
+    corners diverge) the interpolated gradient would average both ways away
+    and run along the ridge, so the lowest arrival time on a circle of two
+    cells picks one way.  The loop is over steps along the path (two per
+    cell travelled at the default step), never over grid cells.
+    """
+    if not 0 < step <= 1:
+        raise ValueError("`step` must be in (0, 1] cells")
+    h = space.resolution
+    iy, ix = space.grid.cell_of(start[None, :])
+    t_start = float(t[iy[0], ix[0]])
+    if not math.isfinite(t_start):
+        raise NoPathFound("the goal cannot be reached from the start")
+    d = _Descent(space, t)
+    tv, W, inv_h = d.t, d.W, d.inv_h
+    goal_x, goal_y = float(goal[0]), float(goal[1])
+    x, y = float(start[0]), float(start[1])
+    pts = [(x, y)]
+    near_r2 = (1.5 * h) ** 2
+    ds = step * h
+    n_checks = math.ceil(step * 3)
+    checks = [k / n_checks for k in range(1, n_checks + 1)]  # samples every <= h/3, as segments_free
+    max_steps = int(4 * max(t_start, 0.0) / ds) + 8 * (d.nx + d.ny)
+    fallbacks = ridge_steps = 0
+    # Descent flows away from ridges, so a path is on one only where it starts
+    # or right after a fallback or ridge move: look for ridges only then.
+    ridge_watch = _RIDGE_WATCH
+    for _ in range(max_steps):
+        dgx, dgy = goal_x - x, goal_y - y
+        if dgx * dgx + dgy * dgy <= near_r2 and d.segment_free(x, y, dgx, dgy, [0.25, 0.5, 0.75]):
+            break
+        u, v = x * inv_h + 1.5, y * inv_h + 1.5
+        j, i = int(u), int(v)
+        fu, fv = u - j, v - i
+        k = i * W + j
+        c0, c1, c2, c3 = tv(k), tv(k + 1), tv(k + W), tv(k + W + 1)
+        near = c0 >= _BIG or c1 >= _BIG or c2 >= _BIG or c3 >= _BIG
+        if not near and not ridge_watch:
+            # open space: the gradient of the bilinear interpolant of the quad
+            gx = (1 - fv) * (c1 - c0) + fv * (c3 - c2)
+            gy = (1 - fu) * (c2 - c0) + fu * (c3 - c1)
+        else:
+            a0, a1, a2, a3, b0, b1, b2, b3, near = d.gradient(k)
+            if ridge_watch:
+                ridge_watch -= 1
+                n0, n1, n2, n3 = math.hypot(a0, b0), math.hypot(a1, b1), math.hypot(a2, b2), math.hypot(a3, b3)
+                # divergence (1/cell) of the unit descent directions -g/|g| over the quad
+                if n0 and n1 and n2 and n3 and 0.5 * (
+                    a0 / n0 - a1 / n1 + a2 / n2 - a3 / n3 + b0 / n0 + b1 / n1 - b2 / n2 - b3 / n3
+                ) > _RIDGE_DIVERGENCE:
+                    best_t, best_q = d.t_at(x, y), None
+                    for e in _CIRCLE:
+                        qx, qy = x + 2 * h * e.real, y + 2 * h * e.imag
+                        tq = d.t_at(qx, qy)
+                        if tq < best_t and d.segment_free(x, y, qx - x, qy - y, _RIDGE_CHECKS):
+                            best_t, best_q = tq, (qx, qy)
+                    if best_q is not None:
+                        x, y = best_q
+                        pts.append(best_q)
+                        ridge_steps += 1
+                        ridge_watch = _RIDGE_WATCH
+                        continue
+            # near obstacles: the interpolated upwind gradient never points into a blocked cell
+            w00, w01, w10, w11 = (1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv
+            gx = w00 * a0 + w01 * a1 + w10 * a2 + w11 * a3
+            gy = w00 * b0 + w01 * b1 + w10 * b2 + w11 * b3
+        norm = math.hypot(gx, gy)
+        if norm > 0:
+            sx, sy = -ds * gx / norm, -ds * gy / norm
+            # next to obstacles the step must also lower the arrival time
+            if d.segment_free(x, y, sx, sy, checks) and (not near or d.t_at(x + sx, y + sy) < d.t_at(x, y)):
+                x, y = x + sx, y + sy
+                pts.append((x, y))
+                continue
+        # discrete steepest descent among this cell's and its neighbours' centres
+        fallbacks += 1
+        ridge_watch = _RIDGE_WATCH
+        best = d.t_at(x, y)
+        kc = d.cell(x, y)
+        bk = kc if tv(kc) < best else -1
+        if bk >= 0:
+            best = tv(kc)
+        for di, dj in _NEIGHBOURS:
+            kn = kc + di * W + dj
+            if tv(kn) < best:
+                if di and dj and not (tv(kc + di * W) < _BIG and tv(kc + dj) < _BIG):
+                    continue  # no corner cutting
+                best, bk = tv(kn), kn
+        if bk < 0:
+            break  # bottom of the goal basin: the goal lies in this free cell
+        x, y = ((bk % W) - 1.5) * h, ((bk // W) - 1.5) * h
+        pts.append((x, y))
+    else:
+        raise NoPathFound(f"fast-marching descent did not reach the goal within {max_steps} steps")
+    pts.append((goal_x, goal_y))
+    counters = {"descent_steps": len(pts) - 2, "descent_fallbacks": fallbacks, "descent_ridge_steps": ridge_steps}
+    return np.array(pts), counters

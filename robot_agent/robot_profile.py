@@ -1,0 +1,30 @@
+"""Robot profiles: physical and controller parameters as data (``robot_agent/profiles/*.json``).
+
+Every value is in SI units and carries a documented reason in the file's
+``notes``.  Load one with :func:`load_profile`; list them with
+:func:`profile_names`.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from typing import Any
+
+__all__ = ["DEFAULT_PROFILE", "load_profile", "profile_names"]
+
+DEFAULT_PROFILE = "bebot"
+
+
+def profile_names() -> list[str]:
+    """Names of the shipped profiles (``bebot``, ``khepera3``)."""
+    files = resources.files("robot_agent").joinpath("profiles")
+    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".json"))
+
+
+def load_profile(name: str = DEFAULT_PROFILE) -> dict[str, Any]:
+    """The profile called ``name`` as a dict; ``ValueError`` naming the choices if unknown."""
+    if name not in profile_names():
+        raise ValueError(f"unknown robot profile {name!r} (profiles: {', '.join(profile_names())})")
+    text = resources.files("robot_agent").joinpath("profiles", f"{name}.json").read_text("utf-8")
+    return json.loads(text)
