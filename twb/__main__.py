@@ -1,0 +1,5 @@
+import sys
+
+from twb.main import main
+
+sys.exit(main())

@@ -1,0 +1,47 @@
+"""The ``twb`` command: one Typer app; each sub-command lives in its own module.
+
+Command modules import their heavy dependencies inside the command function,
+so ``twb --help`` and every command start quickly.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from . import plan_cmd
+from .errors import report_exception
+
+app = typer.Typer(
+    name="twb",
+    help="Teleworkbench emulator: plan paths, run robots and the testbed, get metrics.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+app.command("plan")(plan_cmd.plan)
+app.command("planners")(plan_cmd.planners)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point: run the app and turn any error into one line on stderr.
+
+    Typer handles usage errors itself (standalone mode); everything a command
+    raises ends here.
+    """
+    try:
+        app(args=argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except KeyboardInterrupt:
+        print("twb: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the one place errors become messages
+        return report_exception(exc)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

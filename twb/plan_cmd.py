@@ -1,0 +1,99 @@
+"""``twb plan`` and ``twb planners``: plan a path from the shell (DESIGN §8)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from enum import Enum
+from typing import Annotated, Optional
+
+import typer
+
+from .errors import fail
+from .poses import parse_cli_pose
+
+
+class PlanFormat(str, Enum):
+    json = "json"
+    ttp = "ttp"
+    csv = "csv"
+
+
+def _params(items: list[str]) -> dict:
+    out: dict = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            fail(f"--param must be NAME=VALUE, got {item!r}")
+        try:
+            out[key.strip()] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key.strip()] = raw
+    return out
+
+
+def plan(
+    env: Annotated[str, typer.Option("--env", help="Built-in environment name (room, blocks) or a JSON file.")],
+    start: Annotated[Optional[str], typer.Option(help="Start X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
+    goal: Annotated[Optional[str], typer.Option(help="Goal X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
+    plan_name: Annotated[
+        Optional[str], typer.Option("--plan", help="Use the environment's named start/goal plan (e.g. A).")
+    ] = None,
+    planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar or a plug-in name.")] = "fmm",
+    seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM).", min=0)] = 0,
+    robot_radius: Annotated[
+        Optional[float], typer.Option(help="Robot radius in metres [default: the BeBot profile's].")
+    ] = None,
+    resolution: Annotated[float, typer.Option(help="Grid resolution in metres per cell.")] = 0.01,
+    max_spacing: Annotated[float, typer.Option(help="Largest distance between path points, metres.")] = 0.1,
+    param: Annotated[
+        Optional[list[str]], typer.Option("--param", "-p", help="Planner parameter NAME=VALUE (repeatable).")
+    ] = None,
+    fmt: Annotated[PlanFormat, typer.Option("--format", help="json, ttp (wire line, mm/deg) or csv.")] = PlanFormat.json,
+) -> None:
+    """Plan a collision-free path and print it (JSON, a T,T,P line, or CSV t,x,y,theta)."""
+    from planners import load_environment, plan_path
+    from robot_agent.protocol import encode_path
+    from robot_agent.robot_profile import load_profile
+
+    environment = load_environment(env)
+    if plan_name is not None:
+        if start or goal:
+            fail("give either --plan or --start/--goal, not both")
+        try:
+            p = environment.plan(plan_name)
+        except KeyError as exc:
+            fail(str(exc.args[0]))
+        s, g = list(p.start), list(p.goal)
+    else:
+        if not start or not goal:
+            fail("--start and --goal are required (or --plan NAME for a built-in start/goal pair)")
+        s, g = parse_cli_pose(start, "start"), parse_cli_pose(goal, "goal")
+    radius = load_profile()["radius_m"] if robot_radius is None else robot_radius
+    if not math.isfinite(radius) or radius < 0:
+        fail(f"--robot-radius must be a finite number >= 0, got {radius}")
+    result = plan_path(
+        environment, s, g, planner, robot_radius=radius, resolution=resolution,
+        params=_params(param or []), seed=seed, max_spacing=max_spacing,
+    )
+    out = sys.stdout
+    if fmt is PlanFormat.json:
+        doc = result.to_dict()
+        doc.update(environment=environment.name, start=s, goal=g, robot_radius_m=radius, resolution_m=resolution)
+        json.dump(doc, out)
+        out.write("\n")
+    elif fmt is PlanFormat.ttp:
+        out.write(encode_path(result.path) + "\n")
+    else:
+        out.write("t,x,y,theta\n")
+        for x, y, a in result.path.tolist():
+            out.write(f",{x:.6f},{y:.6f},{a:.6f}\n")
+
+
+def planners() -> None:
+    """List the planners that --planner accepts (built-ins and installed plug-ins)."""
+    from planners import available_planners
+
+    for name, desc in available_planners().items():
+        typer.echo(f"{name:10s} {desc}")
