@@ -30,7 +30,6 @@ __all__ = ["descend", "travel_time"]
 _CIRCLE = [complex(math.cos(a), math.sin(a)) for a in np.linspace(0, 2 * math.pi, 32, endpoint=False)]
 _RIDGE_WATCH = 8  # steps checked for a ridge after the start, a fallback or a ridge step
 _RIDGE_DIVERGENCE = 0.3  # 1/cell; about the angle (rad) between the two ways round on a ridge
-_RIDGE_CHECKS = [k / 6 for k in range(1, 7)]  # a 2-cell step sampled every h/3
 _NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
 
 
@@ -96,10 +95,40 @@ class _Descent:
     def is_free(self, x: float, y: float) -> bool:
         return 0.0 <= x < self.nx * self.h and 0.0 <= y < self.ny * self.h and self.t(self.cell(x, y)) < _BIG
 
-    def segment_free(self, x: float, y: float, sx: float, sy: float, fractions: list[float]) -> bool:
-        """The points (x, y) + f (sx, sy) for f in ``fractions`` are all in free cells."""
-        for f in fractions:
-            if not self.is_free(x + sx * f, y + sy * f):
+    def segment_free(self, x0: float, y0: float, x1: float, y1: float) -> bool:
+        """Whether the segment from (x0, y0), a point in a free cell, to (x1, y1) (m) crosses only free cells.
+
+        A scalar grid traversal (Amanatides & Woo) with the same rules as
+        :meth:`ConfigSpace.segments_free`: a cell touched only at a corner is
+        not crossed.  Meant for the short steps of the descent, where the end
+        is usually in the same or the next cell.
+        """
+        if not (0.0 <= x1 < self.nx * self.h and 0.0 <= y1 < self.ny * self.h):
+            return False
+        inv, W, ti = self.inv_h, self.W, self.t
+        u0, v0, u1, v1 = x0 * inv, y0 * inv, x1 * inv, y1 * inv
+        j, i, j1, i1 = int(u0), int(v0), int(u1), int(v1)
+        if j == j1 and i == i1:
+            return True
+        if ti((i1 + 2) * W + j1 + 2) >= _BIG:
+            return False
+        if abs(j1 - j) + abs(i1 - i) == 1:
+            return True
+        du, dv = u1 - u0, v1 - v0
+        sj, si = (1 if du > 0 else -1), (1 if dv > 0 else -1)
+        tx = ((j + (du > 0)) - u0) / du if du else math.inf
+        ty = ((i + (dv > 0)) - v0) / dv if dv else math.inf
+        dtx, dty = (abs(1 / du) if du else math.inf), (abs(1 / dv) if dv else math.inf)
+        for _ in range(abs(j1 - j) + abs(i1 - i)):
+            if abs(tx - ty) <= 1e-9:  # through a grid vertex: diagonally, corner cells untouched
+                j, i, tx, ty = j + sj, i + si, tx + dtx, ty + dty
+            elif tx < ty:
+                j, tx = j + sj, tx + dtx
+            else:
+                i, ty = i + si, ty + dty
+            if i == i1 and j == j1:
+                return True
+            if ti((i + 2) * W + j + 2) >= _BIG:
                 return False
         return True
 
@@ -139,18 +168,19 @@ def descend(
 ) -> tuple[np.ndarray, dict[str, int]]:
     """Descend ``t`` from ``start`` to ``goal``; returns the ``(N, 2)`` path (m) and counters.
 
-    ``step`` is the step length in cells, in (0, 1].  The direction is the
-    bilinearly interpolated upwind gradient.  Away from obstacles (the 3 x 3
-    cells around the point all free) a step is taken as is; near obstacles a
-    step must keep the dense samples that :meth:`ConfigSpace.segments_free`
-    checks free and strictly decrease the interpolated arrival time, else the
+    ``step`` is the step length in cells, in (0, 1].  In open space the
+    direction is the gradient of the bilinear interpolant of ``t``; next to
+    obstacles it is the interpolated upwind gradient, and the step must also
+    strictly decrease the interpolated arrival time.  Every step crosses only
+    free cells (exact grid traversal); where the continuous step fails the
     descent moves to the neighbouring cell centre with the lowest arrival
-    time, so it never enters an occupied cell.  On a ridge of T (two equally
-    fast ways round an obstacle: the unit descent directions at the quad's
-    corners diverge) the interpolated gradient would average both ways away
-    and run along the ridge, so the lowest arrival time on a circle of two
-    cells picks one way.  The loop is over steps along the path (two per
-    cell travelled at the default step), never over grid cells.
+    time, so it never enters an occupied cell and cannot cycle.  On a ridge
+    of ``t`` (two equally fast ways round an obstacle: the unit descent
+    directions at the quad's corners diverge) the interpolated gradient would
+    average both ways away and run along the ridge, so the lowest arrival
+    time on a circle of two cells picks one way.  The loop is over steps
+    along the path (two per cell travelled at the default step), never over
+    grid cells.
     """
     if not 0 < step <= 1:
         raise ValueError("`step` must be in (0, 1] cells")
@@ -166,8 +196,6 @@ def descend(
     pts = [(x, y)]
     near_r2 = (1.5 * h) ** 2
     ds = step * h
-    n_checks = math.ceil(step * 3)
-    checks = [k / n_checks for k in range(1, n_checks + 1)]  # samples every <= h/3, as segments_free
     max_steps = int(4 * max(t_start, 0.0) / ds) + 8 * (d.nx + d.ny)
     fallbacks = ridge_steps = 0
     # Descent flows away from ridges, so a path is on one only where it starts
@@ -175,7 +203,7 @@ def descend(
     ridge_watch = _RIDGE_WATCH
     for _ in range(max_steps):
         dgx, dgy = goal_x - x, goal_y - y
-        if dgx * dgx + dgy * dgy <= near_r2 and d.segment_free(x, y, dgx, dgy, [0.25, 0.5, 0.75]):
+        if dgx * dgx + dgy * dgy <= near_r2 and d.segment_free(x, y, goal_x, goal_y):
             break
         u, v = x * inv_h + 1.5, y * inv_h + 1.5
         j, i = int(u), int(v)
@@ -200,7 +228,7 @@ def descend(
                     for e in _CIRCLE:
                         qx, qy = x + 2 * h * e.real, y + 2 * h * e.imag
                         tq = d.t_at(qx, qy)
-                        if tq < best_t and d.segment_free(x, y, qx - x, qy - y, _RIDGE_CHECKS):
+                        if tq < best_t and d.segment_free(x, y, qx, qy):
                             best_t, best_q = tq, (qx, qy)
                     if best_q is not None:
                         x, y = best_q
@@ -216,7 +244,7 @@ def descend(
         if norm > 0:
             sx, sy = -ds * gx / norm, -ds * gy / norm
             # next to obstacles the step must also lower the arrival time
-            if d.segment_free(x, y, sx, sy, checks) and (not near or d.t_at(x + sx, y + sy) < d.t_at(x, y)):
+            if d.segment_free(x, y, x + sx, y + sy) and (not near or d.t_at(x + sx, y + sy) < d.t_at(x, y)):
                 x, y = x + sx, y + sy
                 pts.append((x, y))
                 continue

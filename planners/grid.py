@@ -2,9 +2,12 @@
 
 :class:`GridMap` rasterises an :class:`~planners.environment.Environment` at a
 resolution ``h`` (metres per cell) and keeps, for every cell centre, an
-approximate clearance (metres to the nearest obstacle) from SciPy's Euclidean
-distance transform.  :class:`ConfigSpace` dilates the obstacles by a robot
-radius: a cell is free when its clearance is at least the radius.  Every
+approximate clearance (metres to the nearest obstacle, within about one cell)
+from SciPy's Euclidean distance transform.  :class:`ConfigSpace` dilates the
+obstacles by a robot radius: a cell is free when the exact distance from its
+centre to every obstacle is at least the radius (the transform decides far
+from the boundary, exact geometry in the band of cells where its error could
+flip the decision).  Every
 planner works in a ``ConfigSpace`` and every path it returns is checked
 against it.
 
@@ -22,7 +25,7 @@ import numpy as np
 from scipy import ndimage
 
 from .environment import Environment
-from .geometry import block_arrays
+from .geometry import block_arrays, distance_to_obstacles
 
 __all__ = ["ConfigSpace", "GridMap", "config_space", "grid_map"]
 
@@ -72,7 +75,8 @@ class GridMap:
     resolution : float, metres per cell
     obstacle : (ny, nx) bool array, cell centre inside a block
     clearance : (ny, nx) float array, metres from the cell centre to the nearest
-        obstacle (blocks and walls), from the Euclidean distance transform; 0 in blocks.
+        obstacle (blocks and walls), from the Euclidean distance transform (within
+        about one cell of the exact distance); 0 in blocks.
     """
 
     env: Environment
@@ -89,7 +93,7 @@ class GridMap:
         # A ring of obstacle cells outside the field makes the walls obstacles.
         # The EDT measures centre-to-centre; subtracting h/2 turns that into the
         # distance to the obstacle cell's edge, which is exact for walls and
-        # grid-aligned blocks and within h/2 otherwise.
+        # grid-aligned blocks and within about one cell otherwise.
         padded = np.pad(~obstacle, 1, constant_values=False)
         edt = ndimage.distance_transform_edt(padded, sampling=resolution)[1:-1, 1:-1]
         clearance = np.maximum(edt - resolution / 2, 0.0)
@@ -121,6 +125,12 @@ class GridMap:
         key = round(float(robot_radius), 9)
         if key not in self._spaces:
             free = (self.clearance >= robot_radius) & ~self.obstacle
+            # The EDT clearance is within about one cell of the exact distance; in
+            # the band where that could flip the decision, decide exactly.
+            band = np.abs(self.clearance - robot_radius) <= 1.5 * self.resolution
+            iy, ix = np.nonzero(band)
+            exact = distance_to_obstacles(self.env, self.cell_centres(iy, ix))
+            free[iy, ix] = (exact >= robot_radius) & ~self.obstacle[iy, ix]
             free.flags.writeable = False
             self._spaces[key] = ConfigSpace(self, float(robot_radius), free)
         return self._spaces[key]
@@ -160,33 +170,49 @@ class ConfigSpace:
         return self._free_at(p[:, 0], p[:, 1])
 
     def segments_free(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """True for each segment ``a[i] -> b[i]`` whose dense samples (every <= h/3, ends included) are free.
+        """True for each segment ``a[i] -> b[i]`` that crosses only free cells (exact).
 
-        All segments are sampled and looked up at once.  A segment with an end
-        outside the field (or NaN) is not free.
+        The cells a segment crosses are the cells of its two ends and, at every
+        grid line it crosses, the cells on both sides; all segments are handled
+        at once.  A cell touched only at a corner is not crossed.  Because the
+        test is exact, every piece of a free segment is free too.  A segment
+        with an end outside the field (or NaN) is not free.
         """
         a = np.asarray(a, dtype=float)[:, :2]
         b = np.asarray(b, dtype=float)[:, :2]
-        if len(a) == 0:
+        n = len(a)
+        if n == 0:
             return np.zeros(0, dtype=bool)
-        ends_ok = self.is_free(a) & self.is_free(b)
-        # the field is convex, so with both ends inside every sample is inside
-        a = np.where(ends_ok[:, None], a, 0.0) * (1.0 / self.resolution)  # cell units from here
-        d = np.where(ends_ok[:, None], b * (1.0 / self.resolution), 0.0) - a
-        pieces = np.ceil(np.hypot(d[:, 0], d[:, 1]) * 3.0).astype(np.intp)
-        np.maximum(pieces, 1, out=pieces)
-        counts = pieces + 1
-        first = np.cumsum(counts) - counts
-        frac = (np.arange(int(counts.sum())) - np.repeat(first, counts)) * np.repeat(1.0 / pieces, counts)
+        ok = self.is_free(a) & self.is_free(b)
+        inv_h = 1.0 / self.resolution
+        # cell units from here; segments with a bad end are collapsed and already False
+        A = np.where(ok[:, None], a, 0.0) * inv_h
+        D = np.where(ok[:, None], b, 0.0) * inv_h - A
         ny, nx = self.free.shape
-        ix = (np.repeat(a[:, 0], counts) + np.repeat(d[:, 0], counts) * frac).astype(np.intp)
-        iy = (np.repeat(a[:, 1], counts) + np.repeat(d[:, 1], counts) * frac).astype(np.intp)
-        np.minimum(ix, nx - 1, out=ix)  # a sample exactly on the far wall
-        np.minimum(iy, ny - 1, out=iy)
-        iy *= nx
-        iy += ix
-        ok = self.free.ravel()[iy]
-        return np.logical_and.reduceat(ok, first) & ends_ok
+        free = self.free.ravel()
+        bad = np.zeros(n, dtype=bool)
+        for axis in (0, 1):  # crossings of vertical (x = k) then horizontal (y = k) grid lines
+            lo = np.floor(np.minimum(A[:, axis], A[:, axis] + D[:, axis])) + 1
+            hi = np.ceil(np.maximum(A[:, axis], A[:, axis] + D[:, axis])) - 1
+            count = np.maximum(hi - lo + 1, 0).astype(np.intp)
+            total = int(count.sum())
+            if total == 0:
+                continue
+            owner = np.repeat(np.arange(n), count)
+            first = np.cumsum(count) - count
+            k = np.repeat(lo, count) + (np.arange(total) - np.repeat(first, count))
+            t = (k - A[owner, axis]) / D[owner, axis]
+            other = 1 - axis
+            along = A[owner, other] + D[owner, other] * t
+            # at a grid vertex the segment passes diagonally: tilt the other
+            # coordinate towards each side's real cell so corner-touched cells are skipped
+            tilt = 1e-9 * np.sign(D[owner, 0] * D[owner, 1])
+            for side, shift in ((k - 1, -tilt), (k, tilt)):
+                c_axis = np.clip(side, 0, (nx, ny)[axis] - 1).astype(np.intp)
+                c_other = np.clip(np.floor(along + shift), 0, (nx, ny)[other] - 1).astype(np.intp)
+                idx = c_other * nx + c_axis if axis == 0 else c_axis * nx + c_other
+                bad[owner[~free[idx]]] = True
+        return ok & ~bad
 
     def path_free(self, path: np.ndarray) -> bool:
         """True when every segment of the polyline ``path`` ``(N, >=2)`` is free."""

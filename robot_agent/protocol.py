@@ -190,7 +190,7 @@ def _check_range(xy_m: np.ndarray, field_size: tuple[float, float] | None, what:
     out = (xy_m[:, 0] < 0) | (xy_m[:, 0] > w) | (xy_m[:, 1] < 0) | (xy_m[:, 1] > h)
     if out.any():
         i = int(np.flatnonzero(out)[0])
-        x, y = xy_m[i] * 1000
+        x, y = xy_m[i, :2] * 1000
         raise ProtocolError(
             ErrorCode.RANGE,
             f"{what} {i + 1} ({x:.0f}, {y:.0f}) mm is outside the field 0..{w * 1000:.0f} x 0..{h * 1000:.0f} mm",

@@ -1,0 +1,26 @@
+"""Shared fixtures: running the real ``twb`` console script."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+TWB = Path(sys.executable).with_name("twb")
+
+
+@pytest.fixture
+def twb():
+    """Run the installed ``twb`` command; returns the CompletedProcess (text mode)."""
+
+    def run(*args: str, timeout: float = 120, env: dict | None = None, **kw) -> subprocess.CompletedProcess:
+        full_env = {**os.environ, **(env or {})}
+        full_env.pop("TWB_DEBUG", None)
+        return subprocess.run(
+            [str(TWB), *args], capture_output=True, text=True, timeout=timeout, env=full_env, **kw
+        )
+
+    return run

@@ -1,0 +1,84 @@
+import json
+
+import pytest
+
+from planners import InvalidEnvironment, builtin_names, load_environment, parse_environment
+
+
+def good(**over):
+    data = {"name": "t", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.2, "h": 0.1, "angle": 0.5}]}
+    data.update(over)
+    return data
+
+
+def test_builtins_are_the_papers_two_environments_with_two_plans_each():
+    assert {"room", "blocks"} <= set(builtin_names())
+    for name in ("room", "blocks"):
+        env = load_environment(name)
+        assert env.name == name
+        assert env.size == (1.8, 1.8)
+        assert len(env.blocks) >= 9
+        assert [p.name for p in env.plans] == ["A", "B"]
+    assert any(b.angle != 0 for b in load_environment("blocks").blocks)
+
+
+def test_round_trip_through_dict_and_file(tmp_path):
+    env = load_environment("room")
+    path = tmp_path / "room.json"
+    path.write_text(json.dumps(env.to_dict()))
+    assert load_environment(path) == env
+    assert load_environment(str(path)) == env
+    assert parse_environment(env.to_dict()) == env
+
+
+def test_plan_lookup_names_the_choices():
+    env = load_environment("room")
+    assert env.plan("A").start == (0.3, 0.3, 0.0)
+    with pytest.raises(KeyError, match="plans: A, B"):
+        env.plan("Z")
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ([1, 2], "must be a JSON object"),
+        (good(name=""), "name must be a non-empty string"),
+        (good(name=3), "name must be a non-empty string"),
+        (good(size=[1.8]), r"size must be \[width, height\]"),
+        (good(size=[1.8, -1]), r"size\[1\] must be in \(0, 100"),
+        (good(size=[1.8, float("nan")]), r"size\[1\] must be finite"),
+        (good(size=["a", 1]), r"size\[0\] must be a number"),
+        (good(size=[True, 1]), r"size\[0\] must be a number"),
+        (good(blocks={}), "blocks must be a list"),
+        (good(blocks=[3]), r"blocks\[0\] must be an object"),
+        (good(blocks=[{"x": 1, "y": 1, "w": 0.1}]), r"blocks\[0\]\.h is missing"),
+        (good(blocks=[{"x": 1, "y": 1, "w": 0, "h": 1}]), r"blocks\[0\]\.w must be > 0"),
+        (good(blocks=[{"x": 1, "y": 1, "w": 1, "h": 1, "angle": float("inf")}]), r"blocks\[0\]\.angle must be finite"),
+        (good(blocks=[{"x": 5, "y": 1, "w": 1, "h": 1}]), r"blocks\[0\] centre \(5.0, 1.0\) must lie inside"),
+        (good(blocks=[{"x": 1, "y": 1, "w": 1, "h": 1, "width": 2}]), r"blocks\[0\] has unknown key 'width'"),
+        (good(blocks=[{"x": 1, "y": 1, "w": 1, "h": 1}] * 1001), "at most 1000 entries"),
+        (good(blok=[]), "environment has unknown key 'blok'"),
+        (good(plans=[{"name": "A", "start": [1, 1], "goal": [1]}]), r"plans\[0\]\.goal must be \[x, y\]"),
+        (good(plans=[{"name": "A", "start": [1, "x"], "goal": [1, 1]}]), r"plans\[0\]\.start\[1\] must be a number"),
+    ],
+)
+def test_invalid_environments_name_the_bad_field(data, message):
+    with pytest.raises(InvalidEnvironment, match=message):
+        parse_environment(data)
+
+
+def test_file_errors_are_clear(tmp_path):
+    with pytest.raises(InvalidEnvironment, match="not a built-in .* and no such file"):
+        load_environment(tmp_path / "missing.json")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"name": "x", ')
+    with pytest.raises(InvalidEnvironment, match=r"is not valid JSON: .* line 1"):
+        load_environment(bad)
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps(good(size=[0, 1])))
+    with pytest.raises(InvalidEnvironment, match=r"wrong.json: size\[0\] must be in"):
+        load_environment(wrong)
+    binary = tmp_path / "bin.json"
+    binary.write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(InvalidEnvironment, match="cannot read environment file"):
+        load_environment(binary)
