@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/twb plan --env room --start 0.3,0.3,0 --goal 1.5,1.5,90 --planner fm2 --format json
+	$(VENV)/bin/twb demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q

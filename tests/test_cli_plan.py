@@ -82,3 +82,11 @@ def test_unreachable_goal_and_invalid_file(twb, tmp_path):
     broken.write_text("{")
     out = twb("plan", "--env", str(broken), "--start", "0.2,0.5", "--goal", "0.8,0.5")
     assert out.returncode == 2 and "is not valid JSON" in out.stderr
+
+
+def test_demo_plans_every_builtin_case(twb):
+    out = twb("demo")
+    assert out.returncode == 0, out.stderr
+    rows = [line for line in out.stdout.splitlines() if line.startswith("│")]
+    assert len(rows) == 2 * 2 * 4
+    assert all(p in out.stdout for p in ("fmm", "fm2", "prm", "astar"))
