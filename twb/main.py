@@ -10,7 +10,7 @@ import sys
 
 import typer
 
-from . import demo_cmd, plan_cmd
+from . import demo_cmd, metrics_cmd, plan_cmd
 from .errors import report_exception
 
 app = typer.Typer(
@@ -24,6 +24,7 @@ app = typer.Typer(
 app.command("plan")(plan_cmd.plan)
 app.command("planners")(plan_cmd.planners)
 app.command("demo")(demo_cmd.demo)
+app.command("metrics")(metrics_cmd.metrics)
 
 
 def main(argv: list[str] | None = None) -> int:
