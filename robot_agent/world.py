@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FIELD_SIZE", "SUBFIELD_ORIGINS", "SUBFIELD_SIZE", "World"]
+__all__ = ["FIELD_SIZE", "SUBFIELD_ORIGINS", "SUBFIELD_SIZE", "World", "field_layout"]
 
 FIELD_SIZE = (3.6, 3.6)
 SUBFIELD_SIZE = (1.8, 1.8)
@@ -177,3 +177,48 @@ class World:
             if (np.hypot(*(others - xy).T) < 2 * self.radius).any():
                 return "another robot stands there"
         return None
+
+
+def field_layout(
+    n: int,
+    mode: str = "auto",
+    area: tuple[float, float] | None = None,
+    origins: list[tuple[float, float]] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Where ``n`` robots live: ``(sizes (W, 2), world_of (N,), origin (N, 2), area (N, 2))``, metres.
+
+    ``mode`` ``shared``: one 3.6 m field; robots default to sub-fields 1..4
+    (origins (0,0), (1.8,0), (0,1.8), (1.8,1.8)) with 1.8 m areas; an
+    ``area`` larger than a sub-field (e.g. the whole field) puts origins at
+    (0, 0).  ``separate``: every robot has a world of its own, of its area's
+    size (default a sub-field), origin (0, 0).  ``auto``: shared for up to 4
+    robots, separate beyond.
+    """
+    if n < 1:
+        raise ValueError("`robots` must be >= 1")
+    if mode == "auto":
+        mode = "shared" if n <= 4 else "separate"
+    if mode not in ("shared", "separate"):
+        raise ValueError(f"`world` must be auto, shared or separate, got {mode!r}")
+    a = np.array(area if area is not None else SUBFIELD_SIZE, dtype=float)
+    if a.shape != (2,) or not np.isfinite(a).all() or (a <= 0).any():
+        raise ValueError(f"`area` must be two numbers W,H > 0 (metres), got {area!r}")
+    areas = np.tile(a, (n, 1))
+    if mode == "separate":
+        if origins is not None:
+            raise ValueError("`origins` only apply to a shared world")
+        return areas.copy(), np.arange(n), np.zeros((n, 2)), areas
+    if origins is not None:
+        o = np.array(origins, dtype=float).reshape(-1, 2)
+        if len(o) != n:
+            raise ValueError(f"`origins` must give one X,Y per robot ({n}), got {len(o)}")
+    elif (a > np.array(SUBFIELD_SIZE) + 1e-9).any():
+        o = np.zeros((n, 2))
+    elif n <= 4:
+        o = np.array(SUBFIELD_ORIGINS[:n], dtype=float)
+    else:
+        raise ValueError(f"a shared field has 4 sub-fields, not {n}: use world='separate' or give origins")
+    size = np.array(FIELD_SIZE)
+    if (o < 0).any() or ((o + areas) > size + 1e-9).any():
+        raise ValueError(f"robot areas must lie inside the {size[0]} m x {size[1]} m field")
+    return size[None, :], np.zeros(n, dtype=np.int64), o, areas

@@ -1,0 +1,373 @@
+"""AgentHost: N robots in one asyncio process — TCP servers, the simulation loop, tracker output.
+
+The Python API the testbed server embeds::
+
+    async with AgentHost(robots=4, backend="field", time_scale=100.0,
+                         tracker_sink=MemoryTrackerSink()) as agents:
+        agents.ports                   # bound TCP ports, robot i on ports[i]
+        agents.set_path_seed("robot-1", 42)   # the next T,T,P of robot-1 replays seed 42
+        ...
+
+or ``host = await start_agents(...)`` / ``await host.stop()``.
+
+Time: the simulation advances in fixed control steps (``1 / control_rate_hz``
+of experiment time).  With ``time_scale`` S it keeps experiment time at S x
+wall time (``math.inf``: as fast as possible, yielding to the event loop
+every few milliseconds; experiment time then stands still while nothing
+moves).  While no robot moves, time jumps instead of stepping.  All times
+reported (EV, ST, tracker) are experiment time.
+
+Seeds: each path's noise key is ``path_key(seed, robot_id, path_count)``
+from the host's ``seed``, or ``path_key(s)`` when :meth:`set_path_seed` gave
+the next path a seed ``s`` (the same ``s`` replays the same run on any robot).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import heapq
+import itertools
+import logging
+import math
+import socket
+import time
+from typing import Callable
+
+from .backends import make_backend
+from .connection import Connection
+from .params import RobotParams, robot_params
+from .protocol import MAX_LINE_BYTES, ErrorCode, format_error
+from .robot import Robot
+from .robot_profile import DEFAULT_PROFILE
+from .server_link import ServerLink
+from .sim import SimCore, SimEvent
+from .sinks import TrackerSink
+from .world import World, field_layout
+
+__all__ = ["AgentHost", "EventListener", "start_agents"]
+
+log = logging.getLogger("robot_agent.host")
+
+EventListener = Callable[[str, str], None]
+_SLICE_S = 0.004  # longest run of simulation steps between yields to the event loop
+_MAX_LAG_S = 0.5  # wall seconds behind schedule before the clock gives up catching up
+
+
+class AgentHost:
+    """``robots`` emulated robots served on consecutive TCP ports (see the module docstring).
+
+    Parameters (SI units): ``backend`` ``ideal`` or ``field``; ``profile`` a
+    shipped profile name or dict; ``host``/``port`` where to listen (``port``
+    0: every robot gets a free port); ``time_scale`` experiment seconds per
+    wall second (``math.inf`` = as fast as possible); ``seed`` the agent seed;
+    ``robot_id`` a base name (``robot`` gives ``robot-1`` ...) or
+    ``robot_ids`` one per robot; ``world``, ``area``, ``origins`` the layout
+    (:func:`robot_agent.world.field_layout`); ``tracker_sink`` where logged
+    poses go; ``server_url`` + ``token`` register the robots with the testbed
+    server and, without another sink, post the poses there.
+    """
+
+    def __init__(
+        self,
+        *,
+        robots: int = 1,
+        backend: str = "ideal",
+        profile: str | dict = DEFAULT_PROFILE,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        time_scale: float = 1.0,
+        seed: int = 0,
+        robot_id: str | None = None,
+        robot_ids: list[str] | None = None,
+        world: str = "auto",
+        area: tuple[float, float] | None = None,
+        origins: list[tuple[float, float]] | None = None,
+        tracker_sink: TrackerSink | None = None,
+        server_url: str | None = None,
+        token: str | None = None,
+        advertise_host: str | None = None,
+        max_connections: int = 256,
+        flush_interval_s: float = 0.25,
+    ) -> None:
+        if not (time_scale > 0):  # also refuses NaN
+            raise ValueError(f"`time_scale` must be > 0 (math.inf: as fast as possible), got {time_scale}")
+        if not 0 <= port <= 65535 or (port and port + robots - 1 > 65535):
+            raise ValueError(f"`port` must be 0..65535 (and leave room for {robots} robots), got {port}")
+        if server_url and not token:
+            raise ValueError("`server_url` needs a `token`")
+        self.params: RobotParams = robot_params(profile)
+        self.backend_name = backend
+        self.time_scale = float(time_scale)
+        self.seed = int(seed)
+        self.bind_host, self.base_port = host, port
+        self.advertise_host = advertise_host or (socket.gethostname() if host in ("", "0.0.0.0", "::") else host)
+        self.max_connections = max_connections
+        self.flush_interval_s = flush_interval_s
+        sizes, world_of, origin, areas = field_layout(robots, world, area, origins)
+        self.world = World(sizes, world_of, origin, areas, self.params.collision_radius_m)
+        self.link = ServerLink(server_url, token or "") if server_url else None
+        self.sink: TrackerSink | None = tracker_sink if tracker_sink is not None else self.link
+        self.core = SimCore(self.params, make_backend(backend, robots, self.params), self.world,
+                            log_poses=self.sink is not None)
+        if robot_ids is None:
+            base = robot_id or "robot"
+            robot_ids = [robot_id] if (robot_id and robots == 1) else [f"{base}-{i + 1}" for i in range(robots)]
+        if len(robot_ids) != robots or len(set(robot_ids)) != robots:
+            raise ValueError(f"`robot_ids` must be {robots} distinct names")
+        self.robots = [Robot(self, i, rid) for i, rid in enumerate(robot_ids)]
+        for r in self.robots:
+            r.hello()  # validates the id (ASCII, no separators)
+            home = (0.1, 0.1, 0.0)
+            self.core.place(r.index, home)
+        self._by_id = {r.robot_id: r for r in self.robots}
+        self._listeners: list[EventListener] = []
+        self._servers: list[asyncio.base_events.Server] = []
+        self._tasks: list[asyncio.Task] = []
+        self._conn_tasks: set[asyncio.Task] = set()
+        self._timers: list[tuple[int, int, asyncio.Future]] = []
+        self._seq = itertools.count()
+        self._wake = asyncio.Event()
+        self._wall0 = 0.0
+        self._step0 = 0
+        self._last_lag_warning = -math.inf
+        self._running = False
+
+    # ------------------------------------------------------------------ API
+
+    @property
+    def ports(self) -> list[int]:
+        """The bound TCP port of each robot (after :meth:`start`)."""
+        return [r.port for r in self.robots]
+
+    def robot(self, robot_id: str) -> Robot:
+        """The robot called ``robot_id`` (``KeyError`` if unknown)."""
+        return self._by_id[robot_id]
+
+    def now(self) -> float:
+        """Experiment time (s)."""
+        return self.core.t
+
+    def set_path_seed(self, robot_id: str, seed: int | None) -> None:
+        """Seed the noise of ``robot_id``'s next path (one-shot); None returns to the default derivation."""
+        self.robot(robot_id).next_seed = None if seed is None else int(seed)
+
+    def add_event_listener(self, fn: EventListener) -> None:
+        """Call ``fn(robot_id, line)`` for every EV line (also when no client is left to receive it)."""
+        self._listeners.append(fn)
+
+    def event_hook(self, robot: Robot, line: str) -> None:
+        for fn in self._listeners:
+            try:
+                fn(robot.robot_id, line)
+            except Exception:  # noqa: BLE001 - a listener's bug must not stop the robots
+                log.exception("event listener failed")
+
+    async def start(self) -> "AgentHost":
+        """Bind the servers, start the simulation and register with the server (if any)."""
+        if self._running:
+            return self
+        loop = asyncio.get_running_loop()
+        try:
+            for r in self.robots:
+                port = self.base_port + r.index if self.base_port else 0
+                server = await asyncio.start_server(
+                    lambda rd, wr, robot=r: self._accept(robot, rd, wr), self.bind_host, port, limit=MAX_LINE_BYTES
+                )
+                self._servers.append(server)
+                r.port = server.sockets[0].getsockname()[1]
+        except OSError:
+            for s in self._servers:
+                s.close()
+            self._servers.clear()
+            raise
+        self._running = True
+        self._reanchor()
+        self._tasks.append(loop.create_task(self._sim_loop(), name="twb-sim"))
+        if self.sink is not None:
+            self._tasks.append(loop.create_task(self._flush_loop(), name="twb-tracker-flush"))
+        if self.link is not None:
+            for r in self.robots:
+                self.link.register(r.info())
+        log.info("%d %s robot(s) (%s) on %s ports %s, time scale %s, seed %d", len(self.robots), self.backend_name,
+                 self.params.name, self.bind_host, self.ports, self.time_scale, self.seed)
+        return self
+
+    async def stop(self) -> None:
+        """Close every connection and server, flush the tracker and stop the simulation."""
+        if not self._running:
+            return
+        self._running = False
+        for s in self._servers:
+            s.close()
+        for r in self.robots:
+            for c in list(r.connections):
+                c.close()
+        if self._conn_tasks:
+            _, pending = await asyncio.wait(self._conn_tasks, timeout=2.0)
+            for t in pending:
+                t.cancel()
+        for t in self._tasks:
+            t.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._tasks.clear()
+        for _, _, fut in self._timers:
+            fut.cancel()
+        await self.flush_tracker()
+        if self.sink is not None:
+            await self.sink.aclose()
+        if self.link is not None and self.link is not self.sink:
+            await self.link.aclose()
+        for s in self._servers:
+            await s.wait_closed()
+        self._servers.clear()
+
+    async def __aenter__(self) -> "AgentHost":
+        return await self.start()
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    async def flush_tracker(self) -> None:
+        """Send every logged pose to the sink now (and wait for the server to take them)."""
+        if self.sink is None:
+            return
+        for idx, rows in self.core.poses.drain().items():
+            await self.sink.send(self.robots[idx].robot_id, rows)
+        if isinstance(self.sink, ServerLink):
+            await self.sink.flush()
+
+    # ------------------------------------------------------------------ clock
+
+    def wake(self) -> None:
+        """Something changed: the simulation loop re-plans now."""
+        self._wake.set()
+
+    def _reanchor(self) -> None:
+        self._wall0 = time.monotonic()
+        self._step0 = self.core.step_count
+
+    def _due(self) -> float:
+        """The step count experiment time should have reached by now."""
+        if math.isinf(self.time_scale):
+            return math.inf
+        return self._step0 + (time.monotonic() - self._wall0) * self.time_scale / self.core.dt
+
+    def sync_clock(self) -> None:
+        """While nothing moves, bring experiment time up to date (before applying a command)."""
+        if self._running and not self.core.busy():
+            self._advance_idle()
+
+    def _advance_idle(self) -> None:
+        due = self._due()
+        if math.isinf(due):
+            target = self._timers[0][0] if self._timers else self.core.step_count
+        else:
+            target = int(due)
+        if target > self.core.step_count:
+            self.core.skip(target - self.core.step_count)
+        self._fire_timers()
+
+    def _fire_timers(self) -> None:
+        while self._timers and self._timers[0][0] <= self.core.step_count:
+            _, _, fut = heapq.heappop(self._timers)
+            if not fut.done():
+                fut.set_result(None)
+
+    async def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` of experiment time."""
+        steps = math.ceil(seconds / self.core.dt - 1e-9)
+        if steps <= 0:
+            return
+        self.sync_clock()
+        fut = asyncio.get_running_loop().create_future()
+        heapq.heappush(self._timers, (self.core.step_count + steps, next(self._seq), fut))
+        self.wake()
+        await fut
+
+    async def _wait(self, timeout: float | None) -> None:
+        try:
+            await asyncio.wait_for(self._wake.wait(), timeout)
+        except asyncio.TimeoutError:
+            pass
+        self._wake.clear()
+
+    async def _sim_loop(self) -> None:
+        core = self.core
+        steps_per_s = self.time_scale / core.dt
+        while True:
+            if not core.busy():
+                self._advance_idle()
+                if core.busy():
+                    continue
+                if self._timers and not math.isinf(steps_per_s):
+                    timeout = max(0.0, (self._timers[0][0] - self._due()) / steps_per_s)
+                    await self._wait(min(timeout, 1.0))
+                elif self._timers:
+                    await asyncio.sleep(0)
+                else:
+                    await self._wait(None if math.isinf(steps_per_s) else 1.0)
+                continue
+            due = self._due()
+            if due - core.step_count > _MAX_LAG_S * steps_per_s:
+                now = time.monotonic()
+                if now - self._last_lag_warning > 10.0:
+                    log.warning("simulation cannot keep up with time scale %s; experiment time runs slower",
+                                self.time_scale)
+                    self._last_lag_warning = now
+                self._reanchor()
+                due = self._due()
+            end = time.perf_counter() + _SLICE_S
+            while core.step_count + 1 <= due:
+                events = core.step()
+                if events:
+                    self._dispatch(events)
+                if self._timers and self._timers[0][0] <= core.step_count:
+                    self._fire_timers()
+                if not core.busy() or time.perf_counter() > end:
+                    break
+            if not core.busy() or core.step_count + 1 <= self._due():
+                await asyncio.sleep(0)
+            else:
+                await self._wait((core.step_count + 1 - self._due()) / steps_per_s)
+
+    def _dispatch(self, events: list[SimEvent]) -> None:
+        for ev in events:
+            self.robots[ev.robot].on_event(ev)
+
+    async def _flush_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.flush_interval_s)
+            try:
+                for idx, rows in self.core.poses.drain().items():
+                    await self.sink.send(self.robots[idx].robot_id, rows)  # type: ignore[union-attr]
+            except Exception:  # noqa: BLE001 - a failing sink must not stop the robots
+                log.exception("tracker sink failed")
+
+    # ------------------------------------------------------------------ connections
+
+    async def _accept(self, robot: Robot, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        if len(robot.connections) >= self.max_connections or not self._running:
+            writer.write((format_error(ErrorCode.STATE, "too many connections") + "\n").encode())
+            try:
+                await writer.drain()
+            finally:
+                writer.close()
+            return
+        conn = Connection(reader, writer, robot)
+        robot.connected(conn)
+        if task is not None:
+            self._conn_tasks.add(task)
+        try:
+            await conn.run()
+        except Exception:  # noqa: BLE001 - one client's trouble never reaches the others
+            log.exception("%r failed", conn)
+        finally:
+            if task is not None:
+                self._conn_tasks.discard(task)
+
+
+async def start_agents(**kwargs: object) -> AgentHost:
+    """Create and start an :class:`AgentHost` (same keyword arguments); ``await host.stop()`` ends it."""
+    return await AgentHost(**kwargs).start()  # type: ignore[arg-type]
+

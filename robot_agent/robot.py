@@ -1,0 +1,224 @@
+"""One robot as its clients see it: the protocol verbs, events and the disconnect rule.
+
+:class:`Robot` turns parsed commands into calls on the host's simulation core
+(one method per verb, after aiosmtpd's ``smtp_<VERB>``) and routes the core's
+events to the connection that sent the path.
+
+Rules (documented in ``docs/protocol.md``):
+
+- A new ``T,T,P`` replaces the path in progress; the replaced path ends with
+  ``EV,FAIL,STOPPED`` to its sender, before the new path's ``OK,P,<n>``.
+- ``T,T,S`` stops the path in progress (``EV,FAIL,STOPPED`` to its sender,
+  then ``OK,S``); with no path in progress it only answers ``OK,S``.
+- ``T,T,I`` and ``T,T,B`` are refused with ``ERR,STATE`` while a path is in
+  progress or the gripper is busy; ``T,T,P`` is refused while the gripper is
+  busy.  The gripper takes experiment time per block / placement, and the
+  ``OK`` comes when it is done.
+- **Disconnect rule**: when the connection that sent the path in progress
+  closes, the robot stops at once (the path ends as ``FAIL,STOPPED``, logged
+  by the agent since nobody is left to tell): nothing drives unattended.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from typing import TYPE_CHECKING
+
+from .noise import path_key
+from .protocol import (
+    BuildCommand,
+    ErrorCode,
+    PathCommand,
+    PlaceCommand,
+    ProtocolError,
+    QueryCommand,
+    RobotState,
+    StopCommand,
+    format_event,
+    format_hello,
+    format_ok,
+    format_status,
+    parse_command,
+)
+from .sim import SimEvent, State
+
+if TYPE_CHECKING:
+    from .connection import Connection
+    from .host import AgentHost
+
+__all__ = ["Robot"]
+
+log = logging.getLogger("robot_agent.robot")
+
+
+class Robot:
+    """Robot ``index`` of ``host``, called ``robot_id``."""
+
+    def __init__(self, host: "AgentHost", index: int, robot_id: str) -> None:
+        self.host, self.index, self.robot_id = host, index, robot_id
+        self.port = 0
+        self.connections: set["Connection"] = set()
+        self.owner: "Connection | None" = None  # sender of the path in progress
+        self.gripper_busy = False
+        self.path_count = 0
+        self.next_seed: int | None = None  # one-shot seed for the next path
+        self.last_seed: int | None = None
+
+    # ------------------------------------------------------------------ frames
+
+    @property
+    def origin(self) -> tuple[float, float]:
+        """The robot frame's origin in its world (m)."""
+        o = self.host.world.origin[self.index]
+        return float(o[0]), float(o[1])
+
+    @property
+    def area(self) -> tuple[float, float]:
+        """The working area (w, h) in m: protocol points must lie in [0, w] x [0, h]."""
+        a = self.host.world.area[self.index]
+        return float(a[0]), float(a[1])
+
+    def hello(self) -> str:
+        """The greeting line."""
+        return format_hello(self.robot_id, self.host.params.platform)
+
+    def state(self) -> RobotState:
+        """The path state (ST names)."""
+        return RobotState(State(int(self.host.core.state[self.index])).name)
+
+    # ------------------------------------------------------------------ dispatch
+
+    async def handle(self, conn: "Connection", line: bytes, *, in_thread: bool = False) -> list[str]:
+        """Reply lines for one client line (``ERR`` for anything refused)."""
+        try:
+            if in_thread:
+                cmd = await asyncio.to_thread(parse_command, line, field_size=self.area)
+            else:
+                cmd = parse_command(line, field_size=self.area)
+            if isinstance(cmd, PathCommand):
+                return self.cmd_path(conn, cmd)
+            if isinstance(cmd, StopCommand):
+                return self.cmd_stop()
+            if isinstance(cmd, QueryCommand):
+                return self.cmd_query()
+            if isinstance(cmd, PlaceCommand):
+                return await self.cmd_place(cmd)
+            if isinstance(cmd, BuildCommand):
+                return await self.cmd_build(cmd)
+            raise ProtocolError(ErrorCode.UNSUPPORTED, "unsupported command")
+        except ProtocolError as exc:
+            return [exc.line()]
+
+    def _noise_key(self) -> int:
+        if self.next_seed is not None:
+            seed, self.next_seed = self.next_seed, None
+            self.last_seed = seed
+            return path_key(seed)
+        self.last_seed = None
+        return path_key(self.host.seed, self.robot_id, self.path_count)
+
+    def cmd_path(self, conn: "Connection", cmd: PathCommand) -> list[str]:
+        """``T,T,P``: follow a path from the next control step."""
+        if self.gripper_busy:
+            raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
+        self.host.sync_clock()
+        replaced = self.host.core.set_path(self.index, cmd.points, self._noise_key())
+        self.path_count += 1
+        if replaced is not None:
+            self._deliver(replaced)
+        self.owner = conn
+        self.host.wake()
+        log.info("%s: path of %d points from %s", self.robot_id, len(cmd.points), conn.peer)
+        return [format_ok("P", len(cmd.points))]
+
+    def cmd_stop(self) -> list[str]:
+        """``T,T,S``: stop now."""
+        self.host.sync_clock()
+        ev = self.host.core.stop(self.index)
+        if ev is not None:
+            self._deliver(ev)
+        return [format_ok("S")]
+
+    def cmd_query(self) -> list[str]:
+        """``T,T,Q``: state, believed pose (robot frame) and experiment time."""
+        self.host.sync_clock()
+        return [format_status(self.state(), self.host.core.belief(self.index), self.host.core.t)]
+
+    def _check_gripper(self) -> None:
+        if self.host.core.state[self.index] == State.MOVING:
+            raise ProtocolError(ErrorCode.STATE, "the robot is following a path (send T,T,S first)")
+        if self.gripper_busy:
+            raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
+
+    async def cmd_place(self, cmd: PlaceCommand) -> list[str]:
+        """``T,T,I``: the gripper places the robot (takes ``seconds_per_placement``)."""
+        self._check_gripper()
+        why = self.host.world.place_conflict(self.index, cmd.pose, self.host.core.backend.pose)
+        if why:
+            raise ProtocolError(ErrorCode.RANGE, f"cannot place the robot: {why}")
+        self.gripper_busy = True
+        try:
+            await self.host.sleep(self.host.params.gripper.seconds_per_placement)
+            if self.host.core.state[self.index] == State.MOVING:  # a path arrived meanwhile: impossible, but safe
+                raise ProtocolError(ErrorCode.STATE, "the robot started moving")
+            self.host.core.place(self.index, cmd.pose)
+        finally:
+            self.gripper_busy = False
+        return [format_ok("I")]
+
+    async def cmd_build(self, cmd: BuildCommand) -> list[str]:
+        """``T,T,B``: the gripper replaces this robot's blocks (time per block removed and placed)."""
+        self._check_gripper()
+        removed = len(self.host.world.blocks_local(self.index))
+        self.gripper_busy = True
+        try:
+            await self.host.sleep(self.host.params.gripper.seconds_per_block * (removed + len(cmd.blocks)))
+            self.host.world.set_blocks(self.index, cmd.blocks)
+        finally:
+            self.gripper_busy = False
+        return [format_ok("B", len(cmd.blocks))]
+
+    # ------------------------------------------------------------------ events
+
+    def _deliver(self, ev: SimEvent) -> None:
+        """Send a core event to the path's sender (log it when nobody is left)."""
+        line = format_event(ev.kind, ev.t, index=ev.index, reason=ev.reason)
+        if ev.kind in ("DONE", "FAIL"):
+            log.info("%s: %s", self.robot_id, line)
+        owner = self.owner
+        if ev.kind in ("DONE", "FAIL"):
+            self.owner = None
+        if owner is not None:
+            owner.send(line)
+        self.host.event_hook(self, line)
+
+    def on_event(self, ev: SimEvent) -> None:
+        """An event of this robot from the simulation core."""
+        self._deliver(ev)
+
+    def connected(self, conn: "Connection") -> None:
+        self.connections.add(conn)
+
+    def disconnected(self, conn: "Connection") -> None:
+        """The disconnect rule: the path of a closing sender stops at once."""
+        self.connections.discard(conn)
+        if self.owner is conn:
+            self.owner = None
+            ev = self.host.core.stop(self.index)
+            if ev is not None:
+                log.warning("%s: client %s left mid-path; robot stopped (FAIL,STOPPED)", self.robot_id, conn.peer)
+                self.host.event_hook(self, format_event("FAIL", ev.t, reason="STOPPED"))
+
+    def info(self) -> dict[str, object]:
+        """The registration record of this robot (see ``docs/protocol.md``)."""
+        return {
+            "robot_id": self.robot_id,
+            "host": self.host.advertise_host,
+            "port": self.port,
+            "platform": self.host.params.platform,
+            "backend": self.host.backend_name,
+            "profile": self.host.params.name,
+            "origin": list(self.origin),
+            "area": list(self.area),
+        }
