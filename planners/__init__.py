@@ -9,7 +9,7 @@ metres and radians throughout.
 3
 """
 
-from .api import DEFAULT_ROBOT_RADIUS, PlanResult, parse_pose, plan_path
+from .api import DEFAULT_ROBOT_RADIUS, PlanResult, check_query, parse_pose, plan_path
 from .base import Planner
 from .environment import Block, Environment, Plan, builtin_names, load_environment, parse_environment
 from .errors import InvalidEnvironment, InvalidPose, NoPathFound, PlanningError, UnknownPlanner
@@ -34,6 +34,7 @@ __all__ = sorted(
         "PlanningError",
         "UnknownPlanner",
         "available_planners",
+        "check_query",
         "builtin_names",
         "config_space",
         "distance_to_obstacles",

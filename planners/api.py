@@ -22,7 +22,7 @@ from .grid import ConfigSpace, config_space
 from .postprocess import postprocess
 from .registry import get_planner
 
-__all__ = ["DEFAULT_ROBOT_RADIUS", "PlanResult", "components", "parse_pose", "plan_path"]
+__all__ = ["DEFAULT_ROBOT_RADIUS", "PlanResult", "check_query", "components", "parse_pose", "plan_path"]
 
 #: Radius (m) of the BeBot profile, the default robot; planners import nothing
 #: from robot_agent, so the value is repeated here and checked by a test.
@@ -98,6 +98,41 @@ def components(space: ConfigSpace) -> np.ndarray:
     return labels
 
 
+def check_query(
+    env: Environment | str,
+    start: Sequence[float],
+    goal: Sequence[float],
+    *,
+    robot_radius: float = DEFAULT_ROBOT_RADIUS,
+    resolution: float = 0.01,
+) -> tuple[ConfigSpace, np.ndarray, np.ndarray]:
+    """Check a planning query before any planning: returns ``(space, start, goal)``.
+
+    Poses come back as length-3 arrays (theta NaN when not given).  Raises
+    :class:`InvalidPose` for a start or goal that is not finite, outside the
+    field or not free for a robot of ``robot_radius`` metres, and
+    :class:`NoPathFound` when the two lie in separate free regions.
+    """
+    env = load_environment(env)
+    try:
+        space = config_space(env, robot_radius, resolution)
+    except PlanningError:
+        raise
+    except ValueError as exc:
+        raise PlanningError(str(exc)) from exc
+    s, g = parse_pose(start, "start"), parse_pose(goal, "goal")
+    _check_pose(space, s, "start")
+    _check_pose(space, g, "goal")
+    labels = components(space)
+    (sy, gy), (sx, gx) = space.grid.cell_of(np.array([s[:2], g[:2]]))
+    if labels[sy, sx] != labels[gy, gx]:
+        raise NoPathFound(
+            f"the goal ({g[0]:g}, {g[1]:g}) cannot be reached from the start ({s[0]:g}, {s[1]:g}): "
+            f"they are in separate free regions for a robot of radius {robot_radius:g} m"
+        )
+    return space, s, g
+
+
 def plan_path(
     env: Environment | str,
     start: Sequence[float],
@@ -128,23 +163,13 @@ def plan_path(
         checked = impl.validate_params(params)
         if not (isinstance(seed, int) and not isinstance(seed, bool)) or not 0 <= seed < 2**63:
             raise ValueError(f"`seed` must be an integer in [0, 2**63), got {seed!r}")
-        t0 = time.perf_counter()
-        space = config_space(env, robot_radius, resolution)
-        grid_time = time.perf_counter() - t0
     except PlanningError:
         raise
     except ValueError as exc:
         raise PlanningError(str(exc)) from exc
-    s, g = parse_pose(start, "start"), parse_pose(goal, "goal")
-    _check_pose(space, s, "start")
-    _check_pose(space, g, "goal")
-    labels = components(space)
-    (sy, gy), (sx, gx) = space.grid.cell_of(np.array([s[:2], g[:2]]))
-    if labels[sy, sx] != labels[gy, gx]:
-        raise NoPathFound(
-            f"the goal ({g[0]:g}, {g[1]:g}) cannot be reached from the start ({s[0]:g}, {s[1]:g}): "
-            f"they are in separate free regions for a robot of radius {robot_radius:g} m"
-        )
+    t0 = time.perf_counter()
+    space, s, g = check_query(env, start, goal, robot_radius=robot_radius, resolution=resolution)
+    grid_time = time.perf_counter() - t0
     t0 = time.perf_counter()
     try:
         out = impl.solve(space, s[:2].copy(), g[:2].copy(), checked, seed)
