@@ -98,7 +98,8 @@ def aggregate(
         without one of them is grouped under None.
     metrics : sequence of str, optional
         The metrics to summarise; default: every key not in ``by`` holding a
-        number or bool in some record of the group, in first-seen order.
+        number or bool in some record of the group, in the order keys are
+        first seen (so columns keep the records' order).
     confidence : float
         Level of the confidence interval (default 0.95).
 
@@ -128,12 +129,14 @@ def aggregate(
 
 
 def _numeric_keys(records: Sequence[Mapping[str, Any]], skip: Sequence[str]) -> list[str]:
-    seen: dict[str, None] = {}
+    """Keys in first-seen order that hold a number or bool in at least one record."""
+    numeric = (bool, int, float, np.bool_, np.integer, np.floating)
+    seen: dict[str, bool] = {}
     for rec in records:
         for k, v in rec.items():
-            if k not in skip and isinstance(v, (bool, int, float, np.bool_, np.integer, np.floating)):
-                seen.setdefault(k, None)
-    return list(seen)
+            if k not in skip:
+                seen[k] = seen.get(k, False) or isinstance(v, numeric)
+    return [k for k, ok in seen.items() if ok]
 
 
 def table_rows(groups: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:

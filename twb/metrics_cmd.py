@@ -16,12 +16,14 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
-import numpy as np
 import typer
 
 from .errors import fail
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["metrics", "read_path_csv"]
 
@@ -33,6 +35,8 @@ def read_path_csv(path: str | Path, what: str) -> tuple[np.ndarray, np.ndarray |
     (``what``, e.g. ``--planned``), the line and the problem.
     """
     import csv
+
+    import numpy as np
 
     where = f"{what} {path}"
     try:
@@ -74,6 +78,8 @@ def read_path_csv(path: str | Path, what: str) -> tuple[np.ndarray, np.ndarray |
 
 def _column(rows: list[tuple[int, list[str]]], k: int, name: str, where: str) -> np.ndarray:
     """Column ``k`` as finite floats, or a one-line error naming the first bad line."""
+    import numpy as np
+
     texts = [row[k].strip() for _, row in rows]
     try:
         values = np.array(texts, dtype=float)
