@@ -91,6 +91,8 @@ ZERO_LENGTH = 1e-12
 
 # (points x neighbours) handled at once in the exact distance passes
 _CHUNK = 1 << 16
+# pieces of the point-to-polyline search are at most this times the mean segment length
+_CAP_FACTOR = 2.0
 
 #: Keys of :func:`path_metrics`, in output order.
 PATH_KEYS = (
@@ -258,7 +260,7 @@ def point_to_polyline_distance(points: np.ndarray, polyline: np.ndarray) -> np.n
         return np.hypot(*(q - line[0]).T)
     a, d = line[:-1], np.diff(line, axis=0)
     lengths = np.hypot(d[:, 0], d[:, 1])
-    cap = 2.0 * lengths.mean()
+    cap = _CAP_FACTOR * lengths.mean()
     if cap > 0 and lengths.max() > cap:
         pieces = np.maximum(np.ceil(lengths / cap).astype(np.intp), 1)
         owner = np.repeat(np.arange(len(a)), pieces)
