@@ -240,17 +240,18 @@ def point_to_polyline_distance(points: np.ndarray, polyline: np.ndarray) -> np.n
 
     Notes
     -----
-    Exact point-to-segment distances with a k-d tree only to skip segments
+    Exact point-to-segment distances, with a k-d tree only to skip segments
     that cannot be nearest.  Segments longer than twice the mean segment
-    length are cut into pieces no longer than twice it (the union, hence the
-    distance, is unchanged), so every piece has half-length at most ``H``.  For each
-    point the ``k`` pieces with the nearest midpoints are measured exactly;
-    any other piece is at least ``d_k - H`` away (``d_k``: the k-th midpoint
-    distance), so the answer is final once ``d_k - H >= best``.  Points not
-    yet final are queried again with ``4 k`` neighbours.  ``k`` starts at 8,
-    or, for many points, at the value that settles 90% of a 1/64 pilot: a
-    polyline much denser than the distances measured needs more neighbours
-    (about ``2 sqrt(2 d H) / spacing``).  O((N k + M) log M) overall.
+    length are cut into pieces no longer than that (the union, hence the
+    distance, is unchanged), so every piece has half-length at most ``H``.
+    For each point the ``k`` pieces with the nearest midpoints are measured
+    exactly; any other piece is at least ``d_k - H`` away (``d_k``: the k-th
+    midpoint distance), so the answer is final once ``d_k - H >= best``.
+    Points not yet final are queried again with ``4 k`` neighbours.  ``k``
+    starts at 8, or, for more than 8192 points, at the cheapest start
+    estimated on an evenly strided 1/64 pilot: a polyline much denser than
+    the distances measured needs more neighbours (about
+    ``2 sqrt(2 d H) / spacing``).  O((N k + M) log M) overall.
     """
     q = _path_iv(points, "points", min_points=0)
     line = _path_iv(polyline, "polyline", min_points=1)
