@@ -104,11 +104,11 @@ def metrics(
         Optional[str], typer.Option("--env", help="Environment (built-in name or JSON file) for clearance and collision.")
     ] = None,
     segments: Annotated[
-        Optional[int], typer.Option("--segments", help="Segments m of the smoothness resampling [default: 0.05 m each].")
+        Optional[int], typer.Option("--segments", help="Segments m of the smoothness resampling (default: segments of 0.05 m).")
     ] = None,
     samples: Annotated[int, typer.Option("--samples", help="Points n of the deviation/clearance resampling.")] = 200,
     robot_radius: Annotated[
-        Optional[float], typer.Option("--robot-radius", help="Robot radius (m) for 'collided' [default: the BeBot profile's].")
+        Optional[float], typer.Option("--robot-radius", help="Robot radius (m) for 'collided' (default: the BeBot profile's).")
     ] = None,
     goal_tolerance: Annotated[
         float, typer.Option("--goal-tolerance", help="Distance (m) from the planned end that counts as goal reached.")
