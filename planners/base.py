@@ -69,7 +69,11 @@ class Planner:
                 raise ValueError(f"planner {self.name!r} has no parameter {key!r} (parameters: {allowed})")
             default = self.defaults[key]
             out[key] = _coerce(value, default, f"{self.name}.{key}")
+        self.check_params(out)
         return out
+
+    def check_params(self, params: dict[str, Any]) -> None:
+        """Range checks of merged parameters; raise ``ValueError`` naming the parameter and the rule."""
 
 
 def _coerce(value: Any, default: Any, where: str) -> Any:

@@ -32,15 +32,17 @@ class FM2Planner(Planner):
     description = "Fast Marching Square: clearance-weighted fast marching (smooth, safe paths)"
     defaults = {"saturation": 0.2, "min_speed": 0.01, "step": 0.5}
 
-    def solve(
-        self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
-    ) -> tuple[np.ndarray, dict[str, Any]]:
+    def check_params(self, params: dict[str, Any]) -> None:
         if params["saturation"] <= 0:
             raise ValueError("parameter fm2.saturation must be > 0 (metres)")
         if not 0 < params["min_speed"] <= 1:
             raise ValueError("parameter fm2.min_speed must be in (0, 1]")
         if not 0.05 <= params["step"] <= 1.0:
             raise ValueError("parameter fm2.step must be in [0.05, 1] cells")
+
+    def solve(
+        self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         speed = speed_map(space, params["saturation"], params["min_speed"])
         t = travel_time(space, goal, speed)
         return descend(space, t, start, goal, step=params["step"])

@@ -25,10 +25,12 @@ class FMMPlanner(Planner):
     description = "Fast Marching Method: geodesic shortest path (scikit-fmm), sub-cell descent"
     defaults = {"step": 0.5}
 
+    def check_params(self, params: dict[str, Any]) -> None:
+        if not 0.05 <= params["step"] <= 1.0:
+            raise ValueError("parameter fmm.step must be in [0.05, 1] cells")
+
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        if not 0.05 <= params["step"] <= 1.0:
-            raise ValueError("parameter fmm.step must be in [0.05, 1] cells")
         t = travel_time(space, goal)
         return descend(space, t, start, goal, step=params["step"])

@@ -103,14 +103,16 @@ class PRMPlanner(Planner):
         per_space[key] = rm
         return rm, False
 
+    def check_params(self, params: dict[str, Any]) -> None:
+        if not 2 <= params["samples"] <= 200_000:
+            raise ValueError("parameter prm.samples must be in [2, 200000]")
+        if not 1 <= params["k"] <= 100:
+            raise ValueError("parameter prm.k must be in [1, 100]")
+
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
     ) -> tuple[np.ndarray, dict[str, Any]]:
         samples, k = params["samples"], params["k"]
-        if not 2 <= samples <= 200_000:
-            raise ValueError("parameter prm.samples must be in [2, 200000]")
-        if not 1 <= k <= 100:
-            raise ValueError("parameter prm.k must be in [1, 100]")
         rm, cached = self.roadmap(space, samples, k, seed)
         m = len(rm.nodes)
         ends = np.array([start[:2], goal[:2]])

@@ -10,7 +10,7 @@ import sys
 
 import typer
 
-from . import demo_cmd, metrics_cmd, plan_cmd
+from . import agent_cmd, demo_cmd, metrics_cmd, plan_cmd, server_cmd
 from .errors import report_exception
 
 app = typer.Typer(
@@ -25,6 +25,10 @@ app.command("plan")(plan_cmd.plan)
 app.command("planners")(plan_cmd.planners)
 app.command("demo")(demo_cmd.demo)
 app.command("metrics")(metrics_cmd.metrics)
+app.command("agent")(agent_cmd.agent)
+app.command("up")(server_cmd.up)
+app.command("server")(server_cmd.server)
+app.add_typer(server_cmd.users_app, name="users")
 
 
 def main(argv: list[str] | None = None) -> int:

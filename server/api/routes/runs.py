@@ -1,0 +1,75 @@
+"""Runs: logged poses (JSON or CSV) and protocol messages."""
+
+from __future__ import annotations
+
+import io
+from typing import Literal
+
+from fastapi import APIRouter, HTTPException, Query
+from fastapi.responses import PlainTextResponse
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from ...jobs import run_public
+from ...models import Experiment, Message, Pose, Run, User
+from ...schemas import RunPublic
+from ..deps import CurrentUser, SessionDep
+
+router = APIRouter(prefix="/runs", tags=["runs"])
+
+
+def owned_run(session: Session, user: User, run_id: int) -> Run:
+    run = session.get(Run, run_id)
+    if run is None:
+        raise HTTPException(404, "Run not found")
+    owner = session.scalar(select(Experiment.owner_id).where(Experiment.id == run.experiment_id))
+    if owner != user.id and not user.is_admin:
+        raise HTTPException(404, "Run not found")
+    return run
+
+
+@router.get("/{run_id}", response_model=RunPublic)
+def get_run(run_id: int, session: SessionDep, user: CurrentUser) -> RunPublic:
+    """One run with its metrics."""
+    return run_public(owned_run(session, user, run_id))
+
+
+@router.get("/{run_id}/poses", response_model=None)
+def get_poses(
+    run_id: int,
+    session: SessionDep,
+    user: CurrentUser,
+    format: Literal["json", "csv"] = Query(default="json", description="json or csv (header t,x,y,theta)."),
+):
+    """Logged poses of a run, oldest first: tracker measurements (twb) or ground truth (sim).
+
+    Times are experiment seconds on the robot's clock; x, y in metres and
+    theta in radians, in the frame of the experiment's field.
+    """
+    owned_run(session, user, run_id)
+    rows = session.execute(select(Pose.t, Pose.x, Pose.y, Pose.theta).where(Pose.run_id == run_id).order_by(Pose.t)).all()
+    if format == "csv":
+        buf = io.StringIO()
+        buf.write("t,x,y,theta\n")
+        for t, x, y, a in rows:
+            buf.write(f"{t:.4f},{x:.5f},{y:.5f},{a:.5f}\n")
+        return PlainTextResponse(buf.getvalue(), media_type="text/csv",
+                                 headers={"Content-Disposition": f'attachment; filename="run-{run_id}-poses.csv"'})
+    return {"run_id": run_id, "count": len(rows), "columns": ["t", "x", "y", "theta"], "poses": [list(r) for r in rows]}
+
+
+@router.get("/{run_id}/messages")
+def get_messages(
+    run_id: int,
+    session: SessionDep,
+    user: CurrentUser,
+    offset: int = Query(default=0, ge=0),
+    limit: int = Query(default=1000, ge=1, le=10000),
+) -> dict:
+    """Every protocol line sent to (``>``) or received from (``<``) the robot, with experiment time."""
+    owned_run(session, user, run_id)
+    rows = session.scalars(
+        select(Message).where(Message.run_id == run_id).order_by(Message.id).offset(offset).limit(limit)
+    ).all()
+    count = session.scalar(select(func.count(Message.id)).where(Message.run_id == run_id)) or 0
+    return {"data": [{"t": m.t, "direction": m.direction, "line": m.line} for m in rows], "count": count}

@@ -1,0 +1,192 @@
+"""Database tables (SQLAlchemy 2, portable SQL: SQLite by default, PostgreSQL next).
+
+Units follow DESIGN §2: metres, radians, seconds.  Times named ``t*`` are
+experiment time on the robot agent's clock; ``*_at`` are wall-clock UTC.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from typing import Any, Optional
+
+from sqlalchemy import JSON, BigInteger, Boolean, DateTime, Float, ForeignKey, Index, Integer, String, Text
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+__all__ = [
+    "Base",
+    "Environment",
+    "Experiment",
+    "Message",
+    "Pose",
+    "Robot",
+    "Run",
+    "Subfield",
+    "Token",
+    "User",
+    "utcnow",
+]
+
+
+def utcnow() -> datetime:
+    return datetime.now(timezone.utc)
+
+
+class Base(DeclarativeBase):
+    type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class User(Base):
+    __tablename__ = "users"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    is_admin: Mapped[bool] = mapped_column(Boolean, default=False)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    tokens: Mapped[list["Token"]] = relationship(back_populates="user", cascade="all, delete-orphan")
+
+
+class Token(Base):
+    """A bearer token, stored hashed. ``kind``: user, admin or agent (tracker ingestion)."""
+
+    __tablename__ = "tokens"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    token_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    kind: Mapped[str] = mapped_column(String(16), default="user")
+    label: Mapped[str] = mapped_column(String(64), default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    user: Mapped[User] = relationship(back_populates="tokens")
+
+
+class Environment(Base):
+    """An environment file (DESIGN §3) stored as JSON; built-ins have no owner."""
+
+    __tablename__ = "environments"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(100), unique=True)
+    owner_id: Mapped[Optional[int]] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"), nullable=True)
+    builtin: Mapped[bool] = mapped_column(Boolean, default=False)
+    data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class Experiment(Base):
+    """A planning job: one planned path, run ``repetitions`` times in each of ``modes``."""
+
+    __tablename__ = "experiments"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    owner_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    environment: Mapped[str] = mapped_column(String(100))
+    environment_data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    start: Mapped[list[Any]] = mapped_column(JSON)
+    goal: Mapped[list[Any]] = mapped_column(JSON)
+    planner: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)
+    planner_params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    explicit_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
+    modes: Mapped[list[Any]] = mapped_column(JSON)
+    repetitions: Mapped[int] = mapped_column(Integer, default=1)
+    seed: Mapped[int] = mapped_column(BigInteger, default=0)
+    field: Mapped[str] = mapped_column(String(8), default="sub")
+    robot_radius: Mapped[float] = mapped_column(Float)
+    planned_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
+    planning_time_s: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    planning_info: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    error: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)
+    finished_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)
+
+    runs: Mapped[list["Run"]] = relationship(
+        back_populates="experiment", cascade="all, delete-orphan", order_by="Run.id"
+    )
+
+
+class Run(Base):
+    """One execution of an experiment's path in one mode (sim or twb), one repetition."""
+
+    __tablename__ = "runs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    experiment_id: Mapped[int] = mapped_column(ForeignKey("experiments.id", ondelete="CASCADE"), index=True)
+    mode: Mapped[str] = mapped_column(String(8))
+    repetition: Mapped[int] = mapped_column(Integer)
+    status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    seed: Mapped[int] = mapped_column(BigInteger, default=0)
+    attempt: Mapped[int] = mapped_column(Integer, default=1)
+    subfield: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
+    robot_id: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)
+    t_start: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    t_end: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    error: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)
+    finished_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)
+
+    experiment: Mapped[Experiment] = relationship(back_populates="runs")
+
+
+class Pose(Base):
+    """A logged pose of a run: tracker measurement (twb) or ground truth (sim)."""
+
+    __tablename__ = "poses"
+    __table_args__ = (Index("ix_poses_run_t", "run_id", "t"),)
+
+    id: Mapped[int] = mapped_column(BigInteger().with_variant(Integer, "sqlite"), primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"))
+    t: Mapped[float] = mapped_column(Float)
+    x: Mapped[float] = mapped_column(Float)
+    y: Mapped[float] = mapped_column(Float)
+    theta: Mapped[float] = mapped_column(Float)
+
+
+class Message(Base):
+    """A protocol line sent to (``>``) or received from (``<``) a robot during a run."""
+
+    __tablename__ = "messages"
+    __table_args__ = (Index("ix_messages_run", "run_id", "id"),)
+
+    id: Mapped[int] = mapped_column(BigInteger().with_variant(Integer, "sqlite"), primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"))
+    t: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    direction: Mapped[str] = mapped_column(String(1))
+    line: Mapped[str] = mapped_column(Text)
+
+
+class Robot(Base):
+    """A registered robot agent endpoint (field robots on sub-fields, ideal robots in the pool)."""
+
+    __tablename__ = "robots"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    robot_id: Mapped[str] = mapped_column(String(64), unique=True)
+    host: Mapped[str] = mapped_column(String(255))
+    port: Mapped[int] = mapped_column(Integer)
+    platform: Mapped[str] = mapped_column(String(64), default="")
+    backend: Mapped[str] = mapped_column(String(16))
+    profile: Mapped[str] = mapped_column(String(32), default="bebot")
+    origin: Mapped[list[Any]] = mapped_column(JSON)
+    area: Mapped[list[Any]] = mapped_column(JSON)
+    subfield: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
+    status: Mapped[str] = mapped_column(String(16), default="idle")
+    registered_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    last_seen: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class Subfield(Base):
+    """One of the four 1.8 m sub-fields: what is built on it and what runs there."""
+
+    __tablename__ = "subfields"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    state: Mapped[str] = mapped_column(String(16), default="idle")
+    environment: Mapped[Optional[str]] = mapped_column(String(100), nullable=True)
+    robot_id: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)
+    run_id: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)

@@ -1,0 +1,99 @@
+"""CPU work of the testbed — planning and metrics — run in worker processes, never the event loop.
+
+Functions here take and return plain JSON-ready data so they pickle cheaply
+to a ``ProcessPoolExecutor``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Optional
+
+import numpy as np
+
+__all__ = ["compare_runs", "expected_duration_s", "measure_run", "plan_job", "warm_up"]
+
+
+def warm_up() -> bool:
+    """Import the numerical stack in a fresh worker (first jobs then start at once)."""
+    import planners  # noqa: F401
+    import planners.metrics  # noqa: F401
+
+    return True
+
+
+def plan_job(env_data: dict[str, Any], start: list[float], goal: list[float], planner: str,
+             params: dict[str, Any], seed: int, robot_radius: float) -> dict[str, Any]:
+    """Plan one experiment's path; returns ``{"path", "length_m", "planning_time_s", "info"}``.
+
+    Raises :class:`planners.PlanningError` (no path, bad plug-in output, ...).
+    """
+    from planners import parse_environment, plan_path
+
+    env = parse_environment(env_data)
+    r = plan_path(env, start, goal, planner, robot_radius=robot_radius, params=params, seed=seed)
+    return {"path": np.round(r.path, 6).tolist(), "length_m": r.length_m,
+            "planning_time_s": r.planning_time_s, "info": r.info}
+
+
+def explicit_path(path: list[list[float]], goal: list[float]) -> list[list[float]]:
+    """Headings for a user's explicit path (points face the next one; the last takes the goal's)."""
+    from planners.postprocess import headings
+
+    p = np.asarray([q[:2] for q in path], dtype=float)
+    final = goal[2] if len(goal) > 2 else None
+    return np.round(headings(p, final), 6).tolist()
+
+
+def expected_duration_s(path_length_m: float, n_blocks: int, *, speed_m_s: float = 0.2,
+                        seconds_per_block: float = 4.0) -> float:
+    """Rough experiment seconds a run takes (gripper + driving), for estimates and timeouts."""
+    return n_blocks * seconds_per_block + 5.0 + path_length_m / speed_m_s * 1.5
+
+
+def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: list[list[float]],
+                t_start: Optional[float], t_done: Optional[float], goal: list[float], robot_radius: float,
+                planning_time_s: Optional[float]) -> dict[str, Any]:
+    """DESIGN §6 metrics of one run from its planned path and logged poses ``[t, x, y, theta]``."""
+    from planners import parse_environment
+    from planners.metrics import MetricSettings, run_metrics
+
+    env = parse_environment(env_data)
+    pr = np.asarray(poses, dtype=float).reshape(-1, 4)
+    if t_start is not None and t_done is not None:
+        inside = (pr[:, 0] >= t_start - 1e-9) & (pr[:, 0] <= t_done + 1e-9)
+        if inside.sum() >= 2:
+            pr = pr[inside]
+    if len(pr) < 2:
+        raise ValueError(f"only {len(pr)} pose(s) were logged for this run; metrics need at least 2")
+    settings = MetricSettings(robot_radius=robot_radius)
+    g = np.asarray(goal[:2], dtype=float)
+    out = run_metrics(np.asarray(planned, dtype=float), pr[:, 1:4], env=env, t=pr[:, 0], start_time=t_start,
+                      done_time=t_done, goal=g, planning_time_s=planning_time_s, settings=settings)
+    out["poses"] = int(len(pr))
+    out["settings"] = settings.to_dict()
+    return _clean(out)
+
+
+def compare_runs(sim_poses: list[list[float]], twb_poses: list[list[float]]) -> dict[str, Any]:
+    """The paper's direct sim-vs-twb comparison ("ST") of two performed paths."""
+    from planners.metrics import direct_comparison
+
+    a = np.asarray(sim_poses, dtype=float).reshape(-1, 4)[:, 1:3]
+    b = np.asarray(twb_poses, dtype=float).reshape(-1, 4)[:, 1:3]
+    return _clean(direct_comparison(a, b))
+
+
+def _clean(d: Any) -> Any:
+    """JSON-safe: NaN/inf become None, numpy scalars become Python numbers."""
+    if isinstance(d, dict):
+        return {k: _clean(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [_clean(v) for v in d]
+    if isinstance(d, (np.floating, float)):
+        return float(d) if math.isfinite(d) else None
+    if isinstance(d, np.integer):
+        return int(d)
+    if isinstance(d, np.bool_):
+        return bool(d)
+    return d

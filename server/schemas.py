@@ -1,0 +1,289 @@
+"""Request and response bodies of the REST API (DESIGN §7), kept apart from the tables.
+
+SI units throughout: metres, radians, seconds.  NaN and infinity are refused
+everywhere (``allow_inf_nan=False``).
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
+
+__all__ = [
+    "EnvironmentCreate",
+    "EnvironmentPublic",
+    "ExperimentCreate",
+    "ExperimentPublic",
+    "ExperimentSummary",
+    "Page",
+    "RobotPublic",
+    "RobotRegister",
+    "RunPublic",
+    "SubfieldPublic",
+    "TrackerBatch",
+    "UserCreate",
+    "UserPublic",
+    "UserWithToken",
+]
+
+T = TypeVar("T")
+
+
+def _utc(v: datetime) -> datetime:
+    return v.replace(tzinfo=timezone.utc) if v.tzinfo is None else v
+
+
+#: wall-clock times are UTC; SQLite hands them back without a zone
+UTCDateTime = Annotated[datetime, AfterValidator(_utc)]
+
+Mode = Literal["sim", "twb"]
+RUN_STATES = (
+    "queued", "building", "placing", "planning", "running", "analyzing",
+    "completed", "failed", "error", "cancelled", "interrupted",
+)
+TERMINAL_STATES = frozenset({"completed", "failed", "error", "cancelled", "interrupted"})
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(allow_inf_nan=False, extra="forbid")
+
+
+class Page(BaseModel, Generic[T]):
+    """A page of a list: ``data`` and the total ``count`` of matching items."""
+
+    data: list[T]
+    count: int
+
+
+# --------------------------------------------------------------------------- users
+
+
+class UserCreate(Strict):
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")
+    is_admin: bool = False
+
+
+class UserPublic(BaseModel):
+    id: int
+    name: str
+    is_admin: bool
+    created_at: UTCDateTime
+
+
+class UserWithToken(UserPublic):
+    token: str = Field(description="Bearer token; shown once, stored only as a hash.")
+
+
+# --------------------------------------------------------------------------- environments
+
+
+class EnvironmentCreate(Strict):
+    """An environment file (DESIGN §3); validated by the planners' environment model."""
+
+    model_config = ConfigDict(allow_inf_nan=False, extra="allow")
+
+    name: str = Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
+
+    def to_data(self) -> dict[str, Any]:
+        return self.model_dump()
+
+
+class EnvironmentPublic(BaseModel):
+    name: str
+    size: list[float]
+    blocks: list[dict[str, float]]
+    plans: list[dict[str, Any]] = []
+    description: str = ""
+    builtin: bool
+    owner: Optional[str] = None
+
+
+# --------------------------------------------------------------------------- experiments
+
+Pose = list[float]
+
+
+class ExperimentCreate(Strict):
+    """A job: plan with ``planner`` (or send the explicit ``path``), run it in ``modes``.
+
+    Poses are ``[x, y]`` or ``[x, y, theta]`` (m, rad) in the frame of the
+    sub-field (``field: "sub"``) or of the whole 3.6 m field (``"full"``).
+    """
+
+    model_config = ConfigDict(
+        allow_inf_nan=False,
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708],
+                    "planner": "fm2", "planner_params": {}, "modes": ["sim", "twb"],
+                    "repetitions": 2, "seed": 0, "field": "sub",
+                }
+            ]
+        },
+    )
+
+    environment: str = Field(min_length=1, max_length=100)
+    start: Optional[Pose] = None
+    goal: Optional[Pose] = None
+    planner: Optional[str] = Field(default=None, max_length=64)
+    planner_params: dict[str, Any] = Field(default_factory=dict)
+    path: Optional[list[Pose]] = Field(default=None, max_length=10_000)
+    modes: list[Mode] = Field(default_factory=lambda: ["sim", "twb"], min_length=1, max_length=2)
+    repetitions: int = Field(default=1, ge=1)
+    seed: int = Field(default=0, ge=0, lt=2**63)
+    field: Literal["sub", "full"] = "sub"
+
+    @field_validator("start", "goal")
+    @classmethod
+    def _pose(cls, v: Optional[Pose]) -> Optional[Pose]:
+        if v is not None and len(v) not in (2, 3):
+            raise ValueError("must be [x, y] or [x, y, theta]")
+        return v
+
+    @field_validator("path")
+    @classmethod
+    def _path(cls, v: Optional[list[Pose]]) -> Optional[list[Pose]]:
+        if v is None:
+            return v
+        if len(v) < 2:
+            raise ValueError("needs at least 2 points")
+        for i, p in enumerate(v):
+            if len(p) not in (2, 3):
+                raise ValueError(f"point {i} must be [x, y] or [x, y, theta]")
+        return v
+
+    @field_validator("modes")
+    @classmethod
+    def _modes(cls, v: list[str]) -> list[str]:
+        if len(set(v)) != len(v):
+            raise ValueError("modes must not repeat")
+        return v
+
+    @model_validator(mode="after")
+    def _planner_or_path(self) -> "ExperimentCreate":
+        if self.path is not None and self.planner is not None:
+            raise ValueError("give either `planner` or `path`, not both")
+        if self.path is None:
+            if self.planner is None:
+                self.planner = "fmm"
+            if self.start is None or self.goal is None:
+                raise ValueError("`start` and `goal` are required with a planner")
+        else:
+            if self.planner_params:
+                raise ValueError("`planner_params` needs a `planner`")
+            self.start = self.start or list(self.path[0])
+            self.goal = self.goal or list(self.path[-1])
+        return self
+
+
+class RunPublic(BaseModel):
+    id: int
+    experiment_id: int
+    mode: str
+    repetition: int
+    status: str
+    seed: int
+    attempt: int
+    subfield: Optional[int]
+    robot_id: Optional[str]
+    t_start: Optional[float]
+    t_end: Optional[float]
+    metrics: dict[str, Any]
+    error: str
+    created_at: UTCDateTime
+    started_at: Optional[UTCDateTime]
+    finished_at: Optional[UTCDateTime]
+
+
+class ExperimentSummary(BaseModel):
+    id: int
+    owner: str
+    status: str
+    environment: str
+    planner: Optional[str]
+    modes: list[str]
+    repetitions: int
+    field: str
+    error: str
+    created_at: UTCDateTime
+    finished_at: Optional[UTCDateTime]
+    estimated_start_s: Optional[float] = Field(
+        default=None, description="Queued jobs: estimated wall seconds until the first run starts."
+    )
+
+
+class ExperimentPublic(ExperimentSummary):
+    start: list[float]
+    goal: list[float]
+    planner_params: dict[str, Any]
+    seed: int
+    robot_radius: float
+    planned_path: Optional[list[list[float]]]
+    planning_time_s: Optional[float]
+    planning_info: dict[str, Any]
+    started_at: Optional[UTCDateTime]
+    runs: list[RunPublic]
+
+
+# --------------------------------------------------------------------------- robots, tracker
+
+
+class RobotRegister(Strict):
+    """What an agent sends to ``POST /api/v1/robots`` when it starts."""
+
+    model_config = ConfigDict(allow_inf_nan=False, extra="ignore")
+
+    robot_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")
+    host: str = Field(min_length=1, max_length=255)
+    port: int = Field(ge=1, le=65535)
+    platform: str = Field(default="", max_length=64)
+    backend: Literal["ideal", "field"]
+    profile: str = Field(default="bebot", max_length=32)
+    origin: list[float] = Field(default_factory=lambda: [0.0, 0.0], min_length=2, max_length=2)
+    area: list[float] = Field(default_factory=lambda: [1.8, 1.8], min_length=2, max_length=2)
+
+
+class RobotPublic(BaseModel):
+    robot_id: str
+    host: str
+    port: int
+    platform: str
+    backend: str
+    profile: str
+    origin: list[float]
+    area: list[float]
+    subfield: Optional[int]
+    pool: str
+    status: str
+    last_seen: UTCDateTime
+
+
+class SubfieldPublic(BaseModel):
+    id: int
+    state: str
+    environment: Optional[str]
+    robot_id: Optional[str]
+    run_id: Optional[int]
+    origin: list[float]
+    size: list[float]
+
+
+class TrackerBatch(Strict):
+    """Tracker poses of one robot: ``[t, x, y, theta]`` rows (s, m, m, rad), robot frame."""
+
+    model_config = ConfigDict(allow_inf_nan=False, extra="ignore")
+
+    robot_id: str = Field(min_length=1, max_length=64)
+    poses: list[list[float]] = Field(max_length=100_000)
+
+    @field_validator("poses")
+    @classmethod
+    def _rows(cls, v: list[list[float]]) -> list[list[float]]:
+        for i, row in enumerate(v):
+            if len(row) != 4:
+                raise ValueError(f"pose {i} must be [t, x, y, theta]")
+        return v

@@ -1,0 +1,117 @@
+"""Tracker pose ingestion: routes each robot's pose batches to the run it is executing.
+
+The tracker (emulated overhead cameras, or ground truth in the simulation
+pool) streams every robot's poses all the time, as on the real testbed; the
+runner opens a *window* on a robot for the run it executes, and only poses
+inside an open window are stored.  Live positions of every robot are
+published for the dashboard, at most a few per second per robot.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+from sqlalchemy import insert
+from sqlalchemy.orm import Session, sessionmaker
+
+from .broker import EventBroker
+from .models import Pose
+
+__all__ = ["PoseRouter"]
+
+_LIVE_INTERVAL_S = 0.1
+
+
+@dataclass
+class _Window:
+    run_id: int
+    owner_id: int
+    stored: int = 0
+
+
+class PoseRouter:
+    """Which run each robot's poses belong to, and the store for them."""
+
+    def __init__(self, sessions: sessionmaker[Session], broker: EventBroker,
+                 origin_of: Callable[[str], tuple[float, float]]) -> None:
+        self._sessions = sessions
+        self._broker = broker
+        self._origin_of = origin_of
+        self._lock = threading.Lock()
+        self._windows: dict[str, _Window] = {}
+        self._last_t: dict[str, float] = {}
+        self._last_live: dict[str, float] = {}
+        self._waiters: dict[str, list[tuple[float, asyncio.Future, asyncio.AbstractEventLoop]]] = {}
+        self.dropped = 0
+
+    def open(self, robot_id: str, run_id: int, owner_id: int) -> None:
+        """Store ``robot_id``'s poses for ``run_id`` from now on."""
+        with self._lock:
+            self._windows[robot_id] = _Window(run_id, owner_id)
+
+    def close(self, robot_id: str) -> int:
+        """Stop storing; returns how many poses the window stored."""
+        with self._lock:
+            w = self._windows.pop(robot_id, None)
+        return w.stored if w else 0
+
+    def last_time(self, robot_id: str) -> Optional[float]:
+        return self._last_t.get(robot_id)
+
+    async def wait_for_time(self, robot_id: str, t: float, timeout_s: float) -> bool:
+        """Wait until a pose of ``robot_id`` at experiment time >= ``t`` has arrived (or time out)."""
+        loop = asyncio.get_running_loop()
+        fut: asyncio.Future = loop.create_future()
+        with self._lock:
+            if self._last_t.get(robot_id, -float("inf")) >= t:
+                return True
+            self._waiters.setdefault(robot_id, []).append((t, fut, loop))
+        try:
+            await asyncio.wait_for(fut, timeout_s)
+            return True
+        except asyncio.TimeoutError:
+            return False
+        finally:
+            with self._lock:
+                self._waiters[robot_id] = [w for w in self._waiters.get(robot_id, []) if w[1] is not fut]
+
+    def ingest(self, robot_id: str, rows: list[list[float]]) -> tuple[int, Optional[int]]:
+        """Accept one batch ``[[t, x, y, theta], ...]``; returns (stored, run_id). Thread-safe, blocking I/O."""
+        if not rows:
+            return 0, None
+        with self._lock:
+            w = self._windows.get(robot_id)
+        stored = 0
+        if w is not None:
+            with self._sessions.begin() as s:
+                s.execute(insert(Pose), [
+                    {"run_id": w.run_id, "t": r[0], "x": r[1], "y": r[2], "theta": r[3]} for r in rows
+                ])
+            stored = len(rows)
+            with self._lock:
+                w.stored += stored
+        else:
+            self.dropped += len(rows)
+        last = max(r[0] for r in rows)
+        wake = []
+        with self._lock:
+            self._last_t[robot_id] = max(self._last_t.get(robot_id, -float("inf")), last)
+            for t, fut, loop in self._waiters.get(robot_id, []):
+                if last >= t:
+                    wake.append((fut, loop))
+        for fut, loop in wake:
+            loop.call_soon_threadsafe(lambda f=fut: f.done() or f.set_result(True))
+        now = time.monotonic()
+        if now - self._last_live.get(robot_id, 0.0) >= _LIVE_INTERVAL_S:
+            self._last_live[robot_id] = now
+            t, x, y, a = rows[-1]
+            ox, oy = self._origin_of(robot_id)
+            self._broker.publish({
+                "type": "pose", "robot_id": robot_id, "run_id": w.run_id if w else None,
+                "owner_id": w.owner_id if w else None, "t": t, "x": x + ox, "y": y + oy, "theta": a,
+            })
+        return stored, (w.run_id if w else None)

@@ -1,0 +1,89 @@
+"""Pre-flight validation of a job before it is queued (as the Robotarium does).
+
+Everything that would make a run fail for a reason known in advance is
+refused here with a clear message: unknown environment or planner, bad
+planner parameters, a start or goal outside the field or not free for the
+robot, an unreachable goal, an explicit path leaving free space.  Pure
+computation on the planners' model; no database, no robots.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from planners import Environment, PlanningError, check_query, get_planner, parse_environment
+
+from .schemas import ExperimentCreate
+
+__all__ = ["FIELD_SIZE", "SUBFIELD_SIZE", "Preflight", "PreflightError", "preflight"]
+
+SUBFIELD_SIZE = (1.8, 1.8)
+FIELD_SIZE = (3.6, 3.6)
+
+
+class PreflightError(ValueError):
+    """The job cannot run; the message says why (HTTP 422)."""
+
+
+@dataclass(frozen=True)
+class Preflight:
+    """A checked job: the environment model, poses (theta NaN if not given), checked parameters."""
+
+    env: Environment
+    start: list[float]
+    goal: list[float]
+    planner_params: dict[str, Any]
+    path: list[list[float]] | None
+
+
+def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: float) -> Preflight:
+    """Validate ``body`` against the stored environment ``env_data``; raises :class:`PreflightError`."""
+    try:
+        env = parse_environment(env_data)
+    except PlanningError as exc:
+        raise PreflightError(f"environment: {exc}") from None
+    limit = SUBFIELD_SIZE if body.field == "sub" else FIELD_SIZE
+    if env.width > limit[0] + 1e-9 or env.height > limit[1] + 1e-9:
+        raise PreflightError(
+            f"environment {env.name!r} is {env.width:g} x {env.height:g} m; a {body.field}-field job "
+            f"allows at most {limit[0]:g} x {limit[1]:g} m" + (' (use "field": "full")' if body.field == "sub" else "")
+        )
+    params: dict[str, Any] = {}
+    if body.planner is not None:
+        try:
+            params = get_planner(body.planner).validate_params(body.planner_params)
+        except (PlanningError, ValueError) as exc:
+            raise PreflightError(str(exc)) from None
+    try:
+        space, s, g = check_query(env, body.start, body.goal, robot_radius=robot_radius)
+    except PlanningError as exc:
+        raise PreflightError(str(exc)) from None
+    path = None
+    if body.path is not None:
+        pts = np.array([p[:2] for p in body.path], dtype=float)
+        if np.hypot(*(pts[0] - s[:2])) > 1e-3 or np.hypot(*(pts[-1] - g[:2])) > 1e-3:
+            raise PreflightError("`path` must begin at `start` and end at `goal` (within 1 mm)")
+        outside = ~space.is_free(pts)
+        if outside.any():
+            i = int(np.flatnonzero(outside)[0])
+            raise PreflightError(
+                f"path point {i} ({pts[i, 0]:g}, {pts[i, 1]:g}) is outside the field or closer than the "
+                f"robot radius {robot_radius:g} m to an obstacle"
+            )
+        bad = ~space.segments_free(pts[:-1], pts[1:])
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise PreflightError(
+                f"path segment {i} from ({pts[i, 0]:g}, {pts[i, 1]:g}) to ({pts[i + 1, 0]:g}, {pts[i + 1, 1]:g}) "
+                f"passes closer than the robot radius {robot_radius:g} m to an obstacle"
+            )
+        path = [list(map(float, p)) for p in body.path]
+    return Preflight(env, _pose(s), _pose(g), params, path)
+
+
+def _pose(p: np.ndarray) -> list[float]:
+    return [float(p[0]), float(p[1])] + ([] if math.isnan(p[2]) else [float(p[2])])

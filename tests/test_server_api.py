@@ -1,0 +1,193 @@
+"""The REST API of a real `twb server` process (no robots needed for these)."""
+
+import json
+
+import pytest
+
+from servers import Process
+
+JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
+       "modes": ["sim", "twb"], "repetitions": 2, "seed": 3}
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    p = Process(["server"], tmp_path_factory.mktemp("server"))
+    yield p
+    p.stop()
+
+
+@pytest.fixture(scope="module")
+def alice(server):
+    with server.client() as admin:
+        token = admin.post("/api/v1/users", json={"name": "alice"}).json()["token"]
+    with server.client(token) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def bob(server):
+    with server.client() as admin:
+        token = admin.post("/api/v1/users", json={"name": "bob"}).json()["token"]
+    with server.client(token) as c:
+        yield c
+
+
+def test_health_is_open_and_the_token_file_is_written(server):
+    with server.client(token=None) as c:
+        assert c.get("/health").json()["status"] == "ok"
+    assert (server.data_dir / "token").read_text().strip() == server.token
+    assert (server.data_dir / "twb.db").exists()
+
+
+def test_auth_errors(server):
+    with server.client(token=None) as c:
+        r = c.get("/api/v1/experiments")
+        assert r.status_code == 401 and r.json() == {"detail": "Missing bearer token"}
+    with server.client(token="nope") as c:
+        assert c.get("/api/v1/experiments").json() == {"detail": "Invalid token"}
+
+
+def test_tokens_are_stored_hashed(server, alice):
+    import sqlite3
+
+    con = sqlite3.connect(server.data_dir / "twb.db")
+    hashes = [h for (h,) in con.execute("select token_hash from tokens")]
+    assert server.token not in hashes and all(len(h) == 64 for h in hashes)
+
+
+def test_users_admin_only(server, alice):
+    assert alice.get("/api/v1/users").status_code == 403
+    assert alice.get("/api/v1/users/me").json()["name"] == "alice"
+    with server.client() as admin:
+        assert admin.post("/api/v1/users", json={"name": "alice"}).status_code == 409
+        assert admin.post("/api/v1/users", json={"name": "a b"}).status_code == 422
+
+
+def test_environments(alice, bob):
+    names = [e["name"] for e in alice.get("/api/v1/environments").json()["data"]]
+    assert {"room", "blocks"} <= set(names)
+    room = alice.get("/api/v1/environments/room").json()
+    assert room["builtin"] and len(room["plans"]) == 2
+    mine = {"name": "alice-corridor", "size": [1.8, 1.8],
+            "blocks": [{"x": 0.9, "y": 0.6, "w": 1.2, "h": 0.05, "angle": 0.0}]}
+    r = alice.post("/api/v1/environments", json=mine)
+    assert r.status_code == 201, r.text
+    assert r.json()["owner"] == "alice"
+    assert alice.post("/api/v1/environments", json=mine).status_code == 409
+    assert bob.get("/api/v1/environments/alice-corridor").status_code == 404  # not his
+    bad = {**mine, "name": "bad-env", "blocks": [{"x": 0.9, "y": 0.6, "w": -1, "h": 0.05}]}
+    r = alice.post("/api/v1/environments", json=bad)
+    assert r.status_code == 422 and "blocks[0].w must be > 0" in r.json()["detail"]
+    assert alice.get("/api/v1/environments/nowhere").status_code == 404
+
+
+def test_submit_returns_202_with_runs_and_others_get_404(alice, bob):
+    r = alice.post("/api/v1/experiments", json=JOB)
+    assert r.status_code == 202, r.text
+    exp = r.json()
+    assert exp["status"] == "queued" and exp["owner"] == "alice"
+    assert [(x["mode"], x["repetition"]) for x in exp["runs"]] == [("sim", 1), ("twb", 1), ("sim", 2), ("twb", 2)]
+    assert len({x["seed"] for x in exp["runs"]}) == 4
+    eid = exp["id"]
+    assert alice.get(f"/api/v1/experiments/{eid}").json()["id"] == eid
+    assert bob.get(f"/api/v1/experiments/{eid}").status_code == 404
+    assert bob.post(f"/api/v1/experiments/{eid}/cancel").status_code == 404
+    assert all(e["id"] != eid for e in bob.get("/api/v1/experiments").json()["data"])
+    listed = alice.get("/api/v1/experiments", params={"status": "queued"}).json()
+    assert listed["count"] >= 1 and listed["data"][0]["id"] == eid
+    run_id = exp["runs"][0]["id"]
+    assert bob.get(f"/api/v1/runs/{run_id}/poses").status_code == 404
+    assert alice.get(f"/api/v1/runs/{run_id}/poses").json()["count"] == 0
+    assert alice.get("/api/v1/runs/999999/poses").status_code == 404
+    assert alice.get("/api/v1/experiments/999999").status_code == 404
+    # cancel, then cancelling again is a state conflict
+    c = alice.post(f"/api/v1/experiments/{eid}/cancel")
+    assert c.status_code == 200 and c.json()["status"] == "cancelled"
+    assert all(x["status"] == "cancelled" for x in c.json()["runs"])
+    assert alice.post(f"/api/v1/experiments/{eid}/cancel").status_code == 409
+
+
+@pytest.mark.parametrize(
+    "change, status, message",
+    [
+        ({"environment": "nowhere"}, 422, "unknown environment 'nowhere'"),
+        ({"start": [0.9, 0.5, 0.0]}, 422, r"start \(0.9, 0.5\) is inside an obstacle"),
+        ({"goal": [2.5, 0.5]}, 422, r"goal \(2.5, 0.5\) is outside the field"),
+        ({"planner": "rrt"}, 422, "unknown planner 'rrt'"),
+        ({"planner_params": {"saturation": -1.0}}, 422, None),
+        ({"planner_params": {"bogus": 1}}, 422, "has no parameter 'bogus'"),
+        ({"modes": ["sim", "sim"]}, 422, "modes must not repeat"),
+        ({"modes": ["real"]}, 422, "modes.0"),
+        ({"repetitions": 0}, 422, "repetitions"),
+        ({"repetitions": 1000}, 422, "repetitions must be at most"),
+        ({"seed": -1}, 422, "seed"),
+        ({"field": "half"}, 422, "field"),
+        ({"start": [0.3]}, 422, r"must be \[x, y\] or \[x, y, theta\]"),
+        ({"extra": 1}, 422, "extra"),
+    ],
+)
+def test_preflight_refuses_bad_jobs_with_a_reason(alice, change, status, message):
+    import re
+
+    r = alice.post("/api/v1/experiments", json={**JOB, **change})
+    assert r.status_code == status, r.text
+    if message:
+        assert re.search(message, r.json()["detail"]), r.json()["detail"]
+
+
+def test_explicit_paths(alice):
+    ok = {"environment": "room", "path": [[0.3, 0.3], [0.45, 0.6], [0.45, 1.35], [1.5, 1.35], [1.5, 1.5]],
+          "modes": ["sim"]}
+    r = alice.post("/api/v1/experiments", json=ok)
+    assert r.status_code == 202, r.text
+    assert r.json()["planner"] is None and r.json()["start"] == [0.3, 0.3]
+    alice.post(f"/api/v1/experiments/{r.json()['id']}/cancel")
+    through_wall = {"environment": "room", "path": [[0.3, 0.3], [1.5, 0.3]], "modes": ["sim"]}
+    r = alice.post("/api/v1/experiments", json=through_wall)
+    assert r.status_code == 422 and "path segment 0" in r.json()["detail"]
+    both = {**ok, "planner": "fmm"}
+    assert alice.post("/api/v1/experiments", json=both).status_code == 422
+
+
+def test_invalid_json_nan_and_huge_bodies(alice):
+    r = alice.post("/api/v1/experiments", content=b"{not json", headers={"content-type": "application/json"})
+    assert r.status_code == 422
+    nan = json.dumps({**JOB, "start": [0.3, 0.3, 0.0]}).replace("0.3, 0.3, 0.0", "NaN, 0.3, 0.0")
+    r = alice.post("/api/v1/experiments", content=nan.encode(), headers={"content-type": "application/json"})
+    assert r.status_code == 422 and "start" in r.json()["detail"]
+    huge = b'{"environment": "' + b"x" * (5 << 20) + b'"}'
+    r = alice.post("/api/v1/experiments", content=huge, headers={"content-type": "application/json"})
+    assert r.status_code == 413 and "larger than" in r.json()["detail"]
+
+    def chunks():
+        yield b'{"environment": "'
+        for _ in range(6):
+            yield b"x" * (1 << 20)
+        yield b'"}'
+
+    r = alice.post("/api/v1/experiments", content=chunks(), headers={"content-type": "application/json"})
+    assert r.status_code == 413
+
+
+def test_tracker_ingestion_needs_an_agent_token(server, alice):
+    batch = {"robot_id": "r1", "poses": [[0.0, 0.1, 0.1, 0.0]]}
+    assert alice.post("/api/v1/tracker/poses", json=batch).status_code == 403
+    with server.client() as admin:
+        r = admin.post("/api/v1/users/alice/tokens", params={"kind": "agent"})
+        agent_token = r.json()["token"]
+    with server.client(agent_token) as agent:
+        r = agent.post("/api/v1/tracker/poses", json=batch)
+        assert r.status_code == 200 and r.json() == {"received": 1, "stored": 0, "run_id": None}
+        bad = agent.post("/api/v1/tracker/poses", json={"robot_id": "r1", "poses": [[0.0, 0.1]]})
+        assert bad.status_code == 422
+        # agent tokens are for agents only
+        assert agent.get("/api/v1/experiments").status_code == 403
+
+
+def test_quota(server, tmp_path):
+    with server.client() as admin:
+        token = admin.post("/api/v1/users", json={"name": "greedy"}).json()["token"]
+    with server.client(token) as c:
+        codes = [c.post("/api/v1/experiments", json={**JOB, "modes": ["sim"]}).status_code for _ in range(3)]
+    assert codes == [202, 202, 202]  # the server's limit is 200; this checks the counting path only

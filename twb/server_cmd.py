@@ -1,0 +1,204 @@
+"""``twb up``, ``twb server`` and ``twb users``: run the testbed and manage its users."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import signal
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from .errors import fail
+
+users_app = typer.Typer(help="Manage testbed users (needs the admin token).", no_args_is_help=True)
+
+
+def _time_scale(value: str) -> float:
+    if value.lower() in ("max", "inf"):
+        return math.inf
+    try:
+        v = float(value)
+    except ValueError:
+        fail(f"--time-scale must be a number > 0 or 'max', got {value!r}")
+    if not (v > 0 and math.isfinite(v)):
+        fail(f"--time-scale must be a number > 0 or 'max', got {value!r}")
+    return v
+
+
+async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ignore[no-untyped-def]
+    """Run uvicorn on the current loop until a signal; ``on_ready(url)`` is awaited once it listens."""
+    import uvicorn
+
+    from server.app import create_app
+
+    app = create_app(settings, testbed)
+    config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="on",
+                            timeout_graceful_shutdown=5)
+    server = uvicorn.Server(config)
+    server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    serving = asyncio.create_task(server.serve())
+    while not server.started:
+        if serving.done():
+            serving.result()
+            fail(f"the server could not start on {host}:{port}")
+        await asyncio.sleep(0.05)
+    bound = server.servers[0].sockets[0].getsockname()[1]
+    url = f"http://{host}:{bound}"
+    cleanup = await on_ready(url)
+    try:
+        await stop.wait()
+    finally:
+        print("twb: stopping...", file=sys.stderr, flush=True)
+        if cleanup is not None:
+            await cleanup()
+        server.should_exit = True
+        await serving
+
+
+def _settings(data_dir: Path, token: Optional[str], time_scale: float, **extra):  # type: ignore[no-untyped-def]
+    from server.core.settings import Settings
+
+    kwargs = {"data_dir": data_dir, "time_scale": time_scale, **extra}
+    if token:
+        kwargs["admin_token"] = token
+    return Settings(**kwargs)
+
+
+def up(
+    port: Annotated[int, typer.Option(help="HTTP port of the API and dashboard (0: any free port).")] = 8000,
+    host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
+    data_dir: Annotated[Path, typer.Option(help="Database, token file and logs.")] = Path("twb-data"),
+    time_scale: Annotated[str, typer.Option(help="Experiment seconds per wall second (1 = live; 'max').")] = "1",
+    token: Annotated[Optional[str], typer.Option(help="Fix the admin token instead of generating one.")] = None,
+    sim_robots: Annotated[int, typer.Option(help="Size of the simulation pool (ideal robots).", min=1, max=1000)] = 4,
+    seed: Annotated[int, typer.Option(help="Agent seed (runs are seeded from their job's seed).", min=0)] = 0,
+) -> None:
+    """The whole testbed on this machine: server on SQLite, four field robots, a simulation pool."""
+    from robot_agent.host import AgentHost
+    from server.testbed import Testbed
+
+    scale = _time_scale(time_scale)
+    settings = _settings(data_dir, token, scale)
+    testbed = Testbed(settings)
+    admin = testbed.prepare()
+    agent_token = testbed.issue_agent_token()
+
+    async def ready(url: str):  # type: ignore[no-untyped-def]
+        full = (3.6, 3.6)
+        field = AgentHost(robots=4, backend="field", time_scale=scale, seed=seed, world="shared",
+                          robot_ids=[f"field-{k}" for k in range(1, 5)],
+                          area=[full, (1.8, 1.8), (1.8, 1.8), (1.8, 1.8)],
+                          origins=[(0.0, 0.0), (1.8, 0.0), (0.0, 1.8), (1.8, 1.8)],
+                          server_url=url, token=agent_token, advertise_host="127.0.0.1")
+        pool = AgentHost(robots=sim_robots, backend="ideal", time_scale=scale, seed=seed, world="separate",
+                         area=full, robot_ids=[f"sim-{i}" for i in range(1, sim_robots + 1)],
+                         server_url=url, token=agent_token, advertise_host="127.0.0.1")
+        hosts = [field, pool]
+        for h in hosts:
+            await h.start()
+            for r in h.robots:
+                testbed.seed_hooks[r.robot_id] = lambda s, h=h, rid=r.robot_id: h.set_path_seed(rid, s)
+                testbed.flush_hooks[r.robot_id] = h.flush_tracker
+        for h in hosts:
+            if h.link is not None:
+                await h.link.flush()
+        shown = "max" if math.isinf(scale) else f"{scale:g}x"
+        print(f"Teleworkbench is up: {url}  (dashboard {url}/ , API docs {url}/docs)", flush=True)
+        print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
+        print(f"Robots: 4 field robots (sub-fields 1-4), {sim_robots} simulated; time scale {shown}. "
+              "Ctrl-C stops everything.", flush=True)
+
+        async def cleanup() -> None:
+            for h in hosts:
+                await h.stop()
+
+        return cleanup
+
+    asyncio.run(_serve(settings, testbed, host, port, ready))
+
+
+def server(
+    port: Annotated[int, typer.Option(help="HTTP port (0: any free port).")] = 8000,
+    host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
+    data_dir: Annotated[Path, typer.Option(help="Database, token file and logs.")] = Path("twb-data"),
+    time_scale: Annotated[str, typer.Option(help="Time scale the agents run at (for timeouts).")] = "1",
+    token: Annotated[Optional[str], typer.Option(help="Fix the admin token instead of generating one.")] = None,
+) -> None:
+    """The server alone; robots join with `twb agent --server URL --token T`."""
+    from server.testbed import Testbed
+
+    settings = _settings(data_dir, token, _time_scale(time_scale))
+    testbed = Testbed(settings)
+    admin = testbed.prepare()
+
+    async def ready(url: str):  # type: ignore[no-untyped-def]
+        print(f"Teleworkbench server: {url}  (API docs {url}/docs)", flush=True)
+        print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
+        return None
+
+    asyncio.run(_serve(settings, testbed, host, port, ready))
+
+
+def _client(url: str, token: Optional[str], data_dir: Path):  # type: ignore[no-untyped-def]
+    import httpx
+
+    if not token:
+        path = data_dir / "token"
+        if not path.exists():
+            fail(f"no --token given and no token file {path} (start the testbed with `twb up` first)")
+        token = path.read_text().strip()
+    return httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=10)
+
+
+def _check(resp) -> dict:  # type: ignore[no-untyped-def]
+    if resp.status_code >= 400:
+        try:
+            detail = resp.json().get("detail", resp.text)
+        except ValueError:
+            detail = resp.text
+        fail(f"server answered {resp.status_code}: {detail}")
+    return resp.json()
+
+
+@users_app.command("create")
+def users_create(
+    name: Annotated[str, typer.Argument(help="User name (letters, digits, _ . -).")],
+    admin: Annotated[bool, typer.Option(help="Give the user admin rights.")] = False,
+    url: Annotated[str, typer.Option(envvar="TWB_URL", help="Server URL.")] = "http://127.0.0.1:8000",
+    token: Annotated[Optional[str], typer.Option(envvar="TWB_TOKEN", help="Admin token.")] = None,
+    data_dir: Annotated[Path, typer.Option(help="Where `twb up` wrote the admin token.")] = Path("twb-data"),
+) -> None:
+    """Create a user and print its token (shown once)."""
+    import httpx
+
+    try:
+        with _client(url, token, data_dir) as c:
+            body = _check(c.post("/api/v1/users", json={"name": name, "is_admin": admin}))
+    except httpx.TransportError as exc:
+        fail(f"cannot reach the server at {url}: {exc}")
+    typer.echo(body["token"])
+
+
+@users_app.command("list")
+def users_list(
+    url: Annotated[str, typer.Option(envvar="TWB_URL", help="Server URL.")] = "http://127.0.0.1:8000",
+    token: Annotated[Optional[str], typer.Option(envvar="TWB_TOKEN", help="Admin token.")] = None,
+    data_dir: Annotated[Path, typer.Option(help="Where `twb up` wrote the admin token.")] = Path("twb-data"),
+) -> None:
+    """List users."""
+    import httpx
+
+    try:
+        with _client(url, token, data_dir) as c:
+            body = _check(c.get("/api/v1/users"))
+    except httpx.TransportError as exc:
+        fail(f"cannot reach the server at {url}: {exc}")
+    for u in body["data"]:
+        typer.echo(f"{u['name']}{' (admin)' if u['is_admin'] else ''}")
