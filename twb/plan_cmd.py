@@ -43,7 +43,7 @@ def plan(
     planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar or a plug-in name.")] = "fmm",
     seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM).", min=0)] = 0,
     robot_radius: Annotated[
-        Optional[float], typer.Option(help="Robot radius in metres [default: the BeBot profile's].")
+        Optional[float], typer.Option(help="Robot radius in metres (default: the BeBot profile's, 0.045).")
     ] = None,
     resolution: Annotated[float, typer.Option(help="Grid resolution in metres per cell.")] = 0.01,
     max_spacing: Annotated[float, typer.Option(help="Largest distance between path points, metres.")] = 0.1,
