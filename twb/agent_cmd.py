@@ -1,0 +1,95 @@
+"""``twb agent``: run emulated robots speaking the wire protocol (DESIGN §4, §8)."""
+
+from __future__ import annotations
+
+import logging
+import math
+from enum import Enum
+from typing import Annotated, Optional
+
+import typer
+
+from .errors import fail
+
+
+class BackendName(str, Enum):
+    ideal = "ideal"
+    field = "field"
+
+
+class WorldMode(str, Enum):
+    auto = "auto"
+    shared = "shared"
+    separate = "separate"
+
+
+def _pair(text: str | None, what: str) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        w, h = (float(p) for p in parts)
+    except ValueError:
+        fail(f"--{what} must be two numbers W,H in metres, got {text!r}")
+    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
+        fail(f"--{what} must be two finite numbers > 0, got {text!r}")
+    return w, h
+
+
+def agent(
+    port: Annotated[int, typer.Option(help="TCP port of the first robot (0: any free port); robot i listens on PORT+i-1.")] = 5555,
+    robot_id: Annotated[Optional[str], typer.Option(help="Robot name; with --robots N the names are ID-1..ID-N [default: robot-1..]")] = None,
+    profile: Annotated[str, typer.Option(help="Robot profile: bebot or khepera3.")] = "bebot",
+    backend: Annotated[BackendName, typer.Option(help="ideal (Player/Stage-like) or field (emulated physical robot).")] = BackendName.field,
+    time_scale: Annotated[str, typer.Option(help="Experiment seconds per wall second (1 = live); 'max' runs as fast as possible.")] = "1",
+    server: Annotated[Optional[str], typer.Option(help="Testbed server URL: register the robots and post tracker poses there.")] = None,
+    token: Annotated[Optional[str], typer.Option(help="Bearer token for --server.", envvar="TWB_TOKEN")] = None,
+    robots: Annotated[int, typer.Option(help="Number of robots, on consecutive ports, sharing one field (up to 4).", min=1, max=1000)] = 1,
+    seed: Annotated[int, typer.Option(help="Agent seed: each path's noise derives from (seed, robot id, path count).", envvar="TWB_AGENT_SEED")] = 0,
+    tracker_csv: Annotated[Optional[str], typer.Option(help="Write tracker poses (t,x,y,theta) to this CSV file; {robot_id} or -<id> per robot.")] = None,
+    area: Annotated[Optional[str], typer.Option(help="Working area W,H in metres, e.g. 3.6,3.6 for the whole field [default: 1.8,1.8, a sub-field].")] = None,
+    world: Annotated[WorldMode, typer.Option(help="shared: one field for all robots; separate: a world each; auto: shared up to 4 robots.")] = WorldMode.auto,
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log every path and event.")] = False,
+) -> None:
+    """Run emulated robots speaking the T,T,P line protocol until Ctrl-C (logs on stderr)."""
+    import asyncio
+
+    from robot_agent.host import AgentHost
+    from robot_agent.robot_profile import profile_names
+    from robot_agent.sinks import CsvTrackerSink
+
+    if profile not in profile_names():
+        fail(f"unknown --profile {profile!r} (profiles: {', '.join(profile_names())})")
+    if time_scale.strip().lower() in ("max", "inf"):
+        scale = math.inf
+    else:
+        try:
+            scale = float(time_scale)
+        except ValueError:
+            fail(f"--time-scale must be a number > 0 or 'max', got {time_scale!r}")
+        if not (math.isfinite(scale) and scale > 0):
+            fail(f"--time-scale must be a number > 0 or 'max', got {time_scale!r}")
+    if server and not token:
+        fail("--server needs --token (or TWB_TOKEN)")
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.getLogger("robot_agent.host").setLevel(logging.INFO)
+    sink = CsvTrackerSink(tracker_csv, many=robots > 1) if tracker_csv else None
+    agents = AgentHost(
+        robots=robots, backend=backend.value, profile=profile, host=host, port=port, time_scale=scale,
+        seed=seed, robot_id=robot_id, world=world.value, area=_pair(area, "area"), tracker_sink=sink,
+        server_url=server, token=token,
+    )
+
+    async def run() -> None:
+        await agents.start()
+        try:
+            await asyncio.Event().wait()
+        finally:
+            await agents.stop()
+
+    try:
+        asyncio.run(run())
+    except KeyboardInterrupt:
+        logging.getLogger("robot_agent.host").warning("stopped")
