@@ -212,9 +212,9 @@ class AgentHost:
         self._tasks.clear()
         for _, _, fut in self._timers:
             fut.cancel()
-        await self.flush_tracker()
+        await self.flush_tracker(wait=False)
         if self.sink is not None:
-            await self.sink.aclose()
+            await self.sink.aclose()  # a ServerLink delivers for at most a second more
         if self.link is not None and self.link is not self.sink:
             await self.link.aclose()
         for s in self._servers:
@@ -227,14 +227,15 @@ class AgentHost:
     async def __aexit__(self, *exc: object) -> None:
         await self.stop()
 
-    async def flush_tracker(self) -> None:
-        """Send every logged pose to the sink now (and wait for the server to take them)."""
+    async def flush_tracker(self, *, wait: bool = True, timeout_s: float = 5.0) -> None:
+        """Hand every logged pose to the sink now; with ``wait``, also wait (at most ``timeout_s``)
+        until a server sink delivered them."""
         if self.sink is None:
             return
         for idx, rows in self.core.poses.drain().items():
             await self.sink.send(self.robots[idx].robot_id, rows)
-        if isinstance(self.sink, ServerLink):
-            await self.sink.flush()
+        if wait and isinstance(self.sink, ServerLink):
+            await self.sink.flush(timeout_s)
 
     # ------------------------------------------------------------------ clock
 

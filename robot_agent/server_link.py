@@ -77,7 +77,7 @@ class ServerLink:
         except asyncio.TimeoutError:
             return False
 
-    async def aclose(self, timeout_s: float = 2.0) -> None:
+    async def aclose(self, timeout_s: float = 1.0) -> None:
         """Deliver what is pending for up to ``timeout_s``, then stop and close the client."""
         if self._closed:
             return
