@@ -24,7 +24,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 bench: $(STAMP)
-	$(PY) bench/planners.py && $(PY) bench/metrics.py
+	$(PY) bench/planners.py && $(PY) bench/metrics.py && $(PY) bench/agent.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache
