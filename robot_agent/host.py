@@ -115,10 +115,13 @@ class AgentHost:
         if len(robot_ids) != robots or len(set(robot_ids)) != robots:
             raise ValueError(f"`robot_ids` must be {robots} distinct names")
         self.robots = [Robot(self, i, rid) for i, rid in enumerate(robot_ids)]
+        homes: dict[tuple, int] = {}
         for r in self.robots:
             r.hello()  # validates the id (ASCII, no separators)
-            home = (0.1, 0.1, 0.0)
-            self.core.place(r.index, home)
+            # parked near the area's lower-left corner, side by side when areas share an origin
+            key = (int(self.world.world_of[r.index]), *self.world.origin[r.index].round(6))
+            k = homes[key] = homes.get(key, -1) + 1
+            self.core.place(r.index, (0.1 + 0.15 * k, 0.1, 0.0))
         self._by_id = {r.robot_id: r for r in self.robots}
         self._listeners: list[EventListener] = []
         self._servers: list[asyncio.base_events.Server] = []

@@ -198,6 +198,7 @@ class Robot:
         self._deliver(ev)
 
     def connected(self, conn: "Connection") -> None:
+        """A client connected to this robot's port."""
         self.connections.add(conn)
 
     def disconnected(self, conn: "Connection") -> None:
