@@ -61,7 +61,7 @@ class AgentHost:
     0: every robot gets a free port); ``time_scale`` experiment seconds per
     wall second (``math.inf`` = as fast as possible); ``seed`` the agent seed;
     ``robot_id`` a base name (``robot`` gives ``robot-1`` ...) or
-    ``robot_ids`` one per robot; ``world``, ``area``, ``origins`` the layout
+    ``robot_ids`` one per robot; ``world``, ``area`` (one or per robot), ``origins`` the layout
     (:func:`robot_agent.world.field_layout`); ``tracker_sink`` where logged
     poses go; ``server_url`` + ``token`` register the robots with the testbed
     server and, without another sink, post the poses there.
@@ -80,7 +80,7 @@ class AgentHost:
         robot_id: str | None = None,
         robot_ids: list[str] | None = None,
         world: str = "auto",
-        area: tuple[float, float] | None = None,
+        area: tuple[float, float] | list[tuple[float, float]] | None = None,
         origins: list[tuple[float, float]] | None = None,
         tracker_sink: TrackerSink | None = None,
         server_url: str | None = None,

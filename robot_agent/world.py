@@ -182,17 +182,17 @@ class World:
 def field_layout(
     n: int,
     mode: str = "auto",
-    area: tuple[float, float] | None = None,
+    area: tuple[float, float] | list[tuple[float, float]] | None = None,
     origins: list[tuple[float, float]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Where ``n`` robots live: ``(sizes (W, 2), world_of (N,), origin (N, 2), area (N, 2))``, metres.
 
-    ``mode`` ``shared``: one 3.6 m field; robots default to sub-fields 1..4
-    (origins (0,0), (1.8,0), (0,1.8), (1.8,1.8)) with 1.8 m areas; an
-    ``area`` larger than a sub-field (e.g. the whole field) puts origins at
-    (0, 0).  ``separate``: every robot has a world of its own, of its area's
-    size (default a sub-field), origin (0, 0).  ``auto``: shared for up to 4
-    robots, separate beyond.
+    ``area`` is one (w, h) for every robot or one per robot (default: a
+    1.8 m sub-field).  ``mode`` ``shared``: one 3.6 m field; robot i defaults
+    to sub-field i (origins (0,0), (1.8,0), (0,1.8), (1.8,1.8)), or to origin
+    (0, 0) when its area is larger than a sub-field (e.g. the whole field).
+    ``separate``: every robot has a world of its own, of its area's size,
+    origin (0, 0).  ``auto``: shared for up to 4 robots, separate beyond.
     """
     if n < 1:
         raise ValueError("`robots` must be >= 1")
@@ -201,24 +201,24 @@ def field_layout(
     if mode not in ("shared", "separate"):
         raise ValueError(f"`world` must be auto, shared or separate, got {mode!r}")
     a = np.array(area if area is not None else SUBFIELD_SIZE, dtype=float)
-    if a.shape != (2,) or not np.isfinite(a).all() or (a <= 0).any():
-        raise ValueError(f"`area` must be two numbers W,H > 0 (metres), got {area!r}")
-    areas = np.tile(a, (n, 1))
+    if a.shape == (2,):
+        a = np.tile(a, (n, 1))
+    if a.shape != (n, 2) or not np.isfinite(a).all() or (a <= 0).any():
+        raise ValueError(f"`area` must be W,H > 0 (metres), once or once per robot ({n}), got {area!r}")
     if mode == "separate":
         if origins is not None:
             raise ValueError("`origins` only apply to a shared world")
-        return areas.copy(), np.arange(n), np.zeros((n, 2)), areas
+        return a.copy(), np.arange(n), np.zeros((n, 2)), a
+    big = (a > np.array(SUBFIELD_SIZE) + 1e-9).any(axis=1)
     if origins is not None:
         o = np.array(origins, dtype=float).reshape(-1, 2)
         if len(o) != n:
             raise ValueError(f"`origins` must give one X,Y per robot ({n}), got {len(o)}")
-    elif (a > np.array(SUBFIELD_SIZE) + 1e-9).any():
-        o = np.zeros((n, 2))
-    elif n <= 4:
-        o = np.array(SUBFIELD_ORIGINS[:n], dtype=float)
+    elif n <= 4 or big.all():
+        o = np.array([(0.0, 0.0) if big[i] else SUBFIELD_ORIGINS[i % 4] for i in range(n)], dtype=float)
     else:
         raise ValueError(f"a shared field has 4 sub-fields, not {n}: use world='separate' or give origins")
     size = np.array(FIELD_SIZE)
-    if (o < 0).any() or ((o + areas) > size + 1e-9).any():
+    if (o < 0).any() or ((o + a) > size + 1e-9).any():
         raise ValueError(f"robot areas must lie inside the {size[0]} m x {size[1]} m field")
-    return size[None, :], np.zeros(n, dtype=np.int64), o, areas
+    return size[None, :], np.zeros(n, dtype=np.int64), o, a

@@ -125,6 +125,10 @@ def test_field_layout():
     assert origin.tolist() == [[0, 0]] and area.tolist() == [[3.6, 3.6]]
     sizes, world_of, _, _ = field_layout(10)
     assert len(sizes) == 10 and world_of.tolist() == list(range(10))
+    _, _, origin, area = field_layout(4, "shared", area=[(3.6, 3.6)] + [(1.8, 1.8)] * 3)
+    assert origin.tolist() == [[0, 0], [1.8, 0], [0, 1.8], [1.8, 1.8]] and area[0].tolist() == [3.6, 3.6]
+    with pytest.raises(ValueError, match="once per robot"):
+        field_layout(2, area=[(1.0, 1.0)] * 3)
     with pytest.raises(ValueError, match="4 sub-fields"):
         field_layout(5, "shared")
     with pytest.raises(ValueError, match="inside"):
