@@ -44,7 +44,7 @@ def agent(
     time_scale: Annotated[str, typer.Option(help="Experiment seconds per wall second (1 = live); 'max' runs as fast as possible.")] = "1",
     server: Annotated[Optional[str], typer.Option(help="Testbed server URL: register the robots and post tracker poses there.")] = None,
     token: Annotated[Optional[str], typer.Option(help="Bearer token for --server.", envvar="TWB_TOKEN")] = None,
-    robots: Annotated[int, typer.Option(help="Number of robots, on consecutive ports, sharing one field (up to 4).", min=1, max=1000)] = 1,
+    robots: Annotated[int, typer.Option(help="Number of robots on consecutive ports: up to 4 share the field (sub-fields 1-4); more get a world each.", min=1, max=1000)] = 1,
     seed: Annotated[int, typer.Option(help="Agent seed: each path's noise derives from (seed, robot id, path count).", envvar="TWB_AGENT_SEED")] = 0,
     tracker_csv: Annotated[Optional[str], typer.Option(help="Write tracker poses (t,x,y,theta) to this CSV file; {robot_id} or -<id> per robot.")] = None,
     area: Annotated[Optional[str], typer.Option(help="Working area W,H in metres, e.g. 3.6,3.6 for the whole field [default: 1.8,1.8, a sub-field].")] = None,
