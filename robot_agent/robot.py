@@ -151,6 +151,13 @@ class Robot:
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
 
+    def gripper_seconds(self, *, blocks: int = 0, placements: int = 0) -> float:
+        """Experiment seconds the gripper takes; none in the ``ideal`` simulator, where worlds appear at once."""
+        if self.host.backend_name == "ideal":
+            return 0.0
+        g = self.host.params.gripper
+        return blocks * g.seconds_per_block + placements * g.seconds_per_placement
+
     async def cmd_place(self, cmd: PlaceCommand) -> list[str]:
         """``T,T,I``: the gripper places the robot (takes ``seconds_per_placement``)."""
         self._check_gripper()
@@ -159,7 +166,7 @@ class Robot:
             raise ProtocolError(ErrorCode.RANGE, f"cannot place the robot: {why}")
         self.gripper_busy = True
         try:
-            await self.host.sleep(self.host.params.gripper.seconds_per_placement)
+            await self.host.sleep(self.gripper_seconds(placements=1))
             if self.host.core.state[self.index] == State.MOVING:  # a path arrived meanwhile: impossible, but safe
                 raise ProtocolError(ErrorCode.STATE, "the robot started moving")
             self.host.core.place(self.index, cmd.pose)
@@ -173,7 +180,7 @@ class Robot:
         removed = len(self.host.world.blocks_local(self.index))
         self.gripper_busy = True
         try:
-            await self.host.sleep(self.host.params.gripper.seconds_per_block * (removed + len(cmd.blocks)))
+            await self.host.sleep(self.gripper_seconds(blocks=removed + len(cmd.blocks)))
             self.host.world.set_blocks(self.index, cmd.blocks)
         finally:
             self.gripper_busy = False

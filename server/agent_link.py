@@ -1,9 +1,9 @@
 """The server's side of the robot wire protocol: one TCP connection to one robot agent.
 
-Every line sent and received goes to ``on_line(direction, line, t)`` with the
-experiment time ``t`` on the agent's clock: taken from the line itself for
-``ST``/``EV`` lines, else estimated from the last time the agent reported and
-the time scale.  Replies (``OK``/``ERR``/``ST``) answer requests in order;
+Every line sent and received goes to ``on_line(direction, line, t, estimated)``
+with the experiment time ``t`` on the agent's clock: taken from the line
+itself for ``ST``/``EV`` lines (``estimated`` False), else extrapolated from
+the last time the agent reported and the time scale (``estimated`` True).  Replies (``OK``/``ERR``/``ST``) answer requests in order;
 ``EV`` lines go to an event queue.  A dead or silent agent raises
 :class:`AgentUnavailable` — an infrastructure fault, not the job's.
 """
@@ -19,7 +19,7 @@ from robot_agent.protocol import MAX_LINE_BYTES, ProtocolError, Reply, parse_rep
 
 __all__ = ["AgentLink", "AgentRefused", "AgentUnavailable"]
 
-LineLog = Callable[[str, str, Optional[float]], None]
+LineLog = Callable[[str, str, Optional[float], bool], None]
 
 
 class AgentUnavailable(ConnectionError):
@@ -97,7 +97,11 @@ class AgentLink:
     def _log(self, direction: str, raw: bytes | str, t: Optional[float] = None) -> None:
         text = raw.decode("ascii", "replace") if isinstance(raw, bytes) else raw
         text = text.rstrip("\r\n")
-        self.on_line(direction, text, t if t is not None else self.now())
+        if t is not None:
+            self.on_line(direction, text, t, False)
+        else:
+            est = self.now()
+            self.on_line(direction, text, est, est is not None)
 
     # ------------------------------------------------------------------ I/O
 

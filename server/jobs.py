@@ -39,7 +39,8 @@ def run_seed(experiment_seed: int, mode: str, repetition: int) -> int:
 
 
 def create_experiment(
-    session: Session, *, owner: User, body: ExperimentCreate, checked: Preflight, robot_radius: float
+    session: Session, *, owner: User, body: ExperimentCreate, checked: Preflight, robot_radius: float,
+    planning_margin: float = 0.0,
 ) -> Experiment:
     """Add the experiment and one queued run per repetition and mode (flushes, no commit)."""
     exp = Experiment(
@@ -57,6 +58,7 @@ def create_experiment(
         seed=body.seed,
         field=body.field,
         robot_radius=robot_radius,
+        planning_margin=planning_margin if body.path is None else 0.0,
     )
     session.add(exp)
     session.flush()
@@ -110,7 +112,7 @@ def experiment_public(exp: Experiment, owner: str, estimated_start_s: Optional[f
     return ExperimentPublic(
         **base,
         start=exp.start, goal=exp.goal, planner_params=exp.planner_params or {}, seed=exp.seed,
-        robot_radius=exp.robot_radius, planned_path=exp.planned_path, planning_time_s=exp.planning_time_s,
+        robot_radius=exp.robot_radius, planning_margin=exp.planning_margin, planned_path=exp.planned_path, planning_time_s=exp.planning_time_s,
         planning_info=exp.planning_info or {}, started_at=exp.started_at,
         runs=[run_public(r) for r in exp.runs],
     )

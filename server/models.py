@@ -94,6 +94,8 @@ class Experiment(Base):
     seed: Mapped[int] = mapped_column(BigInteger, default=0)
     field: Mapped[str] = mapped_column(String(8), default="sub")
     robot_radius: Mapped[float] = mapped_column(Float)
+    #: clearance kept beyond the robot radius when planning (m)
+    planning_margin: Mapped[float] = mapped_column(Float, default=0.0, server_default="0")
     planned_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
     planning_time_s: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
     planning_info: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
@@ -155,6 +157,8 @@ class Message(Base):
     id: Mapped[int] = mapped_column(BigInteger().with_variant(Integer, "sqlite"), primary_key=True)
     run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"))
     t: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    #: True when ``t`` is extrapolated from the agent's last reported time (lines without a time)
+    t_estimated: Mapped[bool] = mapped_column(Boolean, default=False, server_default="0")
     direction: Mapped[str] = mapped_column(String(1))
     line: Mapped[str] = mapped_column(Text)
 

@@ -11,7 +11,14 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["compare_runs", "expected_duration_s", "measure_run", "plan_job", "warm_up"]
+__all__ = ["compare_runs", "expected_duration_s", "measure_run", "plan_job", "warm_up", "worker_init"]
+
+
+def worker_init() -> None:
+    """Worker processes ignore Ctrl-C: the server decides when they stop."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def warm_up() -> bool:

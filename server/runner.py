@@ -63,8 +63,9 @@ class RunContext:
         self.robot = testbed.scheduler.robots[assignment.robot_id]
         self.messages: list[dict[str, Any]] = []
 
-    def on_line(self, direction: str, line: str, t: Optional[float]) -> None:
-        self.messages.append({"run_id": self.run_id, "t": t, "direction": direction, "line": line[:10_000]})
+    def on_line(self, direction: str, line: str, t: Optional[float], estimated: bool) -> None:
+        self.messages.append({"run_id": self.run_id, "t": t, "t_estimated": estimated, "direction": direction,
+                              "line": line[:10_000]})
 
     async def flush_messages(self) -> None:
         batch, self.messages = self.messages, []
@@ -117,7 +118,9 @@ async def _finish(ctx: RunContext, status: str, error: str) -> None:
         ctx.robot.healthy = False
         retry = await tb.retry_run(ctx.run_id, ctx.robot.robot_id, error)
     if not retry:
-        await tb.update_run(ctx.run_id, status=status, error=error, finished_at=utcnow())
+        # a completed second attempt keeps the note about the first one
+        extra = {"error": error} if error else {}
+        await tb.update_run(ctx.run_id, status=status, finished_at=utcnow(), **extra)
     tb.scheduler.release(ctx.run_id)
     tb.wake()
 
@@ -255,13 +258,15 @@ async def plan_experiment(testbed: "Testbed", experiment_id: int) -> list[list[f
     if exp.planned_path is not None:
         return exp.planned_path
     if exp.explicit_path is not None:
-        result = {"path": planning.explicit_path(exp.explicit_path, exp.goal), "planning_time_s": None, "info": {}}
+        result = {"path": planning.explicit_path(exp.explicit_path, exp.goal), "planning_time_s": None,
+                  "info": {"explicit": True}}
     else:
         from planners import PlanningError
 
         try:
             result = await testbed.in_pool(planning.plan_job, exp.environment_data, exp.start, exp.goal,
-                                           exp.planner, exp.planner_params or {}, exp.seed, exp.robot_radius)
+                                           exp.planner, exp.planner_params or {}, exp.seed,
+                                           exp.robot_radius + exp.planning_margin)
         except PlanningError as exc:
             raise RunFailed(f"planning failed: {exc}") from None
 

@@ -222,6 +222,7 @@ class ExperimentPublic(ExperimentSummary):
     planner_params: dict[str, Any]
     seed: int
     robot_radius: float
+    planning_margin: float = Field(description="Clearance kept beyond the robot radius when planning (m).")
     planned_path: Optional[list[list[float]]]
     planning_time_s: Optional[float]
     planning_info: dict[str, Any]
@@ -272,18 +273,15 @@ class SubfieldPublic(BaseModel):
     size: list[float]
 
 
-class TrackerBatch(Strict):
-    """Tracker poses of one robot: ``[t, x, y, theta]`` rows (s, m, m, rad), robot frame."""
+class TrackerBatch(BaseModel):
+    """Tracker poses of one robot: ``[t, x, y, theta]`` rows (s, m, m, rad), robot frame.
 
-    model_config = ConfigDict(allow_inf_nan=False, extra="ignore")
+    Rows are checked one by one when stored (a NaN or a short row is refused
+    and counted, the valid rows of the batch are kept), so the model itself
+    accepts any numbers.
+    """
+
+    model_config = ConfigDict(allow_inf_nan=True, extra="ignore")
 
     robot_id: str = Field(min_length=1, max_length=64)
     poses: list[list[float]] = Field(max_length=100_000)
-
-    @field_validator("poses")
-    @classmethod
-    def _rows(cls, v: list[list[float]]) -> list[list[float]]:
-        for i, row in enumerate(v):
-            if len(row) != 4:
-                raise ValueError(f"pose {i} must be [t, x, y, theta]")
-        return v

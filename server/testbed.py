@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Awaitable, Callable, Optional
 
@@ -57,6 +58,7 @@ class Testbed:
         self._wake = asyncio.Event()
         self._tasks: dict[int, asyncio.Task] = {}
         self._loop_task: Optional[asyncio.Task] = None
+        self._probe_task: Optional[asyncio.Task] = None
         self._pool: Optional[ProcessPoolExecutor] = None
         self._plan_locks: dict[int, asyncio.Lock] = {}
         self._estimates: dict[int, float] = {}
@@ -86,18 +88,24 @@ class Testbed:
         self._loop = asyncio.get_running_loop()
         self.broker.bind(self._loop)
         self._wake = asyncio.Event()
-        self._pool = ProcessPoolExecutor(max_workers=self.settings.planning_workers)
+        # spawn, not fork: this process has threads and an event loop; workers
+        # ignore SIGINT so that Ctrl-C in a terminal reaches only the server
+        self._pool = ProcessPoolExecutor(max_workers=self.settings.planning_workers,
+                                         mp_context=multiprocessing.get_context("spawn"),
+                                         initializer=planning.worker_init)
         for _ in range(self.settings.planning_workers):
             self._pool.submit(planning.warm_up)
         await asyncio.to_thread(self._load_state)
         self._loop_task = asyncio.create_task(self._schedule_loop(), name="twb-scheduler")
+        self._probe_task = asyncio.create_task(self._probe_loop(), name="twb-robot-probe")
         self.wake()
 
     async def stop(self) -> None:
         """Stop scheduling; runs in progress end ``interrupted``; queued runs stay queued."""
         self.stopping = True
-        if self._loop_task:
-            self._loop_task.cancel()
+        for t in (self._loop_task, self._probe_task):
+            if t:
+                t.cancel()
         tasks = list(self._tasks.values())
         for t in tasks:
             t.cancel()
@@ -110,9 +118,10 @@ class Testbed:
     def _load_state(self) -> None:
         with self.sessions() as s:
             for r in s.scalars(select(Robot)).all():
+                # known from an earlier start: offline until it registers again or answers a probe
                 self.scheduler.robots[r.robot_id] = RobotSlot(
                     r.robot_id, r.host, r.port, r.backend, r.profile, r.platform,
-                    tuple(r.origin), tuple(r.area))
+                    tuple(r.origin), tuple(r.area), healthy=False)
             rows = s.execute(select(Run, Experiment).join(Experiment).where(Run.status == "queued")
                              .order_by(Run.id)).all()
             for run, exp in rows:
@@ -151,6 +160,18 @@ class Testbed:
                 self._refresh_estimates()
             except Exception:  # noqa: BLE001 - the scheduler must survive any single bad state
                 log.exception("scheduler step failed")
+
+    async def _probe_loop(self, interval_s: float = 3.0) -> None:
+        """Robots marked offline (a failed run, or known from an earlier start) are tried again."""
+        while True:
+            await asyncio.sleep(interval_s)
+            for r in [r for r in self.scheduler.robots.values() if not r.healthy and r.run_id is None]:
+                if await _answers(r.host, r.port):
+                    log.info("robot %s answers again", r.robot_id)
+                    r.healthy = True
+                    self.built.pop(r.robot_id, None)
+                    self.broker.publish({"type": "robot", "robot_id": r.robot_id})
+                    self.wake()
 
     def _refresh_estimates(self) -> None:
         remaining = {rid: self._expected.get(rid, 60.0) / 2 for rid in self._tasks}
@@ -405,6 +426,21 @@ class Testbed:
             "sim_robots": sum(1 for r in robots if r.pool == "sim"),
             "time_scale": None if math.isinf(self.settings.time_scale) else self.settings.time_scale,
         }
+
+
+async def _answers(host: str, port: int, timeout_s: float = 2.0) -> bool:
+    """Whether a robot agent greets on host:port."""
+    try:
+        reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout_s)
+    except (OSError, asyncio.TimeoutError):
+        return False
+    try:
+        line = await asyncio.wait_for(reader.readline(), timeout_s)
+        return line.startswith(b"HELLO,")
+    except (OSError, asyncio.TimeoutError):
+        return False
+    finally:
+        writer.close()
 
 
 def _on_loop(loop: asyncio.AbstractEventLoop) -> bool:

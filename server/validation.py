@@ -40,8 +40,14 @@ class Preflight:
     path: list[list[float]] | None
 
 
-def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: float) -> Preflight:
-    """Validate ``body`` against the stored environment ``env_data``; raises :class:`PreflightError`."""
+def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: float,
+              planning_margin: float = 0.0) -> Preflight:
+    """Validate ``body`` against the stored environment ``env_data``; raises :class:`PreflightError`.
+
+    Planner jobs need the start and goal free for ``robot_radius +
+    planning_margin`` (what the planner will keep); an explicit path only
+    needs the robot radius itself.
+    """
     try:
         env = parse_environment(env_data)
     except PlanningError as exc:
@@ -58,10 +64,13 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
             params = get_planner(body.planner).validate_params(body.planner_params)
         except (PlanningError, ValueError) as exc:
             raise PreflightError(str(exc)) from None
+    radius = robot_radius + (planning_margin if body.path is None else 0.0)
     try:
-        space, s, g = check_query(env, body.start, body.goal, robot_radius=robot_radius)
+        space, s, g = check_query(env, body.start, body.goal, robot_radius=radius)
     except PlanningError as exc:
-        raise PreflightError(str(exc)) from None
+        note = (f" (the robot radius {robot_radius:g} m plus the testbed's planning margin {planning_margin:g} m)"
+                if radius != robot_radius else "")
+        raise PreflightError(f"{exc}{note}") from None
     path = None
     if body.path is not None:
         pts = np.array([p[:2] for p in body.path], dtype=float)

@@ -176,11 +176,19 @@ def test_tracker_ingestion_needs_an_agent_token(server, alice):
     with server.client() as admin:
         r = admin.post("/api/v1/users/alice/tokens", params={"kind": "agent"})
         agent_token = r.json()["token"]
+    robot = {"robot_id": "r1", "host": "127.0.0.1", "port": 9, "backend": "ideal"}
     with server.client(agent_token) as agent:
         r = agent.post("/api/v1/tracker/poses", json=batch)
-        assert r.status_code == 200 and r.json() == {"received": 1, "stored": 0, "run_id": None}
-        bad = agent.post("/api/v1/tracker/poses", json={"robot_id": "r1", "poses": [[0.0, 0.1]]})
-        assert bad.status_code == 422
+        assert r.status_code == 404 and "register it" in r.json()["detail"]
+        assert agent.post("/api/v1/robots", json=robot).status_code == 201
+        r = agent.post("/api/v1/tracker/poses", json=batch)
+        assert r.status_code == 200
+        assert r.json() == {"received": 1, "accepted": 1, "rejected": 0, "stored": 0, "run_id": None}
+        mixed = '{"robot_id": "r1", "poses": [[0.0, 0.1, 0.1, 0.0], [0.1, NaN, 0.1, 0.0], [0.2, 0.1], [0.3, 1, 1, 1]]}'
+        r = agent.post("/api/v1/tracker/poses", content=mixed, headers={"content-type": "application/json"})
+        assert r.status_code == 200 and (r.json()["accepted"], r.json()["rejected"]) == (2, 2)
+        bad = agent.post("/api/v1/tracker/poses", json={"robot_id": "r1", "poses": "nope"})
+        assert bad.status_code == 422 and "poses" in bad.json()["detail"]
         # agent tokens are for agents only
         assert agent.get("/api/v1/experiments").status_code == 403
 

@@ -31,7 +31,12 @@ class Settings(BaseSettings):
     run_timeout_min_s: float = Field(default=30.0, gt=0, description="Shortest run timeout, experiment seconds.")
     tracker_grace_s: float = Field(default=0.5, ge=0, description="Wall seconds to wait for late tracker poses.")
     planning_workers: int = Field(default=2, gt=0, description="Processes planning and computing metrics.")
-    robot_radius_m: float = Field(default=0.045, gt=0, description="Robot radius used for validation and planning.")
+    robot_radius_m: float = Field(default=0.045, gt=0, description="Robot radius: validation, metrics (collided).")
+    planning_margin_m: float = Field(
+        default=0.02, ge=0,
+        description="Extra clearance the testbed's planners keep beyond the robot radius: field robots "
+                    "track a path only to within a few centimetres, and a path grazing a block at exactly "
+                    "the radius would make collisions, not comparisons.")
     uploads_enabled: bool = False
 
     @model_validator(mode="after")

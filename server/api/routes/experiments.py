@@ -43,10 +43,11 @@ def submit_experiment(body: ExperimentCreate, session: SessionDep, user: Current
     if queued >= settings.max_queued_per_user:
         raise HTTPException(429, f"you already have {queued} queued experiments (limit {settings.max_queued_per_user})")
     try:
-        checked = preflight(body, env_row.data, settings.robot_radius_m)
+        checked = preflight(body, env_row.data, settings.robot_radius_m, settings.planning_margin_m)
     except PreflightError as exc:
         raise HTTPException(422, str(exc)) from None
-    exp = create_experiment(session, owner=user, body=body, checked=checked, robot_radius=settings.robot_radius_m)
+    exp = create_experiment(session, owner=user, body=body, checked=checked, robot_radius=settings.robot_radius_m,
+                            planning_margin=settings.planning_margin_m)
     session.commit()
     testbed.submitted(exp.id)
     session.refresh(exp)

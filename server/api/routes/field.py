@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+import math
+
+from fastapi import APIRouter, HTTPException
 
 from ...schemas import Page, RobotPublic, RobotRegister, SubfieldPublic, TrackerBatch
 from ..deps import AgentToken, CurrentUser, TestbedDep
@@ -32,6 +34,15 @@ def register_robot(body: RobotRegister, _: AgentToken, testbed: TestbedDep) -> R
 
 @router.post("/tracker/poses")
 def ingest_poses(body: TrackerBatch, _: AgentToken, testbed: TestbedDep) -> dict:
-    """A batch of tracker poses ``[t, x, y, theta]`` of one robot (agent or admin token)."""
-    stored, run_id = testbed.router.ingest(body.robot_id, body.poses)
-    return {"received": len(body.poses), "stored": stored, "run_id": run_id}
+    """A batch of tracker poses ``[t, x, y, theta]`` of one robot (agent or admin token).
+
+    Rows that are not four finite numbers are refused and counted in
+    ``rejected``; the others are kept.  A robot the testbed does not know is
+    refused (404): it must register first.
+    """
+    if body.robot_id not in testbed.scheduler.robots:
+        raise HTTPException(404, f"Unknown robot {body.robot_id!r}: register it with POST /api/v1/robots first")
+    rows = [r for r in body.poses if len(r) == 4 and all(math.isfinite(v) for v in r)]
+    stored, run_id = testbed.router.ingest(body.robot_id, rows)
+    return {"received": len(body.poses), "accepted": len(rows), "rejected": len(body.poses) - len(rows),
+            "stored": stored, "run_id": run_id}

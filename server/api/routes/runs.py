@@ -66,10 +66,15 @@ def get_messages(
     offset: int = Query(default=0, ge=0),
     limit: int = Query(default=1000, ge=1, le=10000),
 ) -> dict:
-    """Every protocol line sent to (``>``) or received from (``<``) the robot, with experiment time."""
+    """Every protocol line sent to (``>``) or received from (``<``) the robot, with experiment time.
+
+    ``t`` is the agent's clock: exact for ``ST``/``EV`` lines, extrapolated
+    from its last report for the others (``t_estimated``).
+    """
     owned_run(session, user, run_id)
     rows = session.scalars(
         select(Message).where(Message.run_id == run_id).order_by(Message.id).offset(offset).limit(limit)
     ).all()
     count = session.scalar(select(func.count(Message.id)).where(Message.run_id == run_id)) or 0
-    return {"data": [{"t": m.t, "direction": m.direction, "line": m.line} for m in rows], "count": count}
+    return {"data": [{"t": m.t, "t_estimated": m.t_estimated, "direction": m.direction, "line": m.line}
+                     for m in rows], "count": count}

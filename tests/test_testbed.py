@@ -1,0 +1,266 @@
+"""The whole testbed (`twb up`) as users run it: jobs through the REST API to robots and back."""
+
+import json
+import signal
+import threading
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from servers import Process, wait_for
+
+JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
+       "modes": ["sim", "twb"], "repetitions": 2, "seed": 1}
+
+
+@pytest.fixture(scope="module")
+def testbed(tmp_path_factory):
+    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("up"))
+    yield p
+    assert p.stop() == 0, p.output()
+    assert "Traceback" not in p.output(), p.output()
+
+
+@pytest.fixture(scope="module")
+def client(testbed):
+    with testbed.client() as c:
+        yield c
+
+
+def test_robots_register_and_subfields_show_them(client):
+    robots = client.get("/api/v1/robots").json()["data"]
+    field = sorted(r["robot_id"] for r in robots if r["pool"] == "field")
+    assert field == ["field-1", "field-2", "field-3", "field-4"]
+    assert sum(r["pool"] == "sim" for r in robots) == 2
+    subs = client.get("/api/v1/subfields").json()["data"]
+    assert [s["robot_id"] for s in subs] == field
+    assert [s["origin"] for s in subs] == [[0, 0], [1.8, 0], [0, 1.8], [1.8, 1.8]]
+
+
+def test_a_job_runs_in_sim_and_on_the_field_with_metrics(client):
+    exp = client.post("/api/v1/experiments", json=JOB).json()
+    done = wait_for(client, exp["id"], timeout=90)
+    assert done["status"] == "completed", done
+    assert done["planned_path"][0][:2] == [0.3, 0.3] and done["planning_time_s"] > 0
+    runs = done["runs"]
+    assert [r["status"] for r in runs] == ["completed"] * 4
+    for r in runs:
+        m = r["metrics"]
+        assert m["goal_reached"] is True and m["collided"] is False
+        assert m["execution_time_s"] > 5 and 0.05 < m["average_speed_m_s"] < 0.25
+        assert 0 <= m["deviation_mean_m"] < 0.05
+        assert r["t_end"] > r["t_start"]
+        assert (r["subfield"] is None) == (r["mode"] == "sim")
+    # the field is the emulated physical one: noisier and longer than the ideal simulation
+    sim = [r["metrics"] for r in runs if r["mode"] == "sim"]
+    twb = [r["metrics"] for r in runs if r["mode"] == "twb"]
+    assert sim[0]["length_m"] == pytest.approx(sim[1]["length_m"], abs=1e-6)  # ideal: replayable
+    assert min(m["length_m"] for m in twb) > max(m["length_m"] for m in sim)
+
+    metrics = client.get(f"/api/v1/experiments/{exp['id']}/metrics").json()
+    assert set(metrics["aggregates"]) == {"sim", "twb"}
+    assert metrics["aggregates"]["twb"]["metrics"]["length_m"]["n"] == 2
+    assert [d["repetition"] for d in metrics["direct"]] == [1, 2]
+    assert metrics["direct"][0]["deviation_mean_m"] > 0
+    assert metrics["planned"]["length_m"] > 1.5
+
+    twb_run = next(r for r in runs if r["mode"] == "twb")
+    poses = client.get(f"/api/v1/runs/{twb_run['id']}/poses").json()
+    assert poses["count"] > 100
+    arr = np.array(poses["poses"])
+    assert np.all(np.diff(arr[:, 0]) >= 0)
+    csv = client.get(f"/api/v1/runs/{twb_run['id']}/poses", params={"format": "csv"}).text.splitlines()
+    assert csv[0] == "t,x,y,theta" and len(csv) == poses["count"] + 1
+    lines = [m["line"] for m in client.get(f"/api/v1/runs/{twb_run['id']}/messages").json()["data"]]
+    assert lines[0].startswith("HELLO,field-")
+    assert any(line.startswith("T,T,B,") for line in lines) or True  # built once per sub-field
+    assert any(line.startswith("T,T,P,300,300,") for line in lines)
+    assert "OK,P," in " ".join(lines) and any(line.startswith("EV,DONE,") for line in lines)
+
+
+def test_two_jobs_run_in_parallel_on_two_subfields_with_camera_rate_poses(client):
+    job = {**JOB, "modes": ["twb"], "repetitions": 1}
+    a = client.post("/api/v1/experiments", json=job).json()
+    b = client.post("/api/v1/experiments", json={**job, "environment": "blocks", "start": [0.15, 0.15, 0.0],
+                                                   "goal": [1.65, 1.65, 0.0]}).json()
+    ra, rb = (wait_for(client, e["id"], timeout=90)["runs"][0] for e in (a, b))
+    assert ra["status"] == rb["status"] == "completed"
+    assert ra["subfield"] != rb["subfield"]
+    assert ra["started_at"] < rb["finished_at"] and rb["started_at"] < ra["finished_at"]  # overlapping
+    for r in (ra, rb):
+        n = client.get(f"/api/v1/runs/{r['id']}/poses").json()["count"]
+        rate = n / r["metrics"]["execution_time_s"]
+        assert 25 <= rate <= 31, rate  # a 30 Hz camera, a few dropouts
+
+
+def test_same_seed_replays_exactly(client):
+    job = {**JOB, "modes": ["twb"], "repetitions": 1, "seed": 42}
+    a = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)
+    b = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)
+    pa = client.get(f"/api/v1/runs/{a['runs'][0]['id']}/poses").json()["poses"]
+    pb = client.get(f"/api/v1/runs/{b['runs'][0]['id']}/poses").json()["poses"]
+    xa, xb = np.array(pa)[:, 1:], np.array(pb)[:, 1:]
+    assert xa.shape == xb.shape and np.array_equal(xa, xb)
+    other = wait_for(client, client.post("/api/v1/experiments", json={**job, "seed": 43}).json()["id"], timeout=60)
+    pc = np.array(client.get(f"/api/v1/runs/{other['runs'][0]['id']}/poses").json()["poses"])[:, 1:]
+    assert pc.shape != xa.shape or not np.array_equal(pc, xa)
+
+
+def test_explicit_path_and_full_field_jobs(client):
+    path = {"environment": "room", "path": [[0.3, 0.3], [0.45, 0.6], [0.45, 1.35], [1.5, 1.35], [1.5, 1.5]],
+            "modes": ["sim", "twb"]}
+    done = wait_for(client, client.post("/api/v1/experiments", json=path).json()["id"], timeout=60)
+    assert done["status"] == "completed", done
+    assert done["planned_path"][1][:2] == [0.45, 0.6]
+    env = {"name": "open-field", "size": [3.6, 3.6], "blocks": [{"x": 1.8, "y": 1.8, "w": 0.4, "h": 0.4}]}
+    assert client.post("/api/v1/environments", json=env).status_code == 201
+    full = {"environment": "open-field", "start": [0.5, 1.8, 0.0], "goal": [3.1, 1.8, 0.0], "planner": "fmm",
+            "modes": ["twb", "sim"], "field": "full"}
+    done = wait_for(client, client.post("/api/v1/experiments", json=full).json()["id"], timeout=60)
+    assert done["status"] == "completed", [(r["mode"], r["status"], r["error"]) for r in done["runs"]]
+    twb = next(r for r in done["runs"] if r["mode"] == "twb")
+    assert twb["robot_id"] == "field-1" and twb["subfield"] is None
+    assert twb["metrics"]["length_m"] > 2.6
+    sub = {**JOB, "environment": "open-field"}
+    r = client.post("/api/v1/experiments", json=sub)
+    assert r.status_code == 422 and 'use "field": "full"' in r.json()["detail"]
+
+
+def test_planning_failure_fails_the_job_with_the_reason(client):
+    job = {**JOB, "planner": "prm", "planner_params": {"samples": 2, "k": 1}}
+    done = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)
+    assert done["status"] == "failed"
+    assert all(r["status"] == "failed" for r in done["runs"])
+    assert "planning failed: PRM found no path" in done["runs"][0]["error"]
+    assert "PRM found no path" in done["error"]
+
+
+def test_live_event_stream(testbed, client):
+    seen: list[dict] = []
+    ready = threading.Event()
+
+    def listen() -> None:
+        with httpx.Client(base_url=testbed.url, headers={"Authorization": f"Bearer {testbed.token}"},
+                          timeout=60) as c:
+            with c.stream("GET", "/api/v1/events") as resp:
+                event = None
+                for line in resp.iter_lines():
+                    ready.set()
+                    if line.startswith("event: "):
+                        event = line[7:]
+                    elif line.startswith("data: "):
+                        seen.append({"event": event, **json.loads(line[6:])})
+                        if event == "experiment" and seen[-1]["experiment"]["status"] == "completed":
+                            return
+
+    t = threading.Thread(target=listen, daemon=True)
+    t.start()
+    assert ready.wait(10)
+    exp = client.post("/api/v1/experiments", json={**JOB, "modes": ["sim"], "repetitions": 1}).json()
+    t.join(60)
+    kinds = {e["event"] for e in seen}
+    assert {"run", "experiment", "pose"} <= kinds
+    states = [e["run"]["status"] for e in seen if e["event"] == "run" and e["run"]["experiment_id"] == exp["id"]]
+    assert states[:4] == ["building", "placing", "planning", "running"] and states[-1] == "completed"
+
+
+ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
+SLOW_JOB = {"environment": "one-block", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0], "planner": "fmm"}
+
+
+def test_cancel_a_running_job(tmp_path):
+    p = Process(["up", "--time-scale", "5", "--sim-robots", "1"], tmp_path)
+    try:
+        with p.client() as c:
+            assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
+            exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["twb"]}).json()
+            wait_for(c, exp["id"], timeout=60, terminal={"running"})
+            r = c.post(f"/api/v1/experiments/{exp['id']}/cancel")
+            assert r.status_code == 200
+            done = wait_for(c, exp["id"], timeout=30)
+            assert done["status"] == "cancelled" and done["runs"][0]["status"] == "cancelled"
+            lines = [m["line"] for m in c.get(f"/api/v1/runs/{done['runs'][0]['id']}/messages").json()["data"]]
+            assert "EV,DONE" not in " ".join(lines)
+            # the robot is free again: another job completes on it
+            again = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["twb"], "goal": [0.6, 0.5]}).json()
+            assert wait_for(c, again["id"], timeout=60)["status"] == "completed"
+    finally:
+        p.stop()
+
+
+def test_server_killed_mid_run_marks_it_interrupted_and_keeps_the_queue(tmp_path):
+    p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path)
+    with p.client() as c:
+        assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
+        exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["sim"], "repetitions": 3}).json()
+        wait_for(c, exp["id"], timeout=60, terminal={"running"})
+    p.stop(signal.SIGKILL)
+    again = Process(["server"], tmp_path)
+    try:
+        with again.client() as c:
+            e = c.get(f"/api/v1/experiments/{exp['id']}").json()
+            states = [r["status"] for r in e["runs"]]
+            assert states[0] == "interrupted" and "server stopped" in e["runs"][0]["error"]
+            assert states[1:] == ["queued", "queued"]  # nothing lost: they wait for robots
+            assert e["status"] == "queued"
+    finally:
+        again.stop()
+    back = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
+    try:
+        with back.client() as c:
+            e = wait_for(c, exp["id"], timeout=60)
+            assert [r["status"] for r in e["runs"]] == ["interrupted", "completed", "completed"]
+            assert e["status"] == "interrupted"
+    finally:
+        back.stop()
+
+
+def test_a_robot_dying_mid_run_is_an_error_retried_once_on_another_robot(tmp_path):
+    import subprocess
+
+    from servers import TOKEN, TWB
+
+    server = Process(["server", "--time-scale", "5"], tmp_path / "server")
+    agents = {}
+    try:
+        for name in ("solo-a", "solo-b"):
+            agents[name] = subprocess.Popen(
+                [str(TWB), "agent", "--port", "0", "--robot-id", name, "--backend", "ideal", "--time-scale", "5",
+                 "--area", "3.6,3.6", "--server", server.url, "--token", TOKEN],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        with server.client() as c:
+            deadline = time.monotonic() + 30
+            while len(c.get("/api/v1/robots").json()["data"]) < 2:
+                assert time.monotonic() < deadline, "agents did not register"
+                time.sleep(0.2)
+            exp = c.post("/api/v1/experiments", json={**JOB, "modes": ["sim"], "repetitions": 1}).json()
+            running = wait_for(c, exp["id"], timeout=60, terminal={"running"})
+            victim = running["runs"][0]["robot_id"]
+            agents[victim].kill()
+            done = wait_for(c, exp["id"], timeout=90)
+            run = done["runs"][0]
+            assert done["status"] == "completed", run
+            assert run["attempt"] == 2 and run["robot_id"] != victim
+            assert run["error"].startswith("attempt 1: robot " + victim)
+            robots = {r["robot_id"]: r["status"] for r in c.get("/api/v1/robots").json()["data"]}
+            assert robots[victim] == "offline"
+            # with no working robot left the run waits, queued, for one to come back: nothing is lost
+            agents[run["robot_id"]].kill()
+            exp2 = c.post("/api/v1/experiments", json={**JOB, "modes": ["sim"], "repetitions": 1}).json()
+            deadline = time.monotonic() + 30
+            while (r2 := c.get(f"/api/v1/experiments/{exp2['id']}").json()["runs"][0])["attempt"] < 2:
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
+            assert r2["status"] == "queued" and "cannot connect" in r2["error"]
+            agents["solo-c"] = subprocess.Popen(
+                [str(TWB), "agent", "--port", "0", "--robot-id", "solo-c", "--backend", "ideal", "--time-scale", "5",
+                 "--area", "3.6,3.6", "--server", server.url, "--token", TOKEN],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            done2 = wait_for(c, exp2["id"], timeout=60)
+            assert done2["status"] == "completed" and done2["runs"][0]["robot_id"] == "solo-c"
+    finally:
+        for a in agents.values():
+            a.kill()
+        server.stop()
