@@ -50,6 +50,8 @@ def agent(
     area: Annotated[Optional[str], typer.Option(help="Working area W,H in metres, e.g. 3.6,3.6 for the whole field [default: 1.8,1.8, a sub-field].")] = None,
     world: Annotated[WorldMode, typer.Option(help="shared: one field for all robots; separate: a world each; auto: shared up to 4 robots.")] = WorldMode.auto,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    subfield: Annotated[Optional[int], typer.Option(help="Put a single robot on sub-field K (1-4) of the field: its frame's origin is that sub-field's lower-left corner.", min=1, max=4)] = None,
+    advertise_host: Annotated[Optional[str], typer.Option(help="Host name the server should use to reach these robots (e.g. a container name) [default: --host].")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log every path and event.")] = False,
 ) -> None:
     """Run emulated robots speaking the T,T,P line protocol until Ctrl-C (logs on stderr)."""
@@ -76,10 +78,17 @@ def agent(
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     logging.getLogger("robot_agent.host").setLevel(logging.INFO)
     sink = CsvTrackerSink(tracker_csv, many=robots > 1) if tracker_csv else None
+    origins = None
+    if subfield is not None:
+        if robots != 1:
+            fail("--subfield places a single robot; use it with --robots 1")
+        from robot_agent.world import SUBFIELD_ORIGINS
+
+        origins, world = [SUBFIELD_ORIGINS[subfield - 1]], WorldMode.shared
     agents = AgentHost(
         robots=robots, backend=backend.value, profile=profile, host=host, port=port, time_scale=scale,
-        seed=seed, robot_id=robot_id, world=world.value, area=_pair(area, "area"), tracker_sink=sink,
-        server_url=server, token=token,
+        seed=seed, robot_id=robot_id, world=world.value, area=_pair(area, "area"), origins=origins,
+        tracker_sink=sink, server_url=server, token=token, advertise_host=advertise_host,
     )
 
     async def run() -> None:
