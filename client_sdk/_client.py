@@ -1,0 +1,274 @@
+"""``Client`` and ``AsyncClient``: the I/O over the shared :class:`~client_sdk._base.BaseClient`.
+
+Both have the same methods with the same arguments and results; the async
+ones are coroutines.  Each method only sends the :class:`~client_sdk._base.Call`
+its twin in the base class describes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from typing import Any, Literal, Mapping, Optional, Sequence, overload
+
+import httpx
+import numpy as np
+
+from ._base import BaseClient, Call, Waiter, translate_errors
+from ._models import Environment, Experiment, ExperimentMetrics, ExperimentSummary, Message, Page, Robot, Run, Subfield
+
+__all__ = ["AsyncClient", "Client"]
+
+Pose = Sequence[float] | np.ndarray
+PosesFormat = Literal["array", "csv"]
+
+
+class Client(BaseClient):
+    """Synchronous client of the Teleworkbench REST API.
+
+    >>> from client_sdk import Client
+    >>> with Client() as twb:                                    # doctest: +SKIP
+    ...     exp = twb.submit("room", start=[0.3, 0.3, 0], goal=[1.5, 1.5, 1.57], planner="fm2")
+    ...     exp = twb.wait(exp.id, timeout=300)
+    ...     print(twb.get_metrics(exp.id).aggregates["twb"].metrics["length_m"].mean)
+
+    Parameters
+    ----------
+    url, token, timeout
+        See :class:`~client_sdk._base.BaseClient` (``$TWB_URL``, ``$TWB_TOKEN``,
+        the token file of ``twb up``).
+    transport : httpx.BaseTransport, optional
+        Injected transport, e.g. ``httpx.MockTransport`` in tests or
+        ``httpx.HTTPTransport(retries=3)``.
+    """
+
+    def __init__(self, url: Optional[str] = None, token: Optional[str] = None, *, timeout: float = 30.0,
+                 transport: Optional[httpx.BaseTransport] = None) -> None:
+        super().__init__(url, token, timeout=timeout)
+        self._http = httpx.Client(base_url=self.url, headers=self._headers(), timeout=timeout, transport=transport)
+
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the connection pool."""
+        self._http.close()
+
+    def _send(self, call: Call) -> Any:
+        with translate_errors(self.url):
+            response = self._http.request(call.method, call.path, params=call.params, json=call.json)
+        return self._finish(call, response)
+
+    # ------------------------------------------------------------------ testbed
+
+    def health(self) -> dict[str, Any]:
+        """``GET /health`` (no token needed): status, version and a summary of the testbed."""
+        return self._send(self._health())
+
+    def list_subfields(self) -> list[Subfield]:
+        """The four sub-fields: state, environment built, robot, current run."""
+        return self._send(self._list_subfields())
+
+    def list_robots(self) -> list[Robot]:
+        """Registered robots: field robots and the simulation pool."""
+        return self._send(self._list_robots())
+
+    # ------------------------------------------------------------------ environments
+
+    def list_environments(self, *, offset: int = 0, limit: int = 100) -> Page[Environment]:
+        """Built-in environments and your own."""
+        return self._send(self._list_environments(offset, limit))
+
+    def get_environment(self, name: str) -> Environment:
+        """One environment by name (:class:`NotFound` if unknown)."""
+        return self._send(self._get_environment(name))
+
+    def create_environment(self, environment: Mapping[str, Any] | Environment) -> Environment:
+        """Add an environment file (DESIGN §3); :class:`Conflict` if the name is taken."""
+        return self._send(self._create_environment(environment))
+
+    # ------------------------------------------------------------------ experiments
+
+    def submit(self, environment: str | Mapping[str, Any], start: Optional[Pose] = None, goal: Optional[Pose] = None,
+               planner: Optional[str] = None, *, path: Optional[Sequence[Pose] | np.ndarray] = None,
+               planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
+               repetitions: Optional[int] = None, seed: Optional[int] = None,
+               field: Optional[str] = None) -> Experiment:
+        """Queue a job; returns the new experiment (status ``queued``).
+
+        ``environment`` is a name, or a whole job mapping (as in a JSON job
+        file) that the keyword arguments then override.  Poses are
+        ``[x, y]`` or ``[x, y, theta]`` (m, rad); give ``planner`` (default
+        ``fmm`` on the server) or an explicit ``path``.  Omitted fields take
+        the server's defaults (modes sim and twb, 1 repetition, seed 0,
+        ``field="sub"``).  :class:`ValidationError` carries the server's
+        reason when the job cannot run.
+        """
+        job = environment if isinstance(environment, Mapping) else None
+        fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
+                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field)
+        return self._send(self._submit(job, fields))
+
+    def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
+                         limit: int = 50) -> Page[ExperimentSummary]:
+        """Your experiments, newest first; ``status`` filters (e.g. ``"running"``)."""
+        return self._send(self._list_experiments(status, offset, limit))
+
+    def get_experiment(self, experiment_id: int) -> Experiment:
+        """Status, planned path and runs (with metrics) of one experiment."""
+        return self._send(self._get_experiment(experiment_id))
+
+    def cancel(self, experiment_id: int) -> Experiment:
+        """Cancel queued runs and stop running ones; :class:`Conflict` if already finished."""
+        return self._send(self._cancel(experiment_id))
+
+    def get_metrics(self, experiment_id: int) -> ExperimentMetrics:
+        """Metrics per run, mean/std per mode, and the direct sim-vs-twb comparison per repetition."""
+        return self._send(self._get_metrics(experiment_id))
+
+    def wait(self, experiment_id: int, *, timeout: Optional[float] = None, progress: Optional[bool] = None,
+             interval: float = 0.25) -> Experiment:
+        """Poll until the experiment finishes and return it.
+
+        ``progress=True`` shows a rich progress bar on stderr (runs done /
+        total and status); the default (None) shows it when stderr is a
+        terminal.  Raises :class:`WaitTimeout` (a ``TimeoutError``)
+        after ``timeout`` seconds; the experiment keeps running.
+        """
+        waiter = Waiter(experiment_id, timeout, progress, interval)
+        try:
+            while not waiter.update(self.get_experiment(experiment_id)):
+                time.sleep(waiter.sleep_time())
+        finally:
+            waiter.close()
+        assert waiter.last is not None
+        return waiter.last
+
+    # ------------------------------------------------------------------ runs
+
+    def get_run(self, run_id: int) -> Run:
+        """One run with its metrics."""
+        return self._send(self._get_run(run_id))
+
+    @overload
+    def get_poses(self, run_id: int, format: Literal["array"] = "array") -> np.ndarray: ...
+    @overload
+    def get_poses(self, run_id: int, format: Literal["csv"]) -> str: ...
+
+    def get_poses(self, run_id: int, format: PosesFormat = "array") -> np.ndarray | str:
+        """Logged poses of a run: an ``(N, 4)`` array of t, x, y, theta (s, m, m, rad), or CSV text."""
+        return self._send(self._get_poses(run_id, format))
+
+    def get_messages(self, run_id: int, *, offset: int = 0, limit: int = 1000) -> Page[Message]:
+        """Protocol lines exchanged with the robot during a run, with experiment time."""
+        return self._send(self._get_messages(run_id, offset, limit))
+
+
+class AsyncClient(BaseClient):
+    """Asynchronous twin of :class:`Client`: the same methods, as coroutines.
+
+    >>> async with AsyncClient() as twb:                         # doctest: +SKIP
+    ...     exp = await twb.submit("blocks", start=[0.15, 0.15], goal=[1.65, 1.65], planner="prm")
+    ...     exp = await twb.wait(exp.id)
+    """
+
+    def __init__(self, url: Optional[str] = None, token: Optional[str] = None, *, timeout: float = 30.0,
+                 transport: Optional[httpx.AsyncBaseTransport] = None) -> None:
+        super().__init__(url, token, timeout=timeout)
+        self._http = httpx.AsyncClient(base_url=self.url, headers=self._headers(), timeout=timeout,
+                                       transport=transport)
+
+    async def __aenter__(self) -> "AsyncClient":
+        return self
+
+    async def __aexit__(self, *exc: Any) -> None:
+        await self.aclose()
+
+    async def aclose(self) -> None:
+        """Close the connection pool."""
+        await self._http.aclose()
+
+    async def _send(self, call: Call) -> Any:
+        with translate_errors(self.url):
+            response = await self._http.request(call.method, call.path, params=call.params, json=call.json)
+        return self._finish(call, response)
+
+    async def health(self) -> dict[str, Any]:
+        """See :meth:`Client.health`."""
+        return await self._send(self._health())
+
+    async def list_subfields(self) -> list[Subfield]:
+        """See :meth:`Client.list_subfields`."""
+        return await self._send(self._list_subfields())
+
+    async def list_robots(self) -> list[Robot]:
+        """See :meth:`Client.list_robots`."""
+        return await self._send(self._list_robots())
+
+    async def list_environments(self, *, offset: int = 0, limit: int = 100) -> Page[Environment]:
+        """See :meth:`Client.list_environments`."""
+        return await self._send(self._list_environments(offset, limit))
+
+    async def get_environment(self, name: str) -> Environment:
+        """See :meth:`Client.get_environment`."""
+        return await self._send(self._get_environment(name))
+
+    async def create_environment(self, environment: Mapping[str, Any] | Environment) -> Environment:
+        """See :meth:`Client.create_environment`."""
+        return await self._send(self._create_environment(environment))
+
+    async def submit(self, environment: str | Mapping[str, Any], start: Optional[Pose] = None,
+                     goal: Optional[Pose] = None, planner: Optional[str] = None, *,
+                     path: Optional[Sequence[Pose] | np.ndarray] = None,
+                     planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
+                     repetitions: Optional[int] = None, seed: Optional[int] = None,
+                     field: Optional[str] = None) -> Experiment:
+        """See :meth:`Client.submit`."""
+        job = environment if isinstance(environment, Mapping) else None
+        fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
+                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field)
+        return await self._send(self._submit(job, fields))
+
+    async def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
+                               limit: int = 50) -> Page[ExperimentSummary]:
+        """See :meth:`Client.list_experiments`."""
+        return await self._send(self._list_experiments(status, offset, limit))
+
+    async def get_experiment(self, experiment_id: int) -> Experiment:
+        """See :meth:`Client.get_experiment`."""
+        return await self._send(self._get_experiment(experiment_id))
+
+    async def cancel(self, experiment_id: int) -> Experiment:
+        """See :meth:`Client.cancel`."""
+        return await self._send(self._cancel(experiment_id))
+
+    async def get_metrics(self, experiment_id: int) -> ExperimentMetrics:
+        """See :meth:`Client.get_metrics`."""
+        return await self._send(self._get_metrics(experiment_id))
+
+    async def wait(self, experiment_id: int, *, timeout: Optional[float] = None, progress: Optional[bool] = None,
+                   interval: float = 0.25) -> Experiment:
+        """See :meth:`Client.wait`."""
+        waiter = Waiter(experiment_id, timeout, progress, interval)
+        try:
+            while not waiter.update(await self.get_experiment(experiment_id)):
+                await asyncio.sleep(waiter.sleep_time())
+        finally:
+            waiter.close()
+        assert waiter.last is not None
+        return waiter.last
+
+    async def get_run(self, run_id: int) -> Run:
+        """See :meth:`Client.get_run`."""
+        return await self._send(self._get_run(run_id))
+
+    async def get_poses(self, run_id: int, format: PosesFormat = "array") -> np.ndarray | str:
+        """See :meth:`Client.get_poses`."""
+        return await self._send(self._get_poses(run_id, format))
+
+    async def get_messages(self, run_id: int, *, offset: int = 0, limit: int = 1000) -> Page[Message]:
+        """See :meth:`Client.get_messages`."""
+        return await self._send(self._get_messages(run_id, offset, limit))

@@ -1,0 +1,326 @@
+"""Typed results: dataclasses mirroring the server's JSON responses (DESIGN §7).
+
+They are defined here, not imported from the server, so the SDK runs without
+the server's dependencies.  Units are SI: metres, radians, seconds.  Unknown
+keys in a response are ignored, so a newer server does not break an older SDK;
+``from_json`` builds each type from a decoded response.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from dataclasses import field as _field
+from datetime import datetime
+from typing import Any, Callable, ClassVar, Generic, Iterator, Optional, TypeVar
+
+import numpy as np
+
+__all__ = [
+    "TERMINAL_STATES",
+    "DirectComparison",
+    "Environment",
+    "Experiment",
+    "ExperimentMetrics",
+    "ExperimentSummary",
+    "Message",
+    "ModeAggregate",
+    "Page",
+    "Plan",
+    "Robot",
+    "Run",
+    "RunMetrics",
+    "Subfield",
+    "Summary",
+]
+
+#: experiment and run states after which nothing changes any more
+TERMINAL_STATES = frozenset({"completed", "failed", "error", "cancelled", "interrupted"})
+
+T = TypeVar("T")
+
+
+def _dt(v: Any) -> Optional[datetime]:
+    if v is None or isinstance(v, datetime):
+        return v
+    return datetime.fromisoformat(str(v).replace("Z", "+00:00"))
+
+
+def _pick(cls: type, data: dict[str, Any], **conv: Any) -> dict[str, Any]:
+    """The keyword arguments of dataclass ``cls`` found in ``data``, converted by ``conv``."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        if f.name in data:
+            v = data[f.name]
+            out[f.name] = conv[f.name](v) if f.name in conv and v is not None else v
+    return out
+
+
+class _FromJson:
+    """``from_json(data)``: the dataclass from a decoded response, fields converted by ``_conv``."""
+
+    _conv: ClassVar[dict[str, Callable[[Any], Any]]] = {}
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Any:
+        return cls(**_pick(cls, data, **cls._conv))
+
+
+@dataclass
+class Page(Generic[T]):
+    """One page of a list: ``data`` and the ``count`` of all matching items. Iterable."""
+
+    data: list[T]
+    count: int
+
+    def __iter__(self) -> Iterator[T]:
+        return iter(self.data)
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+
+@dataclass
+class Plan(_FromJson):
+    """A named start/goal pair of an environment: poses ``[x, y, theta]`` (m, m, rad)."""
+
+    name: str
+    start: list[float]
+    goal: list[float]
+
+
+@dataclass
+class Environment(_FromJson):
+    """An environment (DESIGN §3): ``size`` (m) and rectangular ``blocks`` (centre, size, angle)."""
+
+    name: str
+    size: list[float]
+    blocks: list[dict[str, float]]
+    plans: list[Plan] = _field(default_factory=list)
+    description: str = ""
+    builtin: bool = False
+    owner: Optional[str] = None
+
+    _conv = {"plans": lambda ps: [Plan.from_json(p) for p in ps]}
+
+    def plan(self, name: str) -> Plan:
+        """The plan called ``name``; ``KeyError`` listing the names otherwise."""
+        for p in self.plans:
+            if p.name == name:
+                return p
+        raise KeyError(f"environment {self.name!r} has no plan {name!r} (plans: {', '.join(p.name for p in self.plans) or 'none'})")
+
+    def to_json(self) -> dict[str, Any]:
+        """The environment file (DESIGN §3) of this environment."""
+        d: dict[str, Any] = {"name": self.name, "size": list(self.size), "blocks": [dict(b) for b in self.blocks]}
+        if self.plans:
+            d["plans"] = [dataclasses.asdict(p) for p in self.plans]
+        if self.description:
+            d["description"] = self.description
+        return d
+
+
+@dataclass
+class Run(_FromJson):
+    """One run: an experiment's ``mode`` (``sim``/``twb``) and ``repetition``, with its metrics (DESIGN §6)."""
+
+    id: int
+    experiment_id: int
+    mode: str
+    repetition: int
+    status: str
+    seed: int = 0
+    attempt: int = 1
+    subfield: Optional[int] = None
+    robot_id: Optional[str] = None
+    t_start: Optional[float] = None
+    t_end: Optional[float] = None
+    metrics: dict[str, Any] = _field(default_factory=dict)
+    error: str = ""
+    created_at: Optional[datetime] = None
+    started_at: Optional[datetime] = None
+    finished_at: Optional[datetime] = None
+
+    _conv = {"created_at": _dt, "started_at": _dt, "finished_at": _dt}
+
+    @property
+    def finished(self) -> bool:
+        """True once the run reached a terminal state."""
+        return self.status in TERMINAL_STATES
+
+
+@dataclass
+class ExperimentSummary(_FromJson):
+    """An experiment as listed: status and job, without planned path and runs."""
+
+    id: int
+    status: str
+    environment: str
+    owner: str = ""
+    planner: Optional[str] = None
+    modes: list[str] = _field(default_factory=list)
+    repetitions: int = 1
+    field: str = "sub"
+    error: str = ""
+    created_at: Optional[datetime] = None
+    finished_at: Optional[datetime] = None
+    estimated_start_s: Optional[float] = None
+
+    _conv = {"created_at": _dt, "finished_at": _dt}
+
+    @property
+    def finished(self) -> bool:
+        """True once the experiment reached a terminal state."""
+        return self.status in TERMINAL_STATES
+
+
+@dataclass
+class Experiment(ExperimentSummary):
+    """An experiment with its job, planned path (``(N, 3)`` array, m/rad) and runs."""
+
+    start: list[float] = _field(default_factory=list)
+    goal: list[float] = _field(default_factory=list)
+    planner_params: dict[str, Any] = _field(default_factory=dict)
+    seed: int = 0
+    robot_radius: Optional[float] = None
+    planning_margin: Optional[float] = None
+    planned_path: Optional[np.ndarray] = None
+    planning_time_s: Optional[float] = None
+    planning_info: dict[str, Any] = _field(default_factory=dict)
+    started_at: Optional[datetime] = None
+    runs: list[Run] = _field(default_factory=list)
+
+    _conv = {
+        "created_at": _dt, "finished_at": _dt, "started_at": _dt,
+        "planned_path": lambda p: np.asarray(p, dtype=float).reshape(-1, 3) if p else np.empty((0, 3)),
+        "runs": lambda rs: [Run.from_json(r) for r in rs],
+    }
+
+    @property
+    def runs_total(self) -> int:
+        """Number of runs of the experiment (modes x repetitions)."""
+        return len(self.runs) or len(self.modes) * self.repetitions
+
+    @property
+    def runs_done(self) -> int:
+        """Number of runs in a terminal state."""
+        return sum(r.finished for r in self.runs)
+
+
+@dataclass
+class Summary(_FromJson):
+    """Mean, sample std and Student-t interval of one metric over ``n`` runs (None where undefined)."""
+
+    n: int
+    mean: Optional[float] = None
+    std: Optional[float] = None
+    ci_low: Optional[float] = None
+    ci_high: Optional[float] = None
+    confidence: float = 0.95
+
+
+@dataclass
+class ModeAggregate:
+    """Aggregates of one mode: ``runs`` completed and a :class:`Summary` per metric."""
+
+    runs: int
+    metrics: dict[str, Summary]
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "ModeAggregate":
+        return cls(runs=data.get("runs", 0),
+                   metrics={k: Summary.from_json(v) for k, v in data.get("metrics", {}).items()})
+
+
+@dataclass
+class RunMetrics(_FromJson):
+    """Metrics of one run as listed by the experiment's metrics."""
+
+    run_id: int
+    mode: str
+    repetition: int
+    status: str
+    metrics: dict[str, Any]
+
+
+@dataclass
+class DirectComparison:
+    """The paper's direct comparison "ST" of one repetition: the field path against the simulated one.
+
+    ``metrics`` holds ``deviation_mean_m``, ``deviation_max_m``, ``hausdorff_m``
+    and ``frechet_m``.
+    """
+
+    repetition: int
+    sim_run_id: int
+    twb_run_id: int
+    metrics: dict[str, Any]
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "DirectComparison":
+        keys = ("repetition", "sim_run_id", "twb_run_id")
+        return cls(*(data[k] for k in keys), metrics={k: v for k, v in data.items() if k not in keys})
+
+
+@dataclass
+class ExperimentMetrics:
+    """``GET /experiments/{id}/metrics``: per run, aggregates per mode, direct sim-vs-twb, planned path's."""
+
+    experiment_id: int
+    status: str
+    planned: Optional[dict[str, Any]]
+    runs: list[RunMetrics]
+    aggregates: dict[str, ModeAggregate]
+    direct: list[DirectComparison]
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "ExperimentMetrics":
+        return cls(
+            experiment_id=data["experiment_id"], status=data["status"], planned=data.get("planned"),
+            runs=[RunMetrics.from_json(r) for r in data.get("runs", [])],
+            aggregates={m: ModeAggregate.from_json(a) for m, a in data.get("aggregates", {}).items()},
+            direct=[DirectComparison.from_json(d) for d in data.get("direct", [])],
+        )
+
+
+@dataclass
+class Message(_FromJson):
+    """A protocol line sent to (``>``) or received from (``<``) a robot, at experiment time ``t`` (s)."""
+
+    t: Optional[float]
+    direction: str
+    line: str
+    t_estimated: bool = False
+
+
+@dataclass
+class Subfield(_FromJson):
+    """One of the four 1.8 m sub-fields: state, environment built on it, robot, current run."""
+
+    id: int
+    state: str
+    environment: Optional[str] = None
+    robot_id: Optional[str] = None
+    run_id: Optional[int] = None
+    origin: list[float] = _field(default_factory=list)
+    size: list[float] = _field(default_factory=list)
+
+
+@dataclass
+class Robot(_FromJson):
+    """A registered robot: a field robot on a sub-field or one of the simulation pool."""
+
+    robot_id: str
+    host: str
+    port: int
+    backend: str
+    pool: str
+    status: str
+    platform: str = ""
+    profile: str = ""
+    origin: list[float] = _field(default_factory=list)
+    area: list[float] = _field(default_factory=list)
+    subfield: Optional[int] = None
+    last_seen: Optional[datetime] = None
+
+    _conv = {"last_seen": _dt}
