@@ -1,0 +1,159 @@
+"""A study's data on disk, and in memory as :class:`StudyData`.
+
+The collector writes, in the output directory:
+
+- ``study.json``: the study file, the server, timings, the environments and
+  every experiment (job, status, planned path, run ids);
+- ``runs.csv``: one row per run with every metric (DESIGN §6; ``planned_*``
+  are the planned path's, ``st_*`` the direct sim-vs-twb comparison of the
+  run's repetition);
+- ``direct.csv``: one row per experiment and repetition with both modes;
+- ``poses/run-<id>.csv``: the logged poses ``t,x,y,theta`` of each run.
+
+Everything else (summary, figures, report, OMPL database) is computed from
+these files, offline.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import dataclass
+from dataclasses import field as _field
+from pathlib import Path
+from typing import Any, Iterable, Optional
+
+import numpy as np
+
+from ._spec import StudySpec
+
+__all__ = ["ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "write_csv_rows"]
+
+#: leading columns of runs.csv (the metrics follow)
+ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "mode", "repetition", "seed",
+              "status", "error", "subfield", "robot_id", "t_start", "t_end")
+DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "repetition", "sim_run_id",
+                  "twb_run_id")
+_STRINGS = {"study", "environment", "plan", "planner", "mode", "status", "error", "robot_id"}
+
+
+@dataclass
+class StudyData:
+    """Everything a study collected: ``rows`` (runs.csv), ``direct`` (direct.csv), experiments, environments."""
+
+    spec: StudySpec
+    environments: dict[str, dict[str, Any]]
+    experiments: list[dict[str, Any]]
+    rows: list[dict[str, Any]]
+    direct: list[dict[str, Any]]
+    meta: dict[str, Any] = _field(default_factory=dict)
+    directory: Optional[Path] = None
+    _poses: dict[int, np.ndarray] = _field(default_factory=dict, repr=False)
+
+    def poses(self, run_id: int) -> np.ndarray:
+        """``(N, 4)`` t, x, y, theta of a run (s, m, m, rad), from memory or ``poses/run-<id>.csv``."""
+        if run_id not in self._poses:
+            if self.directory is None:
+                raise KeyError(f"no poses for run {run_id}")
+            path = self.directory / "poses" / f"run-{run_id}.csv"
+            if not path.exists():
+                return np.empty((0, 4))
+            self._poses[run_id] = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2).reshape(-1, 4)
+        return self._poses[run_id]
+
+    def add_poses(self, run_id: int, poses: np.ndarray) -> None:
+        self._poses[run_id] = np.asarray(poses, dtype=float).reshape(-1, 4)
+
+    @property
+    def planners(self) -> list[str]:
+        return list(dict.fromkeys(e["planner"] for e in self.experiments))
+
+    @property
+    def problems(self) -> list[tuple[str, str]]:
+        """(environment, plan) pairs in study order."""
+        return list(dict.fromkeys((e["environment"], e["plan"]) for e in self.experiments))
+
+    def save(self, directory: Path) -> None:
+        """Write study.json, runs.csv, direct.csv and poses/ into ``directory``."""
+        directory.mkdir(parents=True, exist_ok=True)
+        doc = {"spec": self.spec.to_json(), **self.meta, "environments": self.environments,
+               "experiments": self.experiments}
+        (directory / "study.json").write_text(json.dumps(doc, indent=1) + "\n")
+        write_csv_rows(directory / "runs.csv", self.rows, ID_COLUMNS)
+        write_csv_rows(directory / "direct.csv", self.direct, DIRECT_COLUMNS)
+        pdir = directory / "poses"
+        pdir.mkdir(exist_ok=True)
+        for run_id, arr in self._poses.items():
+            buf = io.StringIO()
+            buf.write("t,x,y,theta\n")
+            np.savetxt(buf, arr, delimiter=",", fmt="%.5f")
+            (pdir / f"run-{run_id}.csv").write_text(buf.getvalue())
+        self.directory = directory
+
+
+def load_study(directory: str | Path) -> StudyData:
+    """Read a study directory written by :func:`~client_sdk.study.run_study`."""
+    d = Path(directory)
+    path = d / "study.json"
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise ValueError(f"{d} is not a study directory: cannot read {path.name} ({exc.strerror or exc})") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: invalid JSON ({exc.msg})") from None
+    spec = StudySpec.from_json(doc["spec"], str(path))
+    meta = {k: v for k, v in doc.items() if k not in ("spec", "environments", "experiments")}
+    rows = read_csv_rows(d / "runs.csv")
+    direct = read_csv_rows(d / "direct.csv") if (d / "direct.csv").exists() else []
+    return StudyData(spec, doc["environments"], doc["experiments"], rows, direct, meta, d)
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else repr(v)
+    return str(v)
+
+
+def _value(key: str, text: str) -> Any:
+    if text == "":
+        return None
+    if key in _STRINGS:
+        return text
+    if text in ("true", "false"):
+        return text == "true"
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def write_csv_rows(path: Path, rows: Iterable[dict[str, Any]], first: Iterable[str] = ()) -> list[str]:
+    """Write dict rows as CSV; columns: ``first`` then every other key in first-seen order."""
+    rows = list(rows)
+    cols = list(first)
+    for r in rows:
+        for k in r:
+            if k not in cols:
+                cols.append(k)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        for r in rows:
+            w.writerow([_cell(r.get(c)) for c in cols])
+    return cols
+
+
+def read_csv_rows(path: Path) -> list[dict[str, Any]]:
+    """Rows of a CSV written by :func:`write_csv_rows`, with numbers, booleans and None restored."""
+    with open(path, newline="") as f:
+        return [{k: _value(k, v) for k, v in row.items()} for row in csv.DictReader(f)]
