@@ -10,7 +10,7 @@ import sys
 
 import typer
 
-from . import agent_cmd, demo_cmd, metrics_cmd, plan_cmd, server_cmd
+from . import agent_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, replay_cmd, server_cmd, study_cmd
 from .errors import report_exception
 
 app = typer.Typer(
@@ -29,6 +29,15 @@ app.command("agent")(agent_cmd.agent)
 app.command("up")(server_cmd.up)
 app.command("server")(server_cmd.server)
 app.add_typer(server_cmd.users_app, name="users")
+app.command("submit")(jobs_cmd.submit)
+app.command("status")(jobs_cmd.status)
+app.command("wait")(jobs_cmd.wait)
+app.command("results")(jobs_cmd.results)
+app.command("cancel")(jobs_cmd.cancel)
+app.command("envs")(jobs_cmd.envs)
+app.command("replay")(replay_cmd.replay)
+app.command("study")(study_cmd.study)
+app.command("export-ompl")(study_cmd.export_ompl)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,7 +12,8 @@ offline from the study directory (:func:`load_study`).  The command line is
 ``twb study``; see ``docs/study.md``.  Needs matplotlib for the figures.
 """
 
-from ._collect import StudyJob, plan_jobs, run_study
+from ._collect import StudyJob, flat_metrics, plan_jobs, run_study
+from ._replay import replay_animation
 from ._data import StudyData, load_study
 from ._figures import figure_metrics, figure_paths, figure_ratios, make_figures, save_figures
 from ._ompl import export_ompl
@@ -30,6 +31,7 @@ __all__ = sorted(
         "StudySpecError",
         "export_ompl",
         "figure_metrics",
+        "flat_metrics",
         "figure_paths",
         "figure_ratios",
         "load_spec",
@@ -37,6 +39,7 @@ __all__ = sorted(
         "make_figures",
         "paper_spec",
         "plan_jobs",
+        "replay_animation",
         "run_study",
         "save_figures",
         "summary_markdown",

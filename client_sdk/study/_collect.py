@@ -14,7 +14,7 @@ from .._models import Environment, Experiment, ExperimentMetrics
 from ._data import StudyData
 from ._spec import PlanSpec, StudySpec, StudySpecError
 
-__all__ = ["StudyJob", "plan_jobs", "run_study"]
+__all__ = ["StudyJob", "flat_metrics", "plan_jobs", "run_study"]
 
 
 class StudyJob(dict):
@@ -150,7 +150,8 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
     return data
 
 
-def _flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
+def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
+    """A run's metrics as one flat row: the planned path's become ``planned_<name>``; settings are left out."""
     out: dict[str, Any] = {}
     for k, v in metrics.items():
         if k == "planned" and isinstance(v, dict):
@@ -183,7 +184,7 @@ def _assemble(spec: StudySpec, envs: dict[str, Environment], jobs: list[StudyJob
         for run in exp.runs:
             row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,
                    "status": run.status, "error": run.error, "subfield": run.subfield, "robot_id": run.robot_id,
-                   "t_start": run.t_start, "t_end": run.t_end, **_flat_metrics(run.metrics)}
+                   "t_start": run.t_start, "t_end": run.t_end, **flat_metrics(run.metrics)}
             d = st.get(run.repetition)
             if d is not None:
                 row.update({f"st_{k}": v for k, v in d.metrics.items()})

@@ -1,0 +1,362 @@
+// The experiment list (queued with estimated start, running, finished) and the page of one
+// experiment: facts, planned vs performed paths, sim-vs-twb charts, metrics tables, downloads.
+
+import { saveBlob } from "./api.js";
+import { barChart, lineChart, speedProfile } from "./charts.js";
+import { $, TERMINAL, badge, debounce, duration, h, num, pose, report, toast, when } from "./dom.js";
+import { COLORS, MapView } from "./fieldmap.js";
+import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
+
+const MODE_COLOR = { sim: COLORS.sim, twb: COLORS.twb };
+
+async function cancel(store, id) {
+  try {
+    await store.api.post(`/api/v1/experiments/${id}/cancel`);
+    toast(`Experiment ${id} cancelled`);
+    store.refreshExperiments();
+  } catch (err) {
+    report(err, `Cancel ${id}`);
+  }
+}
+
+export class ExperimentsPage {
+  constructor(store) {
+    this.store = store;
+    store.addEventListener("experiments", () => { if (this.visible) this.render(); });
+  }
+
+  show() {
+    this.visible = true;
+    this.render();
+  }
+
+  hide() {
+    this.visible = false;
+  }
+
+  render() {
+    const all = this.store.experiments;
+    const queued = all.filter((e) => e.status === "queued").sort((a, b) => a.id - b.id);
+    const running = all.filter((e) => e.status !== "queued" && !TERMINAL.has(e.status));
+    const finished = all.filter((e) => TERMINAL.has(e.status));
+    this.table($("#exp-queued"), queued, "Estimated start", (e) => duration(e.estimated_start_s), true);
+    this.table($("#exp-running"), running, "Started", (e) => when(e.started_at || e.created_at), true);
+    this.table($("#exp-finished"), finished, "Finished", (e) => when(e.finished_at), false);
+  }
+
+  table(el, rows, lastTitle, last, cancellable) {
+    const head = h("thead", {}, h("tr", {}, ["ID", "Status", "Environment", "Planner", "Modes", "Reps", "Field", "Owner", "Submitted", lastTitle, ""]
+      .map((t) => h("th", { scope: "col" }, t))));
+    const body = h("tbody", {}, rows.length ? rows.map((e) => h("tr", { dataset: { experiment: e.id } },
+      h("td", {}, h("a", { href: `#/experiments/${e.id}` }, `#${e.id}`)),
+      h("td", {}, badge(e.status)),
+      h("td", {}, e.environment),
+      h("td", {}, e.planner || "explicit path"),
+      h("td", {}, e.modes.join(" + ")),
+      h("td", { class: "num" }, e.repetitions),
+      h("td", {}, e.field),
+      h("td", {}, e.owner),
+      h("td", {}, when(e.created_at)),
+      h("td", {}, last(e)),
+      h("td", {}, cancellable ? h("button", { type: "button", class: "small", onclick: () => cancel(this.store, e.id),
+        "aria-label": `Cancel experiment ${e.id}` }, "Cancel") : (e.error ? h("span", { class: "muted small", title: e.error }, e.error.slice(0, 60)) : "")),
+    )) : h("tr", { class: "empty-row" }, h("td", { colspan: 11 }, "None")));
+    el.replaceChildren(head, body);
+  }
+}
+
+const RUN_COLUMNS = [
+  ["length_m", "Length (m)"],
+  ["execution_time_s", "Time (s)"],
+  ["average_speed_m_s", "Speed (m/s)"],
+  ["deviation_mean_m", "Dev. mean (m)"],
+  ["deviation_max_m", "Dev. max (m)"],
+  ["smoothness_rad", "κ' (rad)"],
+  ["clearance_min_m", "Clear. min (m)"],
+  ["length_ratio", "Length ratio"],
+  ["goal_reached", "Goal"],
+  ["collided", "Collided"],
+];
+
+const CHARTS = [
+  ["length_m", "Path length", "m", true],
+  ["execution_time_s", "Execution time", "s", false],
+  ["average_speed_m_s", "Average speed", "m/s", false],
+  ["deviation_mean_m", "Mean deviation from plan", "m", false],
+  ["smoothness_rad", "Smoothness κ'", "rad", true],
+  ["clearance_min_m", "Minimum clearance", "m", true],
+];
+
+export class ExperimentPage {
+  constructor(store) {
+    this.store = store;
+    this.root = $("#view-experiment");
+    this.id = null;
+    this.reload = debounce(() => this.load().catch((err) => report(err, "Experiment")), 350);
+    store.addEventListener("experiment", (e) => { if (this.id !== null && e.detail === this.id) this.reload(); });
+    store.addEventListener("pose", (e) => this.onPose(e.detail));
+  }
+
+  hide() {
+    this.id = null;
+  }
+
+  async show(id) {
+    if (this.id !== id) {
+      this.id = id;
+      this.poses = new Map(); // run id -> logged poses
+      this.live = new Map(); // run id -> live points (experiment frame)
+      this.hidden = new Set();
+      this.data = null;
+      this.legendKey = null;
+      this.skeleton(id);
+    }
+    try {
+      await this.load();
+    } catch (err) {
+      if (err.status === 404) this.root.replaceChildren(h("div", { class: "panel" }, h("h1", {}, `Experiment ${id}`),
+        h("p", { class: "error" }, "Experiment not found (it does not exist or is not yours)."),
+        h("a", { href: "#/experiments" }, "All experiments")));
+      else report(err, "Experiment");
+    }
+  }
+
+  skeleton(id) {
+    this.els = {
+      title: h("h1", { id: "experiment-title" }, `Experiment #${id}`),
+      status: h("span", {}),
+      actions: h("span", {}),
+      facts: h("dl", { class: "facts" }),
+      error: h("p", { class: "error", role: "alert" }),
+      canvas: h("canvas", { id: "experiment-canvas", tabindex: 0, role: "img", "aria-label": "Planned and performed paths" }),
+      legend: h("div", { class: "legend", role: "group", "aria-label": "Paths shown" }),
+      charts: h("div", { class: "charts", id: "experiment-charts" }),
+      speed: h("div", { class: "wide-chart" }),
+      runs: h("table", { class: "grid", id: "runs-table" }),
+      aggregates: h("table", { class: "grid", id: "aggregates-table" }),
+      direct: h("table", { class: "grid", id: "direct-table" }),
+      downloads: h("div", { class: "downloads" }),
+    };
+    const e = this.els;
+    this.root.replaceChildren(
+      h("div", { class: "exp-head" }, e.title, e.status, e.actions, h("a", { href: "#/experiments" }, "All experiments")),
+      h("div", { class: "panel" }, e.facts, e.error),
+      h("div", { class: "exp-grid" },
+        h("div", { class: "panel" }, h("h2", {}, "Planned vs performed paths"),
+          h("div", { class: "canvas-box square" }, e.canvas), e.legend),
+        h("div", { class: "panel" }, h("h2", {}, "Simulation vs field"),
+          h("p", { class: "muted small" }, "Bars: mean per mode; whiskers: 95% confidence interval; dots: runs; dashed green: the planned path."),
+          e.charts, e.speed)),
+      h("div", { class: "panel" }, h("h2", {}, "Runs"), h("div", { class: "table-scroll" }, e.runs)),
+      h("div", { class: "panel" }, h("h2", {}, "Aggregates per mode"), h("div", { class: "table-scroll" }, e.aggregates)),
+      h("div", { class: "panel" }, h("h2", {}, "Direct comparison, sim vs field per repetition"),
+        h("div", { class: "table-scroll" }, e.direct)),
+      h("div", { class: "panel" }, h("h2", {}, "Downloads"), e.downloads),
+    );
+    this.map = new MapView(e.canvas, { world: SUBFIELD_SIZE });
+  }
+
+  async load() {
+    const id = this.id;
+    if (id === null) return;
+    const api = this.store.api;
+    const [d, m] = await Promise.all([this.store.detail(id, { fresh: true }), api.get(`/api/v1/experiments/${id}/metrics`)]);
+    if (id !== this.id) return;
+    const want = d.runs.filter((r) => r.t_start != null && TERMINAL.has(r.status) && !this.poses.has(r.id)).slice(0, 40);
+    await Promise.all(want.map((r) => api.get(`/api/v1/runs/${r.id}/poses`).then((p) => this.poses.set(r.id, p.poses))));
+    if (id !== this.id) return;
+    this.data = { d, m };
+    this.render();
+  }
+
+  onPose(ev) {
+    if (this.id === null || !this.data || ev.run_id == null) return;
+    const run = this.data.d.runs.find((r) => r.id === ev.run_id);
+    if (!run || this.poses.has(run.id)) return;
+    const [ox, oy] = this.store.originOf(ev.robot_id);
+    if (!this.live.has(run.id)) this.live.set(run.id, []);
+    this.live.get(run.id).push([ev.x - ox, ev.y - oy]);
+    this.drawMap();
+  }
+
+  render() {
+    const { d, m } = this.data;
+    const e = this.els;
+    e.status.replaceChildren(badge(d.status));
+    e.actions.replaceChildren(TERMINAL.has(d.status) ? "" :
+      h("button", { type: "button", onclick: () => cancel(this.store, d.id) }, "Cancel experiment"));
+    const facts = [
+      ["Environment", d.environment], ["Field", d.field], ["Planner", d.planner || "explicit path"],
+      ["Parameters", Object.keys(d.planner_params || {}).length ? JSON.stringify(d.planner_params) : "defaults"],
+      ["Start (x, y, θ)", pose(d.start)], ["Goal (x, y, θ)", pose(d.goal)], ["Modes", d.modes.join(" + ")],
+      ["Repetitions", d.repetitions], ["Seed", d.seed], ["Owner", d.owner],
+      ["Submitted", when(d.created_at)], ["Finished", when(d.finished_at)],
+      ["Planning time", d.planning_time_s == null ? "–" : `${num(d.planning_time_s * 1000, 1)} ms`],
+      ["Robot radius + margin", `${num(d.robot_radius, 3)} + ${num(d.planning_margin, 3)} m`],
+    ];
+    if (d.status === "queued") facts.push(["Estimated start", duration(d.estimated_start_s)]);
+    e.facts.replaceChildren(...facts.map(([k, v]) => h("div", {}, h("dt", {}, k), h("dd", {}, v))));
+    e.error.textContent = d.error || "";
+    this.map.setWorld(d.field === "full" ? FIELD_SIZE : SUBFIELD_SIZE);
+    const legendKey = d.runs.map((r) => r.id).join(",");
+    if (legendKey !== this.legendKey) {
+      // rebuilt only when the runs change, so keyboard focus on a toggle survives live updates
+      this.legendKey = legendKey;
+      this.renderLegend();
+    }
+    this.drawMap();
+    this.renderRuns(d, m);
+    this.renderAggregates(m);
+    this.renderDirect(m);
+    this.renderCharts(d, m);
+    this.renderDownloads(d);
+  }
+
+  runs() {
+    return [...this.data.d.runs].sort((a, b) => a.mode.localeCompare(b.mode) || a.repetition - b.repetition || a.id - b.id);
+  }
+
+  renderLegend() {
+    const items = [{ key: "planned", label: "planned", cls: "planned" },
+      ...this.runs().map((r) => ({ key: `run-${r.id}`, label: `${r.mode} #${r.repetition} (run ${r.id})`, cls: r.mode }))];
+    this.els.legend.replaceChildren(...items.map((it) => h("label", { class: "check" },
+      h("input", { type: "checkbox", checked: !this.hidden.has(it.key), onchange: (ev) => {
+        if (ev.target.checked) this.hidden.delete(it.key); else this.hidden.add(it.key);
+        this.drawMap();
+      } }), h("span", { class: `swatch ${it.cls}` }), it.label)));
+  }
+
+  drawMap() {
+    if (!this.data) return;
+    const { d } = this.data;
+    const env = this.store.env(d.environment);
+    if (!env) this.store.envAsync(d.environment).then(() => this.drawMap()).catch(() => {});
+    const paths = [];
+    const runs = this.runs();
+    for (const r of runs) {
+      if (this.hidden.has(`run-${r.id}`)) continue;
+      const logged = this.poses.get(r.id);
+      const pts = logged ? logged.map((p) => [p[1], p[2]]) : this.live.get(r.id);
+      if (pts) paths.push({ points: pts, color: MODE_COLOR[r.mode] || "#555", width: 1.8, alpha: runs.length > 4 ? 0.6 : 0.9 });
+    }
+    if (d.planned_path && !this.hidden.has("planned")) {
+      paths.push({ points: d.planned_path.map((p) => [p[0], p[1]]), color: COLORS.planned, width: 2.2, dash: [7, 5] });
+    }
+    this.map.update({
+      blocks: env ? env.blocks : [],
+      paths,
+      markers: [{ x: d.start[0], y: d.start[1], theta: d.start[2], color: COLORS.start, label: "start" },
+        { x: d.goal[0], y: d.goal[1], theta: d.goal[2], color: COLORS.goal, label: "goal" }],
+    });
+  }
+
+  renderRuns(d, m) {
+    const head = h("thead", {}, h("tr", {}, ["Run", "Mode", "Rep.", "Status", "Robot", "Sub-field",
+      ...RUN_COLUMNS.map(([, t]) => t), "Downloads"].map((t, i) => h("th", { scope: "col", class: i > 5 && i < 6 + RUN_COLUMNS.length ? "num" : null }, t))));
+    const rows = this.runs().map((r) => {
+      const mt = r.metrics || {};
+      return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
+        h("td", {}, r.id), h("td", {}, r.mode), h("td", { class: "num" }, r.repetition), h("td", {}, badge(r.status),
+          r.error ? h("div", { class: "muted small" }, r.error) : ""),
+        h("td", {}, r.robot_id || "–"), h("td", {}, r.subfield ?? "–"),
+        ...RUN_COLUMNS.map(([k]) => h("td", { class: "num", dataset: { metric: k } }, num(mt[k]))),
+        h("td", {}, r.t_start == null ? "–" : h("span", { class: "downloads" },
+          this.dl(`/api/v1/runs/${r.id}/poses?format=csv`, `run-${r.id}-poses.csv`, "poses CSV", `Download poses of run ${r.id} as CSV`),
+          this.dl(`/api/v1/runs/${r.id}/poses?format=json`, `run-${r.id}-poses.json`, "JSON", `Download poses of run ${r.id} as JSON`),
+          this.dl(`/api/v1/runs/${r.id}/messages?limit=10000`, `run-${r.id}-messages.json`, "messages", `Download protocol messages of run ${r.id}`))));
+    });
+    if (m.planned) {
+      rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, "planned"), h("td", {}, ""), h("td", {}, ""),
+        h("td", {}, ""), h("td", {}, ""), ...RUN_COLUMNS.map(([k]) => h("td", { class: "num" }, num(m.planned[k]))), h("td", {}, "")));
+    }
+    this.els.runs.replaceChildren(head, h("tbody", {}, rows));
+  }
+
+  renderAggregates(m) {
+    const modes = Object.keys(m.aggregates || {});
+    if (!modes.length) {
+      this.els.aggregates.replaceChildren(h("tbody", {}, h("tr", { class: "empty-row" }, h("td", {}, "No completed runs yet."))));
+      return;
+    }
+    const keys = [...new Set(modes.flatMap((md) => Object.keys(m.aggregates[md].metrics)))];
+    const head = h("thead", {}, h("tr", {}, h("th", { scope: "col" }, "Metric"),
+      ...modes.flatMap((md) => [h("th", { scope: "col", class: "num" }, `${md} mean ± std`), h("th", { scope: "col", class: "num" }, `${md} 95% CI`),
+        h("th", { scope: "col", class: "num" }, "n")])));
+    const body = h("tbody", {}, keys.map((k) => h("tr", { dataset: { metric: k } }, h("th", { scope: "row" }, k),
+      ...modes.flatMap((md) => {
+        const a = m.aggregates[md].metrics[k] || {};
+        return [h("td", { class: "num" }, `${num(a.mean)} ± ${num(a.std)}`),
+          h("td", { class: "num" }, a.ci_low == null ? "–" : `[${num(a.ci_low)}, ${num(a.ci_high)}]`),
+          h("td", { class: "num" }, a.n ?? "–")];
+      }))));
+    this.els.aggregates.replaceChildren(head, body);
+  }
+
+  renderDirect(m) {
+    const rows = m.direct || [];
+    const keys = ["deviation_mean_m", "deviation_max_m", "hausdorff_m", "frechet_m"];
+    const head = h("thead", {}, h("tr", {}, ["Repetition", "sim run", "twb run", ...keys].map((t, i) => h("th", { scope: "col", class: i > 2 ? "num" : null }, t))));
+    const body = h("tbody", {}, rows.length ? rows.map((r) => h("tr", {}, h("td", {}, r.repetition), h("td", {}, r.sim_run_id), h("td", {}, r.twb_run_id),
+      ...keys.map((k) => h("td", { class: "num" }, num(r[k]))))) :
+      h("tr", { class: "empty-row" }, h("td", { colspan: 7 }, "Needs a completed sim and twb run of the same repetition.")));
+    this.els.direct.replaceChildren(head, body);
+  }
+
+  renderCharts(d, m) {
+    const modes = d.modes;
+    const done = (m.runs || []).filter((r) => r.status === "completed");
+    const charts = CHARTS.map(([key, title, unit, withRef]) => {
+      const groups = modes.map((md) => ({
+        label: md, color: MODE_COLOR[md],
+        values: done.filter((r) => r.mode === md).map((r) => r.metrics[key]).filter((v) => typeof v === "number"),
+        agg: m.aggregates?.[md]?.metrics?.[key] || null,
+      }));
+      const ref = withRef && m.planned && typeof m.planned[key] === "number" ? { value: m.planned[key], label: "planned" } : null;
+      return h("figure", { dataset: { metric: key } }, h("figcaption", {}, `${title} (${unit})`), barChart({ title, unit, groups, ref }));
+    });
+    this.els.charts.replaceChildren(...charts);
+    const series = this.runs().filter((r) => this.poses.has(r.id)).map((r) => ({
+      label: `${r.mode} #${r.repetition}`, color: MODE_COLOR[r.mode], alpha: 0.85,
+      points: speedProfile(this.poses.get(r.id), r.t_start),
+    }));
+    this.els.speed.replaceChildren(series.length ? h("figure", {}, h("figcaption", { class: "small" }, "Speed over time (m/s against s since EV,START)"),
+      lineChart({ title: "Speed over time", xLabel: "time since start (s)", yLabel: "speed (m/s)", series })) : "");
+  }
+
+  dl(path, filename, label, aria) {
+    return h("button", { type: "button", class: "small", "aria-label": aria, onclick: () =>
+      this.store.api.download(path, filename).catch((err) => report(err, "Download")) }, label);
+  }
+
+  renderDownloads(d) {
+    const id = d.id;
+    this.els.downloads.replaceChildren(
+      this.dl(`/api/v1/experiments/${id}`, `experiment-${id}.json`, "Experiment (JSON)", "Download the experiment as JSON"),
+      this.dl(`/api/v1/experiments/${id}/metrics`, `experiment-${id}-metrics.json`, "Metrics (JSON)", "Download the metrics as JSON"),
+      h("button", { type: "button", class: "small", onclick: async () => {
+        const blob = await this.map.toBlob();
+        if (blob) saveBlob(blob, `experiment-${id}-paths.png`);
+      } }, "Path figure (PNG)"),
+      h("button", { type: "button", class: "small", onclick: () => this.saveCharts(id) }, "Charts (SVG)"),
+      h("span", { class: "muted small" }, "Per-run poses and messages: in the runs table. Replay GIFs: ",
+        h("code", {}, "twb replay"), " on your machine."),
+    );
+  }
+
+  saveCharts(id) {
+    const svgs = [...this.els.charts.querySelectorAll("svg"), ...this.els.speed.querySelectorAll("svg")];
+    if (!svgs.length) return toast("No charts yet", true);
+    // stack the charts into one SVG document
+    let y = 0;
+    const parts = svgs.map((svg) => {
+      const [, , w, hgt] = svg.getAttribute("viewBox").split(" ").map(Number);
+      const g = `<svg x="0" y="${y}" width="${w}" height="${hgt}" viewBox="0 0 ${w} ${hgt}">${svg.innerHTML}</svg>`;
+      y += hgt + 10;
+      return { g, w };
+    });
+    const width = Math.max(...parts.map((p) => p.w));
+    const doc = `<?xml version="1.0" encoding="UTF-8"?>\n<svg xmlns="http://www.w3.org/2000/svg" width="${width}" height="${y}" ` +
+      `font-family="sans-serif">${parts.map((p) => p.g).join("")}</svg>\n`;
+    saveBlob(new Blob([doc], { type: "image/svg+xml" }), `experiment-${id}-charts.svg`);
+  }
+}

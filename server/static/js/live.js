@@ -1,0 +1,123 @@
+// The field page: the 3.6 m field with its four sub-fields, blocks, robots, traces and
+// planned paths; tables of sub-field states, the queue and the simulation pool.
+
+import { $, TERMINAL, badge, duration, h } from "./dom.js";
+import { COLORS, MapView } from "./fieldmap.js";
+import { FIELD_SIZE } from "./store.js";
+
+export class FieldPage {
+  constructor(store) {
+    this.store = store;
+    this.map = new MapView($("#field-canvas"), { world: FIELD_SIZE });
+    this.onField = () => this.drawSoon();
+    this.onExperiments = () => this.renderQueue();
+    store.addEventListener("field", this.onField);
+    store.addEventListener("experiments", this.onExperiments);
+    this.tableFrame = 0;
+  }
+
+  show() {
+    this.draw();
+    this.renderQueue();
+  }
+
+  drawSoon() {
+    this.map.update(this.layers());
+    if (this.tableFrame) return;
+    this.tableFrame = requestAnimationFrame(() => {
+      this.tableFrame = 0;
+      this.renderTables();
+    });
+  }
+
+  draw() {
+    this.map.update(this.layers());
+    this.renderTables();
+  }
+
+  layers() {
+    const st = this.store;
+    const subfields = st.subfields.map((sf) => ({
+      origin: sf.origin, size: sf.size, state: sf.state,
+      label: `${sf.id} · ${sf.state}${sf.environment ? ` · ${sf.environment}` : ""}`,
+    }));
+    const blocks = [];
+    const fullDone = new Set();
+    for (const sf of st.subfields) {
+      const env = st.env(sf.environment);
+      if (!env) continue;
+      const full = / \(full\)$/.test(sf.environment);
+      if (full && fullDone.has(env.name)) continue;
+      if (full) fullDone.add(env.name);
+      const [ox, oy] = full ? [0, 0] : sf.origin;
+      for (const b of env.blocks) blocks.push({ ...b, x: b.x + ox, y: b.y + oy });
+    }
+    const paths = [];
+    const markers = [];
+    const seenRuns = new Set();
+    for (const sf of st.subfields) {
+      const runId = st.subfieldRun.get(sf.id);
+      if (runId == null || seenRuns.has(runId)) continue;
+      seenRuns.add(runId);
+      const run = st.runs.get(runId);
+      const trace = st.traces.get(runId);
+      const active = sf.run_id === runId;
+      if (trace) paths.push({ points: trace.points, color: COLORS.twb, width: 2, alpha: active ? 1 : 0.55 });
+      const d = run && st.details.get(run.experiment_id);
+      if (d && active && run.robot_id) {
+        const [ox, oy] = st.originOf(run.robot_id);
+        if (d.planned_path) {
+          paths.push({ points: d.planned_path.map(([x, y]) => [x + ox, y + oy]), color: COLORS.planned, width: 2, dash: [7, 5] });
+        }
+        markers.push({ x: d.start[0] + ox, y: d.start[1] + oy, theta: d.start[2], color: COLORS.start });
+        markers.push({ x: d.goal[0] + ox, y: d.goal[1] + oy, theta: d.goal[2], color: COLORS.goal });
+      }
+    }
+    const robots = [];
+    for (const r of st.robots) {
+      if (r.pool !== "field") continue;
+      const p = st.poses.get(r.robot_id);
+      if (!p) continue;
+      robots.push({ x: p.x, y: p.y, theta: p.theta, label: r.robot_id + (p.source === "home" ? " (start-up)" : ""),
+                    ghost: p.source === "home" || r.status === "offline" });
+    }
+    this.describe(robots);
+    return { subfields, blocks, paths, markers, robots };
+  }
+
+  /** The canvas's text alternative: what a sighted user sees on it. */
+  describe(robots) {
+    const parts = this.store.subfields.map((sf) => `sub-field ${sf.id} ${sf.state}${sf.environment ? ` with ${sf.environment}` : ""}`);
+    const rs = robots.map((r) => `${r.label} at (${r.x.toFixed(2)}, ${r.y.toFixed(2)}) m heading ${Math.round((r.theta * 180) / Math.PI)}°`);
+    const text = `Field 3.6 by 3.6 m: ${parts.join("; ")}. Robots: ${rs.join("; ") || "none known"}.`;
+    const c = this.map.canvas;
+    if (c.getAttribute("aria-label") !== text) c.setAttribute("aria-label", text);
+  }
+
+  renderTables() {
+    const st = this.store;
+    const body = $("#subfield-table tbody");
+    body.replaceChildren(...st.subfields.map((sf) => {
+      const run = sf.run_id != null ? st.runs.get(sf.run_id) : null;
+      const runCell = sf.run_id == null ? "–"
+        : run ? h("a", { href: `#/experiments/${run.experiment_id}` }, `run ${sf.run_id}`) : `run ${sf.run_id}`;
+      return h("tr", { dataset: { subfield: sf.id, state: sf.state } },
+        h("td", {}, sf.id), h("td", {}, badge(sf.state)), h("td", {}, sf.environment || "–"),
+        h("td", {}, sf.robot_id || "–"), h("td", {}, runCell));
+    }));
+    const pool = st.robots.filter((r) => r.pool !== "field");
+    $("#pool-list").replaceChildren(...pool.map((r) => h("li", { title: `${r.backend} robot, ${r.profile}` }, `${r.robot_id}: ${r.status}`)));
+  }
+
+  renderQueue() {
+    const exps = this.store.experiments.filter((e) => !TERMINAL.has(e.status))
+      .sort((a, b) => (a.status === "queued") - (b.status === "queued") || a.id - b.id);
+    $("#queue-table tbody").replaceChildren(...exps.map((e) => h("tr", {},
+      h("td", {}, h("a", { href: `#/experiments/${e.id}` }, `#${e.id} ${e.environment}`), " ",
+        h("span", { class: "muted small" }, `${e.planner || "path"} · ${e.owner}`)),
+      h("td", {}, badge(e.status)),
+      h("td", {}, e.status === "queued" ? duration(e.estimated_start_s) : "started"))));
+    $("#queue-table").hidden = exps.length === 0;
+    $("#queue-empty").hidden = exps.length > 0;
+  }
+}

@@ -1,0 +1,320 @@
+// The dashboard's shared state: what the server said, kept fresh by the event stream
+// (and by polling while the stream is down).  Views listen to its events:
+//   "field"       sub-fields, robots, robot poses or traces changed
+//   "experiments" the experiment list changed
+//   "experiment"  detail = experiment id whose runs or status changed
+//   "pose"        detail = a raw pose event (field frame)
+//   "stream"      detail = stream state
+//   "unauthorized" the token stopped working
+
+import { EventStream } from "./api.js";
+import { TERMINAL, report } from "./dom.js";
+
+export const SUBFIELD_SIZE = [1.8, 1.8];
+export const FIELD_SIZE = [3.6, 3.6];
+/** Where a robot stands after start-up, in its own frame (docs/protocol.md). */
+const HOME = [0.1, 0.1, 0];
+const MAX_TRACE = 20000;
+
+export class Store extends EventTarget {
+  constructor(api) {
+    super();
+    this.api = api;
+    this.user = null;
+    this.subfields = [];
+    this.robots = [];
+    this.experiments = [];
+    this.experimentCount = 0;
+    this.envs = new Map(); // name -> environment (resolved)
+    this.envPending = new Map(); // name -> Promise
+    this.details = new Map(); // experiment id -> ExperimentPublic
+    this.runs = new Map(); // run id -> RunPublic
+    this.poses = new Map(); // robot id -> {x, y, theta, t, run_id, source: live|log|home}
+    this.traces = new Map(); // run id -> {robot_id, points: [[x, y]] field frame, exact}
+    this.subfieldRun = new Map(); // sub-field id -> latest run id seen on it
+    this.streamState = "stopped";
+    this.timers = [];
+    this.pending = new Map();
+    this.stream = new EventStream(api, {
+      onEvent: (type, data) => this.onEvent(type, data),
+      onState: (state) => this.onStreamState(state),
+    });
+  }
+
+  emit(topic, detail) {
+    this.dispatchEvent(new CustomEvent(topic, { detail }));
+  }
+
+  start() {
+    this.refreshField();
+    this.refreshExperiments();
+    this.stream.start();
+    this.timers.push(setInterval(() => this.poll(), 2000));
+  }
+
+  stop() {
+    this.stream.stop();
+    this.timers.forEach(clearInterval);
+    this.timers = [];
+    for (const t of this.pending.values()) clearTimeout(t);
+    this.pending.clear();
+  }
+
+  /** Run `fn` once, `ms` from now, however often this is called meanwhile. */
+  later(key, ms, fn) {
+    if (this.pending.has(key)) return;
+    this.pending.set(key, setTimeout(() => {
+      this.pending.delete(key);
+      fn();
+    }, ms));
+  }
+
+  onStreamState(state) {
+    const was = this.streamState;
+    this.streamState = state;
+    this.emit("stream", state);
+    if (state === "unauthorized") this.emit("unauthorized");
+    if (state === "live" && was !== "connecting" && was !== "stopped") {
+      // back after a gap: catch up on what the stream missed
+      this.refreshField();
+      this.refreshExperiments();
+    }
+  }
+
+  poll() {
+    this.tick = (this.tick || 0) + 1;
+    const live = this.streamState === "live";
+    if (live && this.tick % 8) return; // live: a safety refresh every 16 s
+    this.refreshField();
+    this.refreshExperiments();
+    if (!live) {
+      // no stream: follow running robots through their logged poses
+      for (const sf of this.subfields) if (sf.run_id != null) this.loadTrace(sf.run_id).catch(() => {});
+    }
+  }
+
+  // ------------------------------------------------------------------ loading
+
+  async refreshField() {
+    try {
+      const [subs, robots] = await Promise.all([this.api.get("/api/v1/subfields"), this.api.get("/api/v1/robots")]);
+      this.subfields = subs.data;
+      this.robots = robots.data;
+      for (const sf of this.subfields) if (sf.run_id != null) this.subfieldRun.set(sf.id, sf.run_id);
+      this.emit("field");
+      await this.ensureRunning();
+      await this.resolveRobotPoses();
+    } catch (err) {
+      this.failed(err, "Field");
+    }
+  }
+
+  async refreshExperiments() {
+    try {
+      const page = await this.api.get("/api/v1/experiments?limit=200");
+      this.experiments = page.data;
+      this.experimentCount = page.count;
+      this.emit("experiments");
+    } catch (err) {
+      this.failed(err, "Experiments");
+    }
+  }
+
+  failed(err, what) {
+    if (err && err.status === 401) this.emit("unauthorized");
+    else if (err && err.status === 0) { /* server away: the stream state shows it */ }
+    else report(err, what);
+  }
+
+  robot(id) {
+    return this.robots.find((r) => r.robot_id === id);
+  }
+
+  isFieldRobot(id) {
+    const r = this.robot(id);
+    return r ? r.pool === "field" : /^field-/.test(id);
+  }
+
+  /** Offset from a run's (= its robot's) frame to field coordinates. */
+  originOf(robotId) {
+    const r = this.robot(robotId);
+    return r ? r.origin : [0, 0];
+  }
+
+  env(name) {
+    if (!name) return null;
+    const clean = name.replace(/ \(full\)$/, "");
+    if (this.envs.has(clean)) return this.envs.get(clean);
+    if (!this.envPending.has(clean)) {
+      const p = this.api.get(`/api/v1/environments/${encodeURIComponent(clean)}`)
+        .then((e) => { this.envs.set(clean, e); this.emit("field"); return e; })
+        .catch((err) => { this.envPending.delete(clean); this.failed(err, `Environment ${clean}`); return null; });
+      this.envPending.set(clean, p);
+    }
+    return null;
+  }
+
+  async envAsync(name) {
+    const e = this.env(name);
+    return e || (await this.envPending.get(name.replace(/ \(full\)$/, "")));
+  }
+
+  /** An experiment's detail; finished ones are cached for good, others re-read when `fresh`. */
+  async detail(id, { fresh = false } = {}) {
+    const have = this.details.get(id);
+    if (have && !fresh) return have;
+    const d = await this.api.get(`/api/v1/experiments/${id}`);
+    this.details.set(id, d);
+    for (const r of d.runs) this.runs.set(r.id, r);
+    return d;
+  }
+
+  async run(id) {
+    if (this.runs.has(id)) return this.runs.get(id);
+    const r = await this.api.get(`/api/v1/runs/${id}`);
+    this.runs.set(id, r);
+    return r;
+  }
+
+  /** Planned paths of what is running on the field. */
+  async ensureRunning() {
+    for (const sf of this.subfields) {
+      if (sf.run_id == null) continue;
+      try {
+        const run = await this.run(sf.run_id);
+        const d = this.details.get(run.experiment_id);
+        if (!d || d.planned_path == null) {
+          await this.detail(run.experiment_id, { fresh: true });
+          this.emit("field");
+        }
+      } catch (err) {
+        this.failed(err, "Running experiment");
+      }
+    }
+  }
+
+  /** Logged poses of a run as its trace (field frame); the robot's last pose from them. */
+  async loadTrace(runId) {
+    const run = await this.run(runId);
+    if (!run.robot_id) return;
+    const res = await this.api.get(`/api/v1/runs/${runId}/poses`);
+    const [ox, oy] = this.originOf(run.robot_id);
+    const points = res.poses.map(([, x, y]) => [x + ox, y + oy]);
+    const old = this.traces.get(runId);
+    if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true });
+    const last = res.poses[res.poses.length - 1];
+    if (last && this.isFieldRobot(run.robot_id)) {
+      const cur = this.poses.get(run.robot_id);
+      if (!cur || cur.source === "home" || (cur.run_id ?? -1) <= runId) {
+        this.poses.set(run.robot_id, { x: last[1] + ox, y: last[2] + oy, theta: last[3], t: last[0], run_id: runId,
+                                       source: cur && cur.source === "live" && cur.run_id === runId ? "live" : "log" });
+      }
+    }
+    this.emit("field");
+  }
+
+  /** Field robots never seen moving: their last logged pose, else where they start up. */
+  async resolveRobotPoses() {
+    if (this.resolving) return;
+    const missing = new Set(this.robots.filter((r) => r.pool === "field" && !this.poses.has(r.robot_id)).map((r) => r.robot_id));
+    if (!missing.size) return;
+    this.resolving = true;
+    try {
+      const recent = this.experiments.filter((e) => e.status !== "queued" && e.modes.includes("twb")).slice(0, 10);
+      for (const e of recent) {
+        if (!missing.size) break;
+        const d = await this.detail(e.id, { fresh: !TERMINAL.has(e.status) });
+        const runs = d.runs.filter((r) => r.mode === "twb" && missing.has(r.robot_id) && r.t_start != null)
+          .sort((a, b) => b.id - a.id);
+        for (const r of runs) {
+          if (!missing.has(r.robot_id)) continue;
+          await this.loadTrace(r.id);
+          if (this.poses.has(r.robot_id)) missing.delete(r.robot_id);
+        }
+      }
+      for (const id of missing) {
+        if (this.poses.has(id)) continue;
+        const [ox, oy] = this.originOf(id);
+        this.poses.set(id, { x: HOME[0] + ox, y: HOME[1] + oy, theta: HOME[2], t: null, run_id: null, source: "home" });
+      }
+    } catch (err) {
+      this.failed(err, "Robot positions");
+    } finally {
+      this.resolving = false;
+      this.emit("field");
+    }
+  }
+
+  // ------------------------------------------------------------------ live events
+
+  onEvent(type, data) {
+    if (type === "pose") this.onPose(data);
+    else if (type === "run") this.onRun(data.run);
+    else if (type === "experiment") this.onExperiment(data.experiment);
+    else if (type === "subfield") this.onSubfield(data.subfield);
+    else if (type === "robot") this.later("field", 300, () => this.refreshField());
+  }
+
+  onPose(ev) {
+    if (this.isFieldRobot(ev.robot_id)) {
+      this.poses.set(ev.robot_id, { x: ev.x, y: ev.y, theta: ev.theta, t: ev.t, run_id: ev.run_id, source: "live" });
+    }
+    if (ev.run_id != null) {
+      let tr = this.traces.get(ev.run_id);
+      if (!tr) {
+        tr = { robot_id: ev.robot_id, points: [], exact: false };
+        this.traces.set(ev.run_id, tr);
+      }
+      if (!tr.exact && tr.points.length < MAX_TRACE) tr.points.push([ev.x, ev.y]);
+    }
+    this.emit("field");
+    this.emit("pose", ev);
+  }
+
+  onRun(run) {
+    if (!run) return;
+    this.runs.set(run.id, run);
+    if (run.mode === "twb" && run.subfield != null && run.status !== "queued") this.subfieldRun.set(run.subfield, run.id);
+    const d = this.details.get(run.experiment_id);
+    if (d) {
+      const i = d.runs.findIndex((r) => r.id === run.id);
+      if (i >= 0) d.runs[i] = run;
+      if (run.status === "running" && d.planned_path == null) this.details.delete(run.experiment_id);
+    }
+    if (TERMINAL.has(run.status) && run.robot_id && this.isFieldRobot(run.robot_id) && run.t_start != null) {
+      // the exact performed path replaces the sampled live trace
+      this.later(`trace-${run.id}`, 150, () => this.loadTrace(run.id).catch((err) => this.failed(err, "Poses")));
+    }
+    if (TERMINAL.has(run.status) || run.status === "running") {
+      // sub-fields are released without an event of their own
+      this.later("field", 400, () => this.refreshField());
+      this.later("field-again", 1500, () => this.refreshField());
+    }
+    this.later("experiments", 300, () => this.refreshExperiments());
+    this.emit("experiment", run.experiment_id);
+    this.emit("field");
+  }
+
+  onExperiment(exp) {
+    if (!exp) return;
+    const i = this.experiments.findIndex((e) => e.id === exp.id);
+    if (i >= 0) this.experiments[i] = { ...this.experiments[i], ...exp };
+    const d = this.details.get(exp.id);
+    if (d && d.status !== exp.status) this.details.delete(exp.id);
+    this.later("experiments", 300, () => this.refreshExperiments());
+    this.emit("experiments");
+    this.emit("experiment", exp.id);
+  }
+
+  onSubfield(sf) {
+    if (!sf) return;
+    const i = this.subfields.findIndex((s) => s.id === sf.id);
+    if (i >= 0) this.subfields[i] = sf;
+    else this.subfields.push(sf);
+    if (sf.run_id != null) {
+      this.subfieldRun.set(sf.id, sf.run_id);
+      this.ensureRunning();
+    }
+    this.emit("field");
+  }
+}

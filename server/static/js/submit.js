@@ -1,0 +1,385 @@
+// The submit form: environment, start and goal placed on the map (click; drag for the
+// heading; keys too), planner and parameters, modes, repetitions, seed.  The server
+// validates; its 422 message is shown next to the field it is about.
+
+import { $, $$, deg, h, report, toast } from "./dom.js";
+import { COLORS, MapView } from "./fieldmap.js";
+import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
+
+const KEYS = ["environment", "field", "start", "goal", "planner", "planner_params", "modes", "repetitions", "seed"];
+const DRAG_PX = 8;
+const TURN = Math.PI / 12;
+
+/** Which form field a server message is about (pre-flight messages start with the field's name). */
+export function fieldOfMessage(msg) {
+  const m = msg.toLowerCase();
+  if (/^start\b/.test(m) || /`start`/.test(m)) return "start";
+  if (/^goal\b|^the goal\b/.test(m) || /`goal`/.test(m)) return "goal";
+  if (/^repetitions\b/.test(m)) return "repetitions";
+  if (/^seed\b/.test(m)) return "seed";
+  if (/^modes?\b/.test(m)) return "modes";
+  if (/^parameter |has no parameter|planner_params/.test(m)) return "planner_params";
+  if (/planner/.test(m)) return "planner";
+  if (/environment/.test(m)) return "environment";
+  return null;
+}
+
+export class SubmitPage {
+  constructor(store, { onSubmitted }) {
+    this.store = store;
+    this.onSubmitted = onSubmitted;
+    this.form = $("#submit-form");
+    this.map = new MapView($("#submit-canvas"), { world: SUBFIELD_SIZE, padding: 14 });
+    this.poses = { start: null, goal: null };
+    this.planners = [];
+    this.envs = [];
+    this.loaded = false;
+    this.wire();
+  }
+
+  async show() {
+    if (!this.loaded) {
+      try {
+        const [envs, planners] = await Promise.all([
+          this.store.api.get("/api/v1/environments?limit=1000"),
+          this.store.api.get("/dashboard/planners").catch(() => ({ data: ["fmm", "fm2", "prm", "astar"].map((name) => ({ name, description: "", defaults: {} })) })),
+        ]);
+        this.envs = envs.data;
+        this.planners = planners.data;
+        this.loaded = true;
+        this.fillSelects();
+      } catch (err) {
+        report(err, "Submit form");
+        return;
+      }
+    }
+    this.draw();
+  }
+
+  get env() {
+    return this.envs.find((e) => e.name === $("#f-environment").value) || null;
+  }
+
+  get fieldMode() {
+    return this.form.querySelector('input[name="field"]:checked').value;
+  }
+
+  get pick() {
+    return this.form.querySelector('input[name="pick"]:checked').value;
+  }
+
+  set pick(which) {
+    this.form.querySelector(`input[name="pick"][value="${which}"]`).checked = true;
+    this.draw();
+  }
+
+  fillSelects() {
+    const envSel = $("#f-environment");
+    envSel.replaceChildren(...this.envs.map((e) => h("option", { value: e.name }, `${e.name}${e.builtin ? "" : ` (${e.owner || "yours"})`}`)));
+    const plSel = $("#f-planner");
+    plSel.replaceChildren(...this.planners.map((p) => h("option", { value: p.name }, p.name)));
+    plSel.value = this.planners.some((p) => p.name === "fm2") ? "fm2" : plSel.value;
+    this.onEnvironment(true);
+    this.onPlanner();
+  }
+
+  wire() {
+    $("#f-environment").addEventListener("change", () => this.onEnvironment(true));
+    $("#f-planner").addEventListener("change", () => this.onPlanner());
+    for (const r of $$('input[name="field"]', this.form)) r.addEventListener("change", () => this.onEnvironment(false));
+    for (const r of $$('input[name="pick"]', this.form)) r.addEventListener("change", () => this.draw());
+    for (const which of ["start", "goal"]) {
+      for (const c of ["x", "y", "a"]) {
+        $(`#f-${which}-${c}`).addEventListener("input", () => this.fromInputs(which));
+      }
+    }
+    this.form.addEventListener("submit", (ev) => {
+      ev.preventDefault();
+      this.submit().catch((err) => report(err, "Submit"));
+    });
+    const c = this.map.canvas;
+    c.addEventListener("pointerdown", (ev) => this.pointerDown(ev));
+    c.addEventListener("pointermove", (ev) => this.pointerMove(ev));
+    c.addEventListener("pointerup", (ev) => this.pointerUp(ev));
+    c.addEventListener("pointercancel", () => { this.drag = null; });
+    c.addEventListener("keydown", (ev) => this.key(ev));
+  }
+
+  onEnvironment(applyPlan) {
+    const env = this.env;
+    $("#env-desc").textContent = env ? `${env.size[0]} x ${env.size[1]} m, ${env.blocks.length} blocks. ${env.description || ""}` : "";
+    if (env && (env.size[0] > SUBFIELD_SIZE[0] + 1e-9 || env.size[1] > SUBFIELD_SIZE[1] + 1e-9)) {
+      this.form.querySelector('input[name="field"][value="full"]').checked = true;
+    }
+    const plans = env?.plans || [];
+    $("#env-plans").replaceChildren(...plans.map((p) => h("button", { type: "button", class: "small",
+      onclick: () => this.applyPlan(p) }, `Plan ${p.name}`)));
+    if (applyPlan && plans.length && !this.poses.start && !this.poses.goal) this.applyPlan(plans[0]);
+    this.draw();
+  }
+
+  applyPlan(p) {
+    this.setPose("start", [...p.start]);
+    this.setPose("goal", [...p.goal]);
+  }
+
+  onPlanner() {
+    const p = this.planners.find((q) => q.name === $("#f-planner").value);
+    $("#planner-desc").textContent = p?.description || "";
+    const box = $("#f-params");
+    if (!p || p.defaults === null) {
+      box.replaceChildren(h("label", { for: "f-params-json" }, "JSON object"),
+        h("textarea", { id: "f-params-json", rows: 3, placeholder: "{}", "aria-describedby": "err-planner_params" }));
+      return;
+    }
+    const entries = Object.entries(p.defaults);
+    box.replaceChildren(...(entries.length ? entries.map(([k, v]) => {
+      const id = `f-param-${k}`;
+      const input = typeof v === "boolean"
+        ? h("select", { id, "data-param": k, "data-kind": "bool", "aria-describedby": "err-planner_params" },
+          h("option", { value: "" }, `default (${v})`), h("option", { value: "true" }, "true"), h("option", { value: "false" }, "false"))
+        : h("input", { id, "data-param": k, "data-kind": typeof v === "number" ? (Number.isInteger(v) ? "int" : "number") : "string",
+          type: typeof v === "number" ? "number" : "text", step: typeof v === "number" ? "any" : null, placeholder: String(v),
+          "aria-describedby": "err-planner_params" });
+      return h("label", { for: id }, k, input);
+    }) : [h("p", { class: "muted small" }, "This planner takes no parameters.")]));
+  }
+
+  params() {
+    const json = $("#f-params-json");
+    if (json) {
+      const text = json.value.trim();
+      if (!text) return {};
+      try {
+        const v = JSON.parse(text);
+        if (v && typeof v === "object" && !Array.isArray(v)) return v;
+      } catch { /* below */ }
+      throw Object.assign(new Error("planner parameters must be a JSON object"), { field: "planner_params" });
+    }
+    const out = {};
+    for (const el of $$("[data-param]", $("#f-params"))) {
+      const raw = el.value.trim();
+      if (raw === "") continue;
+      const kind = el.dataset.kind;
+      out[el.dataset.param] = kind === "bool" ? raw === "true" : kind === "string" ? raw : Number(raw);
+    }
+    return out;
+  }
+
+  // ------------------------------------------------------------------ poses and map
+
+  world() {
+    if (this.fieldMode === "full") return FIELD_SIZE;
+    return this.env ? this.env.size : SUBFIELD_SIZE;
+  }
+
+  setPose(which, p) {
+    this.poses[which] = p;
+    const [x, y, a] = p || [];
+    $(`#f-${which}-x`).value = Number.isFinite(x) ? x.toFixed(3) : "";
+    $(`#f-${which}-y`).value = Number.isFinite(y) ? y.toFixed(3) : "";
+    $(`#f-${which}-a`).value = Number.isFinite(a) ? a.toFixed(3) : "";
+    $(`#${which}-deg`).textContent = Number.isFinite(a) ? `heading ${deg(a)}` : "heading: any";
+    this.draw();
+  }
+
+  fromInputs(which) {
+    const x = parseFloat($(`#f-${which}-x`).value);
+    const y = parseFloat($(`#f-${which}-y`).value);
+    const a = parseFloat($(`#f-${which}-a`).value);
+    this.poses[which] = Number.isFinite(x) && Number.isFinite(y) ? [x, y, ...(Number.isFinite(a) ? [a] : [])] : null;
+    $(`#${which}-deg`).textContent = Number.isFinite(a) ? `heading ${deg(a)}` : "heading: any";
+    this.draw();
+  }
+
+  draw() {
+    const [w, hgt] = this.world();
+    this.map.world = [w, hgt];
+    const env = this.env;
+    const markers = [];
+    for (const which of ["start", "goal"]) {
+      const p = this.poses[which];
+      if (p) markers.push({ x: p[0], y: p[1], theta: p[2], color: which === "start" ? COLORS.start : COLORS.goal, label: which,
+        active: this.pick === which });
+    }
+    this.map.update({ blocks: env ? env.blocks : [], markers,
+      subfields: this.fieldMode === "full" ? [[0, 0], [1.8, 0], [0, 1.8], [1.8, 1.8]].map((o) => ({ origin: o, size: SUBFIELD_SIZE, state: "idle" })) : [] });
+    const p = this.poses[this.pick];
+    $("#map-readout").textContent = `Placing the ${this.pick}` + (p ? ` at (${p[0].toFixed(2)}, ${p[1].toFixed(2)}) m` +
+      (Number.isFinite(p[2]) ? `, heading ${deg(p[2])}` : "") : "") + ".";
+  }
+
+  local(ev) {
+    const r = this.map.canvas.getBoundingClientRect();
+    return [ev.clientX - r.left, ev.clientY - r.top];
+  }
+
+  pointerDown(ev) {
+    if (ev.button !== 0) return;
+    const [px, py] = this.local(ev);
+    const [x, y] = this.map.toWorld(px, py);
+    const [w, hgt] = this.world();
+    if (x < 0 || y < 0 || x > w || y > hgt) return;
+    ev.preventDefault();
+    this.map.canvas.focus();
+    this.map.canvas.setPointerCapture?.(ev.pointerId);
+    const which = this.pick;
+    const old = this.poses[which];
+    this.drag = { which, px, py };
+    this.setPose(which, [round(x), round(y), ...(old && Number.isFinite(old[2]) ? [old[2]] : [])]);
+  }
+
+  pointerMove(ev) {
+    if (!this.drag) return;
+    const [px, py] = this.local(ev);
+    const dx = px - this.drag.px;
+    const dy = py - this.drag.py;
+    if (Math.hypot(dx, dy) < DRAG_PX) return;
+    const p = this.poses[this.drag.which];
+    this.setPose(this.drag.which, [p[0], p[1], round(Math.atan2(-dy, dx), 3)]);
+  }
+
+  pointerUp(ev) {
+    if (!this.drag) return;
+    this.pointerMove(ev);
+    const which = this.drag.which;
+    this.drag = null;
+    if (which === "start" && !this.poses.goal) this.pick = "goal";
+  }
+
+  key(ev) {
+    const which = this.pick;
+    if (ev.key === "s" || ev.key === "g") {
+      this.pick = ev.key === "s" ? "start" : "goal";
+      ev.preventDefault();
+      return;
+    }
+    const moves = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, 1], ArrowDown: [0, -1] };
+    const [w, hgt] = this.world();
+    const p = this.poses[which] || [w / 2, hgt / 2];
+    if (moves[ev.key]) {
+      const step = ev.shiftKey ? 0.1 : 0.01;
+      const [dx, dy] = moves[ev.key];
+      this.setPose(which, [round(clamp(p[0] + dx * step, 0, w)), round(clamp(p[1] + dy * step, 0, hgt)), ...p.slice(2)]);
+      ev.preventDefault();
+    } else if (ev.key === "[" || ev.key === "]") {
+      const a = Number.isFinite(p[2]) ? p[2] : 0;
+      let na = a + (ev.key === "[" ? TURN : -TURN);
+      na = Math.atan2(Math.sin(na), Math.cos(na));
+      this.setPose(which, [p[0], p[1], round(na, 3)]);
+      ev.preventDefault();
+    }
+  }
+
+  // ------------------------------------------------------------------ submit
+
+  clearErrors() {
+    $("#submit-error").textContent = "";
+    for (const k of KEYS) {
+      const el = $(`#err-${k}`);
+      if (el) el.textContent = "";
+    }
+    for (const el of $$("[aria-invalid]", this.form)) el.removeAttribute("aria-invalid");
+  }
+
+  showError(key, message) {
+    const target = key && $(`#err-${key}`);
+    if (!target) {
+      $("#submit-error").textContent = message;
+      return $("#submit-error");
+    }
+    target.textContent = message;
+    const inputs = {
+      environment: ["#f-environment"], planner: ["#f-planner"], repetitions: ["#f-repetitions"], seed: ["#f-seed"],
+      start: ["#f-start-x", "#f-start-y", "#f-start-a"], goal: ["#f-goal-x", "#f-goal-y", "#f-goal-a"],
+      planner_params: ["#f-params input", "#f-params select", "#f-params textarea"],
+      modes: ['input[name="modes"]'], field: ['input[name="field"]'],
+    }[key] || [];
+    const els = inputs.flatMap((sel) => $$(sel, this.form));
+    const param = /parameter \w+\.(\w+)/.exec(message)?.[1];
+    for (const el of els) {
+      if (key !== "planner_params" || !param || el.dataset.param === param) el.setAttribute("aria-invalid", "true");
+    }
+    return els.find((el) => el.getAttribute("aria-invalid")) || els[0] || target;
+  }
+
+  body() {
+    const modes = $$('input[name="modes"]:checked', this.form).map((el) => el.value);
+    const problems = [];
+    if (!this.poses.start) problems.push(["start", "place the start on the map or type x and y"]);
+    if (!this.poses.goal) problems.push(["goal", "place the goal on the map or type x and y"]);
+    if (!modes.length) problems.push(["modes", "choose at least one mode"]);
+    let params = {};
+    try {
+      params = this.params();
+    } catch (err) {
+      problems.push(["planner_params", err.message]);
+    }
+    const intOf = (sel) => {
+      const v = $(sel).value.trim();
+      return v === "" ? NaN : Number(v);
+    };
+    return {
+      problems,
+      body: {
+        environment: $("#f-environment").value,
+        start: this.poses.start,
+        goal: this.poses.goal,
+        planner: $("#f-planner").value,
+        planner_params: params,
+        modes,
+        repetitions: intOf("#f-repetitions"),
+        seed: intOf("#f-seed"),
+        field: this.fieldMode,
+      },
+    };
+  }
+
+  async submit() {
+    this.clearErrors();
+    const { problems, body } = this.body();
+    if (problems.length) {
+      const first = problems.map(([k, msg]) => this.showError(k, msg))[0];
+      first?.focus?.();
+      return;
+    }
+    // NaN would not survive JSON; send null and let the server say what is wrong
+    for (const k of ["repetitions", "seed"]) if (!Number.isFinite(body[k])) body[k] = null;
+    const button = $("#submit-button");
+    button.disabled = true;
+    try {
+      const exp = await this.store.api.post("/api/v1/experiments", body);
+      toast(`Experiment #${exp.id} queued`);
+      this.store.refreshExperiments();
+      this.onSubmitted(exp.id);
+    } catch (err) {
+      if (err.status === 422 || err.status === 429 || err.status === 413) {
+        let first = null;
+        const pyd = (err.errors || []).filter((e) => Array.isArray(e.loc));
+        if (pyd.length) {
+          for (const e of pyd) {
+            const key = e.loc[0] === "body" && KEYS.includes(e.loc[1]) ? e.loc[1] : null;
+            const el = this.showError(key, key ? e.msg : err.detail);
+            first = first || el;
+          }
+        } else {
+          first = this.showError(fieldOfMessage(err.detail), err.detail);
+        }
+        first?.focus?.();
+      } else {
+        report(err, "Submit");
+      }
+    } finally {
+      button.disabled = false;
+    }
+  }
+}
+
+function round(v, digits = 3) {
+  const f = 10 ** digits;
+  return Math.round(v * f) / f;
+}
+
+function clamp(v, lo, hi) {
+  return Math.min(hi, Math.max(lo, v));
+}

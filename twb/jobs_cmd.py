@@ -1,0 +1,339 @@
+"""Job commands over the SDK: ``twb submit``, ``status``, ``wait``, ``results``, ``cancel``, ``envs``.
+
+Each talks to a running testbed (``--url``/``TWB_URL``, ``--token``/``TWB_TOKEN``
+or the token file ``twb up`` writes); errors are one line on stderr.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+from .errors import fail
+from .sdk_support import TokenOpt, UrlOpt, sdk_client
+
+__all__ = ["cancel", "envs", "results", "status", "submit", "wait"]
+
+EXIT_NOT_COMPLETED = 1
+
+
+def _read_job_file(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text())
+    except OSError as exc:
+        fail(f"cannot read job file {path}: {exc.strerror or exc}")
+    except json.JSONDecodeError as exc:
+        fail(f"{path}: invalid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}")
+    if not isinstance(data, dict):
+        fail(f"{path}: a job file is a JSON object such as {{\"environment\": \"room\", \"start\": [...], ...}}")
+    return data
+
+
+def _read_path_file(path: Path) -> list[list[float]]:
+    """Points from JSON (a list, or ``{"path": [...]}`` as ``twb plan`` prints) or CSV with x,y[,theta] columns."""
+    import csv
+
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        fail(f"cannot read path file {path}: {exc.strerror or exc}")
+    if text.lstrip().startswith(("[", "{")):
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as exc:
+            fail(f"{path}: invalid JSON: {exc.msg}")
+        pts = doc.get("path") if isinstance(doc, dict) else doc
+    else:
+        rows = list(csv.DictReader(text.splitlines()))
+        if not rows or "x" not in rows[0] or "y" not in rows[0]:
+            fail(f"{path}: CSV needs a header with x,y[,theta] columns (as `twb plan --format csv` writes)")
+        try:
+            pts = [[float(r["x"]), float(r["y"])] + ([float(r["theta"])] if r.get("theta") else []) for r in rows]
+        except ValueError as exc:
+            fail(f"{path}: {exc}")
+    if not isinstance(pts, list) or len(pts) < 2:
+        fail(f"{path}: a path needs at least 2 points")
+    return pts
+
+
+def submit(
+    job_file: Annotated[Optional[Path], typer.Argument(help="JSON job file (fields of POST /api/v1/experiments); flags override it.")] = None,
+    env: Annotated[Optional[str], typer.Option("--env", help="Environment name (room, blocks, or one you created).")] = None,
+    plan: Annotated[Optional[str], typer.Option("--plan", help="The environment's named start/goal pair (e.g. A).")] = None,
+    start: Annotated[Optional[str], typer.Option(help="Start X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
+    goal: Annotated[Optional[str], typer.Option(help="Goal X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
+    planner: Annotated[Optional[str], typer.Option(help="fmm, fm2, prm, astar or a plug-in [server default: fmm].")] = None,
+    param: Annotated[Optional[list[str]], typer.Option("--param", "-p", help="Planner parameter NAME=VALUE (repeatable).")] = None,
+    path: Annotated[Optional[Path], typer.Option("--path", help="Send this path instead of planning: JSON or CSV x,y[,theta] (m, rad).")] = None,
+    modes: Annotated[Optional[str], typer.Option(help="sim, twb or sim,twb [default: sim,twb].")] = None,
+    repetitions: Annotated[Optional[int], typer.Option(help="Runs per mode [default: 1].", min=1)] = None,
+    seed: Annotated[Optional[int], typer.Option(help="Seed of the job (planner sampling, noise) [default: 0].", min=0)] = None,
+    field: Annotated[Optional[str], typer.Option(help="sub (a 1.8 m sub-field) or full (3.6 m field) [default: sub].")] = None,
+    wait_: Annotated[bool, typer.Option("--wait", help="Wait for the end with a progress bar; exit 1 unless completed.")] = False,
+    timeout: Annotated[Optional[float], typer.Option(help="With --wait: give up after this many seconds (exit 3).")] = None,
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Submit a job; prints the experiment id (with --wait, waits and prints its final status)."""
+    from .plan_cmd import _params
+    from .poses import parse_cli_pose
+
+    job = _read_job_file(job_file) if job_file else {}
+    fields: dict[str, Any] = {}
+    if env:
+        fields["environment"] = env
+    if start:
+        fields["start"] = parse_cli_pose(start, "start")
+    if goal:
+        fields["goal"] = parse_cli_pose(goal, "goal")
+    if planner:
+        fields["planner"] = planner
+    if param:
+        fields["planner_params"] = _params(param)
+    if path:
+        fields["path"] = _read_path_file(path)
+    if modes:
+        fields["modes"] = [m.strip() for m in modes.split(",") if m.strip()]
+    for key, value in (("repetitions", repetitions), ("seed", seed), ("field", field)):
+        if value is not None:
+            fields[key] = value
+    body = {**job, **fields}
+    if "environment" not in body:
+        fail("give --env NAME (or a job file with an \"environment\")")
+    with sdk_client(url, token) as client:
+        if plan:
+            if "start" in body or "goal" in body:
+                fail("give either --plan or --start/--goal, not both")
+            try:
+                p = client.get_environment(body["environment"]).plan(plan)
+            except KeyError as exc:
+                fail(str(exc.args[0]))
+            body.update(start=p.start, goal=p.goal)
+        exp = client.submit(body)
+        typer.echo(exp.id)
+        if wait_:
+            sys.stdout.flush()
+            done = client.wait(exp.id, timeout=timeout)
+            _final_line(done)
+
+
+def _final_line(exp: Any) -> None:
+    msg = f"experiment {exp.id}: {exp.status} ({sum(r.status == 'completed' for r in exp.runs)}/{len(exp.runs)} runs completed)"
+    if exp.status != "completed":
+        typer.echo(msg + (f": {exp.error}" if exp.error else ""), err=True)
+        raise typer.Exit(EXIT_NOT_COMPLETED)
+    typer.echo(msg, err=True)
+
+
+def _num(v: Any, digits: int = 3) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return f"{v:.{digits}f}"
+    return str(v)
+
+
+def _console():  # type: ignore[no-untyped-def]
+    from rich.console import Console
+
+    con = Console(soft_wrap=False)
+    return con if con.is_terminal else Console(soft_wrap=False, width=180)
+
+
+def status(
+    experiment_id: Annotated[Optional[int], typer.Argument(help="Experiment id; without it, list your experiments.")] = None,
+    state: Annotated[Optional[str], typer.Option("--status", help="List only experiments in this state.")] = None,
+    limit: Annotated[int, typer.Option(help="How many experiments to list.", min=1, max=500)] = 20,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Show one experiment (status, runs) or list your latest experiments."""
+    import dataclasses
+
+    from rich.table import Table
+
+    with sdk_client(url, token) as client:
+        if experiment_id is None:
+            page = client.list_experiments(status=state, limit=limit)
+            if as_json:
+                typer.echo(json.dumps({"data": [_jsonable(dataclasses.asdict(e)) for e in page.data],
+                                       "count": page.count}))
+                return
+            table = Table("id", "status", "environment", "planner", "modes", "reps", "created", "error",
+                          title=f"{len(page.data)} of {page.count} experiments")
+            for e in page.data:
+                table.add_row(str(e.id), e.status, e.environment, e.planner or "path", ",".join(e.modes),
+                              str(e.repetitions), e.created_at.strftime("%Y-%m-%d %H:%M:%S") if e.created_at else "",
+                              e.error[:60])
+            _console().print(table)
+            return
+        exp = client.get_experiment(experiment_id)
+    if as_json:
+        typer.echo(json.dumps(_jsonable(dataclasses.asdict(exp))))
+        return
+    con = _console()
+    length = None
+    if exp.planned_path is not None and len(exp.planned_path) > 1:
+        import numpy as np
+
+        length = float(np.hypot(*np.diff(exp.planned_path[:, :2], axis=0).T).sum())
+    con.print(f"experiment {exp.id}: [bold]{exp.status}[/bold]  {exp.environment} "
+              f"{_pose(exp.start)} -> {_pose(exp.goal)}  planner {exp.planner or 'explicit path'}  "
+              f"planned {_num(length)} m in {_num(exp.planning_time_s, 4)} s  seed {exp.seed}", highlight=False)
+    if exp.error:
+        con.print(f"error: {exp.error}", highlight=False)
+    table = Table("run", "mode", "rep", "status", "robot", "sub-field", "length (m)", "time (s)", "mean dev. (m)",
+                  "error")
+    for r in exp.runs:
+        m = r.metrics
+        table.add_row(str(r.id), r.mode, str(r.repetition), r.status, r.robot_id or "", _num(r.subfield),
+                      _num(m.get("length_m")), _num(m.get("execution_time_s"), 2), _num(m.get("deviation_mean_m"), 4),
+                      r.error[:50])
+    con.print(table)
+
+
+def _pose(p: list[float]) -> str:
+    return "(" + ", ".join(f"{v:.3g}" for v in p) + ")"
+
+
+def _jsonable(v: Any) -> Any:
+    import datetime
+
+    import numpy as np
+
+    if isinstance(v, dict):
+        return {k: _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, datetime.datetime):
+        return v.isoformat()
+    return v
+
+
+def wait(
+    experiment_id: Annotated[int, typer.Argument(help="Experiment id.")],
+    timeout: Annotated[Optional[float], typer.Option(help="Give up after this many seconds (exit 3).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Wait for an experiment to finish (progress bar on stderr); exit 1 unless it completed."""
+    with sdk_client(url, token) as client:
+        exp = client.wait(experiment_id, timeout=timeout, progress=False if quiet else None)
+    _final_line(exp)
+
+
+RESULT_COLUMNS = (
+    ("length_m", "length (m)"), ("smoothness_rad", "κ' (rad)"), ("clearance_min_m", "min clear. (m)"),
+    ("execution_time_s", "time (s)"), ("average_speed_m_s", "speed (m/s)"), ("deviation_mean_m", "mean dev. (m)"),
+    ("deviation_max_m", "max dev. (m)"), ("length_ratio", "length ratio"), ("goal_reached", "goal"),
+    ("collided", "collided"),
+)
+
+
+def metrics_json(m: Any) -> dict[str, Any]:
+    """The metrics document in the server's shape (``GET /experiments/{id}/metrics``)."""
+    import dataclasses
+
+    return {"experiment_id": m.experiment_id, "status": m.status, "planned": m.planned,
+            "runs": [dataclasses.asdict(r) for r in m.runs],
+            "aggregates": {k: dataclasses.asdict(a) for k, a in m.aggregates.items()},
+            "direct": [{"repetition": d.repetition, "sim_run_id": d.sim_run_id, "twb_run_id": d.twb_run_id,
+                        **d.metrics} for d in m.direct]}
+
+
+def results(
+    experiment_id: Annotated[int, typer.Argument(help="Experiment id.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print the metrics JSON (server's shape).")] = False,
+    as_csv: Annotated[bool, typer.Option("--csv", help="Print CSV: one row per run, every metric.")] = False,
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Metrics of an experiment: per run, mean ± std per mode, direct sim-vs-twb comparison."""
+    if as_json and as_csv:
+        fail("give --json or --csv, not both")
+    with sdk_client(url, token) as client:
+        m = client.get_metrics(experiment_id)
+    if as_json:
+        typer.echo(json.dumps(metrics_json(m)))
+        return
+    if as_csv:
+        import csv
+
+        from client_sdk.study import flat_metrics
+
+        rows = [{"run_id": r.run_id, "mode": r.mode, "repetition": r.repetition, "status": r.status,
+                 **flat_metrics(r.metrics)} for r in m.runs]
+        cols = list(dict.fromkeys(k for r in rows for k in r))
+        w = csv.DictWriter(sys.stdout, cols, lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+        return
+    from rich.table import Table
+
+    con = _console()
+    table = Table("run", "mode", "rep", "status", *[h for _, h in RESULT_COLUMNS],
+                  title=f"experiment {m.experiment_id}: {m.status}")
+    for r in m.runs:
+        table.add_row(str(r.run_id), r.mode, str(r.repetition), r.status,
+                      *[_num(r.metrics.get(k)) for k, _ in RESULT_COLUMNS])
+    for mode, agg in m.aggregates.items():
+        cells = []
+        for k, _ in RESULT_COLUMNS:
+            s = agg.metrics.get(k)
+            cells.append("–" if s is None or s.mean is None else
+                         f"{s.mean:.3f}" + (f" ± {s.std:.3f}" if s.std is not None else ""))
+        table.add_row("mean", mode, str(agg.runs), "", *cells, style="bold")
+    con.print(table)
+    if m.planned:
+        con.print("planned path: " + "  ".join(f"{h} {_num(m.planned.get(k))}" for k, h in RESULT_COLUMNS[:3]),
+                  highlight=False)
+    if m.direct:
+        dt = Table("repetition", "sim run", "twb run", "mean dev. (m)", "max dev. (m)", "Hausdorff (m)", "Fréchet (m)",
+                   title="direct comparison ST (field path against the simulated one)")
+        for d in m.direct:
+            dt.add_row(str(d.repetition), str(d.sim_run_id), str(d.twb_run_id),
+                       *[_num(d.metrics.get(k), 4) for k in ("deviation_mean_m", "deviation_max_m", "hausdorff_m",
+                                                              "frechet_m")])
+        con.print(dt)
+
+
+def cancel(
+    experiment_id: Annotated[int, typer.Argument(help="Experiment id.")],
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Cancel an experiment: queued runs are dropped, running ones stopped."""
+    with sdk_client(url, token) as client:
+        exp = client.cancel(experiment_id)
+    typer.echo(f"experiment {exp.id}: {exp.status}")
+
+
+def envs(
+    name: Annotated[Optional[str], typer.Argument(help="Print this environment as an environment file (JSON).")] = None,
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """List the environments (built-ins and yours), or print one as JSON."""
+    from rich.table import Table
+
+    with sdk_client(url, token) as client:
+        if name is not None:
+            typer.echo(json.dumps(client.get_environment(name).to_json(), indent=1))
+            return
+        page = client.list_environments(limit=1000)
+    table = Table("name", "size (m)", "blocks", "plans", "owner", "description")
+    for e in page.data:
+        plans = ", ".join(f"{p.name}: {_pose(p.start[:2])}->{_pose(p.goal[:2])}" for p in e.plans)
+        table.add_row(e.name, "x".join(f"{v:g}" for v in e.size), str(len(e.blocks)), plans,
+                      "built-in" if e.builtin else (e.owner or ""), e.description[:50])
+    _console().print(table)

@@ -1,0 +1,137 @@
+"""``twb study`` (run a study, write its data, summary, figures and report) and ``twb export-ompl``."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import secrets
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Iterator, Optional
+
+import typer
+
+from .errors import fail
+from .sdk_support import TokenOpt, UrlOpt, sdk_client
+
+__all__ = ["embedded_testbed", "export_ompl", "study"]
+
+
+@contextlib.contextmanager
+def embedded_testbed(data_dir: Path, *, sim_robots: int = 4, timeout: float = 60.0) -> Iterator[tuple[str, str]]:
+    """Run ``twb up --time-scale max --port 0`` as a child process; yields (url, token), stops it after."""
+    data_dir.mkdir(parents=True, exist_ok=True)
+    token = secrets.token_urlsafe(24)
+    log_path = data_dir / "stdout.log"
+    log = open(log_path, "w")
+    cmd = [sys.executable, "-m", "twb", "up", "--time-scale", "max", "--port", "0", "--data-dir", str(data_dir),
+           "--token", token, "--sim-robots", str(sim_robots)]
+    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        deadline = time.monotonic() + timeout
+        url = None
+        while url is None:
+            text = log_path.read_text()
+            m = re.search(r"Teleworkbench is up: (http://\S+)", text)
+            if m:
+                url = m.group(1)
+            elif proc.poll() is not None:
+                fail(f"the embedded testbed exited with status {proc.returncode}: {_last_line(text)} (log: {log_path})")
+            elif time.monotonic() > deadline:
+                fail(f"the embedded testbed did not start within {timeout:g} s (log: {log_path})")
+            else:
+                time.sleep(0.1)
+        yield url, token
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        log.close()
+
+
+def _last_line(text: str) -> str:
+    lines = [ln for ln in text.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else "(no output)"
+
+
+def study(
+    spec: Annotated[str, typer.Argument(help="'paper' (the paper's 48 runs) or a study file (JSON; see docs/study.md).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory (created).")] = Path("study"),
+    embedded: Annotated[bool, typer.Option("--embedded", help="Start a testbed of our own (twb up --time-scale max) in OUT/testbed and stop it after.")] = False,
+    ompl: Annotated[Optional[Path], typer.Option("--ompl", help="Also write an OMPL benchmark database (Planner Arena) here.")] = None,
+    sim_robots: Annotated[int, typer.Option(help="With --embedded: size of the simulation pool.", min=1, max=64)] = 4,
+    timeout: Annotated[Optional[float], typer.Option(help="Give up (and cancel) after this many seconds.")] = None,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Progress bar on stderr.")] = True,
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Run a study (environments x plans x planners x repetitions x modes) and write its report.
+
+    OUT gets runs.csv, direct.csv, study.json, poses/, summary.md, fig6/7/8 (PNG, SVG) and report.html.
+    """
+    from client_sdk.study import load_spec
+
+    study_spec = load_spec(spec)  # bad files fail before anything starts
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.monotonic()
+    if embedded:
+        if url:
+            fail("give either --embedded or --url, not both")
+        with embedded_testbed(out / "testbed", sim_robots=sim_robots) as (u, tok):
+            if progress:
+                typer.echo(f"embedded testbed: {u} (log {out / 'testbed' / 'stdout.log'})", err=True)
+            data = _collect(study_spec, u, tok, progress, timeout)
+    else:
+        data = _collect(study_spec, url, token, progress, timeout)
+    _write(data, out, ompl, progress)
+    done = sum(r.get("status") == "completed" for r in data.rows)
+    typer.echo(f"study {study_spec.name}: {done}/{len(data.rows)} runs completed in {time.monotonic() - t0:.1f} s; "
+               f"report {out / 'report.html'}")
+
+
+def _collect(spec, url, token, progress, timeout):  # type: ignore[no-untyped-def]
+    from client_sdk.study import run_study
+
+    with sdk_client(url, token) as client:
+        client.health()
+        return run_study(client, spec, progress=progress, timeout=timeout)
+
+
+def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # type: ignore[no-untyped-def]
+    from client_sdk.study import export_ompl as _export
+    from client_sdk.study import write_report
+
+    data.save(out)
+    if progress:
+        typer.echo("writing summary, figures and report...", err=True)
+    write_report(data, out)
+    if ompl is not None:
+        counts = _export(data, ompl)
+        if progress:
+            typer.echo(f"OMPL database {ompl}: {counts['runs']} runs, {counts['experiments']} experiments", err=True)
+
+
+def export_ompl(
+    study_dir: Annotated[Path, typer.Argument(help="A study directory written by `twb study`.")],
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="SQLite file [default: STUDY_DIR/study.db].")] = None,
+    report: Annotated[bool, typer.Option("--report", help="Also redraw summary.md, figures and report.html.")] = False,
+) -> None:
+    """Export a study to OMPL's benchmark database (SQLite) for Planner Arena; works offline."""
+    from client_sdk.study import export_ompl as _export
+    from client_sdk.study import load_study, write_report
+
+    data = load_study(study_dir)
+    if report:
+        write_report(data, study_dir)
+    path = out or study_dir / "study.db"
+    counts = _export(data, path)
+    typer.echo(f"{path}: {counts['experiments']} experiments, {counts['plannerConfigs']} planner configurations, "
+               f"{counts['runs']} runs, {counts['progress']} progress rows")
