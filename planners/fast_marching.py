@@ -164,23 +164,23 @@ def descend(
     start: np.ndarray,
     goal: np.ndarray,
     *,
-    step: float = 0.5,
+    step: float = 1.0,
 ) -> tuple[np.ndarray, dict[str, int]]:
     """Descend ``t`` from ``start`` to ``goal``; returns the ``(N, 2)`` path (m) and counters.
 
     ``step`` is the step length in cells, in (0, 1].  In open space the
     direction is the gradient of the bilinear interpolant of ``t``; next to
-    obstacles it is the interpolated upwind gradient, and the step must also
-    strictly decrease the interpolated arrival time.  Every step crosses only
-    free cells (exact grid traversal); where the continuous step fails the
-    descent moves to the neighbouring cell centre with the lowest arrival
-    time, so it never enters an occupied cell and cannot cycle.  On a ridge
-    of ``t`` (two equally fast ways round an obstacle: the unit descent
-    directions at the quad's corners diverge) the interpolated gradient would
-    average both ways away and run along the ridge, so the lowest arrival
-    time on a circle of two cells picks one way.  The loop is over steps
-    along the path (two per cell travelled at the default step), never over
-    grid cells.
+    obstacles it is the interpolated upwind gradient, which never points into
+    a blocked cell.  Every step must cross only free cells (exact grid
+    traversal) and strictly decrease the interpolated arrival time, so the
+    descent cannot cycle.  Where a step fails — on a ridge of ``t``, two
+    equally fast ways round an obstacle, the averaged gradient runs along the
+    ridge — the lowest arrival time on a circle of two cells picks one way;
+    failing that, the descent moves to the neighbouring cell centre with the
+    lowest arrival time.  Ridges are also looked for actively (the unit
+    descent directions at the quad's corners diverge) where a path can start
+    on one: at the start and after such moves.  The loop is over steps along
+    the path (about one per cell travelled), never over grid cells.
     """
     if not 0 < step <= 1:
         raise ValueError("`step` must be in (0, 1] cells")
@@ -198,9 +198,22 @@ def descend(
     ds = step * h
     max_steps = int(4 * max(t_start, 0.0) / ds) + 8 * (d.nx + d.ny)
     fallbacks = ridge_steps = 0
-    # Descent flows away from ridges, so a path is on one only where it starts
-    # or right after a fallback or ridge move: look for ridges only then.
+    # Ridges are searched for actively only where a path can start on one: at
+    # the start and after a fallback or ridge move.  Elsewhere, a step that
+    # does not lower the arrival time (the averaged gradient running along a
+    # ridge that has grown sharp) triggers the same circle search.
     ridge_watch = _RIDGE_WATCH
+    t_cur = d.t_at(x, y)
+
+    def circle_step() -> tuple[float, float, float] | None:
+        best_t, best_q = t_cur, None
+        for e in _CIRCLE:
+            qx, qy = x + 2 * h * e.real, y + 2 * h * e.imag
+            tq = d.t_at(qx, qy)
+            if tq < best_t and d.segment_free(x, y, qx, qy):
+                best_t, best_q = tq, (qx, qy, tq)
+        return best_q
+
     for _ in range(max_steps):
         dgx, dgy = goal_x - x, goal_y - y
         if dgx * dgx + dgy * dgy <= near_r2 and d.segment_free(x, y, goal_x, goal_y):
@@ -211,6 +224,7 @@ def descend(
         k = i * W + j
         c0, c1, c2, c3 = tv(k), tv(k + 1), tv(k + W), tv(k + W + 1)
         near = c0 >= _BIG or c1 >= _BIG or c2 >= _BIG or c3 >= _BIG
+        q = None
         if not near and not ridge_watch:
             # open space: the gradient of the bilinear interpolant of the quad
             gx = (1 - fv) * (c1 - c0) + fv * (c3 - c2)
@@ -224,38 +238,35 @@ def descend(
                 if n0 and n1 and n2 and n3 and 0.5 * (
                     a0 / n0 - a1 / n1 + a2 / n2 - a3 / n3 + b0 / n0 + b1 / n1 - b2 / n2 - b3 / n3
                 ) > _RIDGE_DIVERGENCE:
-                    best_t, best_q = d.t_at(x, y), None
-                    for e in _CIRCLE:
-                        qx, qy = x + 2 * h * e.real, y + 2 * h * e.imag
-                        tq = d.t_at(qx, qy)
-                        if tq < best_t and d.segment_free(x, y, qx, qy):
-                            best_t, best_q = tq, (qx, qy)
-                    if best_q is not None:
-                        x, y = best_q
-                        pts.append(best_q)
-                        ridge_steps += 1
-                        ridge_watch = _RIDGE_WATCH
-                        continue
+                    q = circle_step()
             # near obstacles: the interpolated upwind gradient never points into a blocked cell
             w00, w01, w10, w11 = (1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv
             gx = w00 * a0 + w01 * a1 + w10 * a2 + w11 * a3
             gy = w00 * b0 + w01 * b1 + w10 * b2 + w11 * b3
-        norm = math.hypot(gx, gy)
-        if norm > 0:
-            sx, sy = -ds * gx / norm, -ds * gy / norm
-            # next to obstacles the step must also lower the arrival time
-            if d.segment_free(x, y, x + sx, y + sy) and (not near or d.t_at(x + sx, y + sy) < d.t_at(x, y)):
-                x, y = x + sx, y + sy
-                pts.append((x, y))
-                continue
+        if q is None:
+            norm = math.hypot(gx, gy)
+            if norm > 0:
+                qx, qy = x - ds * gx / norm, y - ds * gy / norm
+                if d.segment_free(x, y, qx, qy):
+                    tq = d.t_at(qx, qy)
+                    if tq < t_cur:
+                        x, y, t_cur = qx, qy, tq
+                        pts.append((x, y))
+                        continue
+            q = circle_step()
+        if q is not None:
+            x, y, t_cur = q
+            pts.append((x, y))
+            ridge_steps += 1
+            ridge_watch = _RIDGE_WATCH
+            continue
         # discrete steepest descent among this cell's and its neighbours' centres
         fallbacks += 1
         ridge_watch = _RIDGE_WATCH
-        best = d.t_at(x, y)
         kc = d.cell(x, y)
-        bk = kc if tv(kc) < best else -1
-        if bk >= 0:
-            best = tv(kc)
+        best, bk = t_cur, -1
+        if tv(kc) < best:
+            best, bk = tv(kc), kc
         for di, dj in _NEIGHBOURS:
             kn = kc + di * W + dj
             if tv(kn) < best:
@@ -264,7 +275,7 @@ def descend(
                 best, bk = tv(kn), kn
         if bk < 0:
             break  # bottom of the goal basin: the goal lies in this free cell
-        x, y = ((bk % W) - 1.5) * h, ((bk // W) - 1.5) * h
+        x, y, t_cur = ((bk % W) - 1.5) * h, ((bk // W) - 1.5) * h, best
         pts.append((x, y))
     else:
         raise NoPathFound(f"fast-marching descent did not reach the goal within {max_steps} steps")

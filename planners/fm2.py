@@ -30,7 +30,7 @@ class FM2Planner(Planner):
 
     name = "fm2"
     description = "Fast Marching Square: clearance-weighted fast marching (smooth, safe paths)"
-    defaults = {"saturation": 0.2, "min_speed": 0.01, "step": 0.5}
+    defaults = {"saturation": 0.2, "min_speed": 0.01, "step": 1.0}
 
     def check_params(self, params: dict[str, Any]) -> None:
         if params["saturation"] <= 0:

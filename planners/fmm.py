@@ -23,7 +23,7 @@ class FMMPlanner(Planner):
 
     name = "fmm"
     description = "Fast Marching Method: geodesic shortest path (scikit-fmm), sub-cell descent"
-    defaults = {"step": 0.5}
+    defaults = {"step": 1.0}
 
     def check_params(self, params: dict[str, Any]) -> None:
         if not 0.05 <= params["step"] <= 1.0:

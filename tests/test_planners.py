@@ -202,3 +202,17 @@ def test_random_queries_always_give_valid_paths(env_name):
             r = plan_path(env, s, g, planner)  # raises on any path through an obstacle
             assert np.array_equal(r.path[0, :2], s) and np.array_equal(r.path[-1, :2], g)
             assert space.is_free(dense(r.path)).all()
+
+
+@pytest.mark.parametrize("where", [0.2, 0.35, 0.5, 0.65, 0.8])
+@pytest.mark.parametrize("planner", ["fmm", "fm2"])
+def test_a_block_right_on_the_straight_line_far_from_the_start(planner, where):
+    """The start lies on a ridge of arrival time that only becomes sharp near the block."""
+    c = 0.2 + 1.4 * where
+    env = parse_environment({"name": "ridge", "size": [1.8, 1.8], "blocks": [{"x": c, "y": c, "w": 0.1, "h": 0.1}]})
+    r = plan_path(env, (0.2, 0.2, 0.0), (1.6, 1.6, 0.0), planner, robot_radius=0.065)
+    space = config_space(env, 0.065)
+    assert space.is_free(dense(r.path)).all()
+    if planner == "fmm":
+        # one way round the block: about the straight line plus the detour, not more
+        assert r.length_m < math.hypot(1.4, 1.4) + 0.15
