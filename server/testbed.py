@@ -22,6 +22,7 @@ from . import planning
 from .bootstrap import bootstrap_store
 from .broker import EventBroker
 from .core.db import make_engine, make_session_factory, migrate
+from .core.security import AuthCache, Principal
 from .core.settings import Settings
 from .jobs import finish_if_done, public_dict, run_public
 from .models import Experiment, Pose, Robot, Run, Subfield, User, utcnow
@@ -46,6 +47,7 @@ class Testbed:
         self.broker = EventBroker()
         self.scheduler = Scheduler()
         self.router = PoseRouter(self.sessions, self.broker, self._origin_of)
+        self.auth = AuthCache(self._principal)
         self.admin_token = ""
         self.stopping = False
         #: environment key built by each robot's gripper (None: nothing)
@@ -62,6 +64,8 @@ class Testbed:
         self._pool: Optional[ProcessPoolExecutor] = None
         self._plan_locks: dict[int, asyncio.Lock] = {}
         self._estimates: dict[int, float] = {}
+        #: serialized views of finished experiments (they no longer change): id -> (owner id, JSON)
+        self.finished_views: dict[int, tuple[int, bytes]] = {}
         self._expected: dict[int, float] = {}
 
     # ------------------------------------------------------------------ life cycle
@@ -71,6 +75,14 @@ class Testbed:
         migrate(self.engine)
         self.admin_token = bootstrap_store(self.settings, self.sessions)
         return self.admin_token
+
+    def _principal(self, token_hash: str) -> Optional[Principal]:
+        from .models import Token
+
+        with self.sessions() as s:
+            row = s.execute(select(Token.kind, User.id, User.name, User.is_admin).join(User)
+                            .where(Token.token_hash == token_hash)).first()
+        return None if row is None else Principal(id=row[1], name=row[2], is_admin=row[3], kind=row[0])
 
     def issue_agent_token(self) -> str:
         """A fresh agent token (tracker ingestion, registration) for agents started with the server."""
@@ -292,6 +304,7 @@ class Testbed:
                 return run_public(run).model_dump(mode="json"), exp_view, exp.owner_id
 
         run_view, exp_view, owner_id = await asyncio.to_thread(write)
+        self.finished_views.pop(run_view["experiment_id"], None)
         self.broker.publish({"type": "run", "owner_id": owner_id, "run": run_view})
         if exp_view is not None:
             self.broker.publish({"type": "experiment", "owner_id": owner_id, "experiment": _brief(exp_view)})

@@ -4,18 +4,18 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Annotated, Iterator
 
+import anyio
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from ..core.security import hash_token
-from ..models import Token, User
+from ..core.security import Principal
 
 if TYPE_CHECKING:
     from ..testbed import Testbed
 
 __all__ = ["AdminUser", "AgentToken", "CurrentUser", "SessionDep", "TestbedDep"]
+
 
 _bearer = HTTPBearer(auto_error=False, description="`Authorization: Bearer <token>`")
 
@@ -35,44 +35,47 @@ def get_session(request: Request) -> Iterator[Session]:
 SessionDep = Annotated[Session, Depends(get_session)]
 
 
-def _token(session: Session, creds: HTTPAuthorizationCredentials | None) -> Token:
+async def _principal(request: Request, creds: HTTPAuthorizationCredentials | None) -> Principal:
     if creds is None or not creds.credentials:
         raise HTTPException(401, "Missing bearer token", headers={"WWW-Authenticate": "Bearer"})
-    token = session.scalar(select(Token).where(Token.token_hash == hash_token(creds.credentials)))
-    if token is None:
+    testbed = request.app.state.testbed
+    who = testbed.auth.cached(creds.credentials)
+    if who is None:
+        who = await anyio.to_thread.run_sync(testbed.auth.load, creds.credentials)
+    if who is None:
         raise HTTPException(401, "Invalid token", headers={"WWW-Authenticate": "Bearer"})
-    return token
+    return who
 
 
-def get_current_user(
-    session: SessionDep, creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-) -> User:
-    token = _token(session, creds)
-    if token.kind == "agent":
+async def get_current_user(
+    request: Request, creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+) -> Principal:
+    who = await _principal(request, creds)
+    if who.kind == "agent":
         raise HTTPException(403, "Agent tokens may only post robot registrations and tracker poses")
-    return token.user
+    return who
 
 
-CurrentUser = Annotated[User, Depends(get_current_user)]
+CurrentUser = Annotated[Principal, Depends(get_current_user)]
 
 
-def get_admin_user(user: CurrentUser) -> User:
+def get_admin_user(user: CurrentUser) -> Principal:
     if not user.is_admin:
         raise HTTPException(403, "Admin only")
     return user
 
 
-AdminUser = Annotated[User, Depends(get_admin_user)]
+AdminUser = Annotated[Principal, Depends(get_admin_user)]
 
 
-def get_agent_token(
-    session: SessionDep, creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-) -> Token:
+async def get_agent_token(
+    request: Request, creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+) -> Principal:
     """Tracker ingestion and robot registration: an agent token or an admin's token."""
-    token = _token(session, creds)
-    if token.kind != "agent" and not token.user.is_admin:
+    who = await _principal(request, creds)
+    if who.kind != "agent" and not who.is_admin:
         raise HTTPException(403, "Needs an agent (tracker) token")
-    return token
+    return who
 
 
-AgentToken = Annotated[Token, Depends(get_agent_token)]
+AgentToken = Annotated[Principal, Depends(get_agent_token)]

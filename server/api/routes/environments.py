@@ -7,6 +7,7 @@ from sqlalchemy import func, or_, select
 
 from planners import InvalidEnvironment, parse_environment
 
+from ...core.security import Principal
 from ...models import Environment, User
 from ...schemas import EnvironmentCreate, EnvironmentPublic, Page
 from ..deps import CurrentUser, SessionDep
@@ -22,7 +23,7 @@ def _public(row: Environment, owner: str | None) -> EnvironmentPublic:
     )
 
 
-def visible(user: User):  # type: ignore[no-untyped-def]
+def visible(user: Principal):  # type: ignore[no-untyped-def]
     """SQL condition: environments a user may see (built-ins, own; admins see all)."""
     if user.is_admin:
         return True

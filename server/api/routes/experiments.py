@@ -4,9 +4,12 @@ from __future__ import annotations
 
 from typing import Optional
 
-from fastapi import APIRouter, HTTPException, Query
+import anyio
+from fastapi import APIRouter, HTTPException, Query, Response
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
+
+from ...core.security import Principal
 
 from ...jobs import create_experiment, experiment_public, experiment_summary
 from ...models import Environment, Experiment, User
@@ -18,7 +21,7 @@ from .environments import visible
 router = APIRouter(prefix="/experiments", tags=["experiments"])
 
 
-def owned_experiment(session: Session, user: User, experiment_id: int) -> tuple[Experiment, str]:
+def owned_experiment(session: Session, user: Principal, experiment_id: int) -> tuple[Experiment, str]:
     """The experiment and its owner's name; 404 when it does not exist or is not the user's."""
     row = session.execute(
         select(Experiment, User.name).join(User, Experiment.owner_id == User.id).where(Experiment.id == experiment_id)
@@ -76,10 +79,21 @@ def list_experiments(
 
 
 @router.get("/{experiment_id}", response_model=ExperimentPublic)
-def get_experiment(experiment_id: int, session: SessionDep, user: CurrentUser, testbed: TestbedDep) -> ExperimentPublic:
+async def get_experiment(experiment_id: int, user: CurrentUser, testbed: TestbedDep) -> Response:
     """Status, planned path and runs (mode, repetition, status, sub-field, metrics) of one experiment."""
-    exp, owner = owned_experiment(session, user, experiment_id)
-    return experiment_public(exp, owner, testbed.estimate_start(exp.id))
+    hit = testbed.finished_views.get(experiment_id)
+    if hit is not None and (hit[0] == user.id or user.is_admin):
+        return Response(hit[1], media_type="application/json")
+
+    def load() -> bytes:
+        with testbed.sessions() as session:
+            exp, owner = owned_experiment(session, user, experiment_id)
+            body = experiment_public(exp, owner, testbed.estimate_start(exp.id)).model_dump_json().encode()
+            if exp.status in TERMINAL_STATES:  # finished experiments no longer change
+                testbed.finished_views[exp.id] = (exp.owner_id, body)
+            return body
+
+    return Response(await anyio.to_thread.run_sync(load), media_type="application/json")
 
 
 @router.post("/{experiment_id}/cancel", response_model=ExperimentPublic)
@@ -91,8 +105,6 @@ async def cancel_experiment(experiment_id: int, user: CurrentUser, testbed: Test
             exp, _ = owned_experiment(s, user, experiment_id)
             if exp.status in TERMINAL_STATES:
                 raise HTTPException(409, f"Experiment already {exp.status}")
-
-    import anyio
 
     await anyio.to_thread.run_sync(check)
     await testbed.cancel(experiment_id)

@@ -10,6 +10,8 @@ from fastapi.responses import PlainTextResponse
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from ...core.security import Principal
+
 from ...jobs import run_public
 from ...models import Experiment, Message, Pose, Run, User
 from ...schemas import RunPublic
@@ -18,7 +20,7 @@ from ..deps import CurrentUser, SessionDep
 router = APIRouter(prefix="/runs", tags=["runs"])
 
 
-def owned_run(session: Session, user: User, run_id: int) -> Run:
+def owned_run(session: Session, user: Principal, run_id: int) -> Run:
     run = session.get(Run, run_id)
     if run is None:
         raise HTTPException(404, "Run not found")

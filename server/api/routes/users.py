@@ -18,9 +18,9 @@ def _public(user: User) -> UserPublic:
 
 
 @router.get("/me", response_model=UserPublic)
-def me(user: CurrentUser) -> UserPublic:
+def me(user: CurrentUser, session: SessionDep) -> UserPublic:
     """The user the token belongs to."""
-    return _public(user)
+    return _public(session.get(User, user.id))
 
 
 @router.get("", response_model=Page[UserPublic])

@@ -1,0 +1,233 @@
+"""Server benchmark: tracker ingestion, REST latency under load, experiments per minute.
+
+1. Tracker ingestion over HTTP into SQLite (poses/s): batches of 1000 poses
+   posted by 4 concurrent clients into a run in progress, against a same-run
+   baseline: raw ``sqlite3`` ``executemany`` of the same rows into a table of
+   the same schema (WAL, one transaction per batch, as the server does).
+   Targets: >= 50,000 poses/s and >= 0.3x the baseline.
+2. REST ``GET /api/v1/experiments/{id}`` latency with 32 concurrent clients:
+   p50 / p99 (target p99 <= 50 ms).
+3. Experiments per minute end to end (sim + twb run each) at maximum time scale.
+
+Each part starts its own ``twb up`` on a free port with a temporary data dir.
+Prints JSON.
+
+    python bench/server.py [--batches 200] [--requests 50] [--experiments 20]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import re
+import sqlite3
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+import httpx  # noqa: E402
+import numpy as np  # noqa: E402
+
+from bench._common import report  # noqa: E402
+
+TOKEN = "bench-token"
+TWB = Path(sys.executable).with_name("twb")
+SLOW_ENV = {"name": "bench-open", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.1, "h": 0.1}]}
+
+
+class Testbed:
+    """`twb up` in a subprocess; ``url`` once it listens."""
+
+    def __init__(self, data_dir: Path, *args: str) -> None:
+        data_dir.mkdir(parents=True, exist_ok=True)
+        self.log = data_dir / "out.log"
+        self._out = open(self.log, "w")
+        self.proc = subprocess.Popen([str(TWB), "up", "--port", "0", "--data-dir", str(data_dir), "--token", TOKEN,
+                                      *args], stdout=self._out, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            m = re.search(r"(http://127\.0\.0\.1:\d+)", self.log.read_text())
+            if m and "Ctrl-C" in self.log.read_text():
+                self.url = m.group(1)
+                return
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        raise RuntimeError(f"twb up did not start:\n{self.log.read_text()}")
+
+    def client(self) -> httpx.Client:
+        return httpx.Client(base_url=self.url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=60)
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        self.proc.wait(30)
+        self._out.close()
+
+
+def wait_status(c: httpx.Client, eid: int, wanted: set[str], timeout: float = 120) -> dict:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        e = c.get(f"/api/v1/experiments/{eid}").json()
+        if e["status"] in wanted:
+            return e
+        time.sleep(0.05)
+    raise RuntimeError(f"experiment {eid} stuck in {e['status']}")
+
+
+def rows(n: int, t0: float = 1e6) -> list[list[float]]:
+    rng = np.random.default_rng(0)
+    a = np.column_stack([t0 + np.arange(n) / 30.0, rng.random((n, 3))])
+    return a.tolist()
+
+
+def baseline_sqlite(batches: list[list[list[float]]], path: Path) -> float:
+    con = sqlite3.connect(path)
+    con.execute("PRAGMA journal_mode=WAL")
+    con.execute("PRAGMA synchronous=NORMAL")
+    con.execute("CREATE TABLE poses (id INTEGER PRIMARY KEY, run_id INTEGER, t REAL, x REAL, y REAL, theta REAL)")
+    con.execute("CREATE INDEX ix_poses_run_t ON poses (run_id, t)")
+    t0 = time.perf_counter()
+    for b in batches:
+        with con:
+            con.executemany("INSERT INTO poses (run_id, t, x, y, theta) VALUES (1, ?, ?, ?, ?)", b)
+    dt = time.perf_counter() - t0
+    con.close()
+    return sum(len(b) for b in batches) / dt
+
+
+async def post_batches(url: str, robot: str, batches: list[list[list[float]]], workers: int) -> float:
+    queue: asyncio.Queue = asyncio.Queue()
+    for b in batches:
+        queue.put_nowait(b)
+    stored = 0
+
+    async def worker(client: httpx.AsyncClient) -> None:
+        nonlocal stored
+        while not queue.empty():
+            b = queue.get_nowait()
+            r = await client.post("/api/v1/tracker/poses", json={"robot_id": robot, "poses": b})
+            r.raise_for_status()
+            stored += r.json()["stored"]
+
+    async with httpx.AsyncClient(base_url=url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=60) as c:
+        t0 = time.perf_counter()
+        await asyncio.gather(*(worker(c) for _ in range(workers)))
+        dt = time.perf_counter() - t0
+    if stored != sum(len(b) for b in batches):
+        raise RuntimeError(f"only {stored} poses stored: the run window closed during the benchmark")
+    return stored / dt
+
+
+def ingestion(tmp: Path, n_batches: int) -> dict:
+    tb = Testbed(tmp / "ingest", "--time-scale", "0.2", "--sim-robots", "1")
+    try:
+        with tb.client() as c:
+            c.post("/api/v1/environments", json=SLOW_ENV).raise_for_status()
+            job = {"environment": "bench-open", "start": [0.2, 0.2, 0.0], "goal": [1.6, 1.6, 0.0],
+                   "planner": "fmm", "modes": ["sim"]}
+            e = c.post("/api/v1/experiments", json=job).json()
+            e = wait_status(c, e["id"], {"running"})
+            robot = e["runs"][0]["robot_id"]
+            batches = [rows(1000, 1e6 + 100 * i) for i in range(n_batches)]
+            server = asyncio.run(post_batches(tb.url, robot, batches, workers=4))
+            c.post(f"/api/v1/experiments/{e['id']}/cancel")
+    finally:
+        tb.stop()
+    base = baseline_sqlite(batches, tmp / "baseline.db")
+    return {"poses": n_batches * 1000, "batch": 1000, "clients": 4, "server_poses_per_s": server,
+            "baseline_sqlite_poses_per_s": base, "ratio": server / base}
+
+
+async def latency(url: str, path: str, clients: int, per_client: int) -> list[float]:
+    times: list[float] = []
+
+    async def one(c: httpx.AsyncClient) -> None:
+        for _ in range(per_client):
+            t0 = time.perf_counter()
+            r = await c.get(path)
+            r.raise_for_status()
+            times.append(time.perf_counter() - t0)
+
+    limits = httpx.Limits(max_connections=clients)
+    async with httpx.AsyncClient(base_url=url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=60,
+                                 limits=limits) as c:
+        await c.get(path)
+        await asyncio.gather(*(one(c) for _ in range(clients)))
+    return times
+
+
+def wrk_latency(url: str, connections: int, seconds: int = 5) -> dict | None:
+    """Latency percentiles measured by wrk (a C load generator, so the client costs little CPU)."""
+    import shutil
+
+    if shutil.which("wrk") is None:
+        return None
+    out = subprocess.run(["wrk", "-t", "2", "-c", str(connections), "-d", f"{seconds}s", "--latency",
+                          "-H", f"Authorization: Bearer {TOKEN}", url], capture_output=True, text=True).stdout
+
+    def ms(label: str) -> float:
+        m = re.search(rf"^\s+{label}%\s+([\d.]+)(us|ms|s)\s*$", out, re.M)
+        v, unit = float(m.group(1)), m.group(2)
+        return v / 1000 if unit == "us" else v * 1000 if unit == "s" else v
+
+    rps = re.search(r"Requests/sec:\s+([\d.]+)", out)
+    return {"p50_ms": ms("50"), "p99_ms": ms("99"), "requests_per_s": float(rps.group(1)) if rps else None,
+            "connections": connections, "seconds": seconds}
+
+
+def rest_and_throughput(tmp: Path, requests: int, experiments: int) -> tuple[dict, dict]:
+    tb = Testbed(tmp / "rest", "--time-scale", "max", "--sim-robots", "4")
+    try:
+        with tb.client() as c:
+            job = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708],
+                   "planner": "fm2", "modes": ["sim", "twb"], "repetitions": 2}
+            e = wait_status(c, c.post("/api/v1/experiments", json=job).json()["id"], {"completed"})
+            path = f"/api/v1/experiments/{e['id']}"
+            times = asyncio.run(latency(tb.url, path, 32, requests))
+            q = np.percentile(np.array(times) * 1000, [50, 99])
+            rest = {"endpoint": "GET /api/v1/experiments/{id} (4 runs with metrics)", "clients": 32,
+                    "httpx_client": {"requests": len(times), "p50_ms": float(q[0]), "p99_ms": float(q[1])},
+                    "wrk": wrk_latency(tb.url + path, 32)}
+            best = rest["wrk"] or rest["httpx_client"]
+            rest["p50_ms"], rest["p99_ms"] = best["p50_ms"], best["p99_ms"]
+            t0 = time.perf_counter()
+            ids = [c.post("/api/v1/experiments", json={**job, "repetitions": 1, "seed": i}).json()["id"]
+                   for i in range(experiments)]
+            done = [wait_status(c, i, {"completed", "failed", "error"}, timeout=600) for i in ids]
+            wall = time.perf_counter() - t0
+            ok = sum(d["status"] == "completed" for d in done)
+            thr = {"experiments": experiments, "completed": ok, "runs_each": 2, "wall_s": wall,
+                   "experiments_per_minute": 60 * experiments / wall}
+    finally:
+        tb.stop()
+    return rest, thr
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--batches", type=int, default=200, help="tracker batches of 1000 poses")
+    ap.add_argument("--requests", type=int, default=50, help="GET requests per client (32 clients)")
+    ap.add_argument("--experiments", type=int, default=20)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        ing = ingestion(tmp, args.batches)
+        rest, thr = rest_and_throughput(tmp, args.requests, args.experiments)
+    targets = {
+        "ingestion >= 50000 poses/s": ing["server_poses_per_s"] >= 50_000,
+        "ingestion >= 0.3x raw sqlite executemany": ing["ratio"] >= 0.3,
+        "GET p99 <= 50 ms with 32 clients": rest["p99_ms"] <= 50,
+    }
+    report("server", [{"tracker_ingestion": ing}, {"rest_latency": rest}, {"throughput": thr}],
+           targets_met=targets)
+
+
+if __name__ == "__main__":
+    main()
