@@ -18,13 +18,13 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/twb demo
+	$(VENV)/bin/twb up
 
 test: $(STAMP)
 	$(PY) -m pytest -q
 
 bench: $(STAMP)
-	$(PY) bench/planners.py && $(PY) bench/metrics.py && $(PY) bench/agent.py
+	$(PY) bench/planners.py && $(PY) bench/metrics.py && $(PY) bench/sim.py && $(PY) bench/server.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache

@@ -13,7 +13,7 @@ Live figure: the CPU share (process CPU time / wall time) of one agent
 serving 64 field robots at time scale 1 over TCP, tracking at 30 Hz into CSV
 files, for ``--live-seconds`` (default 5).
 
-    python bench/agent.py [--runs 5] [--steps 200] [--live-seconds 5]
+    python bench/sim.py [--runs 5] [--steps 200] [--live-seconds 5]
 """
 
 from __future__ import annotations
