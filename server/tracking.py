@@ -88,9 +88,16 @@ class PoseRouter:
         if w is not None:
             run = w.run_id
             values = [(run, t, x, y, a) for t, x, y, a in rows.tolist()]
-            with self._sessions.begin() as s:
-                conn = s.connection()
-                conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle), values)
+            # the driver's own executemany on a pooled connection: no ORM or Core layer per row
+            engine = self._sessions.kw["bind"]
+            conn = engine.raw_connection()
+            try:
+                cur = conn.cursor()
+                cur.executemany(_insert_sql(engine.dialect.paramstyle), values)
+                cur.close()
+                conn.commit()
+            finally:
+                conn.close()
             stored = len(rows)
             with self._lock:
                 w.stored += stored
