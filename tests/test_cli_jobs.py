@@ -10,6 +10,7 @@ import pytest
 from PIL import Image
 
 from servers import Process
+from sdk_helpers import invoke
 
 
 @pytest.fixture(scope="module")
@@ -20,17 +21,18 @@ def testbed(tmp_path_factory):
 
 
 @pytest.fixture
-def run(twb, testbed):
-    def call(*args: str, **kw):
-        env = {"TWB_URL": testbed.url, "TWB_TOKEN": testbed.token, **kw.pop("env", {})}
-        return twb(*args, env=env, **kw)
+def run(testbed, capsys, monkeypatch):
+    """``twb ARGS`` in-process with TWB_URL/TWB_TOKEN set to the testbed's (``env=`` overrides)."""
+    def call(*args: str, env: dict | None = None):
+        return invoke(capsys, monkeypatch, *args,
+                      env={"TWB_URL": testbed.url, "TWB_TOKEN": testbed.token, "TWB_DATA_DIR": None, **(env or {})})
 
     return call
 
 
 @pytest.fixture(scope="module")
 def finished(testbed):
-    """The id of a completed sim + twb experiment submitted with `twb submit --wait`."""
+    """The id of a completed sim + twb experiment, submitted with `twb submit --wait` (a real process)."""
     import os
     import subprocess
     import sys
@@ -106,8 +108,8 @@ def test_replay_writes_an_animated_gif(run, finished, tmp_path):
     assert r.returncode == 2 and "must be a .gif" in r.stderr
 
 
-def test_token_file_fallback(twb, testbed):
-    r = twb("envs", env={"TWB_URL": testbed.url, "TWB_TOKEN": "", "TWB_DATA_DIR": str(testbed.data_dir)})
+def test_token_file_fallback(run, testbed):
+    r = run("envs", env={"TWB_TOKEN": None, "TWB_DATA_DIR": str(testbed.data_dir)})
     assert r.returncode == 0, r.stderr
 
 
@@ -134,11 +136,11 @@ def test_cancel_finished_is_a_conflict(run, finished):
     assert r.returncode == 2 and "409 Conflict: Experiment already completed" in r.stderr
 
 
-def test_bad_token_and_no_server(twb, testbed, tmp_path):
-    r = twb("status", "--url", testbed.url, "--token", "wrong")
+def test_bad_token_and_no_server(run, tmp_path):
+    r = run("status", "--token", "wrong")
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Invalid token" in r.stderr
-    r = twb("status", "--url", testbed.url, env={"TWB_TOKEN": "", "TWB_DATA_DIR": str(tmp_path)})
+    r = run("status", env={"TWB_TOKEN": None, "TWB_DATA_DIR": str(tmp_path)})
     assert r.returncode == 2 and "Missing bearer token" in r.stderr and "TWB_TOKEN" in r.stderr
-    r = twb("envs", "--url", "http://127.0.0.1:9", "--token", "x")
+    r = run("envs", "--url", "http://127.0.0.1:9", "--token", "x")
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert "cannot reach the testbed at http://127.0.0.1:9" in r.stderr and "twb up" in r.stderr

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -27,6 +26,7 @@ from client_sdk import (
     WaitTimeout,
     send_path,
 )
+from sdk_helpers import agent_process
 from servers import Process
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
@@ -198,20 +198,8 @@ def test_injected_transport_sees_auth_and_wait_times_out():
 
 @pytest.fixture(scope="module")
 def agent_port():
-    twb = Path(sys.executable).with_name("twb")
-    proc = subprocess.Popen([str(twb), "agent", "--port", "0", "--backend", "ideal", "--time-scale", "max",
-                             "--robot-id", "sdk"], stderr=subprocess.PIPE, text=True)
-    try:
-        for _ in range(200):
-            line = proc.stderr.readline()
-            assert line, f"twb agent exited early with {proc.poll()}"
-            m = re.search(r"ports? \[(\d+)", line)
-            if m:
-                break
-        yield int(m.group(1))
-    finally:
-        proc.send_signal(2)
-        proc.wait(30)
+    with agent_process("sdk") as port:
+        yield port
 
 
 def test_send_path_raw_tcp(agent_port):
@@ -229,3 +217,14 @@ def test_send_path_raw_tcp(agent_port):
 def test_send_path_no_agent():
     with pytest.raises(TransportError, match="cannot reach the robot agent at 127.0.0.1:9"):
         send_path("127.0.0.1", 9, [[0.1, 0.1], [0.2, 0.2]], timeout=5)
+
+
+def test_sdk_quickstart_example(testbed, tmp_path):
+    script = Path(__file__).resolve().parents[1] / "examples" / "sdk_quickstart.py"
+    r = subprocess.run([sys.executable, str(script), "--url", testbed.url, "--token", testbed.token,
+                        "--repetitions", "1", "--planner", "fmm", "--out", str(tmp_path / "poses")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "completed" in r.stdout and "sim: 1 runs, length" in r.stdout and "field vs simulation" in r.stdout
+    files = sorted((tmp_path / "poses").glob("run-*.csv"))
+    assert len(files) == 2 and files[0].read_text().startswith("t,x,y,theta\n")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 import shutil
 import subprocess
 import sys
@@ -11,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from servers import Process
+from sdk_helpers import agent_process
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -20,19 +19,8 @@ TWB = Path(sys.executable).with_name("twb")
 
 @pytest.fixture(scope="module")
 def agent_port():
-    proc = subprocess.Popen([str(TWB), "agent", "--port", "0", "--backend", "ideal", "--time-scale", "max",
-                             "--robot-id", "ex"], stderr=subprocess.PIPE, text=True)
-    try:
-        for _ in range(200):
-            line = proc.stderr.readline()
-            assert line, f"twb agent exited early with {proc.poll()}"
-            m = re.search(r"ports? \[(\d+)", line)
-            if m:
-                break
-        yield int(m.group(1))
-    finally:
-        proc.send_signal(2)
-        proc.wait(30)
+    with agent_process("ex") as port:
+        yield port
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
@@ -80,17 +68,3 @@ def test_plugin_planner_plans_and_declares_its_entry_point():
     )
     r = subprocess.run([sys.executable, "-c", code, str(EXAMPLES / "planner_plugin")], capture_output=True, text=True)
     assert r.stdout.split() == ["True", "True"], r.stderr
-
-
-def test_sdk_quickstart_script(tmp_path):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path / "tb")
-    try:
-        r = subprocess.run([sys.executable, str(EXAMPLES / "sdk_quickstart.py"), "--url", p.url, "--token", p.token,
-                            "--repetitions", "1", "--planner", "fmm", "--out", str(tmp_path / "poses")],
-                           capture_output=True, text=True, timeout=120)
-    finally:
-        p.stop()
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert "completed" in r.stdout and "sim: 1 runs, length" in r.stdout and "field vs simulation" in r.stdout
-    files = sorted((tmp_path / "poses").glob("run-*.csv"))
-    assert len(files) == 2 and files[0].read_text().startswith("t,x,y,theta\n")

@@ -21,6 +21,7 @@ from client_sdk.study import (
 )
 from client_sdk import Environment, Plan
 from servers import Process
+from sdk_helpers import invoke
 
 SMALL = {"name": "small", "environments": ["room"], "plans": ["A"], "planners": ["fmm", "fm2"],
          "repetitions": 1, "modes": ["sim", "twb"], "seed": 2}
@@ -113,11 +114,11 @@ def test_ompl_database_is_readable(study_dir, tmp_path):
     assert counts["runs"] == 4 and counts["progress"] == 0
 
 
-def test_export_ompl_command(twb, study_dir, tmp_path):
-    r = twb("export-ompl", str(study_dir), "--out", str(tmp_path / "x.db"))
+def test_export_ompl_command(capsys, monkeypatch, study_dir, tmp_path):
+    r = invoke(capsys, monkeypatch, "export-ompl", str(study_dir), "--out", str(tmp_path / "x.db"))
     assert r.returncode == 0, r.stderr
     assert "1 experiments, 4 planner configurations, 4 runs" in r.stdout
-    r = twb("export-ompl", str(tmp_path))
+    r = invoke(capsys, monkeypatch, "export-ompl", str(tmp_path))
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "is not a study directory" in r.stderr
 
 
@@ -147,7 +148,7 @@ def test_bad_study_files(tmp_path, content, message):
         load_spec(f)
 
 
-def test_study_errors_are_one_line(twb, testbed, tmp_path):
+def test_study_errors_are_one_line(capsys, monkeypatch, testbed, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text('{"environments": ["room"], "planners": []}')
     cases = [
@@ -159,16 +160,16 @@ def test_study_errors_are_one_line(twb, testbed, tmp_path):
          "refused the request: Invalid token"),
     ]
     for args, message in cases:
-        r = twb(*args, timeout=60)
+        r = invoke(capsys, monkeypatch, *args, env={"TWB_TOKEN": None, "TWB_URL": None})
         assert r.returncode == 2, (args, r.stdout, r.stderr)
         assert r.stderr.startswith("twb: error: ") and r.stderr.count("\n") == 1, r.stderr
         assert message in r.stderr, r.stderr
 
 
-def test_unknown_environment_in_a_study(twb, testbed, tmp_path):
+def test_unknown_environment_in_a_study(capsys, monkeypatch, testbed, tmp_path):
     f = tmp_path / "s.json"
     f.write_text(json.dumps({**SMALL, "environments": ["atlantis"]}))
-    r = twb("study", str(f), "--url", testbed.url, "--token", testbed.token, "--out", str(tmp_path / "o"))
+    r = invoke(capsys, monkeypatch, "study", str(f), "--url", testbed.url, "--token", testbed.token, "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "unknown environment 'atlantis'" in r.stderr and r.stderr.count("\n") == 1
 
 

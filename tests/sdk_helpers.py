@@ -1,0 +1,56 @@
+"""Helpers of the SDK, study and job-command tests: ``twb`` in-process, a real ``twb agent`` process."""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+from twb.main import main
+
+TWB = Path(sys.executable).with_name("twb")
+
+
+@dataclass
+class Result:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def invoke(capsys, monkeypatch, *args: str, env: dict[str, str | None] | None = None) -> Result:  # type: ignore[no-untyped-def]
+    """``twb ARGS`` through the console entry point; ``env`` values None are unset."""
+    monkeypatch.delenv("TWB_DEBUG", raising=False)
+    for key, value in (env or {}).items():
+        if value is None:
+            monkeypatch.delenv(key, raising=False)
+        else:
+            monkeypatch.setenv(key, value)
+    capsys.readouterr()
+    code = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return Result(code, out.out, out.err)
+
+
+@contextlib.contextmanager
+def agent_process(robot_id: str) -> Iterator[int]:
+    """One ideal robot (``twb agent --port 0 --time-scale max``); yields its TCP port, stops it with Ctrl-C."""
+    proc = subprocess.Popen([str(TWB), "agent", "--port", "0", "--backend", "ideal", "--time-scale", "max",
+                             "--robot-id", robot_id], stderr=subprocess.PIPE, text=True)
+    try:
+        port = None
+        while port is None:
+            line = proc.stderr.readline()
+            if not line:
+                raise RuntimeError(f"twb agent exited early with {proc.poll()}")
+            m = re.search(r"ports? \[(\d+)", line)
+            port = int(m.group(1)) if m else None
+        yield port
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(30)
