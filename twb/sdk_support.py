@@ -16,10 +16,10 @@ __all__ = ["TokenOpt", "UrlOpt", "sdk_client"]
 
 UrlOpt = Annotated[Optional[str], typer.Option(
     "--url", envvar="TWB_URL", show_default=False,
-    help="Testbed URL (env TWB_URL) [default: http://127.0.0.1:8000].")]
+    help="Testbed URL (default: http://127.0.0.1:8000).")]
 TokenOpt = Annotated[Optional[str], typer.Option(
     "--token", envvar="TWB_TOKEN", show_default=False,
-    help="Access token (env TWB_TOKEN) [default: the file twb-data/token written by twb up].")]
+    help="Access token (default: the token file twb up writes, TWB_DATA_DIR/token or ./twb-data/token).")]
 
 
 @contextlib.contextmanager

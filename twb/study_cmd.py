@@ -121,7 +121,7 @@ def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # ty
 
 def export_ompl(
     study_dir: Annotated[Path, typer.Argument(help="A study directory written by `twb study`.")],
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="SQLite file [default: STUDY_DIR/study.db].")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="SQLite file (default: STUDY_DIR/study.db).")] = None,
     report: Annotated[bool, typer.Option("--report", help="Also redraw summary.md, figures and report.html.")] = False,
 ) -> None:
     """Export a study to OMPL's benchmark database (SQLite) for Planner Arena; works offline."""
