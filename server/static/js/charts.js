@@ -42,9 +42,12 @@ export function barChart({ title, unit = "", groups, ref = null }) {
     if (Number.isFinite(m)) {
       svg.append(s("rect", { x: cx - bw / 2, y: Math.min(y(m), y(0)), width: bw, height: Math.abs(y(0) - y(m)) || 1,
         fill: g.color, "fill-opacity": 0.35, stroke: g.color }));
-      const clo = Number.isFinite(g.agg.ci_low) ? g.agg.ci_low : Number.isFinite(g.agg.std) ? m - g.agg.std : null;
-      const chi = Number.isFinite(g.agg.ci_high) ? g.agg.ci_high : Number.isFinite(g.agg.std) ? m + g.agg.std : null;
+      let clo = Number.isFinite(g.agg.ci_low) ? g.agg.ci_low : Number.isFinite(g.agg.std) ? m - g.agg.std : null;
+      let chi = Number.isFinite(g.agg.ci_high) ? g.agg.ci_high : Number.isFinite(g.agg.std) ? m + g.agg.std : null;
       if (clo !== null && chi !== null) {
+        // a t-interval of a few runs can reach below zero: draw it to the axis
+        clo = Math.max(lo, clo);
+        chi = Math.min(hi, chi);
         svg.append(s("path", { d: `M${cx},${y(clo)}V${y(chi)}M${cx - 6},${y(clo)}H${cx + 6}M${cx - 6},${y(chi)}H${cx + 6}`,
           stroke: "#1c2430", "stroke-width": 1.2, fill: "none" }));
       }

@@ -135,14 +135,18 @@ export class MapView {
       }
     }
 
-    // blocks
-    ctx.fillStyle = COLORS.block;
-    for (const b of L.blocks || []) {
-      ctx.save();
-      ctx.translate(X(b.x), Y(b.y));
-      ctx.rotate(-(b.angle || 0));
-      ctx.fillRect((-b.w / 2) * g.scale, (-b.h / 2) * g.scale, b.w * g.scale, b.h * g.scale);
-      ctx.restore();
+    // blocks; planned ones (an environment being built) faint
+    for (const [list, alpha] of [[L.plannedBlocks, 0.28], [L.blocks, 1]]) {
+      ctx.fillStyle = COLORS.block;
+      ctx.globalAlpha = alpha;
+      for (const b of list || []) {
+        ctx.save();
+        ctx.translate(X(b.x), Y(b.y));
+        ctx.rotate(-(b.angle || 0));
+        ctx.fillRect((-b.w / 2) * g.scale, (-b.h / 2) * g.scale, b.w * g.scale, b.h * g.scale);
+        ctx.restore();
+      }
+      ctx.globalAlpha = 1;
     }
 
     // field walls

@@ -44,6 +44,9 @@ export class FieldPage {
     const blocks = [];
     const fullDone = new Set();
     for (const sf of st.subfields) {
+      const run = sf.run_id != null ? st.runs.get(sf.run_id) : null;
+      const d = run && st.details.get(run.experiment_id);
+      if (sf.state === "building" && d && this.rebuilding(sf, d)) continue; // the gripper is replacing it
       const env = st.env(sf.environment);
       if (!env) continue;
       const full = / \(full\)$/.test(sf.environment);
@@ -52,6 +55,7 @@ export class FieldPage {
       const [ox, oy] = full ? [0, 0] : sf.origin;
       for (const b of env.blocks) blocks.push({ ...b, x: b.x + ox, y: b.y + oy });
     }
+    const plannedBlocks = [];
     const paths = [];
     const markers = [];
     const seenRuns = new Set();
@@ -66,6 +70,10 @@ export class FieldPage {
       const d = run && st.details.get(run.experiment_id);
       if (d && active && run.robot_id) {
         const [ox, oy] = st.originOf(run.robot_id);
+        if (sf.state === "building" && this.rebuilding(sf, d)) {
+          const target = st.env(d.environment);
+          for (const b of target ? target.blocks : []) plannedBlocks.push({ ...b, x: b.x + ox, y: b.y + oy });
+        }
         if (d.planned_path) {
           paths.push({ points: d.planned_path.map(([x, y]) => [x + ox, y + oy]), color: COLORS.planned, width: 2, dash: [7, 5] });
         }
@@ -82,7 +90,13 @@ export class FieldPage {
                     ghost: p.source === "home" || r.status === "offline" });
     }
     this.describe(robots);
-    return { subfields, blocks, paths, markers, robots };
+    return { subfields, blocks, plannedBlocks, paths, markers, robots };
+  }
+
+  /** Whether the gripper is building another environment than the one the sub-field reports. */
+  rebuilding(sf, d) {
+    const want = d.field === "full" ? `${d.environment} (full)` : d.environment;
+    return sf.environment !== want;
   }
 
   /** The canvas's text alternative: what a sighted user sees on it. */

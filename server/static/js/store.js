@@ -46,8 +46,9 @@ export class Store extends EventTarget {
   }
 
   start() {
+    // robots' last positions are looked up in the experiments: load those first
+    this.experimentsReady = this.refreshExperiments();
     this.refreshField();
-    this.refreshExperiments();
     this.stream.start();
     this.timers.push(setInterval(() => this.poll(), 2000));
   }
@@ -112,9 +113,17 @@ export class Store extends EventTarget {
   async refreshExperiments() {
     try {
       const page = await this.api.get("/api/v1/experiments?limit=200");
+      const before = new Map(this.experiments.map((e) => [e.id, e.status]));
+      const first = this.experimentsLoaded !== true;
       this.experiments = page.data;
       this.experimentCount = page.count;
+      this.experimentsLoaded = true;
       this.emit("experiments");
+      if (!first) {
+        for (const e of page.data) {
+          if (before.get(e.id) !== e.status && e.modes.includes("twb") && e.status !== "queued") this.followFieldRuns(e.id);
+        }
+      }
     } catch (err) {
       this.failed(err, "Experiments");
     }
@@ -200,6 +209,9 @@ export class Store extends EventTarget {
     const res = await this.api.get(`/api/v1/runs/${runId}/poses`);
     const [ox, oy] = this.originOf(run.robot_id);
     const points = res.poses.map(([, x, y]) => [x + ox, y + oy]);
+    if (run.mode === "twb" && run.subfield != null && (this.subfieldRun.get(run.subfield) ?? -1) < runId) {
+      this.subfieldRun.set(run.subfield, runId);
+    }
     const old = this.traces.get(runId);
     if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true });
     const last = res.poses[res.poses.length - 1];
@@ -216,10 +228,11 @@ export class Store extends EventTarget {
   /** Field robots never seen moving: their last logged pose, else where they start up. */
   async resolveRobotPoses() {
     if (this.resolving) return;
-    const missing = new Set(this.robots.filter((r) => r.pool === "field" && !this.poses.has(r.robot_id)).map((r) => r.robot_id));
-    if (!missing.size) return;
     this.resolving = true;
     try {
+      await this.experimentsReady;
+      const missing = new Set(this.robots.filter((r) => r.pool === "field" && !this.poses.has(r.robot_id)).map((r) => r.robot_id));
+      if (!missing.size) return;
       const recent = this.experiments.filter((e) => e.status !== "queued" && e.modes.includes("twb")).slice(0, 10);
       for (const e of recent) {
         if (!missing.size) break;
@@ -242,6 +255,21 @@ export class Store extends EventTarget {
     } finally {
       this.resolving = false;
       this.emit("field");
+    }
+  }
+
+  /** An experiment moved on: its field runs' traces and robots (what events would have told, when polling). */
+  async followFieldRuns(id) {
+    try {
+      const d = await this.detail(id, { fresh: true });
+      for (const r of d.runs) {
+        if (r.mode !== "twb" || r.t_start == null || !r.robot_id) continue;
+        if (r.subfield != null && (this.subfieldRun.get(r.subfield) ?? -1) < r.id) this.subfieldRun.set(r.subfield, r.id);
+        if (TERMINAL.has(r.status) && !this.traces.get(r.id)?.exact) await this.loadTrace(r.id);
+      }
+      this.emit("field");
+    } catch (err) {
+      this.failed(err, "Experiment");
     }
   }
 

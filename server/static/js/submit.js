@@ -244,7 +244,7 @@ export class SubmitPage {
     this.pointerMove(ev);
     const which = this.drag.which;
     this.drag = null;
-    if (which === "start" && !this.poses.goal) this.pick = "goal";
+    if (which === "start") this.pick = "goal"; // then the goal, as one places them
   }
 
   key(ev) {

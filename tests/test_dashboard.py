@@ -1,0 +1,399 @@
+"""The web dashboard in a real browser: Debian's Chromium driven by Playwright against a real `twb up`.
+
+Screenshots go to ``tests/output/dashboard/`` (``TWB_TEST_OUTPUT`` overrides the
+``tests/output`` part).  Without ``/usr/bin/chromium`` (or the ``playwright``
+package) the browser tests skip, unless ``CI`` or ``TWB_REQUIRE_BROWSER`` is set,
+when they fail: CI must really run them.  The tests without a browser (files
+served, path traversal, the planners list) always run.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import httpx
+import pytest
+
+from servers import TOKEN, Process, wait_for
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"]
+OUTPUT = Path(os.environ.get("TWB_TEST_OUTPUT") or Path(__file__).parent / "output") / "dashboard"
+LAPTOP = {"width": 1366, "height": 900}
+TABLET = {"width": 768, "height": 1024}
+
+ROBOT_RGB = (0xFF, 0x6D, 0x00)
+ROBOT_GHOST_RGB = (0xFF, 0xB2, 0x7A)
+SIM_RGB = (0x7B, 0x3F, 0xBF)
+TWB_RGB = (0x1F, 0x77, 0xB4)
+SUBFIELD_ORIGINS = {1: (0.0, 0.0), 2: (1.8, 0.0), 3: (0.0, 1.8), 4: (1.8, 1.8)}
+
+
+def _flag(name: str) -> bool:
+    return os.environ.get(name, "").strip().lower() not in ("", "0", "false", "no")
+
+
+REQUIRE_BROWSER = _flag("CI") or _flag("TWB_REQUIRE_BROWSER")
+
+
+def _missing_browser() -> str | None:
+    if not CHROMIUM.exists():
+        return f"{CHROMIUM} not found (install it: apt-get install -y --no-install-recommends chromium)"
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return "the Python package playwright is not installed (pip install -e '.[dev]')"
+    return None
+
+
+# --------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="module")
+def testbed(tmp_path_factory):
+    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("dash"))
+    yield p
+    assert p.stop() == 0, p.output()
+    assert "Traceback" not in p.output(), p.output()
+
+
+@pytest.fixture(scope="module")
+def browser(testbed):
+    reason = _missing_browser()
+    if reason:
+        if REQUIRE_BROWSER:
+            pytest.fail(f"browser tests are required here (CI / TWB_REQUIRE_BROWSER) but {reason}")
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    OUTPUT.mkdir(parents=True, exist_ok=True)
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+class Console:
+    """Console errors and uncaught exceptions of a page; `allow` lists expected resource failures."""
+
+    def __init__(self, page) -> None:
+        self.errors: list[str] = []
+        page.on("console", lambda m: m.type == "error" and self.errors.append(f"{m.text} @ {m.location.get('url')}"))
+        page.on("pageerror", lambda e: self.errors.append(f"uncaught: {e}"))
+
+    def unexpected(self, *allowed: str) -> list[str]:
+        return [e for e in self.errors if not any(a in e for a in allowed)]
+
+
+@pytest.fixture
+def page(browser, testbed):
+    ctx = browser.new_context(viewport=LAPTOP, accept_downloads=True)
+    pg = ctx.new_page()
+    pg.set_default_timeout(15_000)
+    pg.console = Console(pg)
+    yield pg
+    ctx.close()
+
+
+def login(pg, url: str, token: str = TOKEN) -> None:
+    from playwright.sync_api import expect
+
+    pg.goto(url + "/")
+    pg.fill("#login-token", token)
+    pg.press("#login-token", "Enter")
+    expect(pg.locator("#view-field")).to_be_visible()
+    expect(pg.locator("#stream-state")).to_have_text("live")
+
+
+def canvas_geometry(pg, selector: str) -> dict:
+    """The canvas's metres-to-pixels mapping (its data attributes) and its page position."""
+    box = pg.locator(selector).bounding_box()
+    ds = pg.eval_on_selector(selector, "c => ({...c.dataset})")
+    return {"x": box["x"], "y": box["y"], "scale": float(ds["scale"]), "ox": float(ds["ox"]), "oy": float(ds["oy"])}
+
+
+def world_to_page(geo: dict, x: float, y: float) -> tuple[float, float]:
+    return geo["x"] + geo["ox"] + x * geo["scale"], geo["y"] + geo["oy"] - y * geo["scale"]
+
+
+COUNT_PIXELS = """([sel, rgb, tol, region]) => {
+  const c = document.querySelector(sel);
+  const k = c.width / c.clientWidth;
+  const ds = c.dataset, s = +ds.scale, ox = +ds.ox, oy = +ds.oy;
+  let [x0, y0, x1, y1] = region || [0, 0, c.clientWidth / s, c.clientHeight / s];
+  if (region) { [x0, y0, x1, y1] = [ox + x0 * s, oy - y1 * s, ox + x1 * s, oy - y0 * s]; }
+  else { [x0, y0, x1, y1] = [0, 0, c.clientWidth, c.clientHeight]; }
+  const px = (v) => Math.max(0, Math.round(v * k));
+  const w = Math.max(1, px(x1) - px(x0)), h = Math.max(1, px(y1) - px(y0));
+  const d = c.getContext("2d").getImageData(px(x0), px(y0), w, h).data;
+  let n = 0;
+  for (let i = 0; i < d.length; i += 4) {
+    if (Math.abs(d[i] - rgb[0]) <= tol && Math.abs(d[i + 1] - rgb[1]) <= tol && Math.abs(d[i + 2] - rgb[2]) <= tol) n++;
+  }
+  return n;
+}"""
+
+
+def count_pixels(pg, selector: str, rgb: tuple[int, int, int], tol: int = 12,
+                 region: tuple[float, float, float, float] | None = None) -> int:
+    """Pixels of the canvas within `tol` of `rgb`, optionally only in a world box (x0, y0, x1, y1) in metres."""
+    return pg.evaluate(COUNT_PIXELS, [selector, list(rgb), tol, list(region) if region else None])
+
+
+def no_horizontal_overflow(pg) -> bool:
+    return pg.evaluate("() => document.documentElement.scrollWidth <= window.innerWidth + 1")
+
+
+# --------------------------------------------------------------------------- without a browser
+
+
+def test_the_page_and_its_files_are_served_safely(testbed):
+    with httpx.Client(base_url=testbed.url, timeout=10) as c:
+        r = c.get("/")
+        assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+        assert '<script type="module" src="/static/js/app.js">' in r.text
+        assert "script-src 'self'" in r.headers["content-security-policy"]
+        assert c.head("/").status_code == 200
+        js = c.get("/static/js/app.js")
+        assert js.status_code == 200 and "javascript" in js.headers["content-type"]
+        for bad in ("/static/../app.py", "/static/%2e%2e/app.py", "/static/js/../../app.py", "/static/nope.js", "/static/js"):
+            assert c.get(bad).status_code == 404, bad
+        assert c.get("/dashboard/planners").status_code == 401
+        planners = c.get("/dashboard/planners", headers={"Authorization": f"Bearer {TOKEN}"}).json()
+        names = {p["name"]: p for p in planners["data"]}
+        assert {"fmm", "fm2", "prm", "astar"} <= set(names) and names["fm2"]["defaults"]["saturation"] > 0
+
+
+# --------------------------------------------------------------------------- in the browser
+
+
+def test_a_bad_token_is_refused_clearly_and_the_right_one_logs_in(page, testbed):
+    from playwright.sync_api import expect
+
+    page.goto(testbed.url + "/")
+    expect(page.locator("#view-login")).to_be_visible()
+    page.fill("#login-token", "not-a-token")
+    page.click("#login-form button[type=submit]")
+    expect(page.locator("#login-error")).to_contain_text("refused this token")
+    expect(page.locator("#login-token")).to_have_attribute("aria-invalid", "true")
+    assert page.locator("#nav").is_hidden()
+    page.fill("#login-token", TOKEN)
+    page.press("#login-token", "Enter")
+    expect(page.locator("#user-name")).to_have_text("admin (admin)")
+    expect(page.locator("#stream-state")).to_have_text("live")
+    assert page.evaluate("() => sessionStorage.getItem('twb.token')") == TOKEN
+    page.reload()  # the token survives a reload of the tab
+    expect(page.locator("#view-field")).to_be_visible()
+    page.click("#logout")
+    expect(page.locator("#view-login")).to_be_visible()
+    assert page.evaluate("() => sessionStorage.getItem('twb.token')") is None
+    # the one expected console error: the browser's note on the refused /users/me
+    assert page.console.unexpected("status of 401") == []
+    assert len(page.console.errors) == 1, page.console.errors
+
+
+def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, testbed):
+    from playwright.sync_api import expect
+
+    login(page, testbed.url)
+    # the field shows all four robots (where they start up, or where they last stopped)
+    expect(page.locator("#subfield-table tbody tr")).to_have_count(4)
+    page.wait_for_timeout(300)
+    for k, (ox, oy) in SUBFIELD_ORIGINS.items():
+        n = count_pixels(page, "#field-canvas", ROBOT_RGB, region=(ox, oy, ox + 1.8, oy + 1.8)) + \
+            count_pixels(page, "#field-canvas", ROBOT_GHOST_RGB, region=(ox, oy, ox + 1.8, oy + 1.8))
+        assert n > 20, f"no robot drawn on sub-field {k}"
+
+    page.click("#nav a[data-view=submit]")
+    page.select_option("#f-environment", "room")
+    page.wait_for_timeout(200)
+    geo = canvas_geometry(page, "#submit-canvas")
+    page.check("input[name=pick][value=start]")
+    page.mouse.click(*world_to_page(geo, 0.3, 0.3))  # a click: position, heading kept
+    expect(page.locator("input[name=pick][value=goal]")).to_be_checked()  # moves on to the goal
+    gx, gy = world_to_page(geo, 1.5, 1.5)
+    page.mouse.move(gx, gy)
+    page.mouse.down()
+    page.mouse.move(gx, gy - 50, steps=5)  # drag upwards: heading +90°
+    page.mouse.up()
+    assert float(page.input_value("#f-start-x")) == pytest.approx(0.3, abs=0.01)
+    assert float(page.input_value("#f-start-y")) == pytest.approx(0.3, abs=0.01)
+    assert float(page.input_value("#f-goal-x")) == pytest.approx(1.5, abs=0.01)
+    assert float(page.input_value("#f-goal-y")) == pytest.approx(1.5, abs=0.01)
+    assert float(page.input_value("#f-goal-a")) == pytest.approx(math.pi / 2, abs=0.02)
+    page.select_option("#f-planner", "fm2")
+    page.fill("#f-repetitions", "2")
+    page.fill("#f-seed", "3")
+    page.screenshot(path=OUTPUT / "submit.png")
+    page.click("#submit-button")
+
+    expect(page.locator("#view-experiment")).to_be_visible()
+    expect(page.locator("#view-experiment .exp-head .badge")).to_have_text("completed", timeout=60_000)
+    exp_id = int(page.url.rsplit("/", 1)[1])
+    with testbed.client() as c:
+        exp = c.get(f"/api/v1/experiments/{exp_id}").json()
+    assert exp["start"][:2] == pytest.approx([0.3, 0.3], abs=0.01) and exp["planner"] == "fm2"
+    assert exp["goal"][2] == pytest.approx(math.pi / 2, abs=0.02) and exp["repetitions"] == 2 and exp["seed"] == 3
+
+    # metrics: every run's row filled, aggregates per mode, the direct comparison
+    rows = page.locator("#runs-table tbody tr[data-run]")
+    expect(rows).to_have_count(4)
+    expect(page.locator('#runs-table tr[data-run] .badge')).to_have_text(["completed"] * 4)
+    lengths = [float(t) for t in page.locator('#runs-table tr[data-run] td[data-metric="length_m"]').all_inner_texts()]
+    by_api = sorted(r["metrics"]["length_m"] for r in exp["runs"])
+    assert sorted(lengths) == pytest.approx(by_api, abs=1e-3)
+    expect(page.locator('#aggregates-table tr[data-metric="length_m"] td')).to_have_count(6)
+    expect(page.locator("#direct-table tbody tr")).to_have_count(2)
+    expect(page.locator("#experiment-charts figure svg")).to_have_count(6)
+    # planned and performed paths drawn: both modes' colours on the canvas
+    assert count_pixels(page, "#experiment-canvas", TWB_RGB, tol=40) > 50
+    assert count_pixels(page, "#experiment-canvas", SIM_RGB, tol=40) > 50
+    page.screenshot(path=OUTPUT / "experiment.png", full_page=True)
+
+    # a download goes through the token-carrying fetch
+    twb_run = next(r for r in exp["runs"] if r["mode"] == "twb")
+    with page.expect_download() as dl:
+        page.click(f'#runs-table tr[data-run="{twb_run["id"]}"] button:has-text("poses CSV")')
+    path = dl.value.path()
+    assert dl.value.suggested_filename == f"run-{twb_run['id']}-poses.csv"
+    assert Path(path).read_text().splitlines()[0] == "t,x,y,theta"
+
+    # back on the field: the robot that drove stands at the goal, its trace drawn
+    page.click("#nav a[data-view=field]")
+    ox, oy = SUBFIELD_ORIGINS[twb_run["subfield"]]
+    goal = (1.5 + ox, 1.5 + oy)
+    page.wait_for_timeout(500)
+    near_goal = (goal[0] - 0.15, goal[1] - 0.15, goal[0] + 0.15, goal[1] + 0.15)
+    assert count_pixels(page, "#field-canvas", ROBOT_RGB, region=near_goal) > 20
+    assert count_pixels(page, "#field-canvas", TWB_RGB, tol=70, region=(ox, oy, ox + 1.8, oy + 1.8)) > 30
+    label = page.get_attribute("#field-canvas", "aria-label")
+    assert f"{twb_run['robot_id']} at" in label
+    page.screenshot(path=OUTPUT / "field.png")
+    page.click("#nav a[data-view=experiments]")
+    expect(page.locator(f'#exp-finished tr[data-experiment="{exp_id}"]')).to_be_visible()
+    assert page.console.errors == []
+
+
+def test_server_validation_errors_are_shown_next_to_the_field(page, testbed):
+    from playwright.sync_api import expect
+
+    login(page, testbed.url)
+    page.click("#nav a[data-view=submit]")
+    page.select_option("#f-environment", "room")
+    # start on a wall of the room (the wall block centred at (0.9, 0.15)) - typed, not clicked
+    page.fill("#f-start-x", "0.9")
+    page.fill("#f-start-y", "0.15")
+    page.fill("#f-goal-x", "1.5")
+    page.fill("#f-goal-y", "1.5")
+    page.click("#submit-button")
+    expect(page.locator("#err-start")).to_contain_text("inside an obstacle")
+    expect(page.locator("#f-start-x")).to_have_attribute("aria-invalid", "true")
+    expect(page.locator("#err-goal")).to_be_empty()
+    assert page.evaluate("() => document.activeElement.id") == "f-start-x"
+    # a request-model error (pydantic) lands next to its field too
+    page.fill("#f-start-y", "0.3")
+    page.fill("#f-start-x", "0.3")
+    page.fill("#f-repetitions", "0")
+    page.click("#submit-button")
+    expect(page.locator("#err-repetitions")).to_contain_text("greater than or equal to 1")
+    expect(page.locator("#err-start")).to_be_empty()
+    # a planner parameter out of range
+    page.fill("#f-repetitions", "1")
+    page.fill("#f-param-step", "7")
+    page.click("#submit-button")
+    expect(page.locator("#err-planner_params")).to_contain_text("step must be in")
+    expect(page.locator("#f-param-step")).to_have_attribute("aria-invalid", "true")
+    # nothing was queued; the only console errors are the browser's notes on the three 422 answers
+    assert page.console.unexpected("status of 422") == []
+    assert len(page.console.errors) == 3, page.console.errors
+
+
+def test_keyboard_only_placement_and_submit(page, testbed):
+    from playwright.sync_api import expect
+
+    login(page, testbed.url)
+    page.click("#nav a[data-view=submit]")
+    page.select_option("#f-environment", "room")
+    page.click("#env-plans button:has-text('Plan A')")
+    page.focus("#submit-canvas")
+    page.keyboard.press("s")
+    for _ in range(3):
+        page.keyboard.press("ArrowRight")  # 3 cm
+    page.keyboard.press("Shift+ArrowUp")  # 10 cm
+    page.keyboard.press("[")  # +15°
+    assert float(page.input_value("#f-start-x")) == pytest.approx(0.33, abs=1e-6)
+    assert float(page.input_value("#f-start-y")) == pytest.approx(0.40, abs=1e-6)
+    assert float(page.input_value("#f-start-a")) == pytest.approx(math.radians(15), abs=1e-3)
+    expect(page.locator("#map-readout")).to_contain_text("start at (0.33, 0.40) m, heading 15°")
+    page.uncheck("input[name=modes][value=twb]")
+    page.focus("#f-seed")
+    page.keyboard.press("Enter")  # submits the form
+    expect(page.locator("#view-experiment")).to_be_visible()
+    expect(page.locator("#view-experiment .exp-head .badge")).to_have_text("completed", timeout=60_000)
+    assert page.console.errors == []
+
+
+def test_tablet_width_layout(browser, testbed):
+    ctx = browser.new_context(viewport=TABLET, device_scale_factor=2, has_touch=True)
+    pg = ctx.new_page()
+    console = Console(pg)
+    try:
+        login(pg, testbed.url)
+        canvas = pg.locator("#field-canvas").bounding_box()
+        side = pg.locator("aside.side").bounding_box()
+        assert canvas["width"] > 500 and canvas["x"] >= 0 and canvas["x"] + canvas["width"] <= TABLET["width"]
+        assert side["y"] >= canvas["y"] + canvas["height"]  # one column: the tables below the field
+        assert no_horizontal_overflow(pg)
+        pg.wait_for_timeout(300)
+        assert count_pixels(pg, "#field-canvas", ROBOT_RGB) + count_pixels(pg, "#field-canvas", ROBOT_GHOST_RGB) > 40
+        pg.screenshot(path=OUTPUT / "tablet-field.png")
+        pg.click("#nav a[data-view=submit]")
+        pg.locator("#f-environment option").first.wait_for(state="attached")
+        m = pg.locator("#submit-canvas").bounding_box()
+        assert m["width"] > 300 and m["x"] + m["width"] <= TABLET["width"]
+        assert no_horizontal_overflow(pg)
+        pg.screenshot(path=OUTPUT / "tablet-submit.png", full_page=True)
+        with testbed.client() as c:
+            exp = c.post("/api/v1/experiments", json={"environment": "blocks", "start": [0.15, 0.15, 0], "goal": [1.65, 1.65, 1.57],
+                                                       "planner": "fmm", "modes": ["sim", "twb"], "repetitions": 1}).json()
+            wait_for(c, exp["id"], timeout=60)
+        pg.goto(f"{testbed.url}/#/experiments/{exp['id']}")
+        pg.locator("#runs-table tbody tr[data-run]").first.wait_for()
+        assert no_horizontal_overflow(pg)  # wide tables scroll inside their panel
+        pg.screenshot(path=OUTPUT / "tablet-experiment.png", full_page=True)
+        assert console.errors == []
+    finally:
+        ctx.close()
+
+
+def test_without_the_event_stream_the_dashboard_polls(browser, testbed):
+    """A proxy that buffers or blocks the stream: the dashboard says so and keeps itself current."""
+    from playwright.sync_api import expect
+
+    ctx = browser.new_context(viewport=LAPTOP)
+    ctx.route("**/api/v1/events", lambda route: route.fulfill(status=503, body="no streams here"))
+    pg = ctx.new_page()
+    console = Console(pg)
+    try:
+        pg.goto(testbed.url + "/")
+        pg.fill("#login-token", TOKEN)
+        pg.press("#login-token", "Enter")
+        expect(pg.locator("#stream-state")).to_have_text("polling")
+        with testbed.client() as c:
+            exp = c.post("/api/v1/experiments", json={"environment": "room", "start": [0.3, 0.3], "goal": [1.5, 0.3],
+                                                       "planner": "astar", "modes": ["twb"]}).json()
+            done = wait_for(c, exp["id"], timeout=60)
+        run = done["runs"][0]
+        ox, oy = SUBFIELD_ORIGINS[run["subfield"]]
+        # the finished experiment shows up and the robot is drawn where it stopped, all by polling
+        pg.click("#nav a[data-view=experiments]")
+        expect(pg.locator(f'#exp-finished tr[data-experiment="{exp["id"]}"]')).to_be_visible(timeout=10_000)
+        pg.click("#nav a[data-view=field]")
+        expect(pg.locator(f'#subfield-table tr[data-subfield="{run["subfield"]}"] td').nth(2)).to_have_text("room")
+        pg.wait_for_timeout(300)
+        assert count_pixels(pg, "#field-canvas", ROBOT_RGB, region=(ox + 1.3, oy + 0.1, ox + 1.7, oy + 0.5)) > 20
+        assert console.unexpected("status of 503") == []
+    finally:
+        ctx.close()
