@@ -146,14 +146,27 @@ async def _pipeline(ctx: RunContext) -> None:
         except AgentRefused as exc:
             raise _Cut("error", f"the gripper could not place the robot at the start: {exc.message}") from None
         await tb.update_run(ctx.run_id, status="planning")
-        path = await tb.planned_path(exp["id"])
+        path = await tb.planned_path(exp["id"], ctx)
         await tb.update_run(ctx.run_id, status="running")
-        await _drive(ctx, link, run, exp, path)
+        try:
+            await _drive(ctx, link, run, exp, path)
+        except RunFailed as exc:
+            failure: Optional[RunFailed] = exc
+        else:
+            failure = None
     finally:
         await link.close()
         await ctx.flush_messages()
     await tb.update_run(ctx.run_id, status="analyzing")
-    await _analyze(ctx, exp, path)
+    # a run that failed on the field (collision, stall, timeout) is measured too: what it drove
+    # until then is data; its `collided` is the robot's own verdict, as for completed runs
+    try:
+        await _analyze(ctx, exp, path, collided=failure is not None and str(failure).startswith("collision"))
+    except _Cut:
+        if failure is None:
+            raise
+    if failure is not None:
+        raise failure
 
 
 async def _build(ctx: RunContext, link: AgentLink, exp: dict[str, Any], env: dict[str, Any]) -> None:
@@ -228,7 +241,14 @@ async def _drive(ctx: RunContext, link: AgentLink, run: dict[str, Any], exp: dic
                              "STALLED": "stalled: the robot could not make progress"}.get(reason, reason.lower()))
 
 
-async def _analyze(ctx: RunContext, exp: dict[str, Any], path: list[list[float]]) -> None:
+async def _analyze(ctx: RunContext, exp: dict[str, Any], path: list[list[float]], *, collided: bool) -> None:
+    """DESIGN §6 metrics of the run, in a worker process.
+
+    ``collided`` is what the robot itself detected (it stops with
+    ``EV,FAIL,COLLISION``); the tracker's view of how close it came is
+    ``clearance_min_m``, which can dip below the robot radius by the
+    tracker's noise without a contact.
+    """
     tb = ctx.tb
 
     def load() -> tuple[list[list[float]], Optional[float], Optional[float]]:
@@ -244,11 +264,14 @@ async def _analyze(ctx: RunContext, exp: dict[str, Any], path: list[list[float]]
                                    exp["goal"], exp["robot_radius"], exp["planning_time_s"])
     except ValueError as exc:
         raise _Cut("error", f"cannot compute metrics: {exc}") from None
+    metrics["collided"] = collided
     await tb.update_run(ctx.run_id, metrics=metrics)
 
 
-async def plan_experiment(testbed: "Testbed", experiment_id: int) -> list[list[float]]:
-    """The experiment's path: the explicit one, or planned once in a worker process (stored)."""
+async def plan_experiment(testbed: "Testbed", experiment_id: int, ctx: Optional[RunContext] = None) -> list[list[float]]:
+    """The experiment's path: the explicit one, planned once in a worker process, or sent by the
+    experiment's uploaded program run sandboxed (its output goes to the log of ``ctx``'s run); stored.
+    """
 
     def load() -> Experiment:
         with testbed.sessions() as s:
@@ -260,6 +283,20 @@ async def plan_experiment(testbed: "Testbed", experiment_id: int) -> list[list[f
     if exp.explicit_path is not None:
         result = {"path": planning.explicit_path(exp.explicit_path, exp.goal), "planning_time_s": None,
                   "info": {"explicit": True}}
+    elif exp.program_id is not None or exp.planner is None:
+        from .program_planning import ProgramFailed, plan_with_program
+
+        try:
+            result = await plan_with_program(
+                testbed, exp, run_id=ctx.run_id if ctx else None, robot_id=ctx.robot.robot_id if ctx else "robot",
+                platform=(ctx.robot.platform or "BeBot") if ctx else "BeBot", on_line=ctx.on_line if ctx else None)
+        except ProgramFailed as exc:
+            def store_info() -> None:
+                with testbed.sessions.begin() as s:
+                    s.get(Experiment, experiment_id).planning_info = exc.info
+
+            await asyncio.to_thread(store_info)
+            raise RunFailed(str(exc)) from None
     else:
         from planners import PlanningError
 

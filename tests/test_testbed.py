@@ -128,6 +128,28 @@ def test_explicit_path_and_full_field_jobs(client):
     assert r.status_code == 422 and 'use "field": "full"' in r.json()["detail"]
 
 
+def test_a_path_grazing_a_block_collides_on_the_field_for_some_seeds(client):
+    """Explicit paths need only the robot radius; at 5 cm from a corner the field robot's noise decides."""
+    env = {"name": "graze", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
+    assert client.post("/api/v1/environments", json=env).status_code == 201
+    path = [[0.3, 0.7], [1.1, 0.7], [1.1, 1.4]]  # 5 cm below the block, round its corner, 5 cm beside it
+    outcomes = []
+    for seed in range(8):
+        e = client.post("/api/v1/experiments", json={"environment": "graze", "path": path, "modes": ["twb"],
+                                                     "seed": seed}).json()
+        run = wait_for(client, e["id"], timeout=60)["runs"][0]
+        outcomes.append(run["status"])
+        m = run["metrics"]
+        assert m["length_m"] > 0.2  # measured either way: a failed run's driving is data too
+        if run["status"] == "failed":
+            assert run["error"] == "collision: the robot hit an obstacle"
+            assert m["collided"] is True and m["clearance_min_m"] < 0.045
+            assert m["goal_reached"] is False
+        else:
+            assert run["status"] == "completed" and m["collided"] is False and m["goal_reached"] is True
+    assert "failed" in outcomes and "completed" in outcomes, outcomes
+
+
 def test_planning_failure_fails_the_job_with_the_reason(client):
     job = {**JOB, "planner": "prm", "planner_params": {"samples": 2, "k": 1}}
     done = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)

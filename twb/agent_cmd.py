@@ -38,7 +38,7 @@ def _pair(text: str | None, what: str) -> tuple[float, float] | None:
 
 def agent(
     port: Annotated[int, typer.Option(help="TCP port of the first robot (0: any free port); robot i listens on PORT+i-1.")] = 5555,
-    robot_id: Annotated[Optional[str], typer.Option(help="Robot name; with --robots N the names are ID-1..ID-N [default: robot-1..]")] = None,
+    robot_id: Annotated[Optional[str], typer.Option(help="Robot name; with --robots N the names are ID-1..ID-N (default: robot-1..).")] = None,
     profile: Annotated[str, typer.Option(help="Robot profile: bebot or khepera3.")] = "bebot",
     backend: Annotated[BackendName, typer.Option(help="ideal (Player/Stage-like) or field (emulated physical robot).")] = BackendName.field,
     time_scale: Annotated[str, typer.Option(help="Experiment seconds per wall second (1 = live); 'max' runs as fast as possible.")] = "1",
@@ -47,11 +47,11 @@ def agent(
     robots: Annotated[int, typer.Option(help="Number of robots on consecutive ports: up to 4 share the field (sub-fields 1-4); more get a world each.", min=1, max=1000)] = 1,
     seed: Annotated[int, typer.Option(help="Agent seed: each path's noise derives from (seed, robot id, path count).", envvar="TWB_AGENT_SEED")] = 0,
     tracker_csv: Annotated[Optional[str], typer.Option(help="Write tracker poses (t,x,y,theta) to this CSV file; {robot_id} or -<id> per robot.")] = None,
-    area: Annotated[Optional[str], typer.Option(help="Working area W,H in metres, e.g. 3.6,3.6 for the whole field [default: 1.8,1.8, a sub-field].")] = None,
+    area: Annotated[Optional[str], typer.Option(help="Working area W,H in metres, e.g. 3.6,3.6 for the whole field (default: 1.8,1.8, a sub-field).")] = None,
     world: Annotated[WorldMode, typer.Option(help="shared: one field for all robots; separate: a world each; auto: shared up to 4 robots.")] = WorldMode.auto,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     subfield: Annotated[Optional[int], typer.Option(help="Put a single robot on sub-field K (1-4) of the field: its frame's origin is that sub-field's lower-left corner.", min=1, max=4)] = None,
-    advertise_host: Annotated[Optional[str], typer.Option(help="Host name the server should use to reach these robots (e.g. a container name) [default: --host].")] = None,
+    advertise_host: Annotated[Optional[str], typer.Option(help="Host name the server should use to reach these robots (e.g. a container name) (default: --host).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log every path and event.")] = False,
 ) -> None:
     """Run emulated robots speaking the T,T,P line protocol until Ctrl-C (logs on stderr)."""
