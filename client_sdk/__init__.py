@@ -47,6 +47,7 @@ from ._models import (
     RunMetrics,
     Subfield,
     Summary,
+    User,
 )
 from ._tcp import PathReply, path_with_headings, send_path
 
@@ -77,6 +78,7 @@ __all__ = sorted(
         "RunMetrics",
         "Subfield",
         "Summary",
+        "User",
         "TERMINAL_STATES",
         "TooLarge",
         "TransportError",

@@ -31,6 +31,7 @@ from ._models import (
     Robot,
     Run,
     Subfield,
+    User,
 )
 
 __all__ = ["API_PREFIX", "BaseClient", "Call", "Waiter", "raise_for_status", "translate_errors"]
@@ -205,6 +206,15 @@ class BaseClient:
 
     def _list_robots(self) -> Call:
         return Call("GET", f"{API_PREFIX}/robots", lambda r: _page(Robot.from_json)(r).data)
+
+    def _me(self) -> Call:
+        return Call("GET", f"{API_PREFIX}/users/me", _one(User.from_json))
+
+    def _list_users(self) -> Call:
+        return Call("GET", f"{API_PREFIX}/users", lambda r: _page(User.from_json)(r).data)
+
+    def _create_user(self, name: str, is_admin: bool) -> Call:
+        return Call("POST", f"{API_PREFIX}/users", _one(User.from_json), json={"name": name, "is_admin": is_admin})
 
 
 class Waiter:

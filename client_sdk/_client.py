@@ -15,7 +15,18 @@ import httpx
 import numpy as np
 
 from ._base import BaseClient, Call, Waiter, translate_errors
-from ._models import Environment, Experiment, ExperimentMetrics, ExperimentSummary, Message, Page, Robot, Run, Subfield
+from ._models import (
+    Environment,
+    Experiment,
+    ExperimentMetrics,
+    ExperimentSummary,
+    Message,
+    Page,
+    Robot,
+    Run,
+    Subfield,
+    User,
+)
 
 __all__ = ["AsyncClient", "Client"]
 
@@ -75,6 +86,20 @@ class Client(BaseClient):
     def list_robots(self) -> list[Robot]:
         """Registered robots: field robots and the simulation pool."""
         return self._send(self._list_robots())
+
+    # ------------------------------------------------------------------ users
+
+    def me(self) -> User:
+        """The user the token belongs to."""
+        return self._send(self._me())
+
+    def list_users(self) -> list[User]:
+        """All users (admin token)."""
+        return self._send(self._list_users())
+
+    def create_user(self, name: str, *, is_admin: bool = False) -> User:
+        """Create a user (admin token); the result carries its token, shown once."""
+        return self._send(self._create_user(name, is_admin))
 
     # ------------------------------------------------------------------ environments
 
@@ -203,6 +228,18 @@ class AsyncClient(BaseClient):
     async def list_subfields(self) -> list[Subfield]:
         """See :meth:`Client.list_subfields`."""
         return await self._send(self._list_subfields())
+
+    async def me(self) -> User:
+        """The user the token belongs to."""
+        return await self._send(self._me())
+
+    async def list_users(self) -> list[User]:
+        """All users (admin token)."""
+        return await self._send(self._list_users())
+
+    async def create_user(self, name: str, *, is_admin: bool = False) -> User:
+        """Create a user (admin token); the result carries its token, shown once."""
+        return await self._send(self._create_user(name, is_admin))
 
     async def list_robots(self) -> list[Robot]:
         """See :meth:`Client.list_robots`."""

@@ -324,3 +324,16 @@ class Robot(_FromJson):
     last_seen: Optional[datetime] = None
 
     _conv = {"last_seen": _dt}
+
+
+@dataclass
+class User(_FromJson):
+    """A testbed user; ``token`` only when it was just created (shown once)."""
+
+    id: int
+    name: str
+    is_admin: bool
+    created_at: Optional[datetime] = None
+    token: Optional[str] = None
+
+    _conv = {"created_at": _dt}

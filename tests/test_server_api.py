@@ -199,3 +199,18 @@ def test_quota(server, tmp_path):
     with server.client(token) as c:
         codes = [c.post("/api/v1/experiments", json={**JOB, "modes": ["sim"]}).status_code for _ in range(3)]
     assert codes == [202, 202, 202]  # the server's limit is 200; this checks the counting path only
+
+
+def test_twb_users_commands(server, twb):
+    env = {"TWB_URL": server.url, "TWB_TOKEN": server.token}
+    out = twb("users", "create", "carol", env=env)
+    assert out.returncode == 0, out.stderr
+    token = out.stdout.strip()
+    with server.client(token) as c:
+        assert c.get("/api/v1/users/me").json()["name"] == "carol"
+    listing = twb("users", "list", env=env)
+    assert "carol" in listing.stdout.split() and "admin (admin)" in listing.stdout
+    again = twb("users", "create", "carol", env=env)
+    assert again.returncode == 2 and "already exists" in again.stderr
+    refused = twb("users", "list", env={"TWB_URL": server.url, "TWB_TOKEN": token})
+    assert refused.returncode == 2 and "Admin only" in refused.stderr

@@ -13,6 +13,7 @@ from typing import Annotated, Optional
 import typer
 
 from .errors import fail
+from .sdk_support import TokenOpt, UrlOpt, sdk_client
 
 users_app = typer.Typer(help="Manage testbed users (needs the admin token).", no_args_is_help=True)
 
@@ -86,6 +87,25 @@ def _settings(data_dir: Path, token: Optional[str], time_scale: float, **extra):
     return Settings(**kwargs)
 
 
+UPLOADS_HELP = ("Accept uploaded planner programs and run them sandboxed (docs/uploads.md); "
+                "also TWB_UPLOADS_ENABLED=1.")
+
+
+def _uploads(enable: bool) -> dict:
+    """Settings for --enable-uploads; without the flag TWB_UPLOADS_ENABLED decides."""
+    return {"uploads_enabled": True} if enable else {}
+
+
+async def _print_uploads(testbed) -> None:  # type: ignore[no-untyped-def]
+    """One line on how uploaded programs are isolated here (only when uploads are enabled)."""
+    if not testbed.settings.uploads_enabled:
+        return
+    iso = await testbed.sandbox.probe()
+    ns = "+".join(iso["namespaces"]) or "none"
+    print(f"Uploads: enabled; programs run as {iso['runs_as']}, namespaces {ns}, network {iso['network']}"
+          + (f" ({iso['note']})" if iso["note"] else ""), flush=True)
+
+
 def up(
     port: Annotated[int, typer.Option(help="HTTP port of the API and dashboard (0: any free port).")] = 8000,
     host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
@@ -94,13 +114,14 @@ def up(
     token: Annotated[Optional[str], typer.Option(help="Fix the admin token instead of generating one.")] = None,
     sim_robots: Annotated[int, typer.Option(help="Size of the simulation pool (ideal robots).", min=1, max=1000)] = 4,
     seed: Annotated[int, typer.Option(help="Agent seed (runs are seeded from their job's seed).", min=0)] = 0,
+    enable_uploads: Annotated[bool, typer.Option("--enable-uploads", help=UPLOADS_HELP)] = False,
 ) -> None:
     """The whole testbed on this machine: server on SQLite, four field robots, a simulation pool."""
     from robot_agent.host import AgentHost
     from server.testbed import Testbed
 
     scale = _time_scale(time_scale)
-    settings = _settings(data_dir, token, scale)
+    settings = _settings(data_dir, token, scale, **_uploads(enable_uploads))
     testbed = Testbed(settings)
     admin = testbed.prepare()
     agent_token = testbed.issue_agent_token()
@@ -129,6 +150,7 @@ def up(
         print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
         print(f"Robots: 4 field robots (sub-fields 1-4), {sim_robots} simulated; time scale {shown}. "
               "Ctrl-C stops everything.", flush=True)
+        await _print_uploads(testbed)
 
         async def cleanup() -> None:
             for h in hosts:
@@ -145,75 +167,39 @@ def server(
     data_dir: Annotated[Path, typer.Option(help="Database, token file and logs.")] = Path("twb-data"),
     time_scale: Annotated[str, typer.Option(help="Time scale the agents run at (for timeouts).")] = "1",
     token: Annotated[Optional[str], typer.Option(help="Fix the admin token instead of generating one.")] = None,
+    enable_uploads: Annotated[bool, typer.Option("--enable-uploads", help=UPLOADS_HELP)] = False,
 ) -> None:
     """The server alone; robots join with `twb agent --server URL --token T`."""
     from server.testbed import Testbed
 
-    settings = _settings(data_dir, token, _time_scale(time_scale))
+    settings = _settings(data_dir, token, _time_scale(time_scale), **_uploads(enable_uploads))
     testbed = Testbed(settings)
     admin = testbed.prepare()
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
         print(f"Teleworkbench server: {url}  (API docs {url}/docs)", flush=True)
         print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
+        await _print_uploads(testbed)
         return None
 
     _run(_serve(settings, testbed, host, port, ready))
-
-
-def _client(url: str, token: Optional[str], data_dir: Path):  # type: ignore[no-untyped-def]
-    import httpx
-
-    if not token:
-        path = data_dir / "token"
-        if not path.exists():
-            fail(f"no --token given and no token file {path} (start the testbed with `twb up` first)")
-        token = path.read_text().strip()
-    return httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=10)
-
-
-def _check(resp) -> dict:  # type: ignore[no-untyped-def]
-    if resp.status_code >= 400:
-        try:
-            detail = resp.json().get("detail", resp.text)
-        except ValueError:
-            detail = resp.text
-        fail(f"server answered {resp.status_code}: {detail}")
-    return resp.json()
 
 
 @users_app.command("create")
 def users_create(
     name: Annotated[str, typer.Argument(help="User name (letters, digits, _ . -).")],
     admin: Annotated[bool, typer.Option(help="Give the user admin rights.")] = False,
-    url: Annotated[str, typer.Option(envvar="TWB_URL", help="Server URL.")] = "http://127.0.0.1:8000",
-    token: Annotated[Optional[str], typer.Option(envvar="TWB_TOKEN", help="Admin token.")] = None,
-    data_dir: Annotated[Path, typer.Option(help="Where `twb up` wrote the admin token.")] = Path("twb-data"),
+    url: UrlOpt = None,
+    token: TokenOpt = None,
 ) -> None:
-    """Create a user and print its token (shown once)."""
-    import httpx
-
-    try:
-        with _client(url, token, data_dir) as c:
-            body = _check(c.post("/api/v1/users", json={"name": name, "is_admin": admin}))
-    except httpx.TransportError as exc:
-        fail(f"cannot reach the server at {url}: {exc}")
-    typer.echo(body["token"])
+    """Create a user and print its token (shown once); needs the admin token."""
+    with sdk_client(url, token) as c:
+        typer.echo(c.create_user(name, is_admin=admin).token)
 
 
 @users_app.command("list")
-def users_list(
-    url: Annotated[str, typer.Option(envvar="TWB_URL", help="Server URL.")] = "http://127.0.0.1:8000",
-    token: Annotated[Optional[str], typer.Option(envvar="TWB_TOKEN", help="Admin token.")] = None,
-    data_dir: Annotated[Path, typer.Option(help="Where `twb up` wrote the admin token.")] = Path("twb-data"),
-) -> None:
-    """List users."""
-    import httpx
-
-    try:
-        with _client(url, token, data_dir) as c:
-            body = _check(c.get("/api/v1/users"))
-    except httpx.TransportError as exc:
-        fail(f"cannot reach the server at {url}: {exc}")
-    for u in body["data"]:
-        typer.echo(f"{u['name']}{' (admin)' if u['is_admin'] else ''}")
+def users_list(url: UrlOpt = None, token: TokenOpt = None) -> None:
+    """List users; needs the admin token."""
+    with sdk_client(url, token) as c:
+        for u in c.list_users():
+            typer.echo(f"{u.name}{' (admin)' if u.is_admin else ''}")
