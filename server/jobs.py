@@ -53,6 +53,7 @@ def create_experiment(
         planner=body.planner,
         planner_params=checked.planner_params,
         explicit_path=checked.path,
+        program_id=body.program,
         modes=list(body.modes),
         repetitions=body.repetitions,
         seed=body.seed,
@@ -102,7 +103,7 @@ def run_public(run: Run) -> RunPublic:
 def experiment_summary(exp: Experiment, owner: str, estimated_start_s: Optional[float] = None) -> ExperimentSummary:
     return ExperimentSummary(
         id=exp.id, owner=owner, status=exp.status, environment=exp.environment, planner=exp.planner,
-        modes=exp.modes, repetitions=exp.repetitions, field=exp.field, error=exp.error,
+        program=exp.program_id, modes=exp.modes, repetitions=exp.repetitions, field=exp.field, error=exp.error,
         created_at=exp.created_at, finished_at=exp.finished_at, estimated_start_s=estimated_start_s,
     )
 

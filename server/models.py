@@ -9,7 +9,8 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from typing import Any, Optional
 
-from sqlalchemy import JSON, BigInteger, Boolean, DateTime, Float, ForeignKey, Index, Integer, String, Text
+from sqlalchemy import (JSON, BigInteger, Boolean, DateTime, Float, ForeignKey, Index, Integer, LargeBinary, String,
+                        Text)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 __all__ = [
@@ -18,6 +19,7 @@ __all__ = [
     "Experiment",
     "Message",
     "Pose",
+    "Program",
     "Robot",
     "Run",
     "Subfield",
@@ -74,6 +76,24 @@ class Environment(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+class Program(Base):
+    """An uploaded planner program (docs/uploads.md); run sandboxed once per experiment that names it."""
+
+    __tablename__ = "programs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    owner_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(100))
+    #: "python" (run by the testbed's python3) or "executable" (a binary, or a script for ``interpreter``)
+    kind: Mapped[str] = mapped_column(String(16))
+    interpreter: Mapped[Optional[str]] = mapped_column(String(32), nullable=True)
+    args: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    content: Mapped[bytes] = mapped_column(LargeBinary)
+    size: Mapped[int] = mapped_column(Integer)
+    sha256: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
 class Experiment(Base):
     """A planning job: one planned path, run ``repetitions`` times in each of ``modes``."""
 
@@ -89,6 +109,9 @@ class Experiment(Base):
     planner: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)
     planner_params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     explicit_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
+    #: an uploaded planner program computes the path (instead of ``planner`` or ``explicit_path``)
+    program_id: Mapped[Optional[int]] = mapped_column(ForeignKey("programs.id", ondelete="SET NULL"),
+                                                      nullable=True)
     modes: Mapped[list[Any]] = mapped_column(JSON)
     repetitions: Mapped[int] = mapped_column(Integer, default=1)
     seed: Mapped[int] = mapped_column(BigInteger, default=0)

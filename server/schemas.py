@@ -18,6 +18,8 @@ __all__ = [
     "ExperimentPublic",
     "ExperimentSummary",
     "Page",
+    "ProgramCreate",
+    "ProgramPublic",
     "RobotPublic",
     "RobotRegister",
     "RunPublic",
@@ -106,7 +108,7 @@ Pose = list[float]
 
 
 class ExperimentCreate(Strict):
-    """A job: plan with ``planner`` (or send the explicit ``path``), run it in ``modes``.
+    """A job: plan with ``planner`` (or send the explicit ``path``, or run the uploaded ``program``), run it in ``modes``.
 
     Poses are ``[x, y]`` or ``[x, y, theta]`` (m, rad) in the frame of the
     sub-field (``field: "sub"``) or of the whole 3.6 m field (``"full"``).
@@ -132,6 +134,7 @@ class ExperimentCreate(Strict):
     planner: Optional[str] = Field(default=None, max_length=64)
     planner_params: dict[str, Any] = Field(default_factory=dict)
     path: Optional[list[Pose]] = Field(default=None, max_length=10_000)
+    program: Optional[int] = Field(default=None, ge=1, description="An uploaded program's id (docs/uploads.md).")
     modes: list[Mode] = Field(default_factory=lambda: ["sim", "twb"], min_length=1, max_length=2)
     repetitions: int = Field(default=1, ge=1)
     seed: int = Field(default=0, ge=0, lt=2**63)
@@ -167,6 +170,14 @@ class ExperimentCreate(Strict):
     def _planner_or_path(self) -> "ExperimentCreate":
         if self.path is not None and self.planner is not None:
             raise ValueError("give either `planner` or `path`, not both")
+        if self.program is not None:
+            if self.path is not None or self.planner is not None:
+                raise ValueError("give one of `planner`, `path` or `program`")
+            if self.planner_params:
+                raise ValueError("`planner_params` needs a `planner`")
+            if self.start is None or self.goal is None:
+                raise ValueError("`start` and `goal` are required with a program")
+            return self
         if self.path is None:
             if self.planner is None:
                 self.planner = "fmm"
@@ -205,6 +216,7 @@ class ExperimentSummary(BaseModel):
     status: str
     environment: str
     planner: Optional[str]
+    program: Optional[int] = Field(default=None, description="The uploaded program planning this job, if any.")
     modes: list[str]
     repetitions: int
     field: str
@@ -228,6 +240,55 @@ class ExperimentPublic(ExperimentSummary):
     planning_info: dict[str, Any]
     started_at: Optional[UTCDateTime]
     runs: list[RunPublic]
+
+
+# --------------------------------------------------------------------------- uploaded programs
+
+
+class ProgramCreate(Strict):
+    """An uploaded planner program (docs/uploads.md): its file, base64-encoded, and how to run it."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"name": "my-planner", "kind": "python", "args": ["--fast"],
+                                         "content_base64": "aW1wb3J0IG9zCg=="}]},
+    )
+
+    name: str = Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.+-]+$")
+    kind: Literal["python", "executable"] = Field(
+        default="python", description="python: run by the testbed's python3; executable: a binary or a script.")
+    interpreter: Optional[str] = Field(
+        default=None, max_length=32,
+        description="executable only: run the file with this interpreter (GET /programs/sandbox lists them); "
+                    "none: the file itself is executed (an ELF binary or a script with #!).")
+    args: list[str] = Field(default_factory=list, max_length=64, description="Command-line arguments.")
+    content_base64: str = Field(min_length=1, description="The file, base64-encoded.")
+
+    @field_validator("args")
+    @classmethod
+    def _args(cls, v: list[str]) -> list[str]:
+        for i, a in enumerate(v):
+            if "\x00" in a or len(a) > 4096:
+                raise ValueError(f"argument {i} must be at most 4096 characters without NUL")
+        return v
+
+    @model_validator(mode="after")
+    def _interpreter(self) -> "ProgramCreate":
+        if self.kind == "python" and self.interpreter not in (None, "python3"):
+            raise ValueError("a python program runs with python3; give no `interpreter`")
+        return self
+
+
+class ProgramPublic(BaseModel):
+    id: int
+    name: str
+    owner: str
+    kind: str
+    interpreter: Optional[str]
+    args: list[str]
+    size: int = Field(description="Bytes.")
+    sha256: str
+    created_at: UTCDateTime
 
 
 # --------------------------------------------------------------------------- robots, tracker

@@ -26,7 +26,8 @@ from .core.security import AuthCache, Principal
 from .core.settings import Settings
 from .jobs import finish_if_done, public_dict, run_public
 from .models import Experiment, Pose, Robot, Run, Subfield, User, utcnow
-from .runner import RunFailed, execute_run, plan_experiment
+from .runner import RunContext, RunFailed, execute_run, plan_experiment
+from .sandbox import Sandbox
 from .scheduler import SUBFIELD_ORIGINS, Pending, RobotSlot, Scheduler
 from .schemas import TERMINAL_STATES, RobotPublic, RobotRegister, SubfieldPublic
 from .tracking import PoseRouter
@@ -42,6 +43,10 @@ class Testbed:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         settings.data_dir.mkdir(parents=True, exist_ok=True)
+        if settings.uploads_enabled:  # uploaded programs must not read the database or the token file
+            settings.data_dir.chmod(0o700)
+        #: runs uploaded planner programs (docs/uploads.md)
+        self.sandbox = Sandbox(settings)
         self.engine = make_engine(settings.database_url)
         self.sessions = make_session_factory(self.engine)
         self.broker = EventBroker()
@@ -311,7 +316,7 @@ class Testbed:
             if exp_view["status"] in TERMINAL_STATES:
                 self._estimates.pop(exp_view["id"], None)
 
-    async def planned_path(self, experiment_id: int) -> list[list[float]]:
+    async def planned_path(self, experiment_id: int, ctx: Optional[RunContext] = None) -> list[list[float]]:
         """The experiment's path, planned once even when several runs ask at the same time.
 
         A planning failure fails the whole experiment: its queued runs end
@@ -320,7 +325,7 @@ class Testbed:
         lock = self._plan_locks.setdefault(experiment_id, asyncio.Lock())
         async with lock:
             try:
-                return await plan_experiment(self, experiment_id)
+                return await plan_experiment(self, experiment_id, ctx)
             except RunFailed as exc:
                 await self._fail_queued(experiment_id, str(exc))
                 raise

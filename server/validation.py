@@ -19,7 +19,7 @@ from planners import Environment, PlanningError, check_query, get_planner, parse
 
 from .schemas import ExperimentCreate
 
-__all__ = ["FIELD_SIZE", "SUBFIELD_SIZE", "Preflight", "PreflightError", "preflight"]
+__all__ = ["FIELD_SIZE", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight"]
 
 SUBFIELD_SIZE = (1.8, 1.8)
 FIELD_SIZE = (3.6, 3.6)
@@ -45,8 +45,9 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
     """Validate ``body`` against the stored environment ``env_data``; raises :class:`PreflightError`.
 
     Planner jobs need the start and goal free for ``robot_radius +
-    planning_margin`` (what the planner will keep); an explicit path only
-    needs the robot radius itself.
+    planning_margin`` (what the planner will keep); an explicit path and an
+    uploaded program (whose path is checked when it arrives,
+    :func:`check_program_path`) only need the robot radius itself.
     """
     try:
         env = parse_environment(env_data)
@@ -64,7 +65,7 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
             params = get_planner(body.planner).validate_params(body.planner_params)
         except (PlanningError, ValueError) as exc:
             raise PreflightError(str(exc)) from None
-    radius = robot_radius + (planning_margin if body.path is None else 0.0)
+    radius = robot_radius + (planning_margin if body.planner is not None else 0.0)
     try:
         space, s, g = check_query(env, body.start, body.goal, robot_radius=radius)
     except PlanningError as exc:
@@ -76,22 +77,49 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
         pts = np.array([p[:2] for p in body.path], dtype=float)
         if np.hypot(*(pts[0] - s[:2])) > 1e-3 or np.hypot(*(pts[-1] - g[:2])) > 1e-3:
             raise PreflightError("`path` must begin at `start` and end at `goal` (within 1 mm)")
-        outside = ~space.is_free(pts)
-        if outside.any():
-            i = int(np.flatnonzero(outside)[0])
-            raise PreflightError(
-                f"path point {i} ({pts[i, 0]:g}, {pts[i, 1]:g}) is outside the field or closer than the "
-                f"robot radius {robot_radius:g} m to an obstacle"
-            )
-        bad = ~space.segments_free(pts[:-1], pts[1:])
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise PreflightError(
-                f"path segment {i} from ({pts[i, 0]:g}, {pts[i, 1]:g}) to ({pts[i + 1, 0]:g}, {pts[i + 1, 1]:g}) "
-                f"passes closer than the robot radius {robot_radius:g} m to an obstacle"
-            )
+        _check_clear(space, pts, robot_radius)
         path = [list(map(float, p)) for p in body.path]
     return Preflight(env, _pose(s), _pose(g), params, path)
+
+
+def _check_clear(space: Any, pts: np.ndarray, robot_radius: float) -> None:
+    """Every point and segment of ``pts`` free for the robot radius, else PreflightError naming the first."""
+    outside = ~space.is_free(pts)
+    if outside.any():
+        i = int(np.flatnonzero(outside)[0])
+        raise PreflightError(
+            f"path point {i} ({pts[i, 0]:g}, {pts[i, 1]:g}) is outside the field or closer than the "
+            f"robot radius {robot_radius:g} m to an obstacle"
+        )
+    bad = ~space.segments_free(pts[:-1], pts[1:])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise PreflightError(
+            f"path segment {i} from ({pts[i, 0]:g}, {pts[i, 1]:g}) to ({pts[i + 1, 0]:g}, {pts[i + 1, 1]:g}) "
+            f"passes closer than the robot radius {robot_radius:g} m to an obstacle"
+        )
+
+
+def check_program_path(env_data: dict[str, Any], start: list[float], goal: list[float], path: list[list[float]],
+                       robot_radius: float, tolerance_m: float = 0.01) -> None:
+    """The path an uploaded program sent: from the start to the goal (within ``tolerance_m``), collision-free.
+
+    Raises :class:`PreflightError` with the reason (the run then ends
+    ``failed``).  Pure; run it in a worker process.
+    """
+    try:
+        space, s, g = check_query(parse_environment(env_data), start, goal, robot_radius=robot_radius)
+    except PlanningError as exc:
+        raise PreflightError(str(exc)) from None
+    pts = np.array([p[:2] for p in path], dtype=float)
+    if len(pts) < 2:
+        raise PreflightError(f"the path has {len(pts)} point; it needs at least 2 (the start and the goal)")
+    for name, p, q in (("begin at the start", pts[0], s), ("end at the goal", pts[-1], g)):
+        d = float(np.hypot(*(p - q[:2])))
+        if d > tolerance_m:
+            raise PreflightError(f"the path must {name} ({q[0]:g}, {q[1]:g}) within {tolerance_m * 100:g} cm; "
+                                 f"it is {d:.3f} m away at ({p[0]:g}, {p[1]:g})")
+    _check_clear(space, pts, robot_radius)
 
 
 def _pose(p: np.ndarray) -> list[float]:

@@ -7,7 +7,9 @@ PostgreSQL is next).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -37,7 +39,25 @@ class Settings(BaseSettings):
         description="Extra clearance the testbed's planners keep beyond the robot radius: field robots "
                     "track a path only to within a few centimetres, and a path grazing a block at exactly "
                     "the radius would make collisions, not comparisons.")
-    uploads_enabled: bool = False
+    uploads_enabled: bool = Field(default=False, description="Accept uploaded planner programs (`--enable-uploads`).")
+    max_program_bytes: int = Field(default=1 << 20, gt=0, description="Largest uploaded program (413 beyond).")
+    # the sandbox of uploaded programs (docs/uploads.md)
+    sandbox_wall_s: float = Field(default=30.0, gt=0, description="Wall-clock seconds a program may run.")
+    sandbox_cpu_s: int = Field(default=20, gt=0, description="CPU seconds per process (RLIMIT_CPU).")
+    sandbox_memory_mb: int = Field(default=512, gt=0, description="Address space per process, MiB (RLIMIT_AS).")
+    sandbox_file_mb: int = Field(default=16, gt=0, description="Largest file a program may write, MiB.")
+    sandbox_processes: int = Field(default=32, gt=0, description="Processes a program may have at once.")
+    sandbox_open_files: int = Field(default=64, gt=3, description="Open files per process.")
+    sandbox_output_kib: int = Field(default=64, gt=0, description="Kept stdout and stderr each, KiB.")
+    sandbox_tmpfs_mb: int = Field(default=64, gt=0, description="Size of the program's /tmp (namespaces only), MiB.")
+    sandbox_workers: int = Field(default=2, gt=0, description="Programs running at the same time.")
+    sandbox_uid_base: int = Field(default=3_000_000, gt=0,
+                                  description="As root, each running program gets a uid/gid of its own from this one upwards.")
+    sandbox_namespaces: Literal["auto", "required", "off"] = Field(
+        default="auto", description="Linux namespaces for programs: use when available, require, or never.")
+    sandbox_interpreters: dict[str, str] = Field(
+        default_factory=lambda: _interpreters(),
+        description="Interpreters programs may name: name -> absolute path (JSON in the environment).")
 
     @model_validator(mode="after")
     def _default_database(self) -> "Settings":
@@ -48,3 +68,14 @@ class Settings(BaseSettings):
     @property
     def token_file(self) -> Path:
         return self.data_dir / "token"
+
+
+def _interpreters() -> dict[str, str]:
+    """The machine's system interpreters (not a virtualenv's: its files may be unreadable to the sandbox)."""
+    candidates = {
+        "python3": ("/usr/local/bin/python3", "/usr/bin/python3"),
+        "sh": ("/bin/sh", "/usr/bin/sh"),
+        "bash": ("/bin/bash", "/usr/bin/bash"),
+    }
+    return {name: next(p for p in paths if os.access(p, os.X_OK))
+            for name, paths in candidates.items() if any(os.access(p, os.X_OK) for p in paths)}

@@ -17,6 +17,7 @@ from ...schemas import TERMINAL_STATES, ExperimentCreate, ExperimentPublic, Expe
 from ...validation import PreflightError, preflight
 from ..deps import CurrentUser, SessionDep, TestbedDep
 from .environments import visible
+from .programs import check_usable
 
 router = APIRouter(prefix="/experiments", tags=["experiments"])
 
@@ -37,6 +38,8 @@ def submit_experiment(body: ExperimentCreate, session: SessionDep, user: Current
     settings = testbed.settings
     if body.repetitions > settings.max_repetitions:
         raise HTTPException(422, f"repetitions must be at most {settings.max_repetitions}")
+    if body.program is not None:
+        check_usable(session, user, body.program, settings)
     env_row = session.scalar(select(Environment).where(Environment.name == body.environment, visible(user)))
     if env_row is None:
         raise HTTPException(422, f"unknown environment {body.environment!r}")

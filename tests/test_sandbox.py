@@ -1,0 +1,251 @@
+"""The sandbox launcher on its own: what each isolation level enforces (docs/uploads.md, "what is enforced where").
+
+Jobs go straight to ``python -m server.sandbox_launch``.  The unprivileged
+cases run the launcher as uid 65534 without capabilities (``setpriv``) in a
+private mount namespace where this Python stays reachable — a non-root
+server, simulated on a root machine.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import shutil
+import signal
+import socket
+import stat
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from robot_agent.protocol import MAX_LINE_BYTES
+from server import sandbox_launch
+from server.sandbox import explain
+
+ROOT = Path(__file__).resolve().parent.parent
+NOBODY = 65534
+LIMITS = {"wall_s": 5, "cpu_s": 2, "memory_bytes": 256 << 20, "file_bytes": 1 << 20, "processes": 8,
+          "open_files": 64, "output_bytes": 1 << 16, "tmpfs_bytes": 16 << 20}
+PYTHON = next((p for p in ("/usr/local/bin/python3", "/usr/bin/python3") if os.access(p, os.X_OK)), None)
+is_root = os.geteuid() == 0
+needs_root = pytest.mark.skipif(not is_root or PYTHON is None, reason="needs root and a system python3")
+
+SEND_PATH = """
+import os, socket
+s = socket.create_connection((os.environ["TWB_ROBOT_HOST"], int(os.environ["TWB_ROBOT_PORT"])))
+f = s.makefile("rwb")
+f.readline()
+f.write(b"T,T,P," + b"1" * (MAX + 10) + b"\\n")  # too long: ERR,TOOLONG, then the good line
+f.write(b"T,T,P,300,300,0;1500,300,90\\n")
+f.flush()
+print(f.readline().decode().strip(), f.readline().decode().strip())
+""".replace("MAX", str(MAX_LINE_BYTES))
+
+
+def job(program: str, *, data_dir: Path, namespaces: str = "auto", interpreter: str | None = None,
+        uid: int = 3_950_000, limits: dict | None = None) -> dict:
+    return {
+        "files": {"program.py": {"base64": base64.b64encode(program.encode()).decode(), "mode": 0o444},
+                  "environment.json": {"base64": base64.b64encode(b'{"size": [1.8, 1.8], "blocks": []}').decode(),
+                                       "mode": 0o444}},
+        "argv": [interpreter or PYTHON, "{workdir}/program.py", "{robot_port}"],
+        "env": {"PATH": "/usr/bin:/bin", "PYTHONUNBUFFERED": "1", "TWB_ENV_FILE": "environment.json",
+                "TWB_START": "0.3,0.3,0", "TWB_GOAL": "1.5,0.3"},
+        "uid": uid, "gid": uid, "namespaces": namespaces, "hide": [str(data_dir)], "limits": limits or LIMITS,
+        "field_size": [1.8, 1.8], "robot_id": "sim-1", "platform": "BeBot", "start_pose": [0.3, 0.3, 0.0],
+        "grace_s": 1.0,
+    }
+
+
+def launch(spec: dict, prefix: list[str] = ()) -> dict:
+    r = subprocess.run([*prefix, sys.executable, "-m", "server.sandbox_launch"], input=json.dumps(spec).encode(),
+                       capture_output=True, timeout=60, cwd=ROOT)
+    assert r.returncode == 0, r.stderr.decode()
+    return json.loads(r.stdout.decode().splitlines()[-1])
+
+
+def processes_of(uid: int) -> list[str]:
+    out = subprocess.run(["ps", "-eo", "uid=,args="], capture_output=True, text=True).stdout
+    return [ln for ln in out.splitlines() if int(ln.split()[0]) == uid]
+
+
+@pytest.fixture
+def data_dir():
+    """A server data dir outside /tmp (so only the mount over it can hide it), with a database file."""
+    base = ROOT / "tests" / "output"
+    base.mkdir(exist_ok=True)
+    d = Path(tempfile.mkdtemp(prefix="sandbox-data-", dir=base))
+    (d / "twb.db").write_text("SECRET DATABASE")
+    d.chmod(0o700)
+    yield d
+    shutil.rmtree(d, ignore_errors=True)
+
+
+def read_attempt(path: Path) -> str:
+    return f"""
+try:
+    print("READ", open({str(path / 'twb.db')!r}).read())
+except OSError as exc:
+    print("refused", exc.strerror)
+"""
+
+
+# --------------------------------------------------------------------------- pure
+
+
+def test_the_launcher_keeps_the_protocol_line_limit():
+    assert sandbox_launch.MAX_LINE_BYTES == MAX_LINE_BYTES
+
+
+@pytest.mark.parametrize("result, reason", [
+    ({"launch_error": "OSError: [Errno 8] Exec format error"}, "program could not start: OSError"),
+    ({"path": [[0, 0, 0]]}, None),
+    ({"procs_max": 8}, "program process limit: it reached its limit of 8 processes"),
+    ({"stderr": "x: fork: retry: Resource temporarily unavailable", "timed_out": True}, "program process limit"),
+    ({"stderr": "Traceback...\nMemoryError\n", "exit_code": 1}, "program memory limit: it ran out of its 256 MiB"),
+    ({"signal": signal.SIGXCPU}, "program CPU limit: it used more than 2 s"),
+    ({"signal": signal.SIGKILL, "cpu_s": 2.1}, "program CPU limit"),
+    ({"signal": signal.SIGXFSZ}, "program file size limit: it wrote a file larger than 1 MiB"),
+    ({"timed_out": True, "refused": ["ERR,SYNTAX,empty line"]},
+     "program time limit: no path within 5 s (its last line was refused: ERR,SYNTAX,empty line)"),
+    ({"refused": ["ERR,RANGE,far"], "exit_code": 2}, "program sent an invalid path: ERR,RANGE,far; it then exited with code 2"),
+    ({"exit_code": 3, "stderr": "a\nlast words\n"}, "program crashed: exit code 3 (last words)"),
+    ({"signal": signal.SIGSEGV}, "program crashed: killed by signal SIGSEGV"),
+    ({"exit_code": 0, "connected": True}, "program sent no path: it exited without sending a T,T,P line"),
+    ({"exit_code": 0}, "program sent no path: it exited without connecting to the robot port"),
+])
+def test_explain_names_the_reason(result, reason):
+    got = explain({"path": None, **result}, LIMITS)
+    assert got is None if reason is None else got.startswith(reason), got
+
+
+# --------------------------------------------------------------------------- as root
+
+
+@needs_root
+def test_root_with_namespaces_hides_the_data_dir_and_refuses_long_lines(data_dir):
+    r = launch(job(read_attempt(data_dir) + SEND_PATH, data_dir=data_dir))
+    iso = r["isolation"]
+    assert iso["namespaces"] == ["net", "mount", "pid", "ipc", "uts"] and iso["uid"] == 3_950_000
+    assert iso["hidden"] == [str(data_dir)] and iso["proc"] == "private"
+    assert "READ" not in r["stdout"] and "refused Permission denied" in r["stdout"]
+    assert r["refused"] == [f"ERR,TOOLONG,line longer than {MAX_LINE_BYTES} bytes"]
+    assert r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]]
+    assert f"ERR,TOOLONG,line longer than {MAX_LINE_BYTES} bytes OK,P,2" in r["stdout"]
+
+
+@needs_root
+def test_root_without_namespaces_still_protects_files_by_uid_and_kills_escapees(data_dir):
+    listener = socket.create_server(("127.0.0.1", 0))
+    port = listener.getsockname()[1]
+    program = read_attempt(data_dir) + f"""
+import os, socket, subprocess
+socket.create_connection(("127.0.0.1", {port}), timeout=2).close()
+print("host network reachable")
+subprocess.Popen(["sleep", "300"], start_new_session=True)
+print("uid", os.getuid(), "groups", os.getgroups())
+"""
+    try:
+        r = launch(job(program, data_dir=data_dir, namespaces="off", uid=3_950_001))
+    finally:
+        listener.close()
+    assert r["isolation"]["namespaces"] == [] and r["exit_code"] == 0, r
+    out = r["stdout"]
+    assert "refused Permission denied" in out and "READ" not in out  # other uid, data dir 0700
+    assert "host network reachable" in out  # documented: no network isolation without namespaces
+    assert "uid 3950001 groups []" in out
+    assert processes_of(3_950_001) == []  # the session-escaped sleeper was killed by uid
+
+
+# --------------------------------------------------------------------------- an unprivileged server (simulated)
+
+
+def _as_user_prefix(uid: int) -> list[str] | None:
+    """A command prefix running as ``uid`` with no capabilities, where this Python is still reachable."""
+    if not is_root or not (shutil.which("unshare") and shutil.which("setpriv")):
+        return None
+    needed = {os.path.realpath(sys.executable), os.path.realpath(sys.prefix), os.path.realpath(sys.base_prefix),
+              str(ROOT)}
+    blocked: dict[str, set[str]] = {}  # directory others cannot enter -> its children we need
+    for path in needed:
+        parts = Path(path).parts
+        for i in range(1, len(parts)):
+            d = Path(*parts[:i])
+            if not os.stat(d).st_mode & stat.S_IXOTH:
+                blocked.setdefault(str(d), set()).add(parts[i])
+                break
+    script, stage = ["set -e"], tempfile.mkdtemp(prefix="twb-asuser-")
+    for k, (d, children) in enumerate(blocked.items()):
+        for j, child in enumerate(sorted(children)):
+            script += [f"mkdir -p {stage}/{k}-{j}", f"mount --bind '{d}/{child}' {stage}/{k}-{j}"]
+        script.append(f"mount -t tmpfs -o mode=755 tmpfs '{d}'")
+        for j, child in enumerate(sorted(children)):
+            script += [f"mkdir -p '{d}/{child}'", f"mount --bind {stage}/{k}-{j} '{d}/{child}'"]
+    script.append(f'exec setpriv --reuid {uid} --regid {uid} --clear-groups --inh-caps=-all --bounding-set=-all "$@"')
+    prefix = ["unshare", "--mount", "sh", "-c", "\n".join(script), "sh"]
+    ok = subprocess.run([*prefix, sys.executable, "-c", "import numpy, server.sandbox_launch"], capture_output=True)
+    return prefix if ok.returncode == 0 else None
+
+
+@pytest.fixture(scope="module")
+def as_nobody():
+    prefix = _as_user_prefix(NOBODY)
+    if prefix is None:
+        pytest.skip("cannot run this Python as an unprivileged user here")
+    probe = launch({"probe": True, "namespaces": "auto"}, prefix)
+    if not probe["user_namespace"]:
+        pytest.skip(f"no unprivileged user namespaces: {probe['reason']}")
+    return prefix
+
+
+@pytest.fixture
+def own_data_dir(data_dir):
+    """The data dir of a server running as nobody: its own files, readable by its own uid."""
+    for p in (data_dir, data_dir / "twb.db"):
+        os.chown(p, NOBODY, NOBODY)
+    return data_dir
+
+
+def test_unprivileged_server_isolates_with_a_user_namespace(as_nobody, own_data_dir):
+    program = read_attempt(own_data_dir) + """
+import ctypes, os, socket
+print("caps", open("/proc/self/status").read().split("CapEff:")[1].split()[0])
+libc = ctypes.CDLL(None, use_errno=True)
+print("umount", libc.umount2(os.path.dirname(os.environ["TWB_ENV_FILE"]).encode(), 2), ctypes.get_errno())
+for addr in [("1.1.1.1", 53), ("127.0.0.1", 22)]:
+    try:
+        socket.create_connection(addr, timeout=2)
+        print("CONNECTED", addr)
+    except OSError as exc:
+        print("no network", exc.errno)
+print("processes", sorted(int(p) for p in os.listdir("/proc") if p.isdigit()))
+""" + SEND_PATH
+    r = launch(job(program, data_dir=own_data_dir), as_nobody)
+    iso = r["isolation"]
+    assert iso["user_namespace"] is True and iso["uid"] is None and iso["hidden"] == [str(own_data_dir)]
+    out = r["stdout"]
+    assert "READ" not in out and "refused Permission denied" in out  # readable by the uid, but hidden
+    assert "caps 0000000000000000" in out and "umount -1 1" in out  # cannot undo the mounts (EPERM)
+    assert "CONNECTED" not in out and out.count("no network") == 2
+    assert "processes [1, 2]" in out  # only the launcher (pid 1) and the program
+    assert r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]]
+
+
+def test_unprivileged_server_bounds_a_fork_bomb(as_nobody, data_dir):
+    bomb = job(":(){ :|:& };:\n:\nsleep 600", data_dir=data_dir, interpreter="/bin/bash",
+               limits={**LIMITS, "wall_s": 3})
+    r = launch(bomb, as_nobody)
+    assert r["timed_out"] and 1 < r["procs_max"] <= LIMITS["processes"]
+    assert explain(r, LIMITS).startswith("program process limit")
+    assert processes_of(NOBODY) == []
+
+
+def test_unprivileged_server_without_namespaces_cannot_protect_its_files(as_nobody, own_data_dir):
+    """The documented weakness: the program runs as the server's uid and reads what it can read."""
+    r = launch(job(read_attempt(own_data_dir), data_dir=own_data_dir, namespaces="off"), as_nobody)
+    assert r["isolation"]["namespaces"] == [] and r["isolation"]["uid"] is None
+    assert "READ SECRET DATABASE" in r["stdout"]

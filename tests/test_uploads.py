@@ -1,0 +1,334 @@
+"""Uploaded planner programs on a real `twb up --enable-uploads`: good ones complete, bad ones fail with the reason.
+
+Every program of the batch is uploaded and submitted at once, so the bad
+ones run side by side with good jobs (a built-in planner's and the good
+programs'), all under small limits (5 s wall, 1 s CPU, 160 MiB, 12
+processes).
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+import random
+import re
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from servers import Process, wait_for
+
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "uploads.md"
+ROOT = Path(__file__).resolve().parent.parent
+START, GOAL = [0.3, 0.3, 0.0], [1.5, 1.5, 1.5708]
+# one block in the middle: the straight line collides, the detour along the walls is free
+DETOUR = {"name": "detour", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.4, "h": 0.4, "angle": 0.0}]}
+UID_BASE = 3_100_000 + random.randrange(0, 800) * 1000  # this run's sandbox uids (other test runs use others)
+LIMITS = {"TWB_SANDBOX_WALL_S": "5", "TWB_SANDBOX_CPU_S": "1", "TWB_SANDBOX_MEMORY_MB": "160",
+          "TWB_SANDBOX_PROCESSES": "12", "TWB_SANDBOX_WORKERS": "8", "TWB_SANDBOX_OUTPUT_KIB": "8",
+          "TWB_MAX_PROGRAM_BYTES": str(256 << 10), "TWB_SANDBOX_UID_BASE": str(UID_BASE)}
+
+
+def doc_example(marker: str) -> str:
+    return re.search(rf"<!-- {marker} -->\s*```\w+\n(.*?)```", DOCS.read_text(), re.S).group(1)
+
+
+def b64(data: str | bytes) -> str:
+    return base64.b64encode(data.encode() if isinstance(data, str) else data).decode()
+
+
+def sandbox_processes() -> list[str]:
+    """Processes of this run's sandbox uids still alive."""
+    out = subprocess.run(["ps", "-eo", "uid=,pid=,args="], capture_output=True, text=True).stdout
+    return [ln for ln in out.splitlines() if UID_BASE <= int(ln.split()[0]) < UID_BASE + 4096]
+
+
+@pytest.fixture(scope="module")
+def testbed(tmp_path_factory):
+    with pytest.MonkeyPatch.context() as mp:
+        for k, v in LIMITS.items():
+            mp.setenv(k, v)
+        p = Process(["up", "--time-scale", "max", "--sim-robots", "16", "--enable-uploads"],
+                    tmp_path_factory.mktemp("uploads"))
+    yield p
+    assert p.stop() == 0, p.output()
+    assert "Traceback" not in p.output(), p.output()
+
+
+@pytest.fixture(scope="module")
+def client(testbed):
+    with testbed.client() as c:
+        assert c.post("/api/v1/environments", json=DETOUR).status_code == 201
+        yield c
+
+
+def upload(client, name: str, content: str | bytes, kind: str = "python", **extra) -> int:
+    r = client.post("/api/v1/programs", json={"name": name, "kind": kind, "content_base64": b64(content), **extra})
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+SEND = """
+import os, socket
+s = socket.create_connection((os.environ["TWB_ROBOT_HOST"], int(os.environ["TWB_ROBOT_PORT"])))
+f = s.makefile("rw", newline="\\n")
+f.readline()
+f.write({line!r} + "\\n"); f.flush()
+print(f.readline().strip())
+"""
+GOOD_LINE = "T,T,P,300,300,0;1500,300,90;1500,1500,90"  # the detour, mm and degrees
+
+
+def steal(path: Path) -> str:
+    """A program that sends a valid path only if it could read ``path`` (it must not)."""
+    return f"""
+import sys
+try:
+    data = open({str(path)!r}, "rb").read()
+except OSError as exc:
+    sys.exit(f"cannot read {{exc.filename}}: {{exc.strerror}}")
+print("READ", data[:40])
+""" + SEND.format(line=GOOD_LINE)
+
+
+def connect_out(host: str, port: int) -> str:
+    """A program that sends a valid path only if it could connect to host:port (it must not)."""
+    return f"""
+import socket, sys
+try:
+    socket.create_connection(({host!r}, {port}), timeout=2).close()
+except OSError as exc:
+    sys.exit(f"connection to {host}:{port} failed: {{exc}}")
+print("CONNECTED")
+""" + SEND.format(line=GOOD_LINE)
+
+
+def cases(testbed) -> dict[str, dict]:
+    """name -> upload, job changes, expected status and reason (regex on the run's error)."""
+    port = int(testbed.url.rsplit(":", 1)[1])
+    bash = doc_example("upload-bash")
+    c = {
+        "python_astar": dict(content=doc_example("upload-python"), env="room", modes=["sim", "twb"]),
+        "bash_waypoints": dict(content=bash, kind="executable", interpreter="bash", args=["1.5,0.3"]),
+        "crash": dict(content="import sys\nprint('giving up', file=sys.stderr)\nsys.exit(3)",
+                      reason=r"^program crashed: exit code 3 \(giving up\)"),
+        "segfault": dict(content="import ctypes\nctypes.string_at(0)",
+                         reason=r"^program crashed: killed by signal SIGSEGV"),
+        "cpu_loop": dict(content="while True:\n    pass", reason=r"^program CPU limit: .* 1 s of CPU"),
+        "sleeps": dict(content="import time\ntime.sleep(600)", reason=r"^program time limit: no path within 5 s"),
+        "memory_bomb": dict(content="blocks = []\nwhile True:\n    blocks.append(bytearray(8 << 20))",
+                            reason=r"^program memory limit: .* 160 MiB"),
+        "fork_bomb": dict(content=":(){ :|:& };:\n:\nsleep 600", kind="executable", interpreter="bash",
+                          reason=r"^program process limit: .* 12 processes"),
+        "net_outside": dict(content=connect_out("1.1.1.1", 53),
+                            reason=r"^program crashed: exit code 1 \(connection to 1\.1\.1\.1:53 failed"),
+        "net_server": dict(content=connect_out("127.0.0.1", port),
+                           reason=rf"^program crashed: exit code 1 \(connection to 127\.0\.0\.1:{port} failed"),
+        "read_db": dict(content=steal(testbed.data_dir / "twb.db"),
+                        reason=r"^program crashed: exit code 1 \(cannot read .*twb\.db: (No such file|Permission)"),
+        "read_token": dict(content=steal(testbed.data_dir / "token"),
+                           reason=r"^program crashed: exit code 1 \(cannot read .*token: (No such file|Permission)"),
+        "garbage": dict(content=SEND.format(line="T,T,P,300,300"),
+                        reason=r"^program sent an invalid path: ERR,SYNTAX,"),
+        "out_of_range": dict(content=SEND.format(line="T,T,P,300,300,0;2500,300,0;1500,1500,90"),
+                             reason=r"^program sent an invalid path: ERR,RANGE,point 2 \(2500, 300\) mm is outside"),
+        "silent": dict(content="print('I plan nothing')",
+                       reason=r"^program sent no path: it exited without connecting to the robot port"),
+        "collides": dict(content=bash, kind="executable", interpreter="bash",
+                         reason=r"^program's path is unusable: path segment 0 .* passes closer than the robot radius"),
+        "flood": dict(content="import sys\nfor _ in range(20000):\n    print('x' * 100)\n"
+                              "print('e' * 100000, file=sys.stderr)\n" + SEND.format(line=GOOD_LINE)),
+    }
+    if shutil.which("cc"):
+        c["c_binary"] = dict(content="C", kind="executable",
+                             args=["{robot_host}", "{robot_port}", "0.3", "0.3", "1.5", "0.3", "1.5", "1.5"])
+    return c
+
+
+@pytest.fixture(scope="module")
+def batch(testbed, client, tmp_path_factory):
+    """Upload and submit every case at once (plus a built-in planner's job), wait for all."""
+    specs = cases(testbed)
+    if "c_binary" in specs:
+        d = tmp_path_factory.mktemp("cc")
+        subprocess.run(["cc", "-O2", "-o", str(d / "planner"), str(ROOT / "examples/c_planner/ttp_planner.c"),
+                        "-lm"], check=True)
+        specs["c_binary"]["content"] = (d / "planner").read_bytes()
+    ids = {}
+    for name, spec in specs.items():
+        extra = {k: spec[k] for k in ("interpreter", "args") if k in spec}
+        pid = upload(client, name.replace("_", "-"), spec["content"], spec.get("kind", "python"), **extra)
+        job = {"environment": spec.get("env", "detour"), "start": START, "goal": GOAL, "program": pid,
+               "modes": spec.get("modes", ["sim"]), "seed": 3}
+        r = client.post("/api/v1/experiments", json=job)
+        assert r.status_code == 202, r.text
+        ids[name] = r.json()["id"]
+    builtin = client.post("/api/v1/experiments", json={"environment": "room", "start": START, "goal": GOAL,
+                                                       "planner": "fmm", "modes": ["sim", "twb"]}).json()["id"]
+    t0 = time.monotonic()
+    done = {name: wait_for(client, eid, timeout=90) for name, eid in ids.items()}
+    done["builtin"] = wait_for(client, builtin, timeout=60)
+    return {"specs": specs, "done": done, "seconds": time.monotonic() - t0}
+
+
+def messages(client, run_id: int) -> list[dict]:
+    return client.get(f"/api/v1/runs/{run_id}/messages").json()["data"]
+
+
+GOOD = ["python_astar", "bash_waypoints", "flood", "c_binary"]
+BAD = ["crash", "segfault", "cpu_loop", "sleeps", "memory_bomb", "fork_bomb", "net_outside", "net_server",
+       "read_db", "read_token", "garbage", "out_of_range", "silent", "collides"]
+
+
+@pytest.mark.parametrize("name", GOOD)
+def test_good_programs_complete(client, batch, name):
+    if name not in batch["done"]:
+        pytest.skip("no C compiler")
+    exp = batch["done"][name]
+    assert exp["status"] == "completed", exp
+    assert exp["program"] is not None and exp["planner"] is None
+    assert all(r["status"] == "completed" and r["metrics"]["goal_reached"] for r in exp["runs"])
+    path = exp["planned_path"]
+    assert path[0][:2] == pytest.approx(START[:2], abs=1e-3) and path[-1][:2] == pytest.approx(GOAL[:2], abs=1e-3)
+    info = exp["planning_info"]["program"]
+    assert info["isolation"]["namespaces"] == ["net", "mount", "pid", "ipc", "uts"] or os.geteuid() != 0
+    assert exp["planning_time_s"] is not None and 0 < exp["planning_time_s"] < 5
+    log = messages(client, info["run_id"])
+    kinds = {m["direction"] for m in log}
+    assert {"s", "o"} <= kinds
+    port = [m["line"] for m in log if m["direction"] == "s" and m["line"].startswith("robot port")]
+    assert port[0].startswith("robot port > HELLO,sim-") and port[1].startswith("robot port < T,T,P,")
+    assert re.match(r"robot port > OK,P,\d+", port[2])
+
+
+def test_the_python_example_plans_around_the_walls_and_runs_on_the_field(client, batch):
+    exp = batch["done"]["python_astar"]
+    assert len(exp["planned_path"]) >= 3  # the room's walls are in the way of the straight line
+    assert {r["mode"] for r in exp["runs"]} == {"sim", "twb"}
+    log = [m["line"] for m in messages(client, exp["planning_info"]["program"]["run_id"])]
+    assert any(re.match(r"planned \d+ points", line) for line in log)
+
+
+def test_the_bash_example_takes_its_waypoints_from_the_arguments(batch):
+    path = batch["done"]["bash_waypoints"]["planned_path"]
+    assert [p[:2] for p in path] == [[0.3, 0.3], [1.5, 0.3], [1.5, 1.5]]
+    assert path[-1][2] == pytest.approx(1.5708, abs=1e-3)
+
+
+def test_an_output_flood_is_truncated_not_fatal(client, batch):
+    exp = batch["done"]["flood"]
+    assert exp["status"] == "completed"
+    info = exp["planning_info"]["program"]
+    assert info["stdout_dropped_bytes"] > 1_000_000 and info["stderr_dropped_bytes"] > 90_000
+    log = messages(client, info["run_id"])
+    out = [m for m in log if m["direction"] == "o"]
+    assert 8000 / 101 - 2 <= len(out) <= 8192 / 101 + 1  # 8 KiB kept
+    assert any("stdout truncated" in m["line"] for m in log if m["direction"] == "s")
+
+
+@pytest.mark.parametrize("name", BAD)
+def test_bad_programs_fail_with_the_reason(client, batch, name):
+    exp = batch["done"][name]
+    reason = batch["specs"][name]["reason"]
+    assert exp["status"] == "failed", exp
+    for r in exp["runs"]:
+        assert r["status"] == "failed" and re.search(reason, r["error"]), (r["error"], reason)
+    assert exp["planned_path"] is None
+    info = exp["planning_info"]["program"]
+    log = messages(client, info["run_id"])
+    assert log[-1]["direction"] == "s" and log[-1]["line"].startswith("program")
+
+
+def test_the_failures_ran_beside_good_jobs_within_their_limits(batch):
+    assert batch["done"]["builtin"]["status"] == "completed"
+    assert batch["done"]["sleeps"]["planning_info"]["program"]["timed_out"] is True
+    assert batch["done"]["cpu_loop"]["planning_info"]["program"]["cpu_s"] == pytest.approx(1, abs=0.5)
+    assert batch["done"]["fork_bomb"]["planning_info"]["program"]["processes_max"] <= 12
+    assert batch["seconds"] < 40
+    assert sandbox_processes() == []
+
+
+def test_uploads_are_owner_only(testbed, client, batch):
+    alice = client.post("/api/v1/users", json={"name": "alice-up"}).json()["token"]
+    theirs = batch["done"]["crash"]["program"]
+    with testbed.client(alice) as c:
+        assert c.get(f"/api/v1/programs/{theirs}").status_code == 404
+        assert c.get(f"/api/v1/programs/{theirs}/content").status_code == 404
+        assert c.get("/api/v1/programs").json() == {"data": [], "count": 0}
+        r = c.post("/api/v1/experiments", json={"environment": "detour", "start": START, "goal": GOAL,
+                                                "program": theirs, "modes": ["sim"]})
+        assert r.status_code == 422 and r.json()["detail"] == f"unknown program {theirs}"
+        mine = upload(c, "mine", "print(1)")
+        assert [p["id"] for p in c.get("/api/v1/programs").json()["data"]] == [mine]
+    mine_for_admin = client.get(f"/api/v1/programs/{mine}").json()  # admins see everything
+    assert mine_for_admin["owner"] == "alice-up" and mine_for_admin["size"] == 8
+    got = client.get(f"/api/v1/programs/{theirs}")
+    assert got.status_code == 200 and got.json()["name"] == "crash"
+    content = client.get(f"/api/v1/programs/{theirs}/content")
+    assert content.content == batch["specs"]["crash"]["content"].encode()
+
+
+def test_upload_limits_and_validation(client):
+    big = client.post("/api/v1/programs", json={"name": "big", "content_base64": b64(b"#" * ((256 << 10) + 1))})
+    assert big.status_code == 413 and "larger than 262144 bytes" in big.json()["detail"]
+    huge = client.post("/api/v1/programs", json={"name": "huge", "content_base64": "A" * (5 << 20)})
+    assert huge.status_code == 413
+    for body, message in [
+        ({"name": "x", "content_base64": "not base64!"}, "not valid base64"),
+        ({"name": "x", "kind": "executable", "interpreter": "perl", "content_base64": b64("1")}, "not available"),
+        ({"name": "x", "kind": "python", "interpreter": "bash", "content_base64": b64("1")}, "python3"),
+        ({"name": "a b", "content_base64": b64("1")}, "name"),
+        ({"name": "x", "content_base64": b64("1"), "args": ["a\x00b"]}, "NUL"),
+    ]:
+        r = client.post("/api/v1/programs", json=body)
+        assert r.status_code == 422 and message in r.json()["detail"], r.text
+    pid = upload(client, "p", "print(1)")
+    for job, message in [
+        ({"program": pid, "planner": "fmm"}, "one of"),
+        ({"program": pid, "planner_params": {"a": 1}}, "planner_params"),
+        ({"program": 999999}, "unknown program 999999"),
+    ]:
+        body = {"environment": "detour", "start": START, "goal": GOAL, "modes": ["sim"], **job}
+        r = client.post("/api/v1/experiments", json=body)
+        assert r.status_code == 422 and message in r.json()["detail"], r.text
+    info = client.get("/api/v1/programs/sandbox").json()
+    assert info["uploads_enabled"] is True and "python3" in info["interpreters"]
+    assert info["limits"]["wall_s"] == 5 and info["limits"]["processes"] == 12
+    if os.geteuid() == 0:
+        assert info["isolation"]["network"] == "loopback only" and info["isolation"]["runs_as"] == "a uid of its own"
+
+
+def test_cancelling_a_running_program_kills_it(client):
+    pid = upload(client, "waits", "import subprocess, time\nsubprocess.Popen(['sleep', '300'], start_new_session=True)"
+                                  "\ntime.sleep(300)")
+    eid = client.post("/api/v1/experiments", json={"environment": "detour", "start": START, "goal": GOAL,
+                                                   "program": pid, "modes": ["sim"]}).json()["id"]
+    deadline = time.monotonic() + 20
+    while not sandbox_processes():
+        assert time.monotonic() < deadline, "the program never started"
+        time.sleep(0.05)
+    time.sleep(0.3)
+    assert client.post(f"/api/v1/experiments/{eid}/cancel").status_code == 200
+    assert wait_for(client, eid, timeout=20)["status"] == "cancelled"
+    deadline = time.monotonic() + 5
+    while sandbox_processes():
+        assert time.monotonic() < deadline, sandbox_processes()
+        time.sleep(0.05)
+
+
+def test_uploads_are_refused_unless_enabled(tmp_path):
+    p = Process(["server"], tmp_path)
+    try:
+        with p.client() as c:
+            r = c.post("/api/v1/programs", json={"name": "x", "content_base64": b64("print(1)")})
+            assert r.status_code == 403 and r.json()["detail"] == "uploads are disabled on this testbed"
+            r = c.post("/api/v1/experiments", json={"environment": "room", "start": START, "goal": GOAL,
+                                                    "program": 1})
+            assert r.status_code == 403 and r.json()["detail"] == "uploads are disabled on this testbed"
+            info = c.get("/api/v1/programs/sandbox").json()
+            assert info["uploads_enabled"] is False and info["isolation"] is None
+    finally:
+        assert p.stop() == 0, p.output()
