@@ -42,6 +42,8 @@ export class ExperimentsPage {
     this.table($("#exp-queued"), queued, "Estimated start", (e) => duration(e.estimated_start_s), true);
     this.table($("#exp-running"), running, "Started", (e) => when(e.started_at || e.created_at), true);
     this.table($("#exp-finished"), finished, "Finished", (e) => when(e.finished_at), false);
+    const more = this.store.experimentCount - all.length;
+    $("#exp-more").textContent = more > 0 ? `The ${all.length} newest of ${this.store.experimentCount} experiments are listed.` : "";
   }
 
   table(el, rows, lastTitle, last, cancellable) {
@@ -124,7 +126,7 @@ export class ExperimentPage {
   skeleton(id) {
     this.els = {
       title: h("h1", { id: "experiment-title" }, `Experiment #${id}`),
-      status: h("span", {}),
+      status: h("span", { role: "status" }),
       actions: h("span", {}),
       facts: h("dl", { class: "facts" }),
       error: h("p", { class: "error", role: "alert" }),
@@ -153,6 +155,7 @@ export class ExperimentPage {
         h("div", { class: "table-scroll" }, e.direct)),
       h("div", { class: "panel" }, h("h2", {}, "Downloads"), e.downloads),
     );
+    this.map?.destroy();
     this.map = new MapView(e.canvas, { world: SUBFIELD_SIZE });
   }
 
@@ -338,8 +341,8 @@ export class ExperimentPage {
         if (blob) saveBlob(blob, `experiment-${id}-paths.png`);
       } }, "Path figure (PNG)"),
       h("button", { type: "button", class: "small", onclick: () => this.saveCharts(id) }, "Charts (SVG)"),
-      h("span", { class: "muted small" }, "Per-run poses and messages: in the runs table. Replay GIFs: ",
-        h("code", {}, "twb replay"), " on your machine."),
+      h("span", { class: "muted small" }, "Per-run poses and messages: in the runs table. A run's replay GIF: ",
+        h("code", {}, `twb replay ${this.runs().find((r) => r.t_start != null)?.id ?? "RUN_ID"} -o run.gif`), " on your machine."),
     );
   }
 

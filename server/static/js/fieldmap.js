@@ -37,6 +37,13 @@ export class MapView {
     this.observer.observe(canvas);
   }
 
+  /** Stop following the canvas's size (before dropping the view). */
+  destroy() {
+    this.observer.disconnect();
+    if (this.frame) cancelAnimationFrame(this.frame);
+    this.frame = 0;
+  }
+
   setWorld(world) {
     this.world = world;
     this.render();
@@ -188,7 +195,7 @@ export class MapView {
         ctx.font = "600 11px system-ui, sans-serif";
         ctx.textBaseline = "middle";
         const tw = ctx.measureText(m.label).width;
-        const right = X(m.x) + r + 4 + tw < g.cssW - 2;
+        const right = X(m.x) + r + 4 + tw < X(w) - 4;
         ctx.textAlign = right ? "left" : "right";
         ctx.fillText(m.label, right ? X(m.x) + r + 4 : X(m.x) - r - 4, Y(m.y) + r + 2);
         ctx.textAlign = "left";

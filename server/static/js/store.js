@@ -14,7 +14,9 @@ export const SUBFIELD_SIZE = [1.8, 1.8];
 export const FIELD_SIZE = [3.6, 3.6];
 /** Where a robot stands after start-up, in its own frame (docs/protocol.md). */
 const HOME = [0.1, 0.1, 0];
-const MAX_TRACE = 20000;
+const MAX_TRACE = 20000; // points of one live trace
+const MAX_TRACES = 64;
+const MAX_DETAILS = 200;
 
 export class Store extends EventTarget {
   constructor(api) {
@@ -214,6 +216,7 @@ export class Store extends EventTarget {
     }
     const old = this.traces.get(runId);
     if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true });
+    this.prune();
     const last = res.poses[res.poses.length - 1];
     if (last && this.isFieldRobot(run.robot_id)) {
       const cur = this.poses.get(run.robot_id);
@@ -223,6 +226,19 @@ export class Store extends EventTarget {
       }
     }
     this.emit("field");
+  }
+
+  /** Forget traces no sub-field shows and old experiment details, so a long session stays small. */
+  prune() {
+    const shown = new Set(this.subfieldRun.values());
+    for (const id of this.traces.keys()) {
+      if (this.traces.size <= MAX_TRACES) break;
+      if (!shown.has(id)) this.traces.delete(id);
+    }
+    for (const id of this.details.keys()) {
+      if (this.details.size <= MAX_DETAILS) break;
+      this.details.delete(id);
+    }
   }
 
   /** Field robots never seen moving: their last logged pose, else where they start up. */
@@ -292,6 +308,7 @@ export class Store extends EventTarget {
       if (!tr) {
         tr = { robot_id: ev.robot_id, points: [], exact: false };
         this.traces.set(ev.run_id, tr);
+        this.prune();
       }
       if (!tr.exact && tr.points.length < MAX_TRACE) tr.points.push([ev.x, ev.y]);
     }
