@@ -37,39 +37,20 @@ import httpx  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench._common import report  # noqa: E402
+from twb.launch import LocalTestbed  # noqa: E402
 
 TOKEN = "bench-token"
-TWB = Path(sys.executable).with_name("twb")
 SLOW_ENV = {"name": "bench-open", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.1, "h": 0.1}]}
 
 
-class Testbed:
-    """`twb up` in a subprocess; ``url`` once it listens."""
+class Testbed(LocalTestbed):
+    """`twb up` in a subprocess with the benchmark's token."""
 
     def __init__(self, data_dir: Path, *args: str) -> None:
-        data_dir.mkdir(parents=True, exist_ok=True)
-        self.log = data_dir / "out.log"
-        self._out = open(self.log, "w")
-        self.proc = subprocess.Popen([str(TWB), "up", "--port", "0", "--data-dir", str(data_dir), "--token", TOKEN,
-                                      *args], stdout=self._out, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            m = re.search(r"(http://127\.0\.0\.1:\d+)", self.log.read_text())
-            if m and "Ctrl-C" in self.log.read_text():
-                self.url = m.group(1)
-                return
-            if self.proc.poll() is not None:
-                break
-            time.sleep(0.1)
-        raise RuntimeError(f"twb up did not start:\n{self.log.read_text()}")
+        super().__init__(data_dir, *args, token=TOKEN)
 
     def client(self) -> httpx.Client:
         return httpx.Client(base_url=self.url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=60)
-
-    def stop(self) -> None:
-        self.proc.terminate()
-        self.proc.wait(30)
-        self._out.close()
 
 
 def wait_status(c: httpx.Client, eid: int, wanted: set[str], timeout: float = 120) -> dict:

@@ -2,64 +2,27 @@
 
 from __future__ import annotations
 
-import os
-import re
-import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import httpx
 
+from twb.launch import LocalTestbed
+
 TWB = Path(sys.executable).with_name("twb")
 TOKEN = "test-admin-token"
 
 
-class Process:
-    """A running `twb` server; ``url``, ``token``, ``client()``; ``stop()`` sends SIGINT like Ctrl-C."""
+class Process(LocalTestbed):
+    """A running `twb` server for tests (the project's :class:`~twb.launch.LocalTestbed`), token ``TOKEN``."""
 
     def __init__(self, args: list[str], data_dir: Path, timeout: float = 60.0) -> None:
-        self.data_dir = data_dir
-        self.token = TOKEN
-        self.log = data_dir / "stdout.log"
-        data_dir.mkdir(parents=True, exist_ok=True)
-        self._out = open(self.log, "w")
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        self.proc = subprocess.Popen([str(TWB), *args, "--port", "0", "--data-dir", str(data_dir), "--token", TOKEN],
-                                     stdout=self._out, stderr=subprocess.STDOUT, env=env)
-        deadline = time.monotonic() + timeout
-        self.url = ""
-        while time.monotonic() < deadline:
-            text = self.log.read_text()
-            m = re.search(r"(http://127\.0\.0\.1:\d+)", text)
-            if m and ("Ctrl-C" in text or "API docs" in text):
-                self.url = m.group(1)
-                break
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"twb {args[0]} exited with {self.proc.returncode}:\n{text}")
-            time.sleep(0.1)
-        else:
-            self.stop()
-            raise RuntimeError(f"twb {args[0]} did not start within {timeout} s:\n{self.log.read_text()}")
+        super().__init__(data_dir, *args[1:], command=args[0], token=TOKEN, timeout=timeout)
 
     def client(self, token: str | None = TOKEN, **kw) -> httpx.Client:
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         return httpx.Client(base_url=self.url, headers=headers, timeout=30, **kw)
-
-    def stop(self, sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self._out.close()
-        return self.proc.returncode
-
-    def output(self) -> str:
-        return self.log.read_text()
 
 
 def wait_for(client: httpx.Client, experiment_id: int, timeout: float = 60.0, terminal=None) -> dict:

@@ -3,12 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import os
-import re
-import secrets
-import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Annotated, Iterator, Optional
@@ -24,42 +18,14 @@ __all__ = ["embedded_testbed", "export_ompl", "study"]
 @contextlib.contextmanager
 def embedded_testbed(data_dir: Path, *, sim_robots: int = 4, timeout: float = 60.0) -> Iterator[tuple[str, str]]:
     """Run ``twb up --time-scale max --port 0`` as a child process; yields (url, token), stops it after."""
-    data_dir.mkdir(parents=True, exist_ok=True)
-    token = secrets.token_urlsafe(24)
-    log_path = data_dir / "stdout.log"
-    log = open(log_path, "w")
-    cmd = [sys.executable, "-m", "twb", "up", "--time-scale", "max", "--port", "0", "--data-dir", str(data_dir),
-           "--token", token, "--sim-robots", str(sim_robots)]
-    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    from .launch import LaunchError, LocalTestbed
+
     try:
-        deadline = time.monotonic() + timeout
-        url = None
-        while url is None:
-            text = log_path.read_text()
-            m = re.search(r"Teleworkbench is up: (http://\S+)", text)
-            if m:
-                url = m.group(1)
-            elif proc.poll() is not None:
-                fail(f"the embedded testbed exited with status {proc.returncode}: {_last_line(text)} (log: {log_path})")
-            elif time.monotonic() > deadline:
-                fail(f"the embedded testbed did not start within {timeout:g} s (log: {log_path})")
-            else:
-                time.sleep(0.1)
-        yield url, token
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        log.close()
-
-
-def _last_line(text: str) -> str:
-    lines = [ln for ln in text.strip().splitlines() if ln.strip()]
-    return lines[-1] if lines else "(no output)"
+        tb = LocalTestbed(data_dir, "--time-scale", "max", "--sim-robots", str(sim_robots), timeout=timeout)
+    except LaunchError as exc:
+        fail(f"the embedded testbed did not start: {exc}")
+    with tb:
+        yield tb.url, tb.token
 
 
 def study(
