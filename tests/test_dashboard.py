@@ -1,9 +1,9 @@
 """The web dashboard in a real browser: Debian's Chromium driven by Playwright against a real `twb up`.
 
 Screenshots go to ``tests/output/dashboard/`` (``TWB_TEST_OUTPUT`` overrides the
-``tests/output`` part).  Without ``/usr/bin/chromium`` (or the ``playwright``
-package) the browser tests skip, unless ``CI`` or ``TWB_REQUIRE_BROWSER`` is set,
-when they fail: CI must really run them.  The tests without a browser (files
+``tests/output`` part).  Without ``/usr/bin/chromium`` (``TWB_CHROMIUM`` names another
+binary) or the ``playwright`` package the browser tests skip, unless ``CI`` or
+``TWB_REQUIRE_BROWSER`` is set, when they fail: CI must really run them.  The tests without a browser (files
 served, path traversal, the planners list) always run.
 """
 
@@ -18,7 +18,7 @@ import pytest
 
 from servers import TOKEN, Process, wait_for
 
-CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM = Path(os.environ.get("TWB_CHROMIUM") or "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"]
 OUTPUT = Path(os.environ.get("TWB_TEST_OUTPUT") or Path(__file__).parent / "output") / "dashboard"
 LAPTOP = {"width": 1366, "height": 900}
@@ -60,12 +60,14 @@ def testbed(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def browser(testbed):
+def browser(request):
     reason = _missing_browser()
     if reason:
         if REQUIRE_BROWSER:
             pytest.fail(f"browser tests are required here (CI / TWB_REQUIRE_BROWSER) but {reason}")
         pytest.skip(reason)
+    # the server starts before the browser and stops after it (no open event stream to wait for)
+    request.getfixturevalue("testbed")
     from playwright.sync_api import sync_playwright
 
     OUTPUT.mkdir(parents=True, exist_ok=True)
@@ -333,6 +335,26 @@ def test_keyboard_only_placement_and_submit(page, testbed):
     expect(page.locator("#view-experiment")).to_be_visible()
     expect(page.locator("#view-experiment .exp-head .badge")).to_have_text("completed", timeout=60_000)
     assert page.console.errors == []
+
+
+def test_a_user_sees_the_field_but_only_their_own_experiments(page, testbed):
+    from playwright.sync_api import expect
+
+    with testbed.client() as c:
+        user = c.post("/api/v1/users", json={"name": "dash-user"}).json()
+        theirs = c.post("/api/v1/experiments", json={"environment": "room", "start": [0.3, 0.3], "goal": [0.6, 0.3],
+                                                      "planner": "astar", "modes": ["sim"]}).json()
+    login(page, testbed.url, user["token"])
+    expect(page.locator("#user-name")).to_have_text("dash-user")
+    expect(page.locator("#subfield-table tbody tr")).to_have_count(4)
+    page.wait_for_timeout(300)
+    assert count_pixels(page, "#field-canvas", ROBOT_RGB) + count_pixels(page, "#field-canvas", ROBOT_GHOST_RGB) > 40
+    page.click("#nav a[data-view=experiments]")
+    expect(page.locator("#exp-finished tbody tr.empty-row")).to_have_count(1)
+    page.goto(f"{testbed.url}/#/experiments/{theirs['id']}")
+    expect(page.locator("#view-experiment .error")).to_contain_text("Experiment not found")
+    # the browser's note on the 404 for someone else's experiment is the only console error
+    assert page.console.unexpected("status of 404") == []
 
 
 def test_tablet_width_layout(browser, testbed):
