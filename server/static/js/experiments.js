@@ -9,6 +9,12 @@ import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
 const MODE_COLOR = { sim: COLORS.sim, twb: COLORS.twb };
 
+/** What planned the job: a planner, an uploaded program, or the user's explicit path. */
+export function plannerName(e) {
+  if (e.planner) return e.planner;
+  return e.program != null ? `uploaded program #${e.program}` : "explicit path";
+}
+
 async function cancel(store, id) {
   try {
     await store.api.post(`/api/v1/experiments/${id}/cancel`);
@@ -53,7 +59,7 @@ export class ExperimentsPage {
       h("td", {}, h("a", { href: `#/experiments/${e.id}` }, `#${e.id}`)),
       h("td", {}, badge(e.status)),
       h("td", {}, e.environment),
-      h("td", {}, e.planner || "explicit path"),
+      h("td", {}, plannerName(e)),
       h("td", {}, e.modes.join(" + ")),
       h("td", { class: "num" }, e.repetitions),
       h("td", {}, e.field),
@@ -189,7 +195,7 @@ export class ExperimentPage {
     e.actions.replaceChildren(TERMINAL.has(d.status) ? "" :
       h("button", { type: "button", onclick: () => cancel(this.store, d.id) }, "Cancel experiment"));
     const facts = [
-      ["Environment", d.environment], ["Field", d.field], ["Planner", d.planner || "explicit path"],
+      ["Environment", d.environment], ["Field", d.field], ["Planner", plannerName(d)],
       ["Parameters", Object.keys(d.planner_params || {}).length ? JSON.stringify(d.planner_params) : "defaults"],
       ["Start (x, y, θ)", pose(d.start)], ["Goal (x, y, θ)", pose(d.goal)], ["Modes", d.modes.join(" + ")],
       ["Repetitions", d.repetitions], ["Seed", d.seed], ["Owner", d.owner],
