@@ -9,7 +9,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
-from .api.routes import dashboard, environments, events, experiments, field, health, programs, runs, users
+from .api.routes import dashboard, environments, events, experiments, field, health, planners, programs, runs, users
 from .core.settings import Settings
 from .testbed import Testbed
 
@@ -105,7 +105,7 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
 
     app.include_router(health.router)
     app.include_router(dashboard.router)
-    for module in (users, environments, experiments, runs, field, events, programs):
+    for module in (users, environments, experiments, runs, field, events, planners, programs):
         app.include_router(module.router, prefix=API_PREFIX)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     return app

@@ -122,6 +122,8 @@ async def _finish(ctx: RunContext, status: str, error: str) -> None:
         extra = {"error": error} if error else {}
         await tb.update_run(ctx.run_id, status=status, finished_at=utcnow(), **extra)
     tb.scheduler.release(ctx.run_id)
+    for k in ctx.a.subfields:  # tell the dashboards the sub-field is free again
+        tb.set_subfield(k, state="idle", run_id=None)
     tb.wake()
 
 

@@ -322,6 +322,8 @@ class RobotPublic(BaseModel):
     pool: str
     status: str
     last_seen: UTCDateTime
+    last_pose: Optional[list[float]] = Field(
+        default=None, description="Last tracked pose [t, x, y, theta] in field coordinates (s, m, rad), if any.")
 
 
 class SubfieldPublic(BaseModel):

@@ -423,13 +423,12 @@ class Testbed:
         self.broker.publish({"type": "robot", "robot_id": body.robot_id})
         return self._robot_view(slot)
 
-    @staticmethod
-    def _robot_view(slot: RobotSlot) -> RobotPublic:
+    def _robot_view(self, slot: RobotSlot) -> RobotPublic:
         status = "offline" if not slot.healthy else ("busy" if slot.run_id is not None else "idle")
         return RobotPublic(robot_id=slot.robot_id, host=slot.host, port=slot.port, platform=slot.platform,
                            backend=slot.backend, profile=slot.profile, origin=list(slot.origin),
                            area=list(slot.area), subfield=slot.subfield, pool=slot.pool, status=status,
-                           last_seen=utcnow())
+                           last_seen=utcnow(), last_pose=self.router.last_pose(slot.robot_id))
 
     def _origin_of(self, robot_id: str) -> tuple[float, float]:
         r = self.scheduler.robots.get(robot_id)

@@ -44,6 +44,7 @@ class PoseRouter:
         self._windows: dict[str, _Window] = {}
         self._last_t: dict[str, float] = {}
         self._last_live: dict[str, float] = {}
+        self._last_pose: dict[str, list[float]] = {}
         self._waiters: dict[str, list[tuple[float, asyncio.Future, asyncio.AbstractEventLoop]]] = {}
         self.dropped = 0
 
@@ -60,6 +61,10 @@ class PoseRouter:
 
     def last_time(self, robot_id: str) -> Optional[float]:
         return self._last_t.get(robot_id)
+
+    def last_pose(self, robot_id: str) -> Optional[list[float]]:
+        """The robot's last tracked pose ``[t, x, y, theta]`` in field coordinates, if any."""
+        return self._last_pose.get(robot_id)
 
     async def wait_for_time(self, robot_id: str, t: float, timeout_s: float) -> bool:
         """Wait until a pose of ``robot_id`` at experiment time >= ``t`` has arrived (or time out)."""
@@ -104,6 +109,9 @@ class PoseRouter:
         else:
             self.dropped += len(rows)
         last = float(rows[:, 0].max())
+        t_last, x_last, y_last, a_last = (float(v) for v in rows[-1])
+        ox, oy = self._origin_of(robot_id)
+        self._last_pose[robot_id] = [t_last, x_last + ox, y_last + oy, a_last]
         wake = []
         with self._lock:
             self._last_t[robot_id] = max(self._last_t.get(robot_id, -float("inf")), last)
@@ -115,11 +123,10 @@ class PoseRouter:
         now = time.monotonic()
         if now - self._last_live.get(robot_id, 0.0) >= _LIVE_INTERVAL_S:
             self._last_live[robot_id] = now
-            t, x, y, a = (float(v) for v in rows[-1])
-            ox, oy = self._origin_of(robot_id)
             self._broker.publish({
                 "type": "pose", "robot_id": robot_id, "run_id": w.run_id if w else None,
-                "owner_id": w.owner_id if w else None, "t": t, "x": x + ox, "y": y + oy, "theta": a,
+                "owner_id": w.owner_id if w else None, "t": t_last, "x": x_last + ox, "y": y_last + oy,
+                "theta": a_last,
             })
         return stored, (w.run_id if w else None)
 

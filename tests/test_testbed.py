@@ -286,3 +286,20 @@ def test_a_robot_dying_mid_run_is_an_error_retried_once_on_another_robot(tmp_pat
         for a in agents.values():
             a.kill()
         server.stop()
+
+
+def test_planners_robot_positions_and_incremental_poses(client):
+    planners = {p["name"]: p for p in client.get("/api/v1/planners").json()["data"]}
+    assert {"fmm", "fm2", "prm", "astar"} <= set(planners)
+    assert planners["prm"]["defaults"] == {"samples": 500, "k": 10}
+    job = {**JOB, "modes": ["twb"], "repetitions": 1, "seed": 5}
+    run = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)["runs"][0]
+    robot = next(r for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])
+    t, x, y, _ = robot["last_pose"]  # field coordinates: the sub-field's origin is added
+    sub = client.get("/api/v1/subfields").json()["data"][run["subfield"] - 1]
+    assert abs(x - (sub["origin"][0] + 1.5)) < 0.05 and abs(y - (sub["origin"][1] + 1.5)) < 0.05
+    assert sub["state"] == "idle" and sub["run_id"] is None
+    poses = client.get(f"/api/v1/runs/{run['id']}/poses").json()["poses"]
+    middle = poses[len(poses) // 2][0]
+    later = client.get(f"/api/v1/runs/{run['id']}/poses", params={"after_t": middle}).json()
+    assert later["count"] == sum(p[0] > middle for p in poses) and later["poses"][0][0] > middle

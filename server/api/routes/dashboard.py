@@ -60,20 +60,3 @@ def static_file(path: str) -> FileResponse:
     if not target.is_relative_to(STATIC_DIR) or not target.is_file() or target.suffix not in _TYPES:
         raise HTTPException(404, "Not found")
     return _file(target)
-
-
-@router.get("/dashboard/planners", include_in_schema=False)
-def planners(_: CurrentUser) -> dict:
-    """Planners the server knows, their description and parameter defaults (the submit form's hints)."""
-    from planners import get_planner
-    from planners.registry import available_planners
-
-    out = []
-    for name in available_planners():
-        try:
-            p = get_planner(name)
-        except Exception:  # a broken plug-in must not break the form
-            continue
-        out.append({"name": name, "description": p.description,
-                    "defaults": dict(p.defaults) if p.defaults is not None else None})
-    return {"data": out, "count": len(out)}

@@ -138,7 +138,8 @@ def experiment_metrics(experiment_id: int, session: SessionDep, user: CurrentUse
     per_run = [{"run_id": r.id, "mode": r.mode, "repetition": r.repetition, "status": r.status,
                 "metrics": r.metrics or {}} for r in runs]
     done = [r for r in runs if r.status == "completed" and r.metrics]
-    records = [{"mode": r.mode, **{k: v for k, v in r.metrics.items() if not isinstance(v, dict)}} for r in done]
+    records = [{"mode": r.mode, **{k: v for k, v in r.metrics.items() if not isinstance(v, dict) and k != "poses"}}
+               for r in done]
     aggregates = {g["mode"]: {"runs": g["runs"], "metrics": g["metrics"]}
                   for g in aggregate(records, by=("mode",))} if records else {}
     direct = []

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import io
-from typing import Literal
+from typing import Literal, Optional
 
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import PlainTextResponse
@@ -42,6 +42,8 @@ def get_poses(
     session: SessionDep,
     user: CurrentUser,
     format: Literal["json", "csv"] = Query(default="json", description="json or csv (header t,x,y,theta)."),
+    after_t: Optional[float] = Query(default=None, allow_inf_nan=False,
+                                     description="Only poses later than this experiment time (s): for polling."),
 ):
     """Logged poses of a run, oldest first: tracker measurements (twb) or ground truth (sim).
 
@@ -49,7 +51,10 @@ def get_poses(
     theta in radians, in the frame of the experiment's field.
     """
     owned_run(session, user, run_id)
-    rows = session.execute(select(Pose.t, Pose.x, Pose.y, Pose.theta).where(Pose.run_id == run_id).order_by(Pose.t)).all()
+    q = select(Pose.t, Pose.x, Pose.y, Pose.theta).where(Pose.run_id == run_id)
+    if after_t is not None:
+        q = q.where(Pose.t > after_t)
+    rows = session.execute(q.order_by(Pose.t)).all()
     if format == "csv":
         buf = io.StringIO()
         buf.write("t,x,y,theta\n")

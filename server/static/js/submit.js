@@ -42,7 +42,7 @@ export class SubmitPage {
       try {
         const [envs, planners] = await Promise.all([
           this.store.api.get("/api/v1/environments?limit=1000"),
-          this.store.api.get("/dashboard/planners").catch(() => ({ data: ["fmm", "fm2", "prm", "astar"].map((name) => ({ name, description: "", defaults: {} })) })),
+          this.store.api.get("/api/v1/planners").catch(() => ({ data: ["fmm", "fm2", "prm", "astar"].map((name) => ({ name, description: "", defaults: {} })) })),
         ]);
         this.envs = envs.data;
         this.planners = planners.data;
