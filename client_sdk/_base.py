@@ -10,11 +10,15 @@ become the SDK's exceptions in :func:`raise_for_status` and
 
 from __future__ import annotations
 
+import base64
 import contextlib
+import os
+import re
 import sys
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Mapping, Optional
+from pathlib import Path
+from typing import Any, Callable, Iterator, Mapping, Optional, Sequence
 
 import httpx
 import numpy as np
@@ -28,6 +32,7 @@ from ._models import (
     ExperimentSummary,
     Message,
     Page,
+    Program,
     Robot,
     Run,
     Subfield,
@@ -113,6 +118,33 @@ def _plain(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
     return value
+
+
+def program_body(program: str | os.PathLike[str] | bytes, name: Optional[str], kind: Optional[str],
+                 interpreter: Optional[str], args: Sequence[str]) -> dict[str, Any]:
+    """The upload body of ``POST /api/v1/programs`` from a file (or its bytes) and how to run it.
+
+    ``name`` defaults to the file's name; ``kind`` to ``python`` for a
+    ``.py`` file and ``executable`` otherwise.
+    """
+    if isinstance(program, bytes):
+        if not name:
+            raise ValueError("give a `name` when uploading a program's bytes")
+        content = program
+    else:
+        path = Path(program)
+        try:
+            content = path.read_bytes()
+        except OSError as exc:
+            raise TwbError(f"cannot read program {path}: {exc.strerror or exc}") from exc
+        name = name or re.sub(r"[^A-Za-z0-9_.+-]", "_", path.name)[:100]
+        kind = kind or ("python" if path.suffix == ".py" and interpreter is None else None)
+    kind = kind or "executable"
+    body: dict[str, Any] = {"name": name, "kind": kind, "args": [str(a) for a in args],
+                            "content_base64": base64.b64encode(content).decode()}
+    if interpreter is not None:
+        body["interpreter"] = interpreter
+    return body
 
 
 class BaseClient:
@@ -206,6 +238,18 @@ class BaseClient:
 
     def _list_robots(self) -> Call:
         return Call("GET", f"{API_PREFIX}/robots", lambda r: _page(Robot.from_json)(r).data)
+
+    def _upload_program(self, body: dict[str, Any]) -> Call:
+        return Call("POST", f"{API_PREFIX}/programs", _one(Program.from_json), json=body)
+
+    def _list_programs(self, offset: int, limit: int) -> Call:
+        return Call("GET", f"{API_PREFIX}/programs", _page(Program.from_json), params={"offset": offset, "limit": limit})
+
+    def _get_program(self, program_id: int) -> Call:
+        return Call("GET", f"{API_PREFIX}/programs/{int(program_id)}", _one(Program.from_json))
+
+    def _sandbox_info(self) -> Call:
+        return Call("GET", f"{API_PREFIX}/programs/sandbox", _json)
 
     def _me(self) -> Call:
         return Call("GET", f"{API_PREFIX}/users/me", _one(User.from_json))

@@ -8,13 +8,14 @@ its twin in the base class describes.
 from __future__ import annotations
 
 import asyncio
+import os
 import time
 from typing import Any, Literal, Mapping, Optional, Sequence, overload
 
 import httpx
 import numpy as np
 
-from ._base import BaseClient, Call, Waiter, translate_errors
+from ._base import BaseClient, Call, Waiter, program_body, translate_errors
 from ._models import (
     Environment,
     Experiment,
@@ -22,6 +23,7 @@ from ._models import (
     ExperimentSummary,
     Message,
     Page,
+    Program,
     Robot,
     Run,
     Subfield,
@@ -115,26 +117,56 @@ class Client(BaseClient):
         """Add an environment file (DESIGN §3); :class:`Conflict` if the name is taken."""
         return self._send(self._create_environment(environment))
 
+    # ------------------------------------------------------------------ uploaded programs
+
+    def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
+                       kind: Optional[str] = None, interpreter: Optional[str] = None,
+                       args: Sequence[str] = ()) -> Program:
+        """Upload a planner program (docs/uploads.md); returns it with its ``id`` for ``submit(program=)``.
+
+        ``program`` is a file (``name`` defaults to its name; ``kind`` to
+        ``python`` for ``.py``, else ``executable``) or its bytes (give
+        ``name``).  ``interpreter`` runs an executable with ``sh``, ``bash``
+        or ``python3``; ``args`` may name inputs such as ``{robot_port}``.
+        :class:`Forbidden` when the testbed has uploads disabled,
+        :class:`TooLarge` over its size limit.
+        """
+        return self._send(self._upload_program(program_body(program, name, kind, interpreter, args)))
+
+    def list_programs(self, *, offset: int = 0, limit: int = 50) -> Page[Program]:
+        """Your uploaded programs, newest first."""
+        return self._send(self._list_programs(offset, limit))
+
+    def get_program(self, program_id: int) -> Program:
+        """One of your programs (:class:`NotFound` for anybody else's)."""
+        return self._send(self._get_program(program_id))
+
+    def sandbox_info(self) -> dict[str, Any]:
+        """Whether uploads are enabled, the interpreters, limits and isolation of the testbed's sandbox."""
+        return self._send(self._sandbox_info())
+
     # ------------------------------------------------------------------ experiments
 
     def submit(self, environment: str | Mapping[str, Any], start: Optional[Pose] = None, goal: Optional[Pose] = None,
                planner: Optional[str] = None, *, path: Optional[Sequence[Pose] | np.ndarray] = None,
                planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                repetitions: Optional[int] = None, seed: Optional[int] = None,
-               field: Optional[str] = None) -> Experiment:
+               field: Optional[str] = None, program: Optional[int] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
         file) that the keyword arguments then override.  Poses are
         ``[x, y]`` or ``[x, y, theta]`` (m, rad); give ``planner`` (default
-        ``fmm`` on the server) or an explicit ``path``.  Omitted fields take
+        ``fmm`` on the server), an explicit ``path`` or an uploaded
+        ``program``'s id (:meth:`upload_program`).  Omitted fields take
         the server's defaults (modes sim and twb, 1 repetition, seed 0,
         ``field="sub"``).  :class:`ValidationError` carries the server's
         reason when the job cannot run.
         """
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
-                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field)
+                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
+                      program=program)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -262,12 +294,31 @@ class AsyncClient(BaseClient):
                      path: Optional[Sequence[Pose] | np.ndarray] = None,
                      planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                      repetitions: Optional[int] = None, seed: Optional[int] = None,
-                     field: Optional[str] = None) -> Experiment:
+                     field: Optional[str] = None, program: Optional[int] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
-                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field)
+                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
+                      program=program)
         return await self._send(self._submit(job, fields))
+
+    async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
+                             kind: Optional[str] = None, interpreter: Optional[str] = None,
+                             args: Sequence[str] = ()) -> Program:
+        """See :meth:`Client.upload_program`."""
+        return await self._send(self._upload_program(program_body(program, name, kind, interpreter, args)))
+
+    async def list_programs(self, *, offset: int = 0, limit: int = 50) -> Page[Program]:
+        """See :meth:`Client.list_programs`."""
+        return await self._send(self._list_programs(offset, limit))
+
+    async def get_program(self, program_id: int) -> Program:
+        """See :meth:`Client.get_program`."""
+        return await self._send(self._get_program(program_id))
+
+    async def sandbox_info(self) -> dict[str, Any]:
+        """See :meth:`Client.sandbox_info`."""
+        return await self._send(self._sandbox_info())
 
     async def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
                                limit: int = 50) -> Page[ExperimentSummary]:

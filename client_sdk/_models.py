@@ -27,6 +27,7 @@ __all__ = [
     "ModeAggregate",
     "Page",
     "Plan",
+    "Program",
     "Robot",
     "Run",
     "RunMetrics",
@@ -158,6 +159,7 @@ class ExperimentSummary(_FromJson):
     environment: str
     owner: str = ""
     planner: Optional[str] = None
+    program: Optional[int] = None
     modes: list[str] = _field(default_factory=list)
     repetitions: int = 1
     field: str = "sub"
@@ -324,6 +326,23 @@ class Robot(_FromJson):
     last_seen: Optional[datetime] = None
 
     _conv = {"last_seen": _dt}
+
+
+@dataclass
+class Program(_FromJson):
+    """An uploaded planner program (docs/uploads.md): how it runs, not its content."""
+
+    id: int
+    name: str
+    kind: str
+    owner: str = ""
+    interpreter: Optional[str] = None
+    args: list[str] = _field(default_factory=list)
+    size: int = 0
+    sha256: str = ""
+    created_at: Optional[datetime] = None
+
+    _conv = {"created_at": _dt}
 
 
 @dataclass

@@ -200,7 +200,7 @@ def test_good_programs_complete(client, batch, name):
     kinds = {m["direction"] for m in log}
     assert {"s", "o"} <= kinds
     port = [m["line"] for m in log if m["direction"] == "s" and m["line"].startswith("robot port")]
-    assert port[0].startswith("robot port > HELLO,sim-") and port[1].startswith("robot port < T,T,P,")
+    assert re.match(r"robot port > HELLO,(sim|field)-\d+,", port[0]) and port[1].startswith("robot port < T,T,P,")
     assert re.match(r"robot port > OK,P,\d+", port[2])
 
 
@@ -319,7 +319,7 @@ def test_cancelling_a_running_program_kills_it(client):
         time.sleep(0.05)
 
 
-def test_uploads_are_refused_unless_enabled(tmp_path):
+def test_uploads_are_refused_unless_enabled(tmp_path, twb):
     p = Process(["server"], tmp_path)
     try:
         with p.client() as c:
@@ -330,5 +330,47 @@ def test_uploads_are_refused_unless_enabled(tmp_path):
             assert r.status_code == 403 and r.json()["detail"] == "uploads are disabled on this testbed"
             info = c.get("/api/v1/programs/sandbox").json()
             assert info["uploads_enabled"] is False and info["isolation"] is None
+        prog = tmp_path / "p.py"
+        prog.write_text("print(1)")
+        r = twb("upload", str(prog), "--url", p.url, "--token", p.token)
+        assert r.returncode != 0 and "uploads are disabled on this testbed" in r.stderr and "Traceback" not in r.stderr
     finally:
         assert p.stop() == 0, p.output()
+
+
+def test_sdk_and_cli_upload_and_submit(testbed, client, tmp_path, twb):
+    import asyncio
+
+    from client_sdk import AsyncClient, Client, NotFound
+
+    planner = tmp_path / "detour_planner.sh"
+    planner.write_text(doc_example("upload-bash"))
+    with Client(testbed.url, testbed.token) as c:
+        prog = c.upload_program(planner, interpreter="bash", args=["1.5,0.3"])
+        assert (prog.name, prog.kind, prog.interpreter, prog.args) == ("detour_planner.sh", "executable", "bash",
+                                                                        ["1.5,0.3"])
+        assert c.get_program(prog.id).sha256 == prog.sha256 and prog.id in [p.id for p in c.list_programs()]
+        exp = c.wait(c.submit("detour", START, GOAL, program=prog.id, modes=["sim"]).id, timeout=60)
+        assert exp.status == "completed" and exp.program == prog.id
+        assert exp.planned_path[:, :2].tolist() == [[0.3, 0.3], [1.5, 0.3], [1.5, 1.5]]
+        assert c.sandbox_info()["uploads_enabled"] is True
+        with pytest.raises(NotFound):
+            c.get_program(999999)
+
+    async def upload_bytes() -> int:
+        async with AsyncClient(testbed.url, testbed.token) as ac:
+            p = await ac.upload_program(b"print('hi')", name="hi")
+            assert p.kind == "executable" and (await ac.get_program(p.id)).size == 11
+            return p.id
+
+    assert asyncio.run(upload_bytes()) > 0
+
+    py = tmp_path / "astar.py"
+    py.write_text(doc_example("upload-python"))
+    r = twb("upload", str(py), "--url", testbed.url, "--token", testbed.token)
+    assert r.returncode == 0, r.stderr
+    m = re.fullmatch(r'Uploaded program (\d+): astar\.py, python, \d+ bytes\. Use it in a job as "program": \1\.\n',
+                     r.stdout)
+    assert m, r.stdout
+    r = twb("upload", str(tmp_path / "missing.py"), "--url", testbed.url, "--token", testbed.token)
+    assert r.returncode != 0 and r.stderr.strip().endswith("missing.py") and "Traceback" not in r.stderr

@@ -10,7 +10,7 @@ import sys
 
 import typer
 
-from . import agent_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, replay_cmd, server_cmd, study_cmd
+from . import agent_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, replay_cmd, server_cmd, study_cmd, upload_cmd
 from .errors import report_exception
 
 app = typer.Typer(
@@ -35,6 +35,7 @@ app.command("wait")(jobs_cmd.wait)
 app.command("results")(jobs_cmd.results)
 app.command("cancel")(jobs_cmd.cancel)
 app.command("envs")(jobs_cmd.envs)
+app.command("upload")(upload_cmd.upload)
 app.command("replay")(replay_cmd.replay)
 app.command("study")(study_cmd.study)
 app.command("export-ompl")(study_cmd.export_ompl)
