@@ -162,8 +162,8 @@ def test_the_page_and_its_files_are_served_safely(testbed):
         assert js.status_code == 200 and "javascript" in js.headers["content-type"]
         for bad in ("/static/../app.py", "/static/%2e%2e/app.py", "/static/js/../../app.py", "/static/nope.js", "/static/js"):
             assert c.get(bad).status_code == 404, bad
-        assert c.get("/dashboard/planners").status_code == 401
-        planners = c.get("/dashboard/planners", headers={"Authorization": f"Bearer {TOKEN}"}).json()
+        assert c.get("/api/v1/planners").status_code == 401
+        planners = c.get("/api/v1/planners", headers={"Authorization": f"Bearer {TOKEN}"}).json()
         names = {p["name"]: p for p in planners["data"]}
         assert {"fmm", "fm2", "prm", "astar"} <= set(names) and names["fm2"]["defaults"]["saturation"] > 0
 
