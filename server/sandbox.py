@@ -166,6 +166,7 @@ class Sandbox:
                 "namespaces": iso.get("namespaces", []),
                 "user_namespace": iso.get("user_namespace", False),
                 "network": "loopback only" if "net" in iso.get("namespaces", []) else "not isolated",
+                "seccomp": iso.get("seccomp", False),
                 "runs_as": ("a uid of its own" if iso.get("uid_switch")
                             else "root of a user namespace (the server's uid outside)" if iso.get("user_namespace")
                             else "the server's uid"),
@@ -250,7 +251,7 @@ class Sandbox:
             "stdout_dropped_bytes": r.get("stdout_dropped", 0), "stderr_dropped_bytes": r.get("stderr_dropped", 0),
             "isolation": {"namespaces": iso.get("namespaces", []), "user_namespace": iso.get("user_namespace", False),
                           "own_uid": iso.get("uid") is not None, "proc": iso.get("proc"),
-                          "server_files_hidden": bool(iso.get("hidden"))},
+                          "server_files_hidden": bool(iso.get("hidden")), "seccomp": iso.get("seccomp", False)},
         }
         return ProgramOutcome(r.get("path") if reason is None else None, reason, lines, info, r.get("path_at_s"))
 

@@ -19,14 +19,17 @@ What it does, in order:
    namespace and gets ``SIGKILL`` when this process dies (parent-death
    signal); when pid 1 ends, the kernel kills every process of the namespace,
    so nothing the program started can outlive the sandbox.
-3. **Mounts** (private propagation): a fresh ``/proc`` (only the sandbox's
-   processes), fresh size-limited ``tmpfs`` on ``/tmp``, ``/var/tmp`` and
-   ``/dev/shm``, an empty read-only ``tmpfs`` over every ``hide`` path (the
-   server's data directory: database, token file).  **Network**: only
+3. **Mounts** (private propagation): every mount read-only, a fresh
+   ``/proc`` (only the sandbox's processes), fresh size-limited ``tmpfs`` on
+   ``/tmp``, ``/var/tmp`` and ``/dev/shm`` (the only writable places), an
+   empty read-only ``tmpfs`` over every ``hide`` path (the server's data
+   directory: database, token file).  **Network**: only
    loopback, brought up; the robot port listens on ``127.0.0.1`` there.
 4. **The program** runs in a fresh working directory, in its own session,
    as the job's ``uid``/``gid`` with no supplementary groups (when privileged),
-   with ``no_new_privs``, no capabilities, a parent-death signal, the job's
+   with ``no_new_privs``, no capabilities, a seccomp filter denying system
+   calls a planner never needs (namespaces, mounts, ptrace, keyrings, eBPF,
+   perf, userfaultfd, io_uring, modules), a parent-death signal, the job's
    environment only, stdin ``/dev/null``, stdout/stderr captured (capped) and
    rlimits: CPU seconds, address space, file size, processes, open files,
    core 0.
@@ -47,6 +50,7 @@ import errno
 import fcntl
 import json
 import os
+import re
 import resource
 import selectors
 import signal
@@ -66,7 +70,10 @@ CLONE_NEWPID = 0x20000000
 CLONE_NEWNET = 0x40000000
 
 MS_RDONLY, MS_NOSUID, MS_NODEV, MS_NOEXEC = 1, 2, 4, 8
-MS_REC, MS_PRIVATE = 0x4000, 1 << 18
+MS_REMOUNT, MS_BIND, MS_REC, MS_PRIVATE = 32, 4096, 0x4000, 1 << 18
+#: per-mount options kept when remounting read-only (a user namespace may not drop locked ones)
+MOUNT_FLAGS = {"nosuid": MS_NOSUID, "nodev": MS_NODEV, "noexec": MS_NOEXEC, "noatime": 1024,
+               "nodiratime": 2048, "relatime": 1 << 21, "strictatime": 1 << 24}
 
 PR_SET_PDEATHSIG = 1
 PR_CAPBSET_DROP = 24
@@ -156,9 +163,31 @@ def enter_namespaces(mode: str) -> dict[str, Any]:
     return iso
 
 
+def _read_only_everywhere() -> int:
+    """Remount every mount of this (private) mount namespace read-only; returns how many refused.
+
+    ``MS_REMOUNT | MS_BIND`` changes this namespace's mount only, never the
+    file system itself (which the host keeps writable).
+    """
+    refused = 0
+    with open("/proc/self/mountinfo") as f:
+        mounts = [line.split() for line in f]
+    for fields in mounts:
+        target = re.sub(r"\\([0-7]{3})", lambda m: chr(int(m.group(1), 8)), fields[4])
+        flags = MS_REMOUNT | MS_BIND | MS_RDONLY
+        for opt in fields[5].split(","):
+            flags |= MOUNT_FLAGS.get(opt, 0)
+        try:
+            _mount(None, target, None, flags, None)
+        except OSError:
+            refused += 1
+    return refused
+
+
 def set_up_mounts(iso: dict[str, Any], hide: list[str], tmpfs_bytes: int) -> None:
-    """Fresh /proc and temporary directories; empty read-only tmpfs over ``hide`` (pid 1 of the namespaces)."""
+    """Everything read-only but fresh /proc and temporary directories; empty tmpfs over ``hide``."""
     _mount(None, "/", None, MS_REC | MS_PRIVATE, None)
+    iso["read_only_refused"] = _read_only_everywhere()
     try:
         _mount("proc", "/proc", "proc", MS_NOSUID | MS_NODEV | MS_NOEXEC, None)
         iso["proc"] = "private"
@@ -177,7 +206,7 @@ def set_up_mounts(iso: dict[str, Any], hide: list[str], tmpfs_bytes: int) -> Non
             _mount("tmpfs", h, "tmpfs", MS_RDONLY | MS_NOSUID | MS_NODEV | MS_NOEXEC, "size=4k,mode=000")
             hidden.append(h)
         elif os.path.exists(h):
-            _mount("/dev/null", h, None, 4096, None)  # MS_BIND
+            _mount("/dev/null", h, None, MS_BIND, None)
             hidden.append(h)
     iso["hidden"] = hidden
 
@@ -209,7 +238,71 @@ def make_workdir(job: dict[str, Any], iso: dict[str, Any], uid: Optional[int], g
 # ----------------------------------------------------------------------------- the program
 
 
-def _limits_preexec(limits: dict[str, Any], drop_caps: bool, nproc_extra: int):  # type: ignore[no-untyped-def]
+# ----------------------------------------------------------------------------- seccomp
+
+PR_SET_SECCOMP, SECCOMP_MODE_FILTER = 22, 2
+SECCOMP_RET_ALLOW, SECCOMP_RET_ERRNO = 0x7FFF0000, 0x00050000
+#: system calls a planner never needs and that widen the kernel's attack surface: namespaces,
+#: mounts, tracing other processes, keyrings, eBPF, perf, userfaultfd, io_uring, modules, kexec
+DENIED = {
+    "x86_64": (0xC000003E, {"unshare": 272, "setns": 308, "mount": 165, "umount2": 166, "pivot_root": 155,
+                            "ptrace": 101, "process_vm_readv": 310, "process_vm_writev": 311, "keyctl": 250,
+                            "add_key": 248, "request_key": 249, "bpf": 321, "perf_event_open": 298,
+                            "userfaultfd": 323, "io_uring_setup": 425, "io_uring_enter": 426,
+                            "io_uring_register": 427, "kexec_load": 246, "kexec_file_load": 320,
+                            "init_module": 175, "finit_module": 313, "delete_module": 176,
+                            "open_by_handle_at": 304, "open_tree": 428, "move_mount": 429, "fsopen": 430,
+                            "fsconfig": 431, "fsmount": 432, "fspick": 433, "mount_setattr": 442},
+               56, 435),
+    "aarch64": (0xC00000B7, {"unshare": 97, "setns": 268, "mount": 40, "umount2": 39, "pivot_root": 41,
+                             "ptrace": 117, "process_vm_readv": 270, "process_vm_writev": 271, "keyctl": 219,
+                             "add_key": 217, "request_key": 218, "bpf": 280, "perf_event_open": 241,
+                             "userfaultfd": 282, "io_uring_setup": 425, "io_uring_enter": 426,
+                             "io_uring_register": 427, "kexec_load": 104, "kexec_file_load": 294,
+                             "init_module": 105, "finit_module": 273, "delete_module": 106,
+                             "open_by_handle_at": 265, "open_tree": 428, "move_mount": 429, "fsopen": 430,
+                             "fsconfig": 431, "fsmount": 432, "fspick": 433, "mount_setattr": 442},
+                220, 435),
+}
+NAMESPACE_FLAGS = CLONE_NEWNS | CLONE_NEWUTS | CLONE_NEWIPC | CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNET | 0x02000000
+
+
+def seccomp_program() -> Optional[bytes]:
+    """A classic-BPF seccomp filter for this machine (None on other architectures).
+
+    Denied calls fail with EPERM; ``clone`` with namespace flags too;
+    ``clone3`` (flags out of reach of the filter) fails with ENOSYS, so C
+    libraries fall back to ``clone``; other ABIs (i386, x32) get ENOSYS.
+    """
+    import platform
+
+    spec = DENIED.get(platform.machine())
+    if spec is None:
+        return None
+    arch, calls, clone_nr, clone3_nr = spec
+    ld, jeq, jset, jge, ret = 0x20, 0x15, 0x45, 0x35, 0x06
+    eperm, enosys = SECCOMP_RET_ERRNO | errno.EPERM, SECCOMP_RET_ERRNO | errno.ENOSYS
+    prog: list[tuple[int, int, int, int]] = [
+        (ld, 0, 0, 4), (jeq, 1, 0, arch), (ret, 0, 0, enosys),  # another ABI
+        (ld, 0, 0, 0), (jge, 0, 1, 0x40000000), (ret, 0, 0, enosys),  # x32 numbers
+    ]
+    for nr in sorted(calls.values()):
+        prog += [(jeq, 0, 1, nr), (ret, 0, 0, eperm)]
+    prog += [(jeq, 0, 1, clone3_nr), (ret, 0, 0, enosys),
+             (jeq, 0, 3, clone_nr), (ld, 0, 0, 16), (jset, 0, 1, NAMESPACE_FLAGS), (ret, 0, 0, eperm),
+             (ret, 0, 0, SECCOMP_RET_ALLOW)]
+    return b"".join(struct.pack("HBBI", *ins) for ins in prog)
+
+
+def _install_seccomp(prog: bytes) -> int:
+    buf = ctypes.create_string_buffer(prog, len(prog))
+    fprog = struct.pack("HxxxxxxP", len(prog) // 8, ctypes.addressof(buf))
+    arg = ctypes.create_string_buffer(fprog, len(fprog))
+    return _libc.prctl(PR_SET_SECCOMP, SECCOMP_MODE_FILTER, ctypes.addressof(arg), 0, 0)
+
+
+def _limits_preexec(limits: dict[str, Any], drop_caps: bool, nproc_extra: int,  # type: ignore[no-untyped-def]
+                    seccomp: Optional[bytes]):
     """Runs in the program's process between fork and exec (the launcher has no threads then).
 
     ``nproc_extra``: processes of the same user that are not the program's — in
@@ -237,6 +330,8 @@ def _limits_preexec(limits: dict[str, Any], drop_caps: bool, nproc_extra: int): 
         _prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
         for s in (signal.SIGPIPE, signal.SIGXFSZ, signal.SIGXCPU):
             signal.signal(s, signal.SIG_DFL)
+        if seccomp is not None and _install_seccomp(seccomp) != 0:
+            os._exit(126)
 
     return apply
 
@@ -416,13 +511,15 @@ def supervise(job: dict[str, Any], iso: dict[str, Any]) -> dict[str, Any]:
         argv.append(a)
     result: dict[str, Any] = {"exit_code": None, "signal": None, "timed_out": False, "launch_error": None,
                               "procs_max": 0, "robot_port": port_no}
+    seccomp = seccomp_program() if job.get("seccomp", True) else None
+    iso["seccomp"] = seccomp is not None
     t0 = time.monotonic()
     try:
         proc = subprocess.Popen(
             argv, cwd=work, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
             close_fds=True, start_new_session=True,
             user=uid, group=gid, extra_groups=[] if uid is not None else None,
-            preexec_fn=_limits_preexec(limits, in_userns, 2 if in_userns else 0),
+            preexec_fn=_limits_preexec(limits, in_userns, 2 if in_userns else 0, seccomp),
         )
     except (OSError, subprocess.SubprocessError) as exc:
         listener.close()
@@ -583,6 +680,7 @@ def probe(mode: str) -> dict[str, Any]:
         try:
             iso = enter_namespaces(mode)
             iso["uid_switch"] = not iso["user_namespace"] and _has_cap(CAP_SETUID) and _has_cap(CAP_SETGID)
+            iso["seccomp"] = seccomp_program() is not None
         except OSError as exc:
             iso = {"namespaces": [], "user_namespace": False, "reason": str(exc), "uid_switch": False}
         os.write(w, json.dumps(iso).encode())

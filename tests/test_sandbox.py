@@ -128,11 +128,31 @@ def test_explain_names_the_reason(result, reason):
 
 @needs_root
 def test_root_with_namespaces_hides_the_data_dir_and_refuses_long_lines(data_dir):
-    r = launch(job(read_attempt(data_dir) + SEND_PATH, data_dir=data_dir))
+    shared = data_dir.with_name(data_dir.name + "-shared")  # writable for everybody, outside /tmp
+    shared.mkdir(mode=0o1777)
+    shared.chmod(0o1777)
+    write = f"""
+import ctypes
+libc = ctypes.CDLL(None, use_errno=True)
+print("unshare", libc.unshare(0x10000000), ctypes.get_errno())  # a user namespace: seccomp says EPERM
+for d in [{str(shared)!r}, "/tmp"]:
+    try:
+        open(d + "/planted", "w").write("x")
+        print("wrote", d)
+    except OSError as exc:
+        print("cannot write", d, exc.strerror)
+"""
+    try:
+        r = launch(job(read_attempt(data_dir) + write + SEND_PATH, data_dir=data_dir))
+        assert not (shared / "planted").exists()
+    finally:
+        shutil.rmtree(shared)
     iso = r["isolation"]
     assert iso["namespaces"] == ["net", "mount", "pid", "ipc", "uts"] and iso["uid"] == 3_950_000
-    assert iso["hidden"] == [str(data_dir)] and iso["proc"] == "private"
+    assert iso["hidden"] == [str(data_dir)] and iso["proc"] == "private" and iso["read_only_refused"] == 0
     assert "READ" not in r["stdout"] and "refused Permission denied" in r["stdout"]
+    assert f"cannot write {shared} Read-only file system" in r["stdout"] and "wrote /tmp" in r["stdout"]
+    assert iso["seccomp"] is True and "unshare -1 1" in r["stdout"]
     assert r["refused"] == [f"ERR,TOOLONG,line longer than {MAX_LINE_BYTES} bytes"]
     assert r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]]
     assert f"ERR,TOOLONG,line longer than {MAX_LINE_BYTES} bytes OK,P,2" in r["stdout"]

@@ -103,6 +103,7 @@ async def _print_uploads(testbed) -> None:  # type: ignore[no-untyped-def]
     iso = await testbed.sandbox.probe()
     ns = "+".join(iso["namespaces"]) or "none"
     print(f"Uploads: enabled; programs run as {iso['runs_as']}, namespaces {ns}, network {iso['network']}"
+          + (", seccomp" if iso.get("seccomp") else "")
           + (f" ({iso['note']})" if iso["note"] else ""), flush=True)
 
 
