@@ -148,6 +148,8 @@ def enter_namespaces(mode: str) -> dict[str, Any]:
         first = exc
     uid, gid = os.geteuid(), os.getegid()
     try:
+        if uid == 0:  # root without CAP_SYS_ADMIN (a container) may not map itself (CAP_SETFCAP)
+            raise OSError(errno.EPERM, "root without CAP_SYS_ADMIN")
         _unshare(flags | CLONE_NEWUSER)
     except OSError as exc:
         iso["reason"] = f"no namespaces available ({first.strerror}; user namespace: {exc.strerror})"
@@ -702,7 +704,7 @@ def main() -> int:
     try:
         iso = enter_namespaces(job.get("namespaces", "auto"))
     except OSError as exc:
-        _emit({"launch_error": str(exc), **_empty_outputs(), "exit_code": None, "signal": None,
+        _emit({"launch_error": exc.strerror or str(exc), **_empty_outputs(), "exit_code": None, "signal": None,
                "timed_out": False, "procs_max": 0, "isolation": {"namespaces": []}})
         return 0
     if "pid" in iso["namespaces"]:

@@ -181,6 +181,19 @@ print("uid", os.getuid(), "groups", os.getgroups())
     assert processes_of(3_950_001) == []  # the session-escaped sleeper was killed by uid
 
 
+@needs_root
+@pytest.mark.skipif(shutil.which("setpriv") is None, reason="needs setpriv")
+def test_without_namespaces_required_refuses_and_auto_falls_back(data_dir):
+    """Root without capabilities (a container without CAP_SYS_ADMIN): no namespaces at all."""
+    no_caps = ["setpriv", "--inh-caps=-all", "--bounding-set=-all"]
+    r = launch(job("print('ran')", data_dir=data_dir, namespaces="required"), no_caps)
+    assert r["launch_error"].startswith("the sandbox needs Linux namespaces and cannot create them")
+    assert explain(r, LIMITS).startswith("program could not start: the sandbox needs Linux namespaces")
+    r = launch(job("print('ran')", data_dir=data_dir), no_caps)
+    assert r["isolation"]["namespaces"] == [] and r["isolation"]["uid"] is None and r["stdout"] == "ran\n"
+    assert "no namespaces available" in r["isolation"]["reason"]
+
+
 # --------------------------------------------------------------------------- an unprivileged server (simulated)
 
 
