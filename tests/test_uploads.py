@@ -372,5 +372,8 @@ def test_sdk_and_cli_upload_and_submit(testbed, client, tmp_path, twb):
     m = re.fullmatch(r'Uploaded program (\d+): astar\.py, python, \d+ bytes\. Use it in a job as "program": \1\.\n',
                      r.stdout)
     assert m, r.stdout
+    r = twb("submit", "--env", "detour", "--start", "0.3,0.3,0", "--goal", "1.5,1.5", "--program", m.group(1),
+            "--modes", "sim", "--wait", "--url", testbed.url, "--token", testbed.token)
+    assert r.returncode == 0 and "completed (1/1 runs completed)" in r.stderr, r.stderr
     r = twb("upload", str(tmp_path / "missing.py"), "--url", testbed.url, "--token", testbed.token)
     assert r.returncode != 0 and r.stderr.strip().endswith("missing.py") and "Traceback" not in r.stderr

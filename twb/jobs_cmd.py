@@ -69,6 +69,7 @@ def submit(
     planner: Annotated[Optional[str], typer.Option(help="fmm, fm2, prm, astar or a plug-in (server default: fmm).")] = None,
     param: Annotated[Optional[list[str]], typer.Option("--param", "-p", help="Planner parameter NAME=VALUE (repeatable).")] = None,
     path: Annotated[Optional[Path], typer.Option("--path", help="Send this path instead of planning: JSON or CSV x,y[,theta] (m, rad).")] = None,
+    program: Annotated[Optional[int], typer.Option("--program", help="Plan with your uploaded program of this id (see twb upload).", min=1)] = None,
     modes: Annotated[Optional[str], typer.Option(help="sim, twb or sim,twb (default: sim,twb).")] = None,
     repetitions: Annotated[Optional[int], typer.Option(help="Runs per mode (default: 1).", min=1)] = None,
     seed: Annotated[Optional[int], typer.Option(help="Seed of the job (planner sampling, noise) (default: 0).", min=0)] = None,
@@ -96,6 +97,8 @@ def submit(
         fields["planner_params"] = _params(param)
     if path:
         fields["path"] = _read_path_file(path)
+    if program is not None:
+        fields["program"] = program
     if modes:
         fields["modes"] = [m.strip() for m in modes.split(",") if m.strip()]
     for key, value in (("repetitions", repetitions), ("seed", seed), ("field", field)):

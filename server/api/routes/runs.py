@@ -76,7 +76,9 @@ def get_messages(
     """Every protocol line sent to (``>``) or received from (``<``) the robot, with experiment time.
 
     ``t`` is the agent's clock: exact for ``ST``/``EV`` lines, extrapolated
-    from its last report for the others (``t_estimated``).
+    from its last report for the others (``t_estimated``).  Jobs planned by an
+    uploaded program also log its stdout (``o``), stderr (``e``) and its
+    conversation with the sandbox's robot port (``s``).
     """
     owned_run(session, user, run_id)
     rows = session.scalars(
