@@ -109,6 +109,18 @@ def login(pg, url: str, token: str = TOKEN) -> None:
     expect(pg.locator("#stream-state")).to_have_text("live")
 
 
+def submit_and_wait(pg, testbed, status: str = "completed") -> dict:
+    """Submit the form, land on the new experiment's page, see it reach `status`; the experiment as the API has it."""
+    from playwright.sync_api import expect
+
+    pg.click("#submit-button")
+    expect(pg.locator("#view-experiment")).to_be_visible()
+    expect(pg.locator("#view-experiment .exp-head .badge")).to_have_text(status, timeout=60_000)
+    exp_id = int(pg.url.rsplit("/", 1)[1])
+    with testbed.client() as c:
+        return c.get(f"/api/v1/experiments/{exp_id}").json()
+
+
 def canvas_geometry(pg, selector: str) -> dict:
     """The canvas's metres-to-pixels mapping (its data attributes) and its page position."""
     box = pg.locator(selector).bounding_box()
@@ -229,13 +241,8 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     page.fill("#f-repetitions", "2")
     page.fill("#f-seed", "3")
     page.screenshot(path=OUTPUT / "submit.png")
-    page.click("#submit-button")
-
-    expect(page.locator("#view-experiment")).to_be_visible()
-    expect(page.locator("#view-experiment .exp-head .badge")).to_have_text("completed", timeout=60_000)
-    exp_id = int(page.url.rsplit("/", 1)[1])
-    with testbed.client() as c:
-        exp = c.get(f"/api/v1/experiments/{exp_id}").json()
+    exp = submit_and_wait(page, testbed)
+    exp_id = exp["id"]
     assert exp["start"][:2] == pytest.approx([0.3, 0.3], abs=0.01) and exp["planner"] == "fm2"
     assert exp["goal"][2] == pytest.approx(math.pi / 2, abs=0.02) and exp["repetitions"] == 2 and exp["seed"] == 3
 
@@ -355,6 +362,54 @@ def test_a_user_sees_the_field_but_only_their_own_experiments(page, testbed):
     expect(page.locator("#view-experiment .error")).to_contain_text("Experiment not found")
     # the browser's note on the 404 for someone else's experiment is the only console error
     assert page.console.unexpected("status of 404") == []
+
+
+def test_without_uploads_the_dashboard_says_so_plainly(page, testbed):
+    """The default `twb up` runs without --enable-uploads: no upload form, a plain statement instead."""
+    from playwright.sync_api import expect
+
+    login(page, testbed.url)
+    page.click("#nav a[data-view=programs]")
+    expect(page.locator("#uploads-disabled")).to_be_visible()
+    expect(page.locator("#uploads-disabled")).to_contain_text("Uploads are disabled on this testbed")
+    expect(page.locator("#uploads-disabled")).to_contain_text("--enable-uploads")
+    expect(page.locator("#upload-form")).to_be_hidden()
+    expect(page.locator("#sandbox-panel")).to_be_hidden()
+    expect(page.locator("#programs-table tbody tr.empty-row")).to_have_text("No programs yet.")
+    page.screenshot(path=OUTPUT / "uploads-disabled.png")
+    # the submit form offers the program, says why it cannot be used, and refuses it next to the field
+    page.click("#nav a[data-view=submit]")
+    page.select_option("#f-environment", "room")
+    page.click("#env-plans button:has-text('Plan A')")
+    page.check('input[name="source"][value="program"]')
+    expect(page.locator("#program-desc")).to_contain_text("Uploads are disabled on this testbed")
+    expect(page.locator("#f-program")).to_be_hidden()
+    expect(page.locator("#f-planner")).to_be_hidden()
+    page.click("#submit-button")
+    expect(page.locator("#err-program")).to_have_text("uploads are disabled on this testbed")
+    # an explicit path instead: waypoints by clicking the map, checked by the server
+    page.check('input[name="source"][value="path"]')
+    expect(page.locator("#err-program")).to_be_hidden()
+    page.check('input[name="pick"][value="waypoint"]')
+    geo = canvas_geometry(page, "#submit-canvas")
+    page.mouse.click(*world_to_page(geo, 0.9, 0.15))  # on the room's wall
+    expect(page.locator("#f-path")).to_have_value("0.900, 0.150")
+    expect(page.locator("#map-readout")).to_contain_text("1 so far")
+    page.click("#submit-button")
+    expect(page.locator("#err-path")).to_contain_text("path point 1")
+    expect(page.locator("#f-path")).to_have_attribute("aria-invalid", "true")
+    page.focus("#submit-canvas")
+    page.keyboard.press("Delete")  # removes the last waypoint
+    expect(page.locator("#f-path")).to_have_value("")
+    page.fill("#f-path", "0.45, 0.9\n0.6 1.35")  # through the doorways
+    page.uncheck("input[name=modes][value=twb]")
+    page.screenshot(path=OUTPUT / "submit-path.png")
+    page.click("#submit-button")
+    expect(page.locator("#view-experiment")).to_be_visible()
+    expect(page.locator("#view-experiment .facts dd").nth(2)).to_have_text("explicit path")
+    expect(page.locator("#program-panel")).to_be_hidden()
+    assert page.console.unexpected("status of 422") == []
+    assert len(page.console.errors) == 1, page.console.errors
 
 
 def test_tablet_width_layout(browser, testbed):

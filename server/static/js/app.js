@@ -1,15 +1,17 @@
-// Entry point: token login, hash routing (#/field, #/experiments, #/experiments/ID, #/submit),
+// Entry point: token login, hash routing (#/field, #/experiments, #/experiments/ID, #/submit[?program=ID],
+// #/programs),
 // and the shared store that keeps live data.
 
 import { Api, ApiError } from "./api.js";
 import { $, $$, report } from "./dom.js";
 import { ExperimentPage, ExperimentsPage } from "./experiments.js";
 import { FieldPage } from "./live.js";
+import { ProgramsPage } from "./programs.js";
 import { Store } from "./store.js";
 import { SubmitPage } from "./submit.js";
 
 const TOKEN_KEY = "twb.token";
-const VIEWS = ["login", "field", "experiments", "experiment", "submit"];
+const VIEWS = ["login", "field", "experiments", "experiment", "submit", "programs"];
 
 const app = {
   store: null,
@@ -84,6 +86,7 @@ function startSession(token, user) {
     experiments: new ExperimentsPage(store),
     experiment: new ExperimentPage(store),
     submit: new SubmitPage(store, { onSubmitted: (id) => { location.hash = `#/experiments/${id}`; } }),
+    programs: new ProgramsPage(store),
   };
   store.addEventListener("stream", (e) => {
     const el = $("#stream-state");
@@ -134,7 +137,7 @@ async function login(ev) {
 
 function route() {
   if (!app.store) return;
-  const hash = location.hash || "#/field";
+  const [hash, query = ""] = (location.hash || "#/field").split("?");
   const parts = hash.replace(/^#\/?/, "").split("/");
   const { pages } = app;
   pages.experiments.hide();
@@ -153,7 +156,11 @@ function route() {
   } else if (parts[0] === "submit") {
     showView("submit");
     document.title = "Submit · Teleworkbench";
-    pages.submit.show();
+    pages.submit.show(new URLSearchParams(query));
+  } else if (parts[0] === "programs") {
+    showView("programs");
+    document.title = "Programs · Teleworkbench";
+    pages.programs.show().catch((err) => report(err, "Programs"));
   } else {
     showView("field");
     document.title = "Field · Teleworkbench";

@@ -38,6 +38,16 @@ export function s(tag, attrs = {}, ...children) {
 export const $ = (sel, root = document) => root.querySelector(sel);
 export const $$ = (sel, root = document) => [...root.querySelectorAll(sel)];
 
+/** The value of the checked radio button `name` in `root`. */
+export function radioValue(root, name) {
+  return root.querySelector(`input[name="${name}"]:checked`).value;
+}
+
+/** Check the radio button `name` with `value` in `root`. */
+export function checkRadio(root, name, value) {
+  root.querySelector(`input[name="${name}"][value="${value}"]`).checked = true;
+}
+
 export const TERMINAL = new Set(["completed", "failed", "error", "cancelled", "interrupted"]);
 
 export function badge(state) {

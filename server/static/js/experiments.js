@@ -1,18 +1,22 @@
 // The experiment list (queued with estimated start, running, finished) and the page of one
-// experiment: facts, planned vs performed paths, sim-vs-twb charts, metrics tables, downloads.
+// experiment: facts, the uploaded program's execution and log (programrun.js), planned vs
+// performed paths, sim-vs-twb charts, metrics tables, downloads.
 
 import { saveBlob } from "./api.js";
 import { barChart, lineChart, speedProfile } from "./charts.js";
 import { $, TERMINAL, badge, debounce, duration, h, num, pose, report, toast, when } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { ProgramPanel } from "./programrun.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
 const MODE_COLOR = { sim: COLORS.sim, twb: COLORS.twb };
 
-/** What planned the job: a planner, an uploaded program, or the user's explicit path. */
-export function plannerName(e) {
+/** What planned the job: a planner, an uploaded program (named when `programs`, id -> program, knows it), or an explicit path. */
+export function plannerName(e, programs = null) {
   if (e.planner) return e.planner;
-  return e.program != null ? `uploaded program #${e.program}` : "explicit path";
+  if (e.program == null) return "explicit path";
+  const p = programs?.get(e.program);
+  return p ? `program ${p.name} (#${e.program})` : `uploaded program #${e.program}`;
 }
 
 async function cancel(store, id) {
@@ -59,7 +63,7 @@ export class ExperimentsPage {
       h("td", {}, h("a", { href: `#/experiments/${e.id}` }, `#${e.id}`)),
       h("td", {}, badge(e.status)),
       h("td", {}, e.environment),
-      h("td", {}, plannerName(e)),
+      h("td", {}, plannerName(e, this.store.programs)),
       h("td", {}, e.modes.join(" + ")),
       h("td", { class: "num" }, e.repetitions),
       h("td", {}, e.field),
@@ -117,6 +121,7 @@ export class ExperimentPage {
       this.hidden = new Set();
       this.data = null;
       this.legendKey = null;
+      this.program = new ProgramPanel(this.store);
       this.skeleton(id);
     }
     try {
@@ -149,6 +154,7 @@ export class ExperimentPage {
     this.root.replaceChildren(
       h("div", { class: "exp-head" }, e.title, e.status, e.actions, h("a", { href: "#/experiments" }, "All experiments")),
       h("div", { class: "panel" }, e.facts, e.error),
+      this.program.el,
       h("div", { class: "exp-grid" },
         h("div", { class: "panel" }, h("h2", {}, "Planned vs performed paths"),
           h("div", { class: "canvas-box square" }, e.canvas), e.legend),
@@ -172,7 +178,8 @@ export class ExperimentPage {
     const [d, m] = await Promise.all([this.store.detail(id, { fresh: true }), api.get(`/api/v1/experiments/${id}/metrics`)]);
     if (id !== this.id) return;
     const want = d.runs.filter((r) => r.t_start != null && TERMINAL.has(r.status) && !this.poses.has(r.id)).slice(0, 40);
-    await Promise.all(want.map((r) => api.get(`/api/v1/runs/${r.id}/poses`).then((p) => this.poses.set(r.id, p.poses))));
+    await Promise.all([...want.map((r) => api.get(`/api/v1/runs/${r.id}/poses`).then((p) => this.poses.set(r.id, p.poses))),
+      this.program.load(d)]);
     if (id !== this.id) return;
     this.data = { d, m };
     this.render();
@@ -195,8 +202,8 @@ export class ExperimentPage {
     e.actions.replaceChildren(TERMINAL.has(d.status) ? "" :
       h("button", { type: "button", onclick: () => cancel(this.store, d.id) }, "Cancel experiment"));
     const facts = [
-      ["Environment", d.environment], ["Field", d.field], ["Planner", plannerName(d)],
-      ["Parameters", Object.keys(d.planner_params || {}).length ? JSON.stringify(d.planner_params) : "defaults"],
+      ["Environment", d.environment], ["Field", d.field], ["Planner", plannerName(d, this.store.programs)],
+      ["Parameters", d.program != null ? "see the program below" : Object.keys(d.planner_params || {}).length ? JSON.stringify(d.planner_params) : "defaults"],
       ["Start (x, y, θ)", pose(d.start)], ["Goal (x, y, θ)", pose(d.goal)], ["Modes", d.modes.join(" + ")],
       ["Repetitions", d.repetitions], ["Seed", d.seed], ["Owner", d.owner],
       ["Submitted", when(d.created_at)], ["Finished", when(d.finished_at)],
@@ -206,6 +213,7 @@ export class ExperimentPage {
     if (d.status === "queued") facts.push(["Estimated start", duration(d.estimated_start_s)]);
     e.facts.replaceChildren(...facts.map(([k, v]) => h("div", {}, h("dt", {}, k), h("dd", {}, v))));
     e.error.textContent = d.error || "";
+    this.program.render(d);
     this.map.setWorld(d.field === "full" ? FIELD_SIZE : SUBFIELD_SIZE);
     const legendKey = d.runs.map((r) => r.id).join(",");
     if (legendKey !== this.legendKey) {

@@ -129,7 +129,7 @@ export class FieldPage {
       .sort((a, b) => (a.status === "queued") - (b.status === "queued") || a.id - b.id);
     $("#queue-table tbody").replaceChildren(...exps.map((e) => h("tr", {},
       h("td", {}, h("a", { href: `#/experiments/${e.id}` }, `#${e.id} ${e.environment}`), " ",
-        h("span", { class: "muted small" }, `${plannerName(e)} · ${e.owner}`)),
+        h("span", { class: "muted small" }, `${plannerName(e, this.store.programs)} · ${e.owner}`)),
       h("td", {}, badge(e.status)),
       h("td", {}, e.status === "queued" ? duration(e.estimated_start_s) : "started"))));
     $("#queue-table").hidden = exps.length === 0;

@@ -1,7 +1,7 @@
 // The dashboard's shared state: what the server said, kept fresh by the event stream
 // (and by polling while the stream is down).  Views listen to its events:
 //   "field"       sub-fields, robots, robot poses or traces changed
-//   "experiments" the experiment list changed
+//   "experiments" the experiment list changed (or the names of the programs it uses arrived)
 //   "experiment"  detail = experiment id whose runs or status changed
 //   "pose"        detail = a raw pose event (field frame)
 //   "stream"      detail = stream state
@@ -31,6 +31,7 @@ export class Store extends EventTarget {
     this.envPending = new Map(); // name -> Promise
     this.details = new Map(); // experiment id -> ExperimentPublic
     this.runs = new Map(); // run id -> RunPublic
+    this.programs = new Map(); // program id -> ProgramPublic (names for the lists)
     this.poses = new Map(); // robot id -> {x, y, theta, t, run_id, source: live|log|home}
     this.traces = new Map(); // run id -> {robot_id, points: [[x, y]] field frame, exact}
     this.subfieldRun = new Map(); // sub-field id -> latest run id seen on it
@@ -121,6 +122,7 @@ export class Store extends EventTarget {
       this.experimentCount = page.count;
       this.experimentsLoaded = true;
       this.emit("experiments");
+      this.learnPrograms();
       if (!first) {
         for (const e of page.data) {
           if (before.get(e.id) !== e.status && e.modes.includes("twb") && e.status !== "queued") this.followFieldRuns(e.id);
@@ -128,6 +130,24 @@ export class Store extends EventTarget {
       }
     } catch (err) {
       this.failed(err, "Experiments");
+    }
+  }
+
+  /** Remember uploaded programs (their names label program jobs). */
+  notePrograms(list) {
+    for (const p of list) this.programs.set(p.id, p);
+  }
+
+  /** Read the program list when an experiment names a program not seen yet (at most every 10 s). */
+  async learnPrograms() {
+    if (!this.experiments.some((e) => e.program != null && !this.programs.has(e.program))) return;
+    if (Date.now() - (this.programsAt || 0) < 10000) return;
+    this.programsAt = Date.now();
+    try {
+      this.notePrograms((await this.api.get("/api/v1/programs?limit=500")).data);
+      this.emit("experiments");
+    } catch (err) {
+      this.failed(err, "Programs");
     }
   }
 

@@ -1,24 +1,28 @@
 // The submit form: environment, start and goal placed on the map (click; drag for the
-// heading; keys too), planner and parameters, modes, repetitions, seed.  The server
-// validates; its 422 message is shown next to the field it is about.
+// heading; keys too), where the path comes from (a planner and its parameters, one of your
+// uploaded programs, or an explicit path through waypoints), modes, repetitions, seed.
+// The server validates; its message is shown next to the field it is about.
 
-import { $, $$, deg, h, report, toast } from "./dom.js";
+import { $, $$, checkRadio, deg, h, num, radioValue, report, toast } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { programLabel } from "./programs.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
-const KEYS = ["environment", "field", "start", "goal", "planner", "planner_params", "modes", "repetitions", "seed"];
+const KEYS = ["environment", "field", "start", "goal", "planner", "planner_params", "program", "path", "modes", "repetitions", "seed"];
 const DRAG_PX = 8;
 const TURN = Math.PI / 12;
 
 /** Which form field a server message is about (pre-flight messages start with the field's name). */
 export function fieldOfMessage(msg) {
   const m = msg.toLowerCase();
+  if (/^path\b|^`path`/.test(m)) return "path";
   if (/^start\b/.test(m) || /`start`/.test(m)) return "start";
   if (/^goal\b|^the goal\b/.test(m) || /`goal`/.test(m)) return "goal";
   if (/^repetitions\b/.test(m)) return "repetitions";
   if (/^seed\b/.test(m)) return "seed";
   if (/^modes?\b/.test(m)) return "modes";
   if (/^parameter |has no parameter|planner_params/.test(m)) return "planner_params";
+  if (/program|^uploads? /.test(m)) return "program";
   if (/planner/.test(m)) return "planner";
   if (/environment/.test(m)) return "environment";
   return null;
@@ -31,13 +35,21 @@ export class SubmitPage {
     this.form = $("#submit-form");
     this.map = new MapView($("#submit-canvas"), { world: SUBFIELD_SIZE, padding: 14 });
     this.poses = { start: null, goal: null };
+    this.waypoints = []; // [x, y] between start and goal, for an explicit path
+    this.programs = [];
+    this.uploads = null; // GET /programs/sandbox
     this.planners = [];
     this.envs = [];
     this.loaded = false;
     this.wire();
+    this.onSource(); // the browser may have restored the radios of an earlier visit
   }
 
-  async show() {
+  /** params: the route's query (#/submit?program=ID preselects that program). */
+  async show(params = new URLSearchParams()) {
+    const wanted = params.get("program");
+    if (wanted) this.wantProgram = wanted;
+    this.loadPrograms().catch((err) => report(err, "Programs"));
     if (!this.loaded) {
       try {
         const [envs, planners] = await Promise.all([
@@ -61,15 +73,24 @@ export class SubmitPage {
   }
 
   get fieldMode() {
-    return this.form.querySelector('input[name="field"]:checked').value;
+    return radioValue(this.form, "field");
+  }
+
+  get source() {
+    return radioValue(this.form, "source");
+  }
+
+  set source(which) {
+    checkRadio(this.form, "source", which);
+    this.onSource();
   }
 
   get pick() {
-    return this.form.querySelector('input[name="pick"]:checked').value;
+    return radioValue(this.form, "pick");
   }
 
   set pick(which) {
-    this.form.querySelector(`input[name="pick"][value="${which}"]`).checked = true;
+    checkRadio(this.form, "pick", which);
     this.draw();
   }
 
@@ -83,7 +104,53 @@ export class SubmitPage {
     this.onPlanner();
   }
 
+  /** Your programs (re-read whenever the form is shown: you may just have uploaded one) and whether uploads are on. */
+  async loadPrograms() {
+    const api = this.store.api;
+    const [sandbox, list] = await Promise.all([api.get("/api/v1/programs/sandbox"), api.get("/api/v1/programs?limit=500")]);
+    this.uploads = sandbox;
+    this.programs = list.data;
+    this.store.notePrograms(list.data);
+    const sel = $("#f-program");
+    const keep = this.wantProgram || sel.value;
+    this.wantProgram = null;
+    sel.replaceChildren(...this.programs.map((p) => h("option", { value: p.id }, programLabel(p))));
+    sel.hidden = !sandbox.uploads_enabled || !this.programs.length;
+    if (this.programs.some((p) => String(p.id) === String(keep))) {
+      sel.value = String(keep);
+      if (keep && this.source !== "program") this.source = "program";
+    }
+    this.onProgram();
+  }
+
+  onProgram() {
+    const desc = $("#program-desc");
+    if (!this.uploads) {
+      desc.textContent = "";
+    } else if (!this.uploads.uploads_enabled) {
+      desc.textContent = "Uploads are disabled on this testbed, so a job cannot use an uploaded program here. " +
+        "Choose a planner or an explicit path.";
+    } else if (!this.programs.length) {
+      desc.replaceChildren("You have no programs yet. ", h("a", { href: "#/programs" }, "Upload one"), ".");
+    } else {
+      const p = this.programs.find((q) => String(q.id) === $("#f-program").value);
+      desc.replaceChildren(p ? `${p.kind === "python" ? "Python" : "executable"}${p.interpreter ? ` run by ${p.interpreter}` : ""}, ${p.size} bytes` +
+        (p.args.length ? `, arguments ${p.args.join(" ")}` : "") + ". It runs once, when the first run is planned: " +
+        `at most ${num(this.uploads.limits?.wall_s, 0)} s. ` : "", h("a", { href: "#/programs" }, "Your programs"));
+    }
+  }
+
+  onSource() {
+    const source = this.source;
+    for (const el of $$("[data-source]", this.form)) el.hidden = el.dataset.source !== source;
+    if (source !== "path" && this.pick === "waypoint") this.pick = "start";
+    this.draw();
+  }
+
   wire() {
+    for (const r of $$('input[name="source"]', this.form)) r.addEventListener("change", () => this.onSource());
+    $("#f-program").addEventListener("change", () => this.onProgram());
+    $("#f-path").addEventListener("input", () => this.fromPathText());
     $("#f-environment").addEventListener("change", () => this.onEnvironment(true));
     $("#f-planner").addEventListener("change", () => this.onPlanner());
     for (const r of $$('input[name="field"]', this.form)) r.addEventListener("change", () => this.onEnvironment(false));
@@ -109,7 +176,7 @@ export class SubmitPage {
     const env = this.env;
     $("#env-desc").textContent = env ? `${env.size[0]} x ${env.size[1]} m, ${env.blocks.length} blocks. ${env.description || ""}` : "";
     if (env && (env.size[0] > SUBFIELD_SIZE[0] + 1e-9 || env.size[1] > SUBFIELD_SIZE[1] + 1e-9)) {
-      this.form.querySelector('input[name="field"][value="full"]').checked = true;
+      checkRadio(this.form, "field", "full");
     }
     const plans = env?.plans || [];
     $("#env-plans").replaceChildren(...plans.map((p) => h("button", { type: "button", class: "small",
@@ -192,6 +259,30 @@ export class SubmitPage {
     this.draw();
   }
 
+  setWaypoints(points) {
+    this.waypoints = points;
+    $("#f-path").value = points.map(([x, y]) => `${x.toFixed(3)}, ${y.toFixed(3)}`).join("\n");
+    this.draw();
+  }
+
+  /** The waypoints typed (one "x, y" or "x y" a line); null when a line is not a point. */
+  parsePath() {
+    const pts = [];
+    for (const line of $("#f-path").value.split("\n")) {
+      if (!line.trim()) continue;
+      const v = line.trim().split(/[\s,;]+/).map(Number);
+      if (v.length < 2 || v.length > 3 || !v.every(Number.isFinite)) return null;
+      pts.push(v.slice(0, 2));
+    }
+    return pts;
+  }
+
+  fromPathText() {
+    const pts = this.parsePath();
+    if (pts) this.waypoints = pts;
+    this.draw();
+  }
+
   draw() {
     const [w, hgt] = this.world();
     this.map.world = [w, hgt];
@@ -202,8 +293,22 @@ export class SubmitPage {
       if (p) markers.push({ x: p[0], y: p[1], theta: p[2], color: which === "start" ? COLORS.start : COLORS.goal, label: which,
         active: this.pick === which });
     }
-    this.map.update({ blocks: env ? env.blocks : [], markers,
+    const paths = [];
+    if (this.source === "path") {
+      this.waypoints.forEach(([x, y], i) => markers.push({ x, y, radius: 0.02, color: COLORS.planned, label: String(i + 1),
+        active: this.pick === "waypoint" && i === this.waypoints.length - 1 }));
+      const pts = [this.poses.start, ...this.waypoints, this.poses.goal].filter(Boolean);
+      paths.push({ points: pts.map((q) => [q[0], q[1]]), color: COLORS.planned, width: 2, dash: [7, 5] });
+    }
+    this.map.update({ blocks: env ? env.blocks : [], markers, paths,
       subfields: this.fieldMode === "full" ? [[0, 0], [1.8, 0], [0, 1.8], [1.8, 1.8]].map((o) => ({ origin: o, size: SUBFIELD_SIZE, state: "idle" })) : [] });
+    if (this.pick === "waypoint") {
+      const n = this.waypoints.length;
+      const last = this.waypoints[n - 1];
+      $("#map-readout").textContent = `Placing waypoints: ${n} so far` +
+        (last ? `, the last at (${last[0].toFixed(2)}, ${last[1].toFixed(2)}) m` : "") + ".";
+      return;
+    }
     const p = this.poses[this.pick];
     $("#map-readout").textContent = `Placing the ${this.pick}` + (p ? ` at (${p[0].toFixed(2)}, ${p[1].toFixed(2)}) m` +
       (Number.isFinite(p[2]) ? `, heading ${deg(p[2])}` : "") : "") + ".";
@@ -222,8 +327,12 @@ export class SubmitPage {
     if (x < 0 || y < 0 || x > w || y > hgt) return;
     ev.preventDefault();
     this.map.canvas.focus();
-    this.map.canvas.setPointerCapture?.(ev.pointerId);
     const which = this.pick;
+    if (which === "waypoint") {
+      this.setWaypoints([...this.waypoints, [round(x), round(y)]]);
+      return;
+    }
+    this.map.canvas.setPointerCapture?.(ev.pointerId);
     const old = this.poses[which];
     this.drag = { which, px, py };
     this.setPose(which, [round(x), round(y), ...(old && Number.isFinite(old[2]) ? [old[2]] : [])]);
@@ -256,6 +365,27 @@ export class SubmitPage {
     }
     const moves = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, 1], ArrowDown: [0, -1] };
     const [w, hgt] = this.world();
+    if (ev.key === "w" && this.source === "path") {
+      const last = this.waypoints[this.waypoints.length - 1] || this.poses.start || [w / 2, hgt / 2];
+      checkRadio(this.form, "pick", "waypoint");
+      this.setWaypoints([...this.waypoints, [round(clamp(last[0] + 0.1, 0, w)), round(last[1])]]);
+      ev.preventDefault();
+      return;
+    }
+    if (which === "waypoint") {
+      const n = this.waypoints.length;
+      if (n && moves[ev.key]) {
+        const step = ev.shiftKey ? 0.1 : 0.01;
+        const [dx, dy] = moves[ev.key];
+        const [x, y] = this.waypoints[n - 1];
+        this.setWaypoints([...this.waypoints.slice(0, -1), [round(clamp(x + dx * step, 0, w)), round(clamp(y + dy * step, 0, hgt))]]);
+        ev.preventDefault();
+      } else if (n && (ev.key === "Delete" || ev.key === "Backspace")) {
+        this.setWaypoints(this.waypoints.slice(0, -1));
+        ev.preventDefault();
+      }
+      return;
+    }
     const p = this.poses[which] || [w / 2, hgt / 2];
     if (moves[ev.key]) {
       const step = ev.shiftKey ? 0.1 : 0.01;
@@ -293,6 +423,7 @@ export class SubmitPage {
       environment: ["#f-environment"], planner: ["#f-planner"], repetitions: ["#f-repetitions"], seed: ["#f-seed"],
       start: ["#f-start-x", "#f-start-y", "#f-start-a"], goal: ["#f-goal-x", "#f-goal-y", "#f-goal-a"],
       planner_params: ["#f-params input", "#f-params select", "#f-params textarea"],
+      program: ["#f-program"], path: ["#f-path"],
       modes: ['input[name="modes"]'], field: ['input[name="field"]'],
     }[key] || [];
     const els = inputs.flatMap((sel) => $$(sel, this.form));
@@ -309,11 +440,22 @@ export class SubmitPage {
     if (!this.poses.start) problems.push(["start", "place the start on the map or type x and y"]);
     if (!this.poses.goal) problems.push(["goal", "place the goal on the map or type x and y"]);
     if (!modes.length) problems.push(["modes", "choose at least one mode"]);
-    let params = {};
-    try {
-      params = this.params();
-    } catch (err) {
-      problems.push(["planner_params", err.message]);
+    const source = {};
+    if (this.source === "planner") {
+      source.planner = $("#f-planner").value;
+      try {
+        source.planner_params = this.params();
+      } catch (err) {
+        problems.push(["planner_params", err.message]);
+      }
+    } else if (this.source === "program") {
+      if (this.uploads && !this.uploads.uploads_enabled) problems.push(["program", "uploads are disabled on this testbed"]);
+      else if (!$("#f-program").value) problems.push(["program", "upload a program first (Programs page)"]);
+      else source.program = Number($("#f-program").value);
+    } else {
+      const pts = this.parsePath();
+      if (!pts) problems.push(["path", "each line must be one point: x, y in metres"]);
+      else if (this.poses.start && this.poses.goal) source.path = [this.poses.start, ...pts, this.poses.goal];
     }
     const intOf = (sel) => {
       const v = $(sel).value.trim();
@@ -325,8 +467,7 @@ export class SubmitPage {
         environment: $("#f-environment").value,
         start: this.poses.start,
         goal: this.poses.goal,
-        planner: $("#f-planner").value,
-        planner_params: params,
+        ...source,
         modes,
         repetitions: intOf("#f-repetitions"),
         seed: intOf("#f-seed"),
@@ -353,7 +494,7 @@ export class SubmitPage {
       this.store.refreshExperiments();
       this.onSubmitted(exp.id);
     } catch (err) {
-      if (err.status === 422 || err.status === 429 || err.status === 413) {
+      if (err.status === 422 || err.status === 429 || err.status === 413 || (err.status === 403 && body.program)) {
         let first = null;
         const pyd = (err.errors || []).filter((e) => Array.isArray(e.loc));
         if (pyd.length) {
