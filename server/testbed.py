@@ -68,6 +68,7 @@ class Testbed:
         self._probe_task: Optional[asyncio.Task] = None
         self._pool: Optional[ProcessPoolExecutor] = None
         self._plan_locks: dict[int, asyncio.Lock] = {}
+        self._plan_failures: dict[int, str] = {}  # experiment id -> why planning failed
         self._estimates: dict[int, float] = {}
         #: serialized views of finished experiments (they no longer change): id -> (owner id, JSON)
         self.finished_views: dict[int, tuple[int, bytes]] = {}
@@ -320,13 +321,18 @@ class Testbed:
         """The experiment's path, planned once even when several runs ask at the same time.
 
         A planning failure fails the whole experiment: its queued runs end
-        ``failed`` with the same reason.
+        ``failed`` with the same reason, and a run already past its queue
+        (another mode running in parallel) gets that reason too instead of
+        planning — or running an uploaded program — a second time.
         """
         lock = self._plan_locks.setdefault(experiment_id, asyncio.Lock())
         async with lock:
+            if experiment_id in self._plan_failures:
+                raise RunFailed(self._plan_failures[experiment_id])
             try:
                 return await plan_experiment(self, experiment_id, ctx)
             except RunFailed as exc:
+                self._plan_failures[experiment_id] = str(exc)
                 await self._fail_queued(experiment_id, str(exc))
                 raise
 

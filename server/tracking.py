@@ -41,6 +41,7 @@ class PoseRouter:
         self._broker = broker
         self._origin_of = origin_of
         self._lock = threading.Lock()
+        self._write_lock = threading.Lock()
         self._windows: dict[str, _Window] = {}
         self._last_t: dict[str, float] = {}
         self._last_live: dict[str, float] = {}
@@ -93,16 +94,28 @@ class PoseRouter:
         if w is not None:
             run = w.run_id
             values = [(run, t, x, y, a) for t, x, y, a in rows.tolist()]
-            # the driver's own executemany on a pooled connection: no ORM or Core layer per row
+            # the driver's own executemany on a pooled connection: no ORM or Core layer per row;
+            # one writer at a time, queued on a mutex rather than on SQLite's sleeping busy handler
             engine = self._sessions.kw["bind"]
-            conn = engine.raw_connection()
-            try:
+            with self._write_lock:
+                conn = engine.raw_connection()
+                sqlite = engine.dialect.name == "sqlite"
                 cur = conn.cursor()
-                cur.executemany(_insert_sql(engine.dialect.paramstyle), values)
-                cur.close()
-                conn.commit()
-            finally:
-                conn.close()
+                try:
+                    if sqlite:  # the run id comes from our own window: skip the per-row key lookup
+                        cur.execute("PRAGMA foreign_keys=OFF")
+                    try:
+                        cur.executemany(_insert_sql(engine.dialect.paramstyle), values)
+                        conn.commit()
+                    except Exception:
+                        conn.rollback()
+                        raise
+                    finally:
+                        if sqlite:  # the pooled connection goes back as it came
+                            cur.execute("PRAGMA foreign_keys=ON")
+                finally:
+                    cur.close()
+                    conn.close()
             stored = len(rows)
             with self._lock:
                 w.stored += stored
