@@ -27,7 +27,7 @@ from typing import Any, Optional
 
 from .core.settings import Settings
 
-__all__ = ["ProgramOutcome", "ProgramSpec", "Sandbox", "explain", "program_argv"]
+__all__ = ["ProgramOutcome", "ProgramSpec", "Sandbox", "explain", "launcher_env", "program_argv"]
 
 log = logging.getLogger("twb.sandbox")
 
@@ -58,6 +58,18 @@ class ProgramOutcome:
     log: list[tuple[str, str]] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
     planning_time_s: Optional[float] = None
+
+
+def launcher_env() -> dict[str, str]:
+    """The launcher's environment: a few of ours, and one thread for numpy's BLAS/OpenMP.
+
+    One thread matters: the launcher imports the codec (numpy) before it
+    unshares namespaces and forks, which must happen single-threaded.
+    """
+    env = {k: v for k, v in os.environ.items() if k in ("PATH", "PYTHONPATH", "LANG", "VIRTUAL_ENV")}
+    env.update({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                "PYTHONDONTWRITEBYTECODE": "1"})
+    return env
 
 
 def program_argv(spec: ProgramSpec, interpreters: dict[str, str]) -> list[str]:
@@ -136,12 +148,10 @@ class Sandbox:
 
     async def _launch(self, job: dict[str, Any], timeout_s: float) -> tuple[Optional[dict[str, Any]], str]:
         """Run the launcher with ``job``; (result or None, its stderr)."""
-        env = {k: v for k, v in os.environ.items() if k in ("PATH", "PYTHONPATH", "LANG", "VIRTUAL_ENV")}
-        env.update({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-                    "PYTHONDONTWRITEBYTECODE": "1"})
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "server.sandbox_launch", stdin=asyncio.subprocess.PIPE,
-            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=env, start_new_session=True)
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=launcher_env(),
+            start_new_session=True)
         try:
             out, err = await asyncio.wait_for(proc.communicate(json.dumps(job).encode()), timeout_s)
         except BaseException:

@@ -3,9 +3,10 @@
 The server (:mod:`server.sandbox`) starts it as ``python -m server.sandbox_launch``
 with a JSON job on stdin and prints one JSON result line when everything
 has ended (SIGTERM ends it early, sandbox included).
-Linux only.  Standard library only until the first path line arrives (the
-codec, and with it numpy, is imported after the program has been started, so
-the process is single-threaded when it unshares and forks).
+Linux only.  The wire codec (and with it numpy) is imported first, while the
+project's files are still visible (the mount namespace covers ``/tmp``, where
+a checkout may live), with the BLAS/OpenMP thread counts set to 1 so the
+process is still single-threaded when it unshares and forks.
 
 What it does, in order:
 
@@ -695,11 +696,35 @@ def probe(mode: str) -> dict[str, Any]:
     return json.loads(data)
 
 
+def _preload_codec() -> None:
+    """Import the wire codec now, while the project's files are still visible.
+
+    The mount namespace covers ``/tmp`` with a fresh tmpfs, and a checkout
+    (with its virtualenv) may well live under ``/tmp``: a later import would
+    not find it.  The server starts the launcher with ``OPENBLAS_NUM_THREADS=1``
+    (and the OpenMP/MKL equivalents), so importing numpy starts no thread and
+    the process is still single-threaded when it unshares and forks; that is
+    checked here.
+    """
+    import robot_agent.protocol  # noqa: F401
+
+    threads = len(os.listdir("/proc/self/task")) if os.path.isdir("/proc/self/task") else 1
+    if threads != 1:
+        raise OSError(errno.EAGAIN, f"the launcher has {threads} threads after importing the codec; "
+                                    "start it with OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1")
+
+
 def main() -> int:
     job = json.loads(sys.stdin.buffer.read())
     sys.stdin.close()
     if job.get("probe"):
         _emit(probe(job.get("namespaces", "auto")))
+        return 0
+    try:
+        _preload_codec()
+    except OSError as exc:
+        _emit({"launch_error": exc.strerror or str(exc), **_empty_outputs(), "exit_code": None, "signal": None,
+               "timed_out": False, "procs_max": 0, "isolation": {"namespaces": []}})
         return 0
     try:
         iso = enter_namespaces(job.get("namespaces", "auto"))

@@ -24,7 +24,7 @@ import pytest
 
 from robot_agent.protocol import MAX_LINE_BYTES
 from server import sandbox_launch
-from server.sandbox import explain
+from server.sandbox import explain, launcher_env
 
 ROOT = Path(__file__).resolve().parent.parent
 NOBODY = 65534
@@ -63,7 +63,7 @@ def job(program: str, *, data_dir: Path, namespaces: str = "auto", interpreter: 
 
 def launch(spec: dict, prefix: list[str] = ()) -> dict:
     r = subprocess.run([*prefix, sys.executable, "-m", "server.sandbox_launch"], input=json.dumps(spec).encode(),
-                       capture_output=True, timeout=60, cwd=ROOT)
+                       capture_output=True, timeout=60, cwd=ROOT, env=launcher_env())
     assert r.returncode == 0, r.stderr.decode()
     return json.loads(r.stdout.decode().splitlines()[-1])
 
