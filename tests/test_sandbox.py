@@ -75,9 +75,15 @@ def processes_of(uid: int) -> list[str]:
 
 @pytest.fixture
 def data_dir():
-    """A server data dir outside /tmp (so only the mount over it can hide it), with a database file."""
+    """A server data dir outside /tmp (so only the mount over it can hide it), with a database file.
+
+    The sandbox covers /tmp and /var/tmp with fresh tmpfs, which would hide a data dir there anyway;
+    when the checkout itself lives there (a clean clone in /tmp), the data dir goes to /var/lib.
+    """
     base = ROOT / "tests" / "output"
-    base.mkdir(exist_ok=True)
+    if base.resolve().is_relative_to("/tmp") or base.resolve().is_relative_to("/var/tmp"):
+        base = Path("/var/lib/twb-tests") if os.geteuid() == 0 else Path.home() / ".cache" / "twb-tests"
+    base.mkdir(parents=True, exist_ok=True)
     d = Path(tempfile.mkdtemp(prefix="sandbox-data-", dir=base))
     (d / "twb.db").write_text("SECRET DATABASE")
     d.chmod(0o700)
