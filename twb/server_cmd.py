@@ -62,10 +62,13 @@ async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ig
         await stop.wait()
     finally:
         print("twb: stopping...", file=sys.stderr, flush=True)
-        if cleanup is not None:
-            await cleanup()
-        server.should_exit = True
-        await serving
+        try:
+            if cleanup is not None:
+                await cleanup()
+        finally:
+            # whatever happened to the robots, the server shuts down in order (lifespan included)
+            server.should_exit = True
+            await asyncio.shield(serving)
 
 
 def _run(main) -> None:  # type: ignore[no-untyped-def]
