@@ -293,12 +293,14 @@ async def plan_experiment(testbed: "Testbed", experiment_id: int, ctx: Optional[
                 testbed, exp, run_id=ctx.run_id if ctx else None, robot_id=ctx.robot.robot_id if ctx else "robot",
                 platform=(ctx.robot.platform or "BeBot") if ctx else "BeBot", on_line=ctx.on_line if ctx else None)
         except ProgramFailed as exc:
+            info, reason = exc.info, str(exc)
+
             def store_info() -> None:
                 with testbed.sessions.begin() as s:
-                    s.get(Experiment, experiment_id).planning_info = exc.info
+                    s.get(Experiment, experiment_id).planning_info = info
 
             await asyncio.to_thread(store_info)
-            raise RunFailed(str(exc)) from None
+            raise RunFailed(reason) from None
     else:
         from planners import PlanningError
 

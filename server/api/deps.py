@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Iterator
+from typing import TYPE_CHECKING, Annotated, Any, Iterator
 
 import anyio
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from ..core.security import Principal
@@ -14,7 +15,7 @@ from ..core.security import Principal
 if TYPE_CHECKING:
     from ..testbed import Testbed
 
-__all__ = ["AdminUser", "AgentToken", "CurrentUser", "SessionDep", "TestbedDep"]
+__all__ = ["AdminUser", "AgentToken", "CurrentUser", "SessionDep", "TestbedDep", "owned_row"]
 
 
 _bearer = HTTPBearer(auto_error=False, description="`Authorization: Bearer <token>`")
@@ -79,3 +80,19 @@ async def get_agent_token(
 
 
 AgentToken = Annotated[Principal, Depends(get_agent_token)]
+
+
+def owned_row(session: Session, user: Principal, model: type, row_id: int, what: str) -> tuple[Any, str]:
+    """A row of ``model`` (which has ``owner_id``) and its owner's name.
+
+    404 "<what> not found" when it does not exist or belongs to someone else
+    (admins see everything): other users cannot even learn that it exists.
+    """
+    from ..models import User
+
+    row = session.execute(
+        select(model, User.name).join(User, model.owner_id == User.id).where(model.id == row_id)
+    ).first()
+    if row is None or (row[0].owner_id != user.id and not user.is_admin):
+        raise HTTPException(404, f"{what} not found")
+    return row[0], row[1]

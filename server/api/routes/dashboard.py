@@ -14,7 +14,6 @@ from pathlib import Path
 from fastapi import APIRouter, HTTPException
 from fastapi.responses import FileResponse
 
-from ..deps import CurrentUser
 
 __all__ = ["STATIC_DIR", "router"]
 

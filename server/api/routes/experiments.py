@@ -15,7 +15,7 @@ from ...jobs import create_experiment, experiment_public, experiment_summary
 from ...models import Environment, Experiment, User
 from ...schemas import TERMINAL_STATES, ExperimentCreate, ExperimentPublic, ExperimentSummary, Page
 from ...validation import PreflightError, preflight
-from ..deps import CurrentUser, SessionDep, TestbedDep
+from ..deps import CurrentUser, SessionDep, TestbedDep, owned_row
 from .environments import visible
 from .programs import check_usable
 
@@ -24,12 +24,7 @@ router = APIRouter(prefix="/experiments", tags=["experiments"])
 
 def owned_experiment(session: Session, user: Principal, experiment_id: int) -> tuple[Experiment, str]:
     """The experiment and its owner's name; 404 when it does not exist or is not the user's."""
-    row = session.execute(
-        select(Experiment, User.name).join(User, Experiment.owner_id == User.id).where(Experiment.id == experiment_id)
-    ).first()
-    if row is None or (row[0].owner_id != user.id and not user.is_admin):
-        raise HTTPException(404, "Experiment not found")
-    return row[0], row[1]
+    return owned_row(session, user, Experiment, experiment_id, "Experiment")
 
 
 @router.post("", response_model=ExperimentPublic, status_code=202)

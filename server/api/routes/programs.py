@@ -19,7 +19,7 @@ from ...core.security import Principal
 from ...core.settings import Settings
 from ...models import Program, User
 from ...schemas import Page, ProgramCreate, ProgramPublic
-from ..deps import CurrentUser, SessionDep, TestbedDep
+from ..deps import CurrentUser, SessionDep, TestbedDep, owned_row
 
 router = APIRouter(prefix="/programs", tags=["programs"])
 
@@ -33,12 +33,7 @@ def program_public(p: Program, owner: str) -> ProgramPublic:
 
 def owned_program(session: Session, user: Principal, program_id: int) -> tuple[Program, str]:
     """The program and its owner's name; 404 when it does not exist or is not the user's."""
-    row = session.execute(
-        select(Program, User.name).join(User, Program.owner_id == User.id).where(Program.id == program_id)
-    ).first()
-    if row is None or (row[0].owner_id != user.id and not user.is_admin):
-        raise HTTPException(404, "Program not found")
-    return row[0], row[1]
+    return owned_row(session, user, Program, program_id, "Program")
 
 
 def check_usable(session: Session, user: Principal, program_id: int, settings: Settings) -> None:

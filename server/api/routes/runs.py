@@ -13,7 +13,7 @@ from sqlalchemy.orm import Session
 from ...core.security import Principal
 
 from ...jobs import run_public
-from ...models import Experiment, Message, Pose, Run, User
+from ...models import Experiment, Message, Pose, Run
 from ...schemas import RunPublic
 from ..deps import CurrentUser, SessionDep
 
