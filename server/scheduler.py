@@ -25,10 +25,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Optional
 
+from robot_agent.world import FIELD_SIZE, SUBFIELD_SIZE
+from robot_agent.world import SUBFIELD_ORIGINS as _ORIGINS
+
 __all__ = ["Assignment", "Pending", "RobotSlot", "Scheduler", "SubfieldSlot", "SUBFIELD_ORIGINS"]
 
-SUBFIELD_ORIGINS = {1: (0.0, 0.0), 2: (1.8, 0.0), 3: (0.0, 1.8), 4: (1.8, 1.8)}
-FULL = (3.6, 3.6)
+#: origin of each sub-field 1..4 in the field frame (m)
+SUBFIELD_ORIGINS = dict(enumerate(_ORIGINS, start=1))
+FULL = FIELD_SIZE
 
 
 @dataclass
@@ -42,7 +46,7 @@ class RobotSlot:
     profile: str = "bebot"
     platform: str = ""
     origin: tuple[float, float] = (0.0, 0.0)
-    area: tuple[float, float] = (1.8, 1.8)
+    area: tuple[float, float] = SUBFIELD_SIZE
     run_id: Optional[int] = None
     healthy: bool = True
 
@@ -157,7 +161,7 @@ class Scheduler:
         return out
 
     def _sim(self, p: Pending) -> Optional[Assignment]:
-        need = FULL if p.field == "full" else (1.8, 1.8)
+        need = FULL if p.field == "full" else SUBFIELD_SIZE
         for r in sorted(self.robots.values(), key=lambda r: r.robot_id):
             if r.pool == "sim" and r.idle and r.robot_id not in p.exclude and \
                     r.area[0] >= need[0] - 1e-6 and r.area[1] >= need[1] - 1e-6:
@@ -191,7 +195,7 @@ class Scheduler:
     def can_ever_run(self, mode: str, field_kind: str) -> bool:
         """Whether some registered robot could serve this kind of run at all."""
         if mode == "sim":
-            need = FULL if field_kind == "full" else (1.8, 1.8)
+            need = FULL if field_kind == "full" else SUBFIELD_SIZE
             return any(r.pool == "sim" and r.area[0] >= need[0] - 1e-6 and r.area[1] >= need[1] - 1e-6
                        for r in self.robots.values())
         if field_kind == "full":

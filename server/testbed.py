@@ -18,6 +18,8 @@ from typing import Any, Awaitable, Callable, Optional
 
 from sqlalchemy import delete, select
 
+from robot_agent.world import SUBFIELD_SIZE
+
 from . import planning
 from .bootstrap import bootstrap_store
 from .broker import EventBroker
@@ -395,7 +397,7 @@ class Testbed:
             state = "offline"
         return SubfieldPublic(id=k, state=state, environment=slot.environment,
                               robot_id=robot.robot_id if robot else None, run_id=slot.run_id,
-                              origin=list(SUBFIELD_ORIGINS[k]), size=[1.8, 1.8])
+                              origin=list(SUBFIELD_ORIGINS[k]), size=list(SUBFIELD_SIZE))
 
     def subfields(self) -> list[SubfieldPublic]:
         return [self.subfield_view(k) for k in sorted(self.scheduler.subfields)]

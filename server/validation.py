@@ -16,13 +16,12 @@ from typing import Any
 import numpy as np
 
 from planners import Environment, PlanningError, check_query, get_planner, parse_environment
+from robot_agent.world import FIELD_SIZE, SUBFIELD_SIZE
 
 from .schemas import ExperimentCreate
 
 __all__ = ["FIELD_SIZE", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight"]
 
-SUBFIELD_SIZE = (1.8, 1.8)
-FIELD_SIZE = (3.6, 3.6)
 
 
 class PreflightError(ValueError):
@@ -91,9 +90,8 @@ def _check_clear(space: Any, pts: np.ndarray, robot_radius: float) -> None:
             f"path point {i} ({pts[i, 0]:g}, {pts[i, 1]:g}) is outside the field or closer than the "
             f"robot radius {robot_radius:g} m to an obstacle"
         )
-    bad = ~space.segments_free(pts[:-1], pts[1:])
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
+    i = space.first_blocked_segment(pts)
+    if i is not None:
         raise PreflightError(
             f"path segment {i} from ({pts[i, 0]:g}, {pts[i, 1]:g}) to ({pts[i + 1, 0]:g}, {pts[i + 1, 1]:g}) "
             f"passes closer than the robot radius {robot_radius:g} m to an obstacle"

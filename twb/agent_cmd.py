@@ -10,6 +10,7 @@ from typing import Annotated, Optional
 import typer
 
 from .errors import fail
+from .poses import parse_time_scale
 
 
 class BackendName(str, Enum):
@@ -63,15 +64,7 @@ def agent(
 
     if profile not in profile_names():
         fail(f"unknown --profile {profile!r} (profiles: {', '.join(profile_names())})")
-    if time_scale.strip().lower() in ("max", "inf"):
-        scale = math.inf
-    else:
-        try:
-            scale = float(time_scale)
-        except ValueError:
-            fail(f"--time-scale must be a number > 0 or 'max', got {time_scale!r}")
-        if not (math.isfinite(scale) and scale > 0):
-            fail(f"--time-scale must be a number > 0 or 'max', got {time_scale!r}")
+    scale = parse_time_scale(time_scale)
     if server and not token:
         fail("--server needs --token (or TWB_TOKEN)")
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,

@@ -1,4 +1,4 @@
-"""Parsing of command-line poses such as ``0.3,0.3,90deg``."""
+"""Parsing of command-line values: poses such as ``0.3,0.3,90deg``, time scales such as ``20`` or ``max``."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 from .errors import fail
 
-__all__ = ["parse_cli_pose"]
+__all__ = ["parse_cli_pose", "parse_time_scale"]
 
 
 def parse_cli_pose(text: str, what: str) -> list[float]:
@@ -25,3 +25,16 @@ def parse_cli_pose(text: str, what: str) -> list[float]:
             fail(f"--{what}: {p!r} must be finite")
         out.append(math.radians(v) if deg else v)
     return out
+
+
+def parse_time_scale(text: str) -> float:
+    """``--time-scale``: experiment seconds per wall second, > 0; ``max`` (or ``inf``) is as fast as possible."""
+    if text.strip().lower() in ("max", "inf"):
+        return math.inf
+    try:
+        v = float(text)
+    except ValueError:
+        fail(f"--time-scale must be a number > 0 or 'max', got {text!r}")
+    if not (math.isfinite(v) and v > 0):
+        fail(f"--time-scale must be a number > 0 or 'max', got {text!r}")
+    return v

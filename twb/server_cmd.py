@@ -13,21 +13,10 @@ from typing import Annotated, Optional
 import typer
 
 from .errors import fail
+from .poses import parse_time_scale
 from .sdk_support import TokenOpt, UrlOpt, sdk_client
 
 users_app = typer.Typer(help="Manage testbed users (needs the admin token).", no_args_is_help=True)
-
-
-def _time_scale(value: str) -> float:
-    if value.lower() in ("max", "inf"):
-        return math.inf
-    try:
-        v = float(value)
-    except ValueError:
-        fail(f"--time-scale must be a number > 0 or 'max', got {value!r}")
-    if not (v > 0 and math.isfinite(v)):
-        fail(f"--time-scale must be a number > 0 or 'max', got {value!r}")
-    return v
 
 
 async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ignore[no-untyped-def]
@@ -122,23 +111,24 @@ def up(
 ) -> None:
     """The whole testbed on this machine: server on SQLite, four field robots, a simulation pool."""
     from robot_agent.host import AgentHost
+    from robot_agent.world import FIELD_SIZE, SUBFIELD_ORIGINS, SUBFIELD_SIZE
     from server.testbed import Testbed
 
-    scale = _time_scale(time_scale)
+    scale = parse_time_scale(time_scale)
     settings = _settings(data_dir, token, scale, **_uploads(enable_uploads))
     testbed = Testbed(settings)
     admin = testbed.prepare()
     agent_token = testbed.issue_agent_token()
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
-        full = (3.6, 3.6)
+        # the robot of sub-field 1 covers the whole field, for full-field jobs
         field = AgentHost(robots=4, backend="field", time_scale=scale, seed=seed, world="shared",
                           robot_ids=[f"field-{k}" for k in range(1, 5)],
-                          area=[full, (1.8, 1.8), (1.8, 1.8), (1.8, 1.8)],
-                          origins=[(0.0, 0.0), (1.8, 0.0), (0.0, 1.8), (1.8, 1.8)],
+                          area=[FIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE],
+                          origins=list(SUBFIELD_ORIGINS),
                           server_url=url, token=agent_token, advertise_host="127.0.0.1")
         pool = AgentHost(robots=sim_robots, backend="ideal", time_scale=scale, seed=seed, world="separate",
-                         area=full, robot_ids=[f"sim-{i}" for i in range(1, sim_robots + 1)],
+                         area=FIELD_SIZE, robot_ids=[f"sim-{i}" for i in range(1, sim_robots + 1)],
                          server_url=url, token=agent_token, advertise_host="127.0.0.1")
         hosts = [field, pool]
         for h in hosts:
@@ -176,7 +166,7 @@ def server(
     """The server alone; robots join with `twb agent --server URL --token T`."""
     from server.testbed import Testbed
 
-    settings = _settings(data_dir, token, _time_scale(time_scale), **_uploads(enable_uploads))
+    settings = _settings(data_dir, token, parse_time_scale(time_scale), **_uploads(enable_uploads))
     testbed = Testbed(settings)
     admin = testbed.prepare()
 
