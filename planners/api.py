@@ -201,9 +201,8 @@ def _check_raw(name: str, raw: np.ndarray, s: np.ndarray, g: np.ndarray, space: 
     tol = space.resolution * 1e-6
     if np.hypot(*(raw[0] - s[:2])) > tol or np.hypot(*(raw[-1] - g[:2])) > tol:
         raise PlanningError(f"planner {name!r} returned a path that does not run from start to goal")
-    bad = ~space.segments_free(raw[:-1], raw[1:])
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
+    i = space.first_blocked_segment(raw)
+    if i is not None:
         raise PlanningError(
             f"planner {name!r} returned a path whose segment {i} ({raw[i][0]:.3f}, {raw[i][1]:.3f}) -> "
             f"({raw[i + 1][0]:.3f}, {raw[i + 1][1]:.3f}) enters an obstacle"

@@ -214,12 +214,18 @@ class ConfigSpace:
                 bad[owner[~free[idx]]] = True
         return ok & ~bad
 
+    def first_blocked_segment(self, path: np.ndarray) -> int | None:
+        """Index of the first segment of the polyline ``path`` ``(N >= 2, >=2)`` that is not free, or None."""
+        p = np.asarray(path, dtype=float)
+        bad = np.flatnonzero(~self.segments_free(p[:-1], p[1:]))
+        return int(bad[0]) if len(bad) else None
+
     def path_free(self, path: np.ndarray) -> bool:
         """True when every segment of the polyline ``path`` ``(N, >=2)`` is free."""
         p = np.asarray(path, dtype=float)
         if len(p) == 1:
             return bool(self.is_free(p[:, :2])[0])
-        return bool(self.segments_free(p[:-1], p[1:]).all())
+        return self.first_blocked_segment(p) is None
 
 
 @lru_cache(maxsize=16)
