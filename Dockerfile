@@ -19,6 +19,8 @@ COPY alembic alembic
 COPY alembic.ini ./
 # editable: the server finds its Alembic migrations next to the code
 RUN pip install --no-cache-dir -e .
+# compile the simulation kernels into the image (numba's cache), not at every container start
+RUN python -c "from robot_agent.sim import warm_up; warm_up()"
 
 EXPOSE 8000 5555
 ENTRYPOINT ["twb"]

@@ -18,6 +18,11 @@ All arrays are over the host's robots, in each robot's own frame (metres,
 radians).  Two emulated backends ship: :class:`IdealBackend` (Player/Stage
 like: perfect actuation, exact pose at the control rate) and
 :class:`FieldBackend` (the emulated physical robot on the Teleworkbench field).
+Their per-robot physics is compiled (:mod:`robot_agent.physics`); they are
+also :class:`Emulated`: the simulation core runs them many steps at a time
+inside compiled code (:mod:`robot_agent.stepper`), which only works for
+backends whose whole physics is such code.  Any other backend is stepped
+through the methods below, one step at a time.
 
 **A real robot plugs in here**: subclass :class:`Backend`, send the commands
 of :meth:`actuate` to the robots (radio/Bluetooth), fill the beliefs and
@@ -31,15 +36,12 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 
 import numpy as np
+from numba import njit
 
-from .kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
-from .noise import box_muller, uniforms
+from .physics import FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
 from .params import RobotParams
 
-__all__ = ["BACKENDS", "Backend", "FieldBackend", "IdealBackend", "make_backend"]
-
-# Counters reserved for per-run draws (a path never runs 2**40 steps).
-_RUN_COUNTER = 1 << 40
+__all__ = ["BACKENDS", "Backend", "Emulated", "FieldBackend", "IdealBackend", "make_backend"]
 
 
 class Backend(ABC):
@@ -90,10 +92,45 @@ class Backend(ABC):
         return bool(self.in_motion().any())
 
 
-class IdealBackend(Backend):
+class Emulated(Backend):
+    """A backend the compiled simulation loop can run: its state is plain arrays.
+
+    ``kind`` selects the physics in :func:`robot_agent.stepper.run`
+    (``IDEAL`` or ``FIELD``); :attr:`arrays` hands over the state, in place.
+    """
+
+    IDEAL, FIELD = 0, 1
+    kind: int = IDEAL
+
+    def __init__(self, n: int, params: RobotParams) -> None:
+        super().__init__(n, params)
+        self.fg: FieldGains = field_gains(params)
+        self.tracks = np.zeros((n, 2))  # actual left/right track speeds, m/s
+        self.gain = np.ones((n, 2))  # per-run track gains
+        self.keys = np.zeros(n, dtype=np.uint64)
+        self.ring = np.zeros((n, self.fg.delay + 1, 3))  # tracker measurements in flight
+        self.ring_ok = np.zeros((n, self.fg.delay + 1), dtype=bool)
+        self.ring_pos = np.zeros(n, dtype=np.int64)
+        self.noise = np.zeros((n, 2))  # this step's track noise (standard normals)
+
+    @property
+    def arrays(self) -> tuple:
+        """``(pose, belief, tracks, gain, keys, ring, ring_ok, ring_pos, noise)``, the arrays themselves."""
+        return (self.pose, self.belief, self.tracks, self.gain, self.keys, self.ring, self.ring_ok,
+                self.ring_pos, self.noise)
+
+
+@njit(cache=True, error_model='numpy')
+def _ideal_actuate_all(cmd: np.ndarray, pose: np.ndarray, dt: float) -> None:
+    for i in range(len(pose)):
+        ideal_actuate(i, cmd[i, 0], cmd[i, 1], pose, dt)
+
+
+class IdealBackend(Emulated):
     """Player/Stage-like: commands are executed exactly; the belief is the true pose."""
 
     name = "ideal"
+    kind = Emulated.IDEAL
 
     def begin_path(self, mask: np.ndarray, keys: np.ndarray, from_rest: np.ndarray) -> None:
         pass
@@ -102,7 +139,7 @@ class IdealBackend(Backend):
         return self.pose, moving, self.pose
 
     def actuate(self, cmd: np.ndarray) -> None:
-        unicycle_step(self.pose, cmd, self.dt, out=self.pose)
+        _ideal_actuate_all(np.ascontiguousarray(cmd, dtype=float), self.pose, self.dt)
 
     def halt(self, mask: np.ndarray) -> None:
         pass
@@ -117,8 +154,26 @@ class IdealBackend(Backend):
         return False
 
 
-class FieldBackend(Backend):
-    """The emulated physical robot on the field.
+@njit(cache=True, error_model='numpy')
+def _field_sense_all(step: np.ndarray, keys: np.ndarray, pose: np.ndarray, belief: np.ndarray, ring: np.ndarray,
+                     ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, fg: FieldGains
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    seen = np.zeros(len(pose), dtype=np.bool_)
+    meas = np.empty((len(pose), 3))
+    for i in range(len(pose)):
+        seen[i] = field_sense(i, step[i], keys[i], pose, belief, ring, ring_ok, ring_pos, noise, meas[i], fg)
+    return seen, meas
+
+
+@njit(cache=True, error_model='numpy')
+def _field_actuate_all(cmd: np.ndarray, pose: np.ndarray, tracks: np.ndarray, gain: np.ndarray,
+                       noise: np.ndarray, fg: FieldGains) -> None:
+    for i in range(len(pose)):
+        field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, fg)
+
+
+class FieldBackend(Emulated):
+    """The emulated physical robot on the field (see :mod:`robot_agent.physics`).
 
     Localisation: the overhead tracker measures each robot at
     ``camera_rate_hz`` (frames timed from the path start, on the control
@@ -127,72 +182,30 @@ class FieldBackend(Backend):
     Actuation: body commands become track speeds, scaled by a per-run gain
     per track (bias), perturbed by speed noise, zeroed below the dead band,
     then the tracks follow with a first-order lag (``motor_time_constant_s``)
-    and at most ``max_accel_m_s2``.  All noise comes from
-    :mod:`robot_agent.noise` keyed per run, so runs replay exactly.
+    and at most ``max_accel_m_s2``.
     """
 
     name = "field"
+    kind = Emulated.FIELD
 
     def __init__(self, n: int, params: RobotParams) -> None:
         super().__init__(n, params)
-        f = params.field
-        self.delay = int(round(f.tracker_latency_s / self.dt))  # control steps
         self.belief = np.zeros((n, 3))
-        self.tracks = np.zeros((n, 2))  # actual left/right track speeds, m/s
-        self.gain = np.ones((n, 2))  # per-run track gains
-        self.keys = np.zeros(n, dtype=np.uint64)
-        self.ring = np.zeros((n, self.delay + 1, 3))  # measurements in flight
-        self.ring_ok = np.zeros((n, self.delay + 1), dtype=bool)
-        self.ring_pos = np.zeros(n, dtype=np.int64)
-        self._rows = np.arange(n)
-        self._noise = np.zeros((n, 6))
-        self._sigma = np.array([f.tracker_noise_xy_m, f.tracker_noise_xy_m, f.tracker_noise_theta_rad])
-        self._alpha = 1.0 - np.exp(-self.dt / f.motor_time_constant_s) if f.motor_time_constant_s > 0 else 1.0
-
-    def _measure(self, normal3: np.ndarray) -> np.ndarray:
-        m = self.pose + normal3 * self._sigma
-        m[:, 2] = wrap_angle(m[:, 2])
-        return m
 
     def begin_path(self, mask: np.ndarray, keys: np.ndarray, from_rest: np.ndarray) -> None:
-        idx = np.flatnonzero(mask)
-        self.keys[idx] = keys[idx]
-        z = box_muller(uniforms(self.keys[idx], np.full(len(idx), _RUN_COUNTER), 6))
-        self.gain[idx] = self.params.field.wheel_gain_mean + self.params.field.wheel_bias_sigma * z[:, :2]
-        rest = idx[from_rest[idx]]
-        if len(rest):  # the tracker has been watching the robot at rest: a fresh measurement
-            m = self.pose[rest] + z[from_rest[idx], 2:5] * self._sigma
-            m[:, 2] = wrap_angle(m[:, 2])
-            self.belief[rest] = m
-            self.ring_ok[rest] = False
+        for i in np.flatnonzero(mask):
+            self.keys[i] = keys[i]
+            field_begin(int(i), self.keys[i], bool(from_rest[i]), self.pose, self.belief, self.gain,
+                        self.ring_ok, self.fg)
 
     def sense(self, step: np.ndarray, moving: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        f = self.params.field
-        rate, cam = self.params.controller.control_rate_hz, f.camera_rate_hz
-        u = uniforms(self.keys, step, 8)
-        z = box_muller(u[:, :6])
-        self._noise = z
-        frame = (step * cam) // rate != ((step - 1) * cam) // rate
-        ok = frame & (u[:, 6] >= f.tracker_dropout_prob)
-        meas = self._measure(z[:, :3])
-        slot = self.ring_pos % (self.delay + 1)
-        self.ring[self._rows, slot] = meas
-        self.ring_ok[self._rows, slot] = ok
-        ready = (self.ring_pos + 1) % (self.delay + 1)
-        arrived = self.ring_ok[self._rows, ready]
-        self.belief[arrived] = self.ring[self._rows[arrived], ready[arrived]]
-        self.ring_pos += 1
-        return self.belief, ok & moving, meas
+        seen, meas = _field_sense_all(np.asarray(step, dtype=np.int64), self.keys, self.pose, self.belief,
+                                      self.ring, self.ring_ok, self.ring_pos, self.noise, self.fg)
+        return self.belief, seen & moving, meas
 
     def actuate(self, cmd: np.ndarray) -> None:
-        f = self.params.field
-        want = body_to_tracks(cmd, self.params.wheel_base_m)
-        noise = (f.wheel_noise_rel * np.abs(want) + f.wheel_noise_abs_m_s) * self._noise[:, 3:5]
-        target = np.where(np.abs(want) < f.dead_band_m_s, 0.0, want * self.gain + noise)
-        limit = self.params.max_accel_m_s2 * self.dt
-        self.tracks += np.clip((target - self.tracks) * self._alpha, -limit, limit)
-        self.tracks[np.abs(self.tracks) < 1e-5] = 0.0
-        unicycle_step(self.pose, tracks_to_body(self.tracks, self.params.wheel_base_m), self.dt, out=self.pose)
+        _field_actuate_all(np.ascontiguousarray(cmd, dtype=float), self.pose, self.tracks, self.gain,
+                           self.noise, self.fg)
 
     def halt(self, mask: np.ndarray) -> None:
         self.tracks[mask] = 0.0

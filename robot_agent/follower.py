@@ -1,16 +1,16 @@
-"""The motor-schema path follower: pure functions on arrays, vectorised over robots.
+"""The motor-schema path follower of one robot (compiled scalar functions).
 
 As on the Teleworkbench robots, a path is a list of waypoints.  Each control
 step (all quantities SI: m, rad, s):
 
-1. :func:`advance_waypoints` moves every robot's current waypoint on while
-   the robot (its *believed* position) is within ``switch_radius_m`` of it;
-   the last waypoint counts as reached within ``goal_tolerance_m``, and then
-   the robot only aligns to the last point's angle.
+1. :func:`advance_waypoint` moves the robot's current waypoint on while the
+   robot (its *believed* position) is within ``switch_radius_m`` of it; the
+   last waypoint counts as reached within ``goal_tolerance_m``, and then the
+   robot only aligns to the last point's angle.
 2. :func:`move_to_waypoint` is the move-to-goal motor schema: a velocity
    vector towards the current waypoint, of magnitude ``max speed`` (on the
    approach to the last point ``arrive_gain x distance``, at least
-   ``min_speed``).
+   ``min_speed``; :func:`approach_speed`).
 3. :func:`heading_control` turns that vector into body velocities: a
    P-controller on the heading error for the turn rate; the forward speed is
    the vector's magnitude times ``cos(error)``, zero above
@@ -18,187 +18,194 @@ step (all quantities SI: m, rad, s):
 4. :func:`align_control` turns on the spot to the final angle.
 5. :func:`rate_limit` applies the acceleration limits to the commands.
 
-:func:`stall_update` and :func:`timeout_steps` detect stalls and timeouts.
-:func:`control_step` chains 2-5 for a whole fleet.
+:func:`control` chains 1-5 with stall and timeout detection for one robot
+of a fleet; the simulation's kernels (:mod:`robot_agent.stepper`) call it
+for every moving robot.  The functions are compiled with numba (the issue's
+single-robot target of 5000x real time leaves 4 microseconds per step) and
+can be called from Python with floats.  :class:`Gains` carries the
+controller's parameters into compiled code.
 """
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
 import numpy as np
+from numba import njit
 
 from .kinematics import wrap_angle
-from .params import ControllerParams
+from .params import RobotParams
 
 __all__ = [
-    "advance_waypoints",
-    "align_control",
-    "control_step",
-    "heading_control",
-    "move_to_waypoint",
-    "path_length",
-    "rate_limit",
-    "stall_update",
-    "timeout_steps",
+    "ARRIVED", "DONE", "STALLED", "STARTED", "TIMED_OUT",
+    "Gains", "advance_waypoint", "align_control", "approach_speed", "control", "gains",
+    "heading_control", "move_to_waypoint", "path_length", "rate_limit", "timeout_steps",
 ]
 
-
-def _clip(x: np.ndarray, lo: float | np.ndarray, hi: float | np.ndarray) -> np.ndarray:
-    """``np.clip`` without its wrapper overhead (this runs every control step)."""
-    return np.minimum(np.maximum(x, lo), hi)
-
-
-def move_to_waypoint(xy: np.ndarray, target: np.ndarray, speed: np.ndarray) -> np.ndarray:
-    """Move-to-goal schema: ``(N, 2)`` velocity vectors (m/s) from ``xy`` towards ``target``.
-
-    ``speed`` ``(N,)`` (m/s) is each vector's magnitude; a robot already at its
-    target gets the zero vector.
-    """
-    d = target - xy
-    dist = np.hypot(d[:, 0], d[:, 1])
-    scale = np.divide(speed, dist, out=np.zeros_like(dist), where=dist > 1e-12)
-    return d * scale[:, None]
+# Bits of the flags :func:`control` returns (the stepper adds COLLIDED).
+STARTED, ARRIVED, DONE, STALLED, TIMED_OUT = 1, 2, 4, 8, 16
+MAX_SKIP = 64  # waypoints a robot may pass in one step
 
 
-def approach_speed(dist: np.ndarray, is_last: np.ndarray, max_speed: float, p: ControllerParams) -> np.ndarray:
+class Gains(NamedTuple):
+    """The follower's parameters in compiled code (SI units; see the profile notes)."""
+
+    heading_gain: float
+    switch_radius: float
+    goal_tolerance: float
+    angle_tolerance: float
+    arrive_gain: float
+    min_speed: float
+    min_turn_rate: float
+    turn_in_place: float
+    max_speed: float
+    max_turn: float
+    dv_max: float  #: forward speed change per step (m/s), acceleration limit x dt
+    dw_max: float  #: turn rate change per step (rad/s)
+    stall_time: float
+    stall_distance: float
+    stall_angle: float
+    dt: float
+
+
+def gains(p: RobotParams) -> Gains:
+    """The :class:`Gains` of robot parameters ``p``."""
+    c = p.controller
+    return Gains(c.heading_gain_1_s, c.switch_radius_m, c.goal_tolerance_m, c.angle_tolerance_rad,
+                 c.arrive_gain_1_s, c.min_speed_m_s, c.min_turn_rate_rad_s, c.turn_in_place_rad,
+                 p.max_speed_m_s, p.max_angular_speed_rad_s, c.accel_limit_m_s2 * p.dt,
+                 c.angular_accel_limit_rad_s2 * p.dt, c.stall_time_s, c.stall_distance_m,
+                 c.stall_angle_rad, p.dt)
+
+
+@njit(cache=True, error_model='numpy')
+def _clip(x: float, lo: float, hi: float) -> float:
+    return min(max(x, lo), hi)
+
+
+@njit(cache=True, error_model='numpy')
+def move_to_waypoint(x: float, y: float, tx: float, ty: float, speed: float) -> tuple[float, float]:
+    """Move-to-goal schema: the velocity vector (m/s) of magnitude ``speed`` from ``(x, y)``
+    towards ``(tx, ty)``; the zero vector at the target."""
+    dx, dy = tx - x, ty - y
+    dist = math.hypot(dx, dy)
+    scale = speed / dist if dist > 1e-12 else 0.0
+    return dx * scale, dy * scale
+
+
+@njit(cache=True, error_model='numpy')
+def approach_speed(dist: float, is_last: bool, g: Gains) -> float:
     """Schema magnitude (m/s): ``max_speed``, or on the approach to the last point
     ``arrive_gain x dist`` clipped to ``[min_speed, max_speed]``."""
-    slow = _clip(p.arrive_gain_1_s * dist, p.min_speed_m_s, max_speed)
-    return np.where(is_last, slow, max_speed)
+    if is_last:
+        return _clip(g.arrive_gain * dist, g.min_speed, g.max_speed)
+    return g.max_speed
 
 
-def heading_control(
-    theta: np.ndarray, vec: np.ndarray, p: ControllerParams, max_turn: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Body velocity commands ``(v m/s, w rad/s)`` that follow velocity vectors ``vec`` ``(N, 2)``.
+@njit(cache=True, error_model='numpy')
+def heading_control(theta: float, vx: float, vy: float, g: Gains) -> tuple[float, float]:
+    """Body velocity commands ``(v m/s, w rad/s)`` that follow the velocity vector ``(vx, vy)``.
 
     ``w = clip(heading_gain x error, +-max_turn)``; ``v = |vec| cos(error)``,
-    0 when the error exceeds ``turn_in_place_rad`` or 90 degrees.
+    0 when the error exceeds ``turn_in_place`` or 90 degrees.
     """
-    mag = np.hypot(vec[:, 0], vec[:, 1])
-    err = wrap_angle(np.arctan2(vec[:, 1], vec[:, 0]) - theta)
-    err = np.where(mag > 0, err, 0.0)
-    w = _clip(p.heading_gain_1_s * err, -max_turn, max_turn)
-    v = mag * np.maximum(np.cos(err), 0.0)
-    v = np.where(np.abs(err) > p.turn_in_place_rad, 0.0, v)
+    mag = math.hypot(vx, vy)
+    err = wrap_angle(math.atan2(vy, vx) - theta) if mag > 0 else 0.0
+    w = _clip(g.heading_gain * err, -g.max_turn, g.max_turn)
+    v = 0.0 if abs(err) > g.turn_in_place else mag * max(math.cos(err), 0.0)
     return v, w
 
 
-def align_control(
-    theta: np.ndarray, goal_angle: np.ndarray, p: ControllerParams, max_turn: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Turn rate (rad/s) that aligns ``theta`` to ``goal_angle``, and the mask of aligned robots.
+@njit(cache=True, error_model='numpy')
+def align_control(theta: float, goal_angle: float, g: Gains) -> tuple[float, bool]:
+    """Turn rate (rad/s) that aligns ``theta`` to ``goal_angle``, and whether it is aligned.
 
     The rate is the P-control ``heading_gain x error``, at least
     ``min_turn_rate`` (so the tracks overcome their dead band) and at most
-    ``max_turn``; aligned robots (error below ``angle_tolerance_rad``) get 0.
+    ``max_turn``; an aligned robot (error below ``angle_tolerance``) gets 0.
     """
     err = wrap_angle(goal_angle - theta)
-    aligned = np.abs(err) < p.angle_tolerance_rad
-    rate = _clip(np.abs(p.heading_gain_1_s * err), p.min_turn_rate_rad_s, max_turn)
-    return np.where(aligned, 0.0, np.copysign(rate, err)), aligned
+    if abs(err) < g.angle_tolerance:
+        return 0.0, True
+    return math.copysign(_clip(abs(g.heading_gain * err), g.min_turn_rate, g.max_turn), err), False
 
 
-def rate_limit(prev: np.ndarray, desired: np.ndarray, max_step: float) -> np.ndarray:
-    """``desired`` changed from ``prev`` by at most ``max_step`` (acceleration x dt) per element."""
+@njit(cache=True, error_model='numpy')
+def rate_limit(prev: float, desired: float, max_step: float) -> float:
+    """``desired`` changed from ``prev`` by at most ``max_step`` (acceleration x dt)."""
     return prev + _clip(desired - prev, -max_step, max_step)
 
 
-def advance_waypoints(
-    xy: np.ndarray,
-    points: np.ndarray,
-    offset: np.ndarray,
-    count: np.ndarray,
-    wp: np.ndarray,
-    active: np.ndarray,
-    p: ControllerParams,
-    max_iter: int = 64,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Advance current waypoints; returns the new ``wp`` ``(N,)`` and the mask of robots that
-    reached their last point (within ``goal_tolerance_m``).
+@njit(cache=True, error_model='numpy')
+def advance_waypoint(x: float, y: float, path: np.ndarray, wp: int, g: Gains) -> tuple[int, bool]:
+    """The current waypoint index after this step, and whether the last point was reached.
 
-    ``points`` ``(M, 3)`` holds every robot's path back to back: robot ``i``'s
-    path is ``points[offset[i]:offset[i] + count[i]]`` and its current
-    waypoint index is ``wp[i]``.  Only ``active`` robots move on.  A robot
-    may pass several close waypoints in one step (at most ``max_iter``);
-    every index in ``[old wp, new wp)`` was reached, and so was the last one
-    when the returned mask is set.
+    ``path`` ``(P, 2+)`` is the robot's path, ``wp`` its current waypoint.
+    The robot passes every waypoint within ``switch_radius`` (several close
+    ones in one step, at most ``MAX_SKIP``); the last one is reached within
+    ``goal_tolerance``.
     """
-    arrived = np.zeros(len(wp), dtype=bool)
-    radius = np.where(wp == count - 1, p.goal_tolerance_m, p.switch_radius_m)
-    tgt = points[offset + wp]
-    near = active & (count > 0) & (np.hypot(tgt[:, 0] - xy[:, 0], tgt[:, 1] - xy[:, 1]) < radius)
-    if not near.any():  # the common case: nobody reached a waypoint this step
-        return wp, arrived
-    wp = wp.copy()
-    idx = np.flatnonzero(near)
-    for _ in range(max_iter):
-        last = wp[idx] == count[idx] - 1
-        arrived[idx[last]] = True
-        idx = idx[~last]
-        wp[idx] += 1
-        if not len(idx):
-            break
-        tgt = points[offset[idx] + wp[idx], :2]
-        dist = np.hypot(tgt[:, 0] - xy[idx, 0], tgt[:, 1] - xy[idx, 1])
-        last = wp[idx] == count[idx] - 1
-        idx = idx[dist < np.where(last, p.goal_tolerance_m, p.switch_radius_m)]
-    return wp, arrived
+    last = len(path) - 1
+    for _ in range(MAX_SKIP):
+        radius = g.goal_tolerance if wp == last else g.switch_radius
+        if math.hypot(path[wp, 0] - x, path[wp, 1] - y) >= radius:
+            return wp, False
+        if wp == last:
+            return wp, True
+        wp += 1
+    return wp, False
 
 
-def control_step(
-    belief: np.ndarray,
-    target: np.ndarray,
-    is_last: np.ndarray,
-    aligning: np.ndarray,
-    prev_cmd: np.ndarray,
-    p: ControllerParams,
-    max_speed: float,
-    max_turn: float,
-    dt: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One control step for a fleet: body velocity commands ``(N, 2)`` and the aligned mask.
+@njit(cache=True, error_model='numpy')
+def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset: np.ndarray,
+            count: np.ndarray, wp: np.ndarray, aligning: np.ndarray, cmd: np.ndarray, anchor: np.ndarray,
+            anchor_k: np.ndarray, k: np.ndarray, timeout: np.ndarray, g: Gains) -> int:
+    """One control step of moving robot ``i`` believed at ``(bx, by, bth)``; returns its flags.
 
-    ``belief`` ``(N, 3)`` is each robot's believed pose, ``target`` ``(N, 3)``
-    its current waypoint (x, y, final angle), ``is_last`` whether that is the
-    path's last point, ``aligning`` whether the robot reached it and only
-    turns to its angle; ``prev_cmd`` ``(N, 2)`` the last commands, for the
-    acceleration limits.
+    Updates in place the fleet arrays at ``i``: waypoint ``wp``, ``aligning``,
+    commands ``cmd`` ``(N, 2)`` (zero once the path ended) and the stall
+    anchor (``anchor`` ``(N, 3)``, ``anchor_k``).  ``points``, ``offset`` and
+    ``count`` hold every robot's path back to back; ``k`` counts control
+    steps since the path began, ``timeout`` is its limit.
     """
-    d = target[:, :2] - belief[:, :2]
-    dist = np.hypot(d[:, 0], d[:, 1])
-    vec = move_to_waypoint(belief[:, :2], target[:, :2], approach_speed(dist, is_last, max_speed, p))
-    v, w = heading_control(belief[:, 2], vec, p, max_turn)
-    w_align, aligned = align_control(belief[:, 2], target[:, 2], p, max_turn)
-    v = np.where(aligning, 0.0, v)
-    w = np.where(aligning, w_align, w)
-    cmd = np.empty_like(prev_cmd)
-    cmd[:, 0] = rate_limit(prev_cmd[:, 0], v, p.accel_limit_m_s2 * dt)
-    cmd[:, 1] = rate_limit(prev_cmd[:, 1], w, p.angular_accel_limit_rad_s2 * dt)
-    return cmd, aligning & aligned
-
-
-def stall_update(
-    belief: np.ndarray,
-    anchor: np.ndarray,
-    anchor_step: np.ndarray,
-    step: np.ndarray,
-    active: np.ndarray,
-    p: ControllerParams,
-    dt: float,
-) -> np.ndarray:
-    """Stall detection; updates ``anchor`` (poses) and ``anchor_step`` in place, returns the stalled mask.
-
-    A robot makes progress when its believed pose is more than
-    ``stall_distance_m`` or ``stall_angle_rad`` away from its anchor; then
-    the anchor moves to the current pose.  ``active`` robots without
-    progress for ``stall_time_s`` are stalled.
-    """
-    moved = np.hypot(belief[:, 0] - anchor[:, 0], belief[:, 1] - anchor[:, 1]) > p.stall_distance_m
-    turned = np.abs(wrap_angle(belief[:, 2] - anchor[:, 2])) > p.stall_angle_rad
-    progress = moved | turned
-    anchor[progress] = belief[progress]
-    anchor_step[progress] = step[progress]
-    return active & ((step - anchor_step) * dt > p.stall_time_s)
+    flags = 0
+    if k[i] == 0:
+        flags |= STARTED
+        anchor[i, 0], anchor[i, 1], anchor[i, 2] = bx, by, bth
+        anchor_k[i] = 0
+    if not aligning[i] and count[i] > 0:
+        wp[i], arrived = advance_waypoint(bx, by, points[offset[i]:offset[i] + count[i]], wp[i], g)
+        if arrived:
+            flags |= ARRIVED
+            aligning[i] = True
+    row = offset[i] + wp[i]
+    tx, ty, tth = points[row, 0], points[row, 1], points[row, 2]
+    if aligning[i]:
+        v = 0.0
+        w, aligned = align_control(bth, tth, g)
+    else:
+        speed = approach_speed(math.hypot(tx - bx, ty - by), wp[i] == count[i] - 1, g)
+        vx, vy = move_to_waypoint(bx, by, tx, ty, speed)
+        v, w = heading_control(bth, vx, vy, g)
+        aligned = False
+    if aligned:
+        flags |= DONE
+    if (math.hypot(bx - anchor[i, 0], by - anchor[i, 1]) > g.stall_distance
+            or abs(wrap_angle(bth - anchor[i, 2])) > g.stall_angle):
+        anchor[i, 0], anchor[i, 1], anchor[i, 2] = bx, by, bth
+        anchor_k[i] = k[i]
+    if not aligned:
+        if (k[i] - anchor_k[i]) * g.dt > g.stall_time:
+            flags |= STALLED
+        elif k[i] >= timeout[i]:
+            flags |= TIMED_OUT
+    if flags & (DONE | STALLED | TIMED_OUT):
+        cmd[i, 0] = cmd[i, 1] = 0.0
+    else:
+        cmd[i, 0] = rate_limit(cmd[i, 0], v, g.dv_max)
+        cmd[i, 1] = rate_limit(cmd[i, 1], w, g.dw_max)
+    return flags
 
 
 def path_length(xy: np.ndarray) -> float:
@@ -209,10 +216,11 @@ def path_length(xy: np.ndarray) -> float:
     return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
-def timeout_steps(path: np.ndarray, start_xy: np.ndarray, p: ControllerParams, max_speed: float, dt: float) -> int:
+def timeout_steps(path: np.ndarray, start_xy: np.ndarray, p: RobotParams) -> int:
     """Control steps a path may take: ``timeout_base + factor x (length / max_speed)`` seconds.
 
     The length includes the way from ``start_xy`` to the first point.
     """
+    c = p.controller
     length = path_length(np.vstack([np.asarray(start_xy, dtype=float)[None, :2], path[:, :2]]))
-    return int(np.ceil((p.timeout_base_s + p.timeout_factor * length / max_speed) / dt))
+    return int(np.ceil((c.timeout_base_s + c.timeout_factor * length / p.max_speed_m_s) / p.dt))

@@ -40,9 +40,10 @@ from .protocol import MAX_LINE_BYTES, ErrorCode, format_error
 from .robot import Robot
 from .robot_profile import DEFAULT_PROFILE
 from .server_link import ServerLink
-from .sim import SimCore, SimEvent
+from .sim import SimCore, SimEvent, warm_up
 from .sinks import TrackerSink
-from .world import World, field_layout
+from .frames import field_layout
+from .world import World
 
 __all__ = ["AgentHost", "EventListener", "start_agents"]
 
@@ -50,6 +51,7 @@ log = logging.getLogger("robot_agent.host")
 
 EventListener = Callable[[str, str], None]
 _SLICE_S = 0.004  # longest run of simulation steps between yields to the event loop
+_CHUNK_ROBOT_STEPS = 4096  # robot-steps per call of the compiled loop (~1 ms) between checks of the slice
 _MAX_LAG_S = 0.5  # wall seconds behind schedule before the clock gives up catching up
 
 
@@ -62,7 +64,7 @@ class AgentHost:
     wall second (``math.inf`` = as fast as possible); ``seed`` the agent seed;
     ``robot_id`` a base name (``robot`` gives ``robot-1`` ...) or
     ``robot_ids`` one per robot; ``world``, ``area`` (one or per robot), ``origins`` the layout
-    (:func:`robot_agent.world.field_layout`); ``tracker_sink`` where logged
+    (:func:`robot_agent.frames.field_layout`); ``tracker_sink`` where logged
     poses go; ``server_url`` + ``token`` register the robots with the testbed
     server and, without another sink, post the poses there.
     """
@@ -109,6 +111,7 @@ class AgentHost:
         self.sink: TrackerSink | None = tracker_sink if tracker_sink is not None else self.link
         self.core = SimCore(self.params, make_backend(backend, robots, self.params), self.world,
                             log_poses=self.sink is not None)
+        self._chunk = max(1, _CHUNK_ROBOT_STEPS // robots)  # steps per compiled call when running ahead
         if robot_ids is None:
             base = robot_id or "robot"
             robot_ids = [robot_id] if (robot_id and robots == 1) else [f"{base}-{i + 1}" for i in range(robots)]
@@ -170,6 +173,7 @@ class AgentHost:
         if self._running:
             return self
         loop = asyncio.get_running_loop()
+        await asyncio.to_thread(warm_up)
         try:
             for r in self.robots:
                 port = self.base_port + r.index if self.base_port else 0
@@ -322,7 +326,10 @@ class AgentHost:
                 due = self._due()
             end = time.perf_counter() + _SLICE_S
             while core.step_count + 1 <= due:
-                events = core.step()
+                steps = min(due - core.step_count, self._chunk)
+                if self._timers:
+                    steps = min(steps, self._timers[0][0] - core.step_count)
+                events = core.advance(max(int(steps), 1))
                 if events:
                     self._dispatch(events)
                 if self._timers and self._timers[0][0] <= core.step_count:

@@ -1,44 +1,46 @@
-"""Pure kinematics of differential-drive robots, vectorised over robots.
+"""Pure kinematics of a differential-drive robot (compiled scalar functions).
 
-Poses are ``(N, 3)`` arrays of x, y (m) and heading (rad); body velocities
-``(N, 2)`` of forward speed v (m/s) and turn rate w (rad/s); track (wheel)
-speeds ``(N, 2)`` of left and right (m/s).
+A pose is x, y (m) and heading (rad); body velocities are forward speed v
+(m/s) and turn rate w (rad/s); track (wheel) speeds are left and right (m/s).
+The functions take and return floats; the simulation's kernels call them for
+each robot, and they can be called from Python as they are.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import math
+
+from numba import njit
 
 __all__ = ["body_to_tracks", "tracks_to_body", "unicycle_step", "wrap_angle"]
 
 
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Angles (rad) wrapped to [-pi, pi)."""
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
+@njit(cache=True, error_model='numpy')
+def wrap_angle(a: float) -> float:
+    """Angle (rad) wrapped to [-pi, pi)."""
+    if -math.pi <= a < math.pi:  # the common case, and exact
+        return a
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def unicycle_step(pose: np.ndarray, vw: np.ndarray, dt: float, out: np.ndarray | None = None) -> np.ndarray:
-    """Advance ``pose`` by body velocities ``vw`` for ``dt`` seconds (midpoint rule).
+@njit(cache=True, error_model='numpy')
+def unicycle_step(x: float, y: float, theta: float, v: float, w: float, dt: float) -> tuple[float, float, float]:
+    """The pose after moving with body velocities ``(v, w)`` for ``dt`` seconds (midpoint rule).
 
-    Second-order accurate: the chord of each arc is taken at the mean heading.
-    Writes into ``out`` when given (may be ``pose`` itself) and returns it.
+    Second-order accurate: the chord of the arc is taken at the mean heading.
     """
-    v, w = vw[:, 0], vw[:, 1]
-    mid = pose[:, 2] + 0.5 * dt * w
-    if out is None:
-        out = np.empty_like(pose)
-    out[:, 0] = pose[:, 0] + v * dt * np.cos(mid)
-    out[:, 1] = pose[:, 1] + v * dt * np.sin(mid)
-    out[:, 2] = wrap_angle(pose[:, 2] + w * dt)
-    return out
+    mid = theta + 0.5 * dt * w
+    return x + v * dt * math.cos(mid), y + v * dt * math.sin(mid), wrap_angle(theta + w * dt)
 
 
-def body_to_tracks(vw: np.ndarray, wheel_base: float) -> np.ndarray:
-    """Left and right track speeds (m/s) for body velocities ``vw``; ``wheel_base`` in m."""
-    half = 0.5 * wheel_base * vw[:, 1]
-    return np.stack([vw[:, 0] - half, vw[:, 0] + half], axis=1)
+@njit(cache=True, error_model='numpy')
+def body_to_tracks(v: float, w: float, wheel_base: float) -> tuple[float, float]:
+    """Left and right track speeds (m/s) for body velocities ``(v, w)``; ``wheel_base`` in m."""
+    half = 0.5 * wheel_base * w
+    return v - half, v + half
 
 
-def tracks_to_body(tracks: np.ndarray, wheel_base: float) -> np.ndarray:
+@njit(cache=True, error_model='numpy')
+def tracks_to_body(left: float, right: float, wheel_base: float) -> tuple[float, float]:
     """Body velocities (v m/s, w rad/s) of left/right track speeds (m/s)."""
-    return np.stack([tracks.mean(axis=1), (tracks[:, 1] - tracks[:, 0]) / wheel_base], axis=1)
+    return (left + right) / 2.0, (right - left) / wheel_base

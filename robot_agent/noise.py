@@ -1,4 +1,4 @@
-"""Counter-based random numbers: replayable noise for many robots at once, without loops.
+"""Counter-based random numbers: replayable noise for many robots at once.
 
 Every random number the field emulation draws is a pure function of
 ``(key, counter, channel)``: ``key`` identifies one robot's run (derived from
@@ -10,16 +10,21 @@ replayed exactly by giving the same seed.
 
 The mixer is SplitMix64's finaliser (Steele, Lea and Flood 2014), applied
 twice; uniform doubles take the top 53 bits; normals come from Box-Muller.
+The scalar functions are compiled (numba) and called by the simulation's
+kernels; :func:`uniforms` and :func:`normals` are their array versions.
 """
 
 from __future__ import annotations
 
 import hashlib
+import math
 
 import numpy as np
+from numba import njit
 
-__all__ = ["box_muller", "mix64", "normals", "path_key", "uniforms"]
+__all__ = ["box_muller", "mix64", "normals", "path_key", "uniform", "uniforms"]
 
+# numba promotes uint64 mixed with int64 to float64: every constant is a uint64.
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
@@ -27,16 +32,56 @@ _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(
 _MASK = (1 << 64) - 1
 
 
-def mix64(x: np.ndarray) -> np.ndarray:
-    """SplitMix64 finaliser of a uint64 array (wrapping arithmetic)."""
-    z = x + _GOLDEN
+@njit(cache=True, error_model='numpy')
+def mix64(x: np.uint64) -> np.uint64:
+    """SplitMix64 finaliser of a uint64 (wrapping arithmetic)."""
+    z = np.uint64(x) + _GOLDEN
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
 
 
+@njit(cache=True, error_model='numpy')
+def uniform(key: np.uint64, counter: int, channels: int, channel: int) -> float:
+    """Uniform number in (0, 1) of ``channel`` (of ``channels``) at ``counter`` of run ``key``."""
+    c = np.uint64(counter) * np.uint64(channels) + np.uint64(channel)
+    z = mix64(np.uint64(key) ^ mix64(c))
+    return (float(z >> _S11) + 0.5) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, error_model='numpy')
+def box_muller(u1: float, u2: float) -> tuple[float, float]:
+    """Two standard normals from two uniforms in (0, 1)."""
+    r = math.sqrt(-2.0 * math.log(u1))
+    phi = 2.0 * math.pi * u2
+    return r * math.cos(phi), r * math.sin(phi)
+
+
+@njit(cache=True, error_model='numpy')
+def _uniforms(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarray:
+    out = np.empty((len(keys), channels))
+    for i in range(len(keys)):
+        for ch in range(channels):
+            out[i, ch] = uniform(keys[i], counters[i], channels, ch)
+    return out
+
+
+def uniforms(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarray:
+    """Uniform numbers in (0, 1), shape ``(N, channels)``, for ``keys`` and ``counters`` ``(N,)``."""
+    return _uniforms(np.asarray(keys, dtype=np.uint64), np.asarray(counters, dtype=np.int64), int(channels))
+
+
+def normals(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarray:
+    """Standard normals ``(N, channels)``: Box-Muller on pairs of :func:`uniforms` ``(u[j], u[j + pairs])``."""
+    pairs = (channels + 1) // 2
+    u = uniforms(keys, counters, 2 * pairs)
+    r = np.sqrt(-2.0 * np.log(u[:, :pairs]))
+    phi = 2.0 * np.pi * u[:, pairs:]
+    return np.concatenate([r * np.cos(phi), r * np.sin(phi)], axis=1)[:, :channels]
+
+
 def _scalar_mix(x: int) -> int:
-    return int(mix64(np.array([x & _MASK], dtype=np.uint64))[0])
+    return int(mix64(np.uint64(x & _MASK)))
 
 
 def path_key(seed: int, robot_id: str | None = None, path_count: int | None = None) -> int:
@@ -53,27 +98,3 @@ def path_key(seed: int, robot_id: str | None = None, path_count: int | None = No
     if path_count is not None:
         k = _scalar_mix(k ^ _scalar_mix(path_count + 0x5EED))
     return k
-
-
-def uniforms(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarray:
-    """Uniform numbers in (0, 1), shape ``(N, channels)``, for ``keys`` and ``counters`` ``(N,)``."""
-    k = np.asarray(keys, dtype=np.uint64)[:, None]
-    c = np.asarray(counters, dtype=np.uint64)[:, None] * np.uint64(channels) + np.arange(
-        channels, dtype=np.uint64
-    )
-    z = mix64(k ^ mix64(c))
-    return ((z >> _S11).astype(np.float64) + 0.5) * (1.0 / 9007199254740992.0)
-
-
-def box_muller(u: np.ndarray) -> np.ndarray:
-    """Standard normals ``(N, 2P)`` from uniforms ``(N, 2P)`` in (0, 1) (Box-Muller)."""
-    pairs = u.shape[1] // 2
-    r = np.sqrt(-2.0 * np.log(u[:, :pairs]))
-    phi = 2.0 * np.pi * u[:, pairs : 2 * pairs]
-    return np.concatenate([r * np.cos(phi), r * np.sin(phi)], axis=1)
-
-
-def normals(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarray:
-    """Standard normal numbers, shape ``(N, channels)``, by Box-Muller on :func:`uniforms`."""
-    pairs = (channels + 1) // 2
-    return box_muller(uniforms(keys, counters, 2 * pairs))[:, :channels]

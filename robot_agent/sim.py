@@ -1,11 +1,18 @@
-"""The simulation core: steps all robots of a host at once (numpy, no loops over robots).
+"""The simulation core: steps all robots of a host at once, no I/O.
 
-:class:`SimCore` holds the fleet's controller state (paths, current
+:class:`SimCore` holds the fleet's path-follower state (paths, current
 waypoints, commands, stall anchors, timeouts), a :class:`~robot_agent.backends.Backend`
 for the physical side and a :class:`~robot_agent.world.World` for frames and
-collisions.  :meth:`SimCore.step` advances experiment time by one control
-step (``1 / control_rate_hz``) and returns the events of that step; it does
-no I/O.  The host (:mod:`robot_agent.host`) calls it from an asyncio task.
+collisions.  :meth:`SimCore.advance` moves experiment time on by up to a
+given number of control steps (``1 / control_rate_hz`` each) and returns the
+events of those steps; :meth:`SimCore.step` does one.  The host
+(:mod:`robot_agent.host`) calls them from an asyncio task.
+
+With an emulated backend (ideal or field) the steps run inside compiled code
+(:func:`robot_agent.stepper.run`), many per call; any other backend (a real
+robot) is stepped through its Python methods, with the same compiled
+follower.  Both orders of work are the same: sense, follow, actuate, then
+collisions once every robot moved.
 
 Experiment time is ``step_count x dt``.  Events are stamped with the time of
 the step in which they were detected: START, WP, DONE, STALLED and TIMEOUT at
@@ -25,9 +32,10 @@ from enum import IntEnum
 
 import numpy as np
 
-from .backends import Backend
-from .follower import advance_waypoints, control_step, stall_update, timeout_steps
+from .backends import Backend, Emulated
+from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .params import RobotParams
+from .stepper import COLLIDED, ENDED, control_fleet, run
 from .world import World
 
 __all__ = ["SimCore", "SimEvent", "PoseLog", "State"]
@@ -61,11 +69,11 @@ class PoseLog:
     """Tracker poses collected step by step, drained per robot as ``(M, 4)`` arrays ``t, x, y, theta``."""
 
     def __init__(self) -> None:
-        self._chunks: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.count = 0
 
-    def add(self, t: float, robots: np.ndarray, poses: np.ndarray) -> None:
-        """Record ``poses`` ``(K, 3)`` of robot indices ``robots`` ``(K,)`` at time ``t`` (s)."""
+    def add(self, t: np.ndarray, robots: np.ndarray, poses: np.ndarray) -> None:
+        """Record poses ``(K, 3)`` of robot indices ``robots`` ``(K,)`` at times ``t`` ``(K,)`` (s)."""
         self._chunks.append((t, robots, poses))
         self.count += len(robots)
 
@@ -75,8 +83,7 @@ class PoseLog:
             return {}
         chunks, self._chunks, self.count = self._chunks, [], 0
         robots = np.concatenate([c[1] for c in chunks])
-        t = np.concatenate([np.full(len(c[1]), c[0]) for c in chunks])
-        rows = np.column_stack([t, np.concatenate([c[2] for c in chunks])])
+        rows = np.column_stack([np.concatenate([c[0] for c in chunks]), np.concatenate([c[2] for c in chunks])])
         order = np.argsort(robots, kind="stable")
         robots, rows = robots[order], rows[order]
         cuts = np.flatnonzero(np.diff(robots)) + 1
@@ -90,6 +97,7 @@ class SimCore:
         n = backend.n
         self.n, self.params, self.backend, self.world = n, params, backend, world
         self.dt = params.dt
+        self.gains = gains(params)
         world.step_travel = 2.0 * params.max_speed_m_s * self.dt  # generous bound: gains and noise stay far below 2x
         self.step_count = 0
         self.log_poses = log_poses
@@ -104,6 +112,12 @@ class SimCore:
         self.anchor_k = np.zeros(n, dtype=np.int64)
         self.keys = np.zeros(n, dtype=np.uint64)
         self._paths: list[np.ndarray] = [np.zeros((0, 3)) for _ in range(n)]
+        # output buffers of the compiled loop; it stops when another step might not fit
+        self._events = np.zeros((4 * n + 1024, 5), dtype=np.int64)
+        self._pose_rows = np.zeros((4 * n + 4096, 2), dtype=np.int64)
+        self._pose_xyt = np.zeros((len(self._pose_rows), 3))
+        self._scratch = (np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool),
+                         np.zeros(n, dtype=bool), np.zeros(3))
         self._dirty = True
         self._rebuild_paths()
 
@@ -148,8 +162,7 @@ class SimCore:
         mask = np.zeros(self.n, dtype=bool)
         mask[i] = True
         self.backend.begin_path(mask, self.keys, from_rest)
-        self.timeout[i] = timeout_steps(self._paths[i], self.belief(i), self.params.controller,
-                                        self.params.max_speed_m_s, self.dt)
+        self.timeout[i] = timeout_steps(self._paths[i], self.belief(i), self.params)
         return replaced
 
     def stop(self, i: int) -> SimEvent | None:
@@ -172,78 +185,117 @@ class SimCore:
         self.count = counts
         self.offset = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         # robots without a path point at a dummy row at the end
-        self.points = np.vstack([*self._paths, np.zeros((1, 3))])
+        self.points = np.ascontiguousarray(np.vstack([*self._paths, np.zeros((1, 3))]))
         self.offset[counts == 0] = len(self.points) - 1
         self._dirty = False
 
-    # ------------------------------------------------------------------ the step
+    # ------------------------------------------------------------------ stepping
 
     def step(self) -> list[SimEvent]:
         """Advance one control step; returns its events (usually none)."""
-        if self._dirty:
-            self._rebuild_paths()
-        moving = self.state == State.MOVING
-        if not moving.any() and not self.backend.busy():
+        if not self.busy():
             self.step_count += 1
             return []
-        t0 = self.t
-        p = self.params
+        return self.advance(1)
+
+    def advance(self, max_steps: int) -> list[SimEvent]:
+        """Advance up to ``max_steps`` control steps, stopping early once nothing moves any more
+        (then :meth:`busy` is false); returns the events of those steps in order."""
+        if self._dirty:
+            self._rebuild_paths()
+        events: list[SimEvent] = []
+        left = int(max_steps)
+        while left > 0 and self.busy():
+            if isinstance(self.backend, Emulated):
+                steps, n_ev, n_pose = run(
+                    self.backend.kind, left, self.step_count, self.log_poses, self._ctrl(), self.backend.arrays,
+                    self.world.arrays, self.world.radius, self.world.step_travel,
+                    (self._events, self._pose_rows, self._pose_xyt, *self._scratch), self.gains, self.backend.fg)
+                if n_pose:
+                    rows = self._pose_rows[:n_pose]
+                    self.poses.add(rows[:, 0] * self.dt, rows[:, 1].copy(), self._pose_xyt[:n_pose].copy())
+                records = self._events[:n_ev]
+            else:
+                steps, records = 1, self._python_step()
+            self.step_count += steps
+            left -= steps
+            if len(records):
+                events += self._records_to_events(records)
+        return events
+
+    def _ctrl(self) -> tuple:
+        return (self.state, self.aligning, self.wp, self.k, self.timeout, self.cmd, self.anchor, self.anchor_k,
+                self.points, self.offset, self.count)
+
+    def _python_step(self) -> np.ndarray:
+        """One step through the backend's Python methods; returns its event rows (see stepper)."""
+        moving = self.state == State.MOVING
         belief, logged, logged_pose = self.backend.sense(self.k, moving)
         if self.log_poses and logged.any():
             idx = np.flatnonzero(logged)
-            self.poses.add(t0, idx, logged_pose[idx].copy())
-        started = moving & (self.k == 0)
-        if started.any():
-            self.anchor[started] = belief[started]
-            self.anchor_k[started] = 0
-        old_wp = self.wp
-        self.wp, arrived = advance_waypoints(belief, self.points, self.offset, self.count, old_wp,
-                                             moving & ~self.aligning, p.controller)
-        self.aligning |= arrived
-        target = self.points[self.offset + self.wp]
-        is_last = self.wp == self.count - 1
-        cmd, aligned = control_step(belief, target, is_last, self.aligning, self.cmd, p.controller,
-                                    p.max_speed_m_s, p.max_angular_speed_rad_s, self.dt)
-        done = moving & aligned
-        stalled = stall_update(belief, self.anchor, self.anchor_k, self.k, moving & ~done, p.controller, self.dt)
-        timed_out = moving & ~done & ~stalled & (self.k >= self.timeout)
-        ended = done | stalled | timed_out
-        cmd[~moving | ended] = 0.0
-        self.cmd = cmd
-        self.backend.actuate(cmd)
-        still = moving & ~ended
+            self.poses.add(np.full(len(idx), self.t), idx, np.array(logged_pose[idx], dtype=float))
+        old = self.wp.copy()
+        flags = self._scratch[0]
+        control_fleet(np.ascontiguousarray(belief, dtype=float), moving, self._ctrl(), self.gains, flags)
+        self.backend.actuate(self.cmd)
+        still = moving & (flags & ENDED == 0)
         collided = self.world.collisions(self.backend.pose, still | self.backend.in_motion(), self.step_count)
         if collided.any():
             self.backend.halt(collided)
             self.cmd[collided] = 0.0
-        crashed = collided & still
+            flags[collided & still] |= COLLIDED
         self.k += 1
-        self.step_count += 1
-        events: list[SimEvent] = []
-        if started.any() or (self.wp != old_wp).any() or arrived.any() or ended.any() or crashed.any():
-            events = self._events(t0, started, old_wp, arrived, done, stalled, timed_out, crashed)
-        return events
+        self.state[(flags & DONE) != 0] = State.DONE
+        self.state[((flags & DONE) == 0) & ((flags & (STALLED | TIMED_OUT | COLLIDED)) != 0)] = State.FAILED
+        idx = np.flatnonzero((flags != 0) | (self.wp != old))
+        return np.column_stack([np.full(len(idx), self.step_count), idx, old[idx], self.wp[idx], flags[idx]])
 
-    def _events(self, t0: float, started: np.ndarray, old_wp: np.ndarray, arrived: np.ndarray,
-                done: np.ndarray, stalled: np.ndarray, timed_out: np.ndarray, crashed: np.ndarray) -> list[SimEvent]:
-        """Event records of one step, in order per robot; updates the path states."""
+    def _records_to_events(self, records: np.ndarray) -> list[SimEvent]:
+        """Event records of rows ``(step, robot, old wp, new wp, flags)``, in order per robot."""
         out: list[SimEvent] = []
-        t1 = self.t
-        for i in np.flatnonzero(started | (self.wp != old_wp) | arrived | done | stalled | timed_out | crashed):
-            i = int(i)
-            if started[i]:
+        for step, i, old, new, f in records.tolist():
+            t0 = step * self.dt
+            if f & STARTED:
                 out.append(SimEvent(i, "START", t0))
-            for w in range(int(old_wp[i]), int(self.wp[i])):
+            for w in range(old, new):
                 out.append(SimEvent(i, "WP", t0, index=w))
-            if arrived[i]:
-                out.append(SimEvent(i, "WP", t0, index=int(self.wp[i])))
-            if done[i]:
-                self.state[i] = State.DONE
+            if f & ARRIVED:
+                out.append(SimEvent(i, "WP", t0, index=new))
+            if f & DONE:
                 out.append(SimEvent(i, "DONE", t0))
-            elif stalled[i] or timed_out[i]:
-                self.state[i] = State.FAILED
-                out.append(SimEvent(i, "FAIL", t0, reason="STALLED" if stalled[i] else "TIMEOUT"))
-            elif crashed[i]:
-                self.state[i] = State.FAILED
-                out.append(SimEvent(i, "FAIL", t1, reason="COLLISION"))
+            elif f & (STALLED | TIMED_OUT):
+                out.append(SimEvent(i, "FAIL", t0, reason="STALLED" if f & STALLED else "TIMEOUT"))
+            elif f & COLLIDED:
+                out.append(SimEvent(i, "FAIL", (step + 1) * self.dt, reason="COLLISION"))
         return out
+
+
+_warm = False
+
+
+def warm_up() -> None:
+    """Compile (first run) or load (from numba's cache) every kernel a host uses.
+
+    Takes seconds once after installing or changing the code, then well under
+    one; hosts call it in a worker thread before they accept clients, so the
+    event loop never waits for the compiler.
+    """
+    global _warm
+    if _warm:
+        return
+    from .backends import make_backend
+    from .frames import field_layout
+    from .params import robot_params
+
+    p = robot_params()
+    for name in ("ideal", "field"):
+        sizes, world_of, origin, area = field_layout(2, "shared")
+        core = SimCore(p, make_backend(name, 2, p), World(sizes, world_of, origin, area, p.collision_radius_m))
+        core.world.set_blocks(0, np.array([[1.0, 1.0, 0.1, 0.1, 0.0]]))
+        core.world.place_conflict(1, (0.5, 0.5, 0.0), core.backend.pose)
+        for i in range(2):
+            core.place(i, (0.3, 0.3, 0.0))
+            core.set_path(i, np.array([[0.3, 0.3, 0.0], [0.5, 0.3, 0.0]]), i + 1)
+        core.step()
+        core.advance(5)
+    _warm = True

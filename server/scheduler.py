@@ -25,8 +25,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Optional
 
-from robot_agent.world import FIELD_SIZE, SUBFIELD_SIZE
-from robot_agent.world import SUBFIELD_ORIGINS as _ORIGINS
+from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
+from robot_agent.frames import SUBFIELD_ORIGINS as _ORIGINS
 
 __all__ = ["Assignment", "Pending", "RobotSlot", "Scheduler", "SubfieldSlot", "SUBFIELD_ORIGINS"]
 

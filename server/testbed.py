@@ -18,7 +18,7 @@ from typing import Any, Awaitable, Callable, Optional
 
 from sqlalchemy import delete, select
 
-from robot_agent.world import SUBFIELD_SIZE
+from robot_agent.frames import SUBFIELD_SIZE
 
 from . import planning
 from .bootstrap import bootstrap_store

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from planners import Environment, PlanningError, check_query, get_planner, parse_environment
-from robot_agent.world import FIELD_SIZE, SUBFIELD_SIZE
+from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from .schemas import ExperimentCreate
 

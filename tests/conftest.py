@@ -12,6 +12,14 @@ import pytest
 TWB = Path(sys.executable).with_name("twb")
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile the simulation kernels once, before any test starts agent processes: on a fresh
+    checkout every process would otherwise compile them at the same time (numba's cache)."""
+    from robot_agent.sim import warm_up
+
+    warm_up()
+
+
 @pytest.fixture
 def twb():
     """Run the installed ``twb`` command; returns the CompletedProcess (text mode)."""

@@ -8,16 +8,18 @@ import numpy as np
 import pytest
 
 from robot_agent import follower as fl
-from robot_agent.backends import make_backend
+from robot_agent.backends import Backend, make_backend
 from robot_agent.kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
 from robot_agent.noise import normals, path_key, uniforms
 from robot_agent.params import robot_params
 from robot_agent.robot_profile import load_profile, profile_names
 from robot_agent.sim import SimCore, State
-from robot_agent.world import SUBFIELD_ORIGINS, World, field_layout
+from robot_agent.frames import SUBFIELD_ORIGINS, field_layout
+from robot_agent.world import World
 
 P = robot_params("bebot")
 C = P.controller
+G = fl.gains(P)
 
 
 def test_every_profile_value_has_a_note():
@@ -43,68 +45,89 @@ def test_bad_profile_names_the_key():
 
 
 def test_move_to_waypoint_points_at_target_with_given_speed():
-    xy = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
-    tgt = np.array([[3.0, 4.0], [1.0, 0.0], [2.0, 2.0]])
-    v = fl.move_to_waypoint(xy, tgt, np.array([0.5, 0.2, 0.3]))
-    np.testing.assert_allclose(v, [[0.3, 0.4], [0.0, -0.2], [0.0, 0.0]], atol=1e-12)
+    assert fl.move_to_waypoint(0.0, 0.0, 3.0, 4.0, 0.5) == pytest.approx((0.3, 0.4))
+    assert fl.move_to_waypoint(1.0, 1.0, 1.0, 0.0, 0.2) == pytest.approx((0.0, -0.2))
+    assert fl.move_to_waypoint(2.0, 2.0, 2.0, 2.0, 0.3) == (0.0, 0.0)
+
+
+def test_approach_speed_slows_only_for_the_last_point():
+    assert fl.approach_speed(0.001, False, G) == P.max_speed_m_s
+    assert fl.approach_speed(0.001, True, G) == C.min_speed_m_s
+    assert fl.approach_speed(0.05, True, G) == pytest.approx(min(max(C.arrive_gain_1_s * 0.05, C.min_speed_m_s),
+                                                                 P.max_speed_m_s))
 
 
 def test_heading_control_turns_towards_and_slows_with_error():
-    theta = np.array([0.0, 0.0, 0.0])
-    vec = np.array([[0.2, 0.0], [0.0, 0.2], [-0.2, 0.0]])
-    v, w = fl.heading_control(theta, vec, C, P.max_angular_speed_rad_s)
-    assert v[0] == pytest.approx(0.2) and w[0] == 0.0
-    assert v[1] == 0.0 and w[1] == pytest.approx(min(C.heading_gain_1_s * math.pi / 2, P.max_angular_speed_rad_s))
-    assert v[2] == 0.0 and abs(w[2]) == pytest.approx(P.max_angular_speed_rad_s)
-    small = fl.heading_control(np.array([0.3]), np.array([[0.2, 0.0]]), C, 3.0)
-    assert small[0][0] == pytest.approx(0.2 * math.cos(0.3)) and small[1][0] == pytest.approx(-C.heading_gain_1_s * 0.3)
+    v, w = fl.heading_control(0.0, 0.2, 0.0, G)
+    assert v == pytest.approx(0.2) and w == 0.0
+    v, w = fl.heading_control(0.0, 0.0, 0.2, G)
+    assert v == 0.0 and w == pytest.approx(min(C.heading_gain_1_s * math.pi / 2, P.max_angular_speed_rad_s))
+    v, w = fl.heading_control(0.0, -0.2, 0.0, G)
+    assert v == 0.0 and abs(w) == pytest.approx(P.max_angular_speed_rad_s)
+    v, w = fl.heading_control(0.3, 0.2, 0.0, G._replace(max_turn=3.0))
+    assert v == pytest.approx(0.2 * math.cos(0.3)) and w == pytest.approx(-C.heading_gain_1_s * 0.3)
 
 
 def test_align_control_has_minimum_rate_and_stops_inside_tolerance():
-    w, aligned = fl.align_control(np.array([0.0, 0.0, 0.0]), np.array([0.01, 0.1, -2.0]), C, 3.0)
-    assert aligned.tolist() == [True, False, False]
-    assert w[0] == 0.0
-    assert w[1] == pytest.approx(max(C.min_turn_rate_rad_s, C.heading_gain_1_s * 0.1))
-    assert w[2] == pytest.approx(-3.0)
+    g = G._replace(max_turn=3.0)
+    assert fl.align_control(0.0, 0.01, g) == (0.0, True)
+    w, aligned = fl.align_control(0.0, 0.1, g)
+    assert not aligned and w == pytest.approx(max(C.min_turn_rate_rad_s, C.heading_gain_1_s * 0.1))
+    assert fl.align_control(0.0, -2.0, g) == (pytest.approx(-3.0), False)
 
 
 def test_rate_limit():
-    out = fl.rate_limit(np.array([0.0, 0.1, 0.2]), np.array([1.0, 0.12, -1.0]), 0.05)
-    np.testing.assert_allclose(out, [0.05, 0.12, 0.15])
+    assert [fl.rate_limit(p, d, 0.05) for p, d in [(0.0, 1.0), (0.1, 0.12), (0.2, -1.0)]] == pytest.approx(
+        [0.05, 0.12, 0.15])
 
 
-def test_advance_waypoints_skips_several_close_points_and_detects_arrival():
-    points = np.array([[0, 0, 0], [0.01, 0, 0], [0.02, 0, 0], [1, 0, 0], [5, 5, 0], [5.001, 5, 0]], float)
-    offset, count = np.array([0, 4]), np.array([4, 2])
-    wp, arrived = fl.advance_waypoints(np.array([[0.0, 0.0], [5.0, 5.0]]), points, offset, count,
-                                       np.array([0, 0]), np.array([True, True]), C)
-    assert wp.tolist() == [3, 1]
-    assert arrived.tolist() == [False, True]
-    wp2, arrived2 = fl.advance_waypoints(np.array([[0.0, 0.0], [5.0, 5.0]]), points, offset, count,
-                                         np.array([0, 0]), np.array([False, False]), C)
-    assert wp2.tolist() == [0, 0] and not arrived2.any()
+def test_advance_waypoint_skips_several_close_points_and_detects_arrival():
+    path = np.array([[0, 0, 0], [0.01, 0, 0], [0.02, 0, 0], [1, 0, 0]], float)
+    assert fl.advance_waypoint(0.0, 0.0, path, 0, G) == (3, False)
+    assert fl.advance_waypoint(5.0, 5.0, np.array([[5, 5, 0], [5.001, 5, 0]], float), 0, G) == (1, True)
+    assert fl.advance_waypoint(0.5, 0.5, path, 0, G) == (0, False)
+
+
+def _fleet(n: int, path: np.ndarray) -> dict:
+    return {"points": np.vstack([path] * n), "offset": np.arange(n) * len(path), "count": np.full(n, len(path)),
+            "wp": np.zeros(n, dtype=np.int64), "aligning": np.zeros(n, dtype=bool), "cmd": np.zeros((n, 2)),
+            "anchor": np.zeros((n, 3)), "anchor_k": np.zeros(n, dtype=np.int64), "k": np.zeros(n, dtype=np.int64),
+            "timeout": np.full(n, 10**6)}
+
+
+def _control(f: dict, i: int, belief: tuple[float, float, float]) -> int:
+    return fl.control(i, *belief, f["points"], f["offset"], f["count"], f["wp"], f["aligning"], f["cmd"],
+                      f["anchor"], f["anchor_k"], f["k"], f["timeout"], G)
+
+
+def test_control_starts_accelerates_limited_and_flags_the_end():
+    f = _fleet(1, np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.5]]))
+    assert _control(f, 0, (0.0, 0.0, 0.0)) == fl.STARTED
+    assert f["wp"][0] == 1 and f["cmd"][0].tolist() == [pytest.approx(G.dv_max), 0.0]  # acceleration limit
+    f["k"][0] = 1
+    flags = _control(f, 0, (0.995, 0.0, 0.5))  # within the goal tolerance, already at the final angle
+    assert flags & fl.ARRIVED and flags & fl.DONE and f["cmd"][0].tolist() == [0.0, 0.0]
 
 
 def test_stall_and_timeout():
-    belief = np.zeros((2, 3))
-    anchor = np.zeros((2, 3))
-    anchor_k = np.zeros(2, dtype=np.int64)
+    f = _fleet(2, np.array([[1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]))
     steps = int(C.stall_time_s / P.dt) + 1
-    belief[1, 0] = 0.5  # robot 1 made progress
-    stalled = fl.stall_update(belief, anchor, anchor_k, np.array([steps, steps]), np.array([True, True]), C, P.dt)
-    assert stalled.tolist() == [True, False]
-    assert anchor_k.tolist() == [0, steps]
-    n = fl.timeout_steps(np.array([[1.0, 0, 0], [1.0, 1.0, 0]]), np.zeros(2), C, 0.2, 0.02)
-    assert n == math.ceil((C.timeout_base_s + C.timeout_factor * 2.0 / 0.2) / 0.02)
+    f["k"][:] = steps
+    f["anchor_k"][:] = 0
+    assert _control(f, 0, (0.0, 0.0, 0.0)) == fl.STALLED  # no progress since step 0
+    assert _control(f, 1, (0.5, 0.0, 0.0)) == 0 and f["anchor_k"][1] == steps  # progress: a new anchor
+    f["timeout"][1] = steps
+    assert _control(f, 1, (0.5, 0.0, 0.0)) == fl.TIMED_OUT
+    n = fl.timeout_steps(np.array([[1.0, 0, 0], [1.0, 1.0, 0]]), np.zeros(2), P)
+    assert n == math.ceil((C.timeout_base_s + C.timeout_factor * 2.0 / P.max_speed_m_s) / P.dt)
 
 
 def test_kinematics():
-    pose = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, math.pi / 2]])
-    out = unicycle_step(pose, np.array([[0.1, 0.0], [0.0, 1.0]]), 0.5)
-    np.testing.assert_allclose(out, [[0.05, 0, 0], [1, 1, math.pi / 2 + 0.5]])
-    vw = np.array([[0.2, 1.0], [-0.1, -2.0]])
-    np.testing.assert_allclose(tracks_to_body(body_to_tracks(vw, 0.07), 0.07), vw)
-    assert wrap_angle(np.array([3 * math.pi]))[0] == pytest.approx(-math.pi)
+    assert unicycle_step(0.0, 0.0, 0.0, 0.1, 0.0, 0.5) == pytest.approx((0.05, 0.0, 0.0))
+    assert unicycle_step(1.0, 1.0, math.pi / 2, 0.0, 1.0, 0.5) == pytest.approx((1.0, 1.0, math.pi / 2 + 0.5))
+    assert tracks_to_body(*body_to_tracks(0.2, 1.0, 0.07), 0.07) == pytest.approx((0.2, 1.0))
+    assert wrap_angle(3 * math.pi) == pytest.approx(-math.pi)
+    assert wrap_angle(math.pi) == pytest.approx(-math.pi) and wrap_angle(0.25) == 0.25
 
 
 def test_noise_is_a_pure_function_of_key_and_counter():
@@ -175,3 +198,82 @@ def test_core_follows_a_path_to_the_goal(backend):
     tol = C.goal_tolerance_m + (0.0 if backend == "ideal" else 0.02)
     assert math.hypot(*(core.backend.pose[0, :2] - path[-1, :2])) < tol
     assert abs(wrap_angle(np.array([core.backend.pose[0, 2] - math.pi]))[0]) < C.angle_tolerance_rad + 0.1
+
+
+class _Foreign(Backend):
+    """A backend the compiled loop does not know (as a real robot's would be): it delegates to an
+    emulated one, so the core has to step it through the Backend methods."""
+
+    def __init__(self, inner: Backend) -> None:
+        self.inner, self.n, self.params, self.dt = inner, inner.n, inner.params, inner.dt
+
+    pose = property(lambda self: self.inner.pose)
+    belief = property(lambda self: self.inner.belief)
+
+    def begin_path(self, mask, keys, from_rest):
+        self.inner.begin_path(mask, keys, from_rest)
+
+    def sense(self, step, moving):
+        return self.inner.sense(step, moving)
+
+    def actuate(self, cmd):
+        self.inner.actuate(cmd)
+
+    def halt(self, mask):
+        self.inner.halt(mask)
+
+    def place(self, i, pose):
+        self.inner.place(i, pose)
+
+    def in_motion(self):
+        return self.inner.in_motion()
+
+
+def _busy_shared_core(backend, foreign: bool = False) -> SimCore:
+    """Four robots on the shared field with blocks, random paths: waypoints, collisions with
+    blocks and with each other."""
+    sizes, world_of, origin, area = field_layout(4, "shared")
+    inner = make_backend(backend, 4, P)
+    core = SimCore(P, _Foreign(inner) if foreign else inner, World(sizes, world_of, origin, area,
+                                                                   P.collision_radius_m))
+    rng = np.random.default_rng(5)
+    for i in range(4):
+        core.world.set_blocks(i, np.array([[0.9, 0.9, 0.2, 0.3, 0.5], [0.4, 1.2, 0.1, 0.4, 0.0]]))
+        path = np.hstack([rng.uniform(0.2, 1.6, size=(6, 2)), rng.uniform(-3, 3, size=(6, 1))])
+        core.place(i, tuple(path[0]))
+        core.set_path(i, path, path_key(i))
+    return core
+
+
+def _record(core: SimCore, events: list) -> tuple:
+    return [(e.robot, e.kind, e.t, e.index, e.reason) for e in events], core.poses.drain(), core.backend.pose.copy()
+
+
+@pytest.mark.parametrize("backend", ["ideal", "field"])
+def test_compiled_loop_and_python_stepping_agree(backend):
+    fused = _busy_shared_core(backend)
+    python = _busy_shared_core(backend, foreign=True)
+    assert fused.busy() and python.busy()
+    a, b = _record(fused, fused.advance(6000)), _record(python, python.advance(6000))
+    assert a[0] == b[0]
+    kinds = {(k, r) for _, k, _, _, r in a[0]}
+    assert {("START", None), ("WP", None), ("FAIL", "COLLISION")} <= kinds
+    assert a[1].keys() == b[1].keys()
+    for r in a[1]:
+        np.testing.assert_allclose(a[1][r], b[1][r], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a[2], b[2], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("backend", ["ideal", "field"])
+def test_advance_equals_single_steps_and_stops_when_nothing_moves(backend):
+    many, single = _busy_shared_core(backend), _busy_shared_core(backend)
+    ev_many = many.advance(10**6)
+    assert not many.busy() and many.step_count < 10**6  # it stopped once every robot was done
+    ev_single = []
+    while single.step_count < many.step_count:
+        ev_single += single.step()
+    a, b = _record(many, ev_many), _record(single, ev_single)
+    assert a[0] == b[0]
+    for r in a[1]:
+        assert (a[1][r] == b[1][r]).all()  # bit for bit: the same compiled code in both
+    assert (a[2] == b[2]).all()

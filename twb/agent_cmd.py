@@ -75,7 +75,7 @@ def agent(
     if subfield is not None:
         if robots != 1:
             fail("--subfield places a single robot; use it with --robots 1")
-        from robot_agent.world import SUBFIELD_ORIGINS
+        from robot_agent.frames import SUBFIELD_ORIGINS
 
         origins, world = [SUBFIELD_ORIGINS[subfield - 1]], WorldMode.shared
     agents = AgentHost(

@@ -111,7 +111,7 @@ def up(
 ) -> None:
     """The whole testbed on this machine: server on SQLite, four field robots, a simulation pool."""
     from robot_agent.host import AgentHost
-    from robot_agent.world import FIELD_SIZE, SUBFIELD_ORIGINS, SUBFIELD_SIZE
+    from robot_agent.frames import FIELD_SIZE, SUBFIELD_ORIGINS, SUBFIELD_SIZE
     from server.testbed import Testbed
 
     scale = parse_time_scale(time_scale)
