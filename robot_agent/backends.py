@@ -40,6 +40,7 @@ from numba import njit
 
 from .physics import FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
 from .params import RobotParams
+from .stepper import FIELD, IDEAL
 
 __all__ = ["BACKENDS", "Backend", "Emulated", "FieldBackend", "IdealBackend", "make_backend"]
 
@@ -96,10 +97,10 @@ class Emulated(Backend):
     """A backend the compiled simulation loop can run: its state is plain arrays.
 
     ``kind`` selects the physics in :func:`robot_agent.stepper.run`
-    (``IDEAL`` or ``FIELD``); :attr:`arrays` hands over the state, in place.
+    (``stepper.IDEAL`` or ``stepper.FIELD``); :attr:`arrays` hands over the
+    state, in place.
     """
 
-    IDEAL, FIELD = 0, 1
     kind: int = IDEAL
 
     def __init__(self, n: int, params: RobotParams) -> None:
@@ -130,7 +131,7 @@ class IdealBackend(Emulated):
     """Player/Stage-like: commands are executed exactly; the belief is the true pose."""
 
     name = "ideal"
-    kind = Emulated.IDEAL
+    kind = IDEAL
 
     def begin_path(self, mask: np.ndarray, keys: np.ndarray, from_rest: np.ndarray) -> None:
         pass
@@ -186,7 +187,7 @@ class FieldBackend(Emulated):
     """
 
     name = "field"
-    kind = Emulated.FIELD
+    kind = FIELD
 
     def __init__(self, n: int, params: RobotParams) -> None:
         super().__init__(n, params)

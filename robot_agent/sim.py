@@ -28,26 +28,16 @@ since the path began.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import IntEnum
 
 import numpy as np
 
 from .backends import Backend, Emulated
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .params import RobotParams
-from .stepper import COLLIDED, ENDED, control_fleet, run
+from .stepper import COLLIDED, ENDED, State, control_fleet, run
 from .world import World
 
 __all__ = ["SimCore", "SimEvent", "PoseLog", "State"]
-
-
-class State(IntEnum):
-    """Per-robot path state (the ``ST`` reply's names)."""
-
-    IDLE = 0
-    MOVING = 1
-    DONE = 2
-    FAILED = 3
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,8 @@ Array groups (each passed as a tuple, modified in place):
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 import numpy as np
 from numba import njit
 
@@ -29,12 +31,20 @@ from .contact import collide
 from .follower import DONE, STALLED, TIMED_OUT, Gains, control
 from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
 
-__all__ = ["COLLIDED", "ENDED", "control_fleet", "run"]
+__all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "control_fleet", "run"]
 
 COLLIDED = 32  #: flag bit: the robot touched a wall, a block or a robot this step
 ENDED = DONE | STALLED | TIMED_OUT
-_IDEAL, _FIELD = 0, 1  # Emulated.IDEAL, Emulated.FIELD
-_MOVING, _DONE, _FAILED = 1, 2, 3  # sim.State
+IDEAL, FIELD = 0, 1  #: the physics :func:`run` applies (``Emulated.kind``)
+
+
+class State(IntEnum):
+    """Per-robot path state (the ``ST`` reply's names)."""
+
+    IDLE = 0
+    MOVING = 1
+    DONE = 2
+    FAILED = 3
 
 
 @njit(cache=True, error_model='numpy')
@@ -53,7 +63,7 @@ def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains,
 @njit(cache=True, error_model='numpy')
 def _busy(kind: int, state: np.ndarray, tracks: np.ndarray) -> bool:
     for i in range(len(state)):
-        if state[i] == _MOVING or (kind == _FIELD and (tracks[i, 0] != 0.0 or tracks[i, 1] != 0.0)):
+        if state[i] == State.MOVING or (kind == FIELD and (tracks[i, 0] != 0.0 or tracks[i, 1] != 0.0)):
             return True
     return False
 
@@ -75,8 +85,8 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
     while s < max_steps and n_ev + n <= len(events) and n_pose + n <= len(pose_rows) and _busy(kind, state, tracks):
         step = step0 + s
         for i in range(n):
-            moving = state[i] == _MOVING
-            if kind == _FIELD:
+            moving = state[i] == State.MOVING
+            if kind == FIELD:
                 seen = field_sense(i, k[i], keys[i], pose, belief, ring, ring_ok, ring_pos, noise, meas, fg)
                 logged = seen and moving
             else:
@@ -93,7 +103,7 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
             else:
                 flags[i] = 0
                 cmd[i, 0] = cmd[i, 1] = 0.0
-            if kind == _FIELD:
+            if kind == FIELD:
                 field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, fg)
                 check[i] = (moving and not flags[i] & ENDED) or tracks[i, 0] != 0.0 or tracks[i, 1] != 0.0
             else:
@@ -105,14 +115,14 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
             if hit[i]:
                 tracks[i, 0] = tracks[i, 1] = 0.0
                 cmd[i, 0] = cmd[i, 1] = 0.0
-                if state[i] == _MOVING and not flags[i] & ENDED:
+                if state[i] == State.MOVING and not flags[i] & ENDED:
                     flags[i] |= COLLIDED
             k[i] += 1
             f = flags[i]
             if f & DONE:
-                state[i] = _DONE
+                state[i] = State.DONE
             elif f & (STALLED | TIMED_OUT | COLLIDED):
-                state[i] = _FAILED
+                state[i] = State.FAILED
             if f != 0 or wp[i] != old[i]:
                 events[n_ev, 0], events[n_ev, 1], events[n_ev, 2] = step, i, old[i]
                 events[n_ev, 3], events[n_ev, 4] = wp[i], f
