@@ -36,8 +36,8 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 
 import numpy as np
-from numba import njit
 
+from .compiled import kernel
 from .physics import FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
 from .params import RobotParams
 from .stepper import FIELD, IDEAL
@@ -121,7 +121,7 @@ class Emulated(Backend):
                 self.ring_pos, self.noise)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def _ideal_actuate_all(cmd: np.ndarray, pose: np.ndarray, dt: float) -> None:
     for i in range(len(pose)):
         ideal_actuate(i, cmd[i, 0], cmd[i, 1], pose, dt)
@@ -155,7 +155,7 @@ class IdealBackend(Emulated):
         return False
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def _field_sense_all(step: np.ndarray, keys: np.ndarray, pose: np.ndarray, belief: np.ndarray, ring: np.ndarray,
                      ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, fg: FieldGains
                      ) -> tuple[np.ndarray, np.ndarray]:
@@ -166,7 +166,7 @@ def _field_sense_all(step: np.ndarray, keys: np.ndarray, pose: np.ndarray, belie
     return seen, meas
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def _field_actuate_all(cmd: np.ndarray, pose: np.ndarray, tracks: np.ndarray, gain: np.ndarray,
                        noise: np.ndarray, fg: FieldGains) -> None:
     for i in range(len(pose)):

@@ -12,12 +12,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .compiled import kernel
 
 __all__ = ["block_distance", "collide", "robot_contacts", "wall_distance"]
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def block_distance(x: float, y: float, w: int, centre: np.ndarray, half: np.ndarray, cs: np.ndarray,
                    nblocks: np.ndarray) -> float:
     """Signed distance (m) from ``(x, y)`` to the nearest block of world ``w`` (negative inside;
@@ -33,13 +34,13 @@ def block_distance(x: float, y: float, w: int, centre: np.ndarray, half: np.ndar
     return best
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def wall_distance(x: float, y: float, width: float, height: float) -> float:
     """Distance (m) from ``(x, y)`` to the boundary of a ``width`` x ``height`` world."""
     return min(min(x, width - x), min(y, height - y))
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def robot_contacts(pose: np.ndarray, origin: np.ndarray, world_of: np.ndarray, shared: np.ndarray,
                    radius: float, hit: np.ndarray) -> None:
     """Set ``hit[i]`` for robots of ``shared`` closer than two radii to another robot of their world.
@@ -68,7 +69,7 @@ def robot_contacts(pose: np.ndarray, origin: np.ndarray, world_of: np.ndarray, s
                 hit[shared[jb]] = True
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def collide(pose: np.ndarray, check: np.ndarray, step: int, hit: np.ndarray, origin: np.ndarray,
             world_of: np.ndarray, sizes: np.ndarray, centre: np.ndarray, half: np.ndarray, cs: np.ndarray,
             nblocks: np.ndarray, shared: np.ndarray, safe_until: np.ndarray, radius: float,

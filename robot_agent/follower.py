@@ -32,8 +32,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from .compiled import kernel
 from .kinematics import wrap_angle
 from .params import RobotParams
 
@@ -79,12 +79,12 @@ def gains(p: RobotParams) -> Gains:
                  c.stall_angle_rad, p.dt)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def _clip(x: float, lo: float, hi: float) -> float:
     return min(max(x, lo), hi)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def move_to_waypoint(x: float, y: float, tx: float, ty: float, speed: float) -> tuple[float, float]:
     """Move-to-goal schema: the velocity vector (m/s) of magnitude ``speed`` from ``(x, y)``
     towards ``(tx, ty)``; the zero vector at the target."""
@@ -94,7 +94,7 @@ def move_to_waypoint(x: float, y: float, tx: float, ty: float, speed: float) -> 
     return dx * scale, dy * scale
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def approach_speed(dist: float, is_last: bool, g: Gains) -> float:
     """Schema magnitude (m/s): ``max_speed``, or on the approach to the last point
     ``arrive_gain x dist`` clipped to ``[min_speed, max_speed]``."""
@@ -103,7 +103,7 @@ def approach_speed(dist: float, is_last: bool, g: Gains) -> float:
     return g.max_speed
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def heading_control(theta: float, vx: float, vy: float, g: Gains) -> tuple[float, float]:
     """Body velocity commands ``(v m/s, w rad/s)`` that follow the velocity vector ``(vx, vy)``.
 
@@ -117,7 +117,7 @@ def heading_control(theta: float, vx: float, vy: float, g: Gains) -> tuple[float
     return v, w
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def align_control(theta: float, goal_angle: float, g: Gains) -> tuple[float, bool]:
     """Turn rate (rad/s) that aligns ``theta`` to ``goal_angle``, and whether it is aligned.
 
@@ -131,13 +131,13 @@ def align_control(theta: float, goal_angle: float, g: Gains) -> tuple[float, boo
     return math.copysign(_clip(abs(g.heading_gain * err), g.min_turn_rate, g.max_turn), err), False
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def rate_limit(prev: float, desired: float, max_step: float) -> float:
     """``desired`` changed from ``prev`` by at most ``max_step`` (acceleration x dt)."""
     return prev + _clip(desired - prev, -max_step, max_step)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def advance_waypoint(x: float, y: float, path: np.ndarray, wp: int, g: Gains) -> tuple[int, bool]:
     """The current waypoint index after this step, and whether the last point was reached.
 
@@ -157,7 +157,7 @@ def advance_waypoint(x: float, y: float, path: np.ndarray, wp: int, g: Gains) ->
     return wp, False
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset: np.ndarray,
             count: np.ndarray, wp: np.ndarray, aligning: np.ndarray, cmd: np.ndarray, anchor: np.ndarray,
             anchor_k: np.ndarray, k: np.ndarray, timeout: np.ndarray, g: Gains) -> int:

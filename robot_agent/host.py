@@ -40,7 +40,7 @@ from .protocol import MAX_LINE_BYTES, ErrorCode, format_error
 from .robot import Robot
 from .robot_profile import DEFAULT_PROFILE
 from .server_link import ServerLink
-from .sim import SimCore, SimEvent, warm_up
+from .sim import SimCore, SimEvent, kernels_ready, warm_up
 from .sinks import TrackerSink
 from .frames import field_layout
 from .world import World
@@ -173,7 +173,9 @@ class AgentHost:
         if self._running:
             return self
         loop = asyncio.get_running_loop()
-        await asyncio.to_thread(warm_up)
+        if not kernels_ready():
+            log.info("loading the simulation kernels (the first start after installing compiles them, ~12 s)")
+            await asyncio.to_thread(warm_up)
         try:
             for r in self.robots:
                 port = self.base_port + r.index if self.base_port else 0

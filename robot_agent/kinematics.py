@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from .compiled import kernel
+
 
 __all__ = ["body_to_tracks", "tracks_to_body", "unicycle_step", "wrap_angle"]
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def wrap_angle(a: float) -> float:
     """Angle (rad) wrapped to [-pi, pi)."""
     if -math.pi <= a < math.pi:  # the common case, and exact
@@ -23,7 +24,7 @@ def wrap_angle(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def unicycle_step(x: float, y: float, theta: float, v: float, w: float, dt: float) -> tuple[float, float, float]:
     """The pose after moving with body velocities ``(v, w)`` for ``dt`` seconds (midpoint rule).
 
@@ -33,14 +34,14 @@ def unicycle_step(x: float, y: float, theta: float, v: float, w: float, dt: floa
     return x + v * dt * math.cos(mid), y + v * dt * math.sin(mid), wrap_angle(theta + w * dt)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def body_to_tracks(v: float, w: float, wheel_base: float) -> tuple[float, float]:
     """Left and right track speeds (m/s) for body velocities ``(v, w)``; ``wheel_base`` in m."""
     half = 0.5 * wheel_base * w
     return v - half, v + half
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def tracks_to_body(left: float, right: float, wheel_base: float) -> tuple[float, float]:
     """Body velocities (v m/s, w rad/s) of left/right track speeds (m/s)."""
     return (left + right) / 2.0, (right - left) / wheel_base

@@ -20,7 +20,8 @@ import hashlib
 import math
 
 import numpy as np
-from numba import njit
+
+from .compiled import kernel
 
 __all__ = ["box_muller", "mix64", "normals", "path_key", "uniform", "uniforms"]
 
@@ -32,7 +33,7 @@ _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(
 _MASK = (1 << 64) - 1
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def mix64(x: np.uint64) -> np.uint64:
     """SplitMix64 finaliser of a uint64 (wrapping arithmetic)."""
     z = np.uint64(x) + _GOLDEN
@@ -41,7 +42,7 @@ def mix64(x: np.uint64) -> np.uint64:
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def uniform(key: np.uint64, counter: int, channels: int, channel: int) -> float:
     """Uniform number in (0, 1) of ``channel`` (of ``channels``) at ``counter`` of run ``key``."""
     c = np.uint64(counter) * np.uint64(channels) + np.uint64(channel)
@@ -49,7 +50,7 @@ def uniform(key: np.uint64, counter: int, channels: int, channel: int) -> float:
     return (float(z >> _S11) + 0.5) * (1.0 / 9007199254740992.0)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def box_muller(u1: float, u2: float) -> tuple[float, float]:
     """Two standard normals from two uniforms in (0, 1)."""
     r = math.sqrt(-2.0 * math.log(u1))
@@ -57,7 +58,7 @@ def box_muller(u1: float, u2: float) -> tuple[float, float]:
     return r * math.cos(phi), r * math.sin(phi)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def _uniforms(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarray:
     out = np.empty((len(keys), channels))
     for i in range(len(keys)):

@@ -24,8 +24,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from .compiled import kernel
 from .kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
 from .noise import box_muller, uniform
 from .params import RobotParams
@@ -68,13 +68,13 @@ def field_gains(p: RobotParams) -> FieldGains:
                       f.dead_band_m_s, p.max_accel_m_s2 * p.dt, alpha, p.dt)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def ideal_actuate(i: int, v: float, w: float, pose: np.ndarray, dt: float) -> None:
     """Move robot ``i`` (``pose`` ``(N, 3)``, in place) exactly by commands ``(v, w)`` for ``dt``."""
     pose[i, 0], pose[i, 1], pose[i, 2] = unicycle_step(pose[i, 0], pose[i, 1], pose[i, 2], v, w, dt)
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def field_begin(i: int, key: np.uint64, from_rest: bool, pose: np.ndarray, belief: np.ndarray,
                 gain: np.ndarray, ring_ok: np.ndarray, fg: FieldGains) -> None:
     """A path with noise ``key`` starts for robot ``i``: draw its track gains; a robot that was at
@@ -94,7 +94,7 @@ def field_begin(i: int, key: np.uint64, from_rest: bool, pose: np.ndarray, belie
         ring_ok[i, :] = False
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def field_sense(i: int, step: int, key: np.uint64, pose: np.ndarray, belief: np.ndarray, ring: np.ndarray,
                 ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, meas: np.ndarray,
                 fg: FieldGains) -> bool:
@@ -128,7 +128,7 @@ def field_sense(i: int, step: int, key: np.uint64, pose: np.ndarray, belief: np.
     return ok
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def _track(current: float, want: float, gain: float, z: float, fg: FieldGains) -> float:
     """A track's speed (m/s) after one step towards the commanded ``want``."""
     if abs(want) < fg.dead_band:
@@ -140,7 +140,7 @@ def _track(current: float, want: float, gain: float, z: float, fg: FieldGains) -
     return 0.0 if abs(out) < 1e-5 else out
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def field_actuate(i: int, v: float, w: float, pose: np.ndarray, tracks: np.ndarray, gain: np.ndarray,
                   noise: np.ndarray, fg: FieldGains) -> None:
     """Robot ``i``'s tracks follow commands ``(v, w)`` for one step and move it (in place)."""

@@ -263,6 +263,11 @@ class SimCore:
 _warm = False
 
 
+def kernels_ready() -> bool:
+    """True once :func:`warm_up` ran in this process."""
+    return _warm
+
+
 def warm_up() -> None:
     """Compile (first run) or load (from numba's cache) every kernel a host uses.
 

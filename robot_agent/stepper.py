@@ -25,8 +25,8 @@ from __future__ import annotations
 from enum import IntEnum
 
 import numpy as np
-from numba import njit
 
+from .compiled import kernel
 from .contact import collide
 from .follower import DONE, STALLED, TIMED_OUT, Gains, control
 from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
@@ -47,7 +47,7 @@ class State(IntEnum):
     FAILED = 3
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains, flags: np.ndarray) -> None:
     """The follower's step for every robot (commands of robots not ``moving`` become 0)."""
     state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
@@ -60,7 +60,7 @@ def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains,
             cmd[i, 0] = cmd[i, 1] = 0.0
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def _busy(kind: int, state: np.ndarray, tracks: np.ndarray) -> bool:
     for i in range(len(state)):
         if state[i] == State.MOVING or (kind == FIELD and (tracks[i, 0] != 0.0 or tracks[i, 1] != 0.0)):
@@ -68,7 +68,7 @@ def _busy(kind: int, state: np.ndarray, tracks: np.ndarray) -> bool:
     return False
 
 
-@njit(cache=True, error_model='numpy')
+@kernel
 def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phys: tuple, world: tuple,
         radius: float, step_travel: float, out: tuple, g: Gains, fg: FieldGains) -> tuple[int, int, int]:
     """Advance the fleet up to ``max_steps`` steps from simulation step ``step0``.

@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import math
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import robot_agent
 from robot_agent import follower as fl
 from robot_agent.backends import Backend, make_backend
 from robot_agent.kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
@@ -277,3 +283,23 @@ def test_advance_equals_single_steps_and_stops_when_nothing_moves(backend):
     for r in a[1]:
         assert (a[1][r] == b[1][r]).all()  # bit for bit: the same compiled code in both
     assert (a[2] == b[2]).all()
+
+
+def test_kernel_cache_follows_every_kernel_source(tmp_path):
+    """numba only notices changes to a cached function's own file; the cache directory is keyed by
+    all kernel sources, so editing the follower cannot leave a stale compiled stepper behind."""
+    pkg = tmp_path / "robot_agent"
+    shutil.copytree(Path(robot_agent.__file__).parent, pkg, ignore=shutil.ignore_patterns("__pycache__"))
+
+    def where() -> str:
+        code = "from robot_agent.compiled import cache_dir; print(cache_dir())"
+        env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+        return subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True,
+                              text=True, check=True).stdout.strip()
+
+    first = where()
+    assert first.startswith(str(pkg / "__pycache__" / "kernels")) and where() == first
+    with open(pkg / "follower.py", "a") as f:
+        f.write("\n# changed\n")
+    second = where()
+    assert second != first and Path(second).parent == Path(first).parent
