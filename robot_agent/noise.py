@@ -72,13 +72,20 @@ def uniforms(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarra
     return _uniforms(np.asarray(keys, dtype=np.uint64), np.asarray(counters, dtype=np.int64), int(channels))
 
 
+@kernel
+def _box_muller_rows(u: np.ndarray) -> np.ndarray:
+    pairs = u.shape[1] // 2
+    out = np.empty_like(u)
+    for i in range(len(u)):
+        for j in range(pairs):
+            out[i, j], out[i, j + pairs] = box_muller(u[i, j], u[i, j + pairs])
+    return out
+
+
 def normals(keys: np.ndarray, counters: np.ndarray, channels: int) -> np.ndarray:
-    """Standard normals ``(N, channels)``: Box-Muller on pairs of :func:`uniforms` ``(u[j], u[j + pairs])``."""
+    """Standard normals ``(N, channels)``: :func:`box_muller` on pairs of :func:`uniforms` ``(u[j], u[j + pairs])``."""
     pairs = (channels + 1) // 2
-    u = uniforms(keys, counters, 2 * pairs)
-    r = np.sqrt(-2.0 * np.log(u[:, :pairs]))
-    phi = 2.0 * np.pi * u[:, pairs:]
-    return np.concatenate([r * np.cos(phi), r * np.sin(phi)], axis=1)[:, :channels]
+    return _box_muller_rows(uniforms(keys, counters, 2 * pairs))[:, :channels]
 
 
 def _scalar_mix(x: int) -> int:

@@ -69,6 +69,18 @@ def field_gains(p: RobotParams) -> FieldGains:
 
 
 @kernel
+def _six_normals(key: np.uint64, counter: int, u: np.ndarray) -> tuple[float, float, float, float, float, float]:
+    """Fill ``u`` with the uniforms of ``counter`` (``len(u)`` channels, at least 6) and return six
+    standard normals, Box-Muller on the pairs ``(u[j], u[j + 3])``."""
+    for ch in range(len(u)):
+        u[ch] = uniform(key, counter, len(u), ch)
+    z0, z3 = box_muller(u[0], u[3])
+    z1, z4 = box_muller(u[1], u[4])
+    z2, z5 = box_muller(u[2], u[5])
+    return z0, z1, z2, z3, z4, z5
+
+
+@kernel
 def ideal_actuate(i: int, v: float, w: float, pose: np.ndarray, dt: float) -> None:
     """Move robot ``i`` (``pose`` ``(N, 3)``, in place) exactly by commands ``(v, w)`` for ``dt``."""
     pose[i, 0], pose[i, 1], pose[i, 2] = unicycle_step(pose[i, 0], pose[i, 1], pose[i, 2], v, w, dt)
@@ -79,12 +91,7 @@ def field_begin(i: int, key: np.uint64, from_rest: bool, pose: np.ndarray, belie
                 gain: np.ndarray, ring_ok: np.ndarray, fg: FieldGains) -> None:
     """A path with noise ``key`` starts for robot ``i``: draw its track gains; a robot that was at
     rest gets a fresh tracker measurement as its belief (the tracker was watching it)."""
-    u = np.empty(6)
-    for ch in range(6):
-        u[ch] = uniform(key, RUN_COUNTER, 6, ch)
-    z0, z3 = box_muller(u[0], u[3])
-    z1, z4 = box_muller(u[1], u[4])
-    z2, _ = box_muller(u[2], u[5])
+    z0, z1, z2, z3, z4, _ = _six_normals(key, RUN_COUNTER, np.empty(6))
     gain[i, 0] = fg.gain_mean + fg.bias_sigma * z0
     gain[i, 1] = fg.gain_mean + fg.bias_sigma * z1
     if from_rest:
@@ -106,11 +113,7 @@ def field_sense(i: int, step: int, key: np.uint64, pose: np.ndarray, belief: np.
     ``noise[i]`` for :func:`field_actuate`.
     """
     u = np.empty(_SENSE_CHANNELS)
-    for ch in range(_SENSE_CHANNELS):
-        u[ch] = uniform(key, step, _SENSE_CHANNELS, ch)
-    z0, z3 = box_muller(u[0], u[3])
-    z1, z4 = box_muller(u[1], u[4])
-    z2, _ = box_muller(u[2], u[5])
+    z0, z1, z2, z3, z4, _ = _six_normals(key, step, u)
     noise[i, 0], noise[i, 1] = z3, z4
     frame = (step * fg.camera_rate) // fg.control_rate != ((step - 1) * fg.camera_rate) // fg.control_rate
     ok = frame and u[6] >= fg.dropout

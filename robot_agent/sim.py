@@ -34,7 +34,7 @@ import numpy as np
 from .backends import Backend, Emulated
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .params import RobotParams
-from .stepper import COLLIDED, ENDED, State, control_fleet, run
+from .stepper import COLLIDED, ENDED, State, control_fleet, run, settle_fleet
 from .world import World
 
 __all__ = ["SimCore", "SimEvent", "PoseLog", "State"]
@@ -107,7 +107,7 @@ class SimCore:
         self._pose_rows = np.zeros((4 * n + 4096, 2), dtype=np.int64)
         self._pose_xyt = np.zeros((len(self._pose_rows), 3))
         self._scratch = (np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool),
-                         np.zeros(n, dtype=bool), np.zeros(3))
+                         np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(3))
         self._dirty = True
         self._rebuild_paths()
 
@@ -224,21 +224,15 @@ class SimCore:
         if self.log_poses and logged.any():
             idx = np.flatnonzero(logged)
             self.poses.add(np.full(len(idx), self.t), idx, np.array(logged_pose[idx], dtype=float))
-        old = self.wp.copy()
-        flags = self._scratch[0]
-        control_fleet(np.ascontiguousarray(belief, dtype=float), moving, self._ctrl(), self.gains, flags)
+        flags, old = self._scratch[0], self._scratch[1]
+        control_fleet(np.ascontiguousarray(belief, dtype=float), moving, self._ctrl(), self.gains, flags, old)
         self.backend.actuate(self.cmd)
         still = moving & (flags & ENDED == 0)
         collided = self.world.collisions(self.backend.pose, still | self.backend.in_motion(), self.step_count)
         if collided.any():
             self.backend.halt(collided)
-            self.cmd[collided] = 0.0
-            flags[collided & still] |= COLLIDED
-        self.k += 1
-        self.state[(flags & DONE) != 0] = State.DONE
-        self.state[((flags & DONE) == 0) & ((flags & (STALLED | TIMED_OUT | COLLIDED)) != 0)] = State.FAILED
-        idx = np.flatnonzero((flags != 0) | (self.wp != old))
-        return np.column_stack([np.full(len(idx), self.step_count), idx, old[idx], self.wp[idx], flags[idx]])
+        n_ev = settle_fleet(self.step_count, collided, flags, old, self._ctrl(), self._events, 0)
+        return self._events[:n_ev]
 
     def _records_to_events(self, records: np.ndarray) -> list[SimEvent]:
         """Event records of rows ``(step, robot, old wp, new wp, flags)``, in order per robot."""

@@ -1,14 +1,15 @@
 """The simulation loop in compiled code: many control steps of a whole fleet per call.
 
 :func:`run` advances every robot of an :class:`~robot_agent.backends.Emulated`
-backend up to ``max_steps`` control steps without returning to Python:
-sense, follow (:func:`robot_agent.follower.control`), actuate
-(:mod:`robot_agent.physics`), then collisions (:func:`robot_agent.contact.collide`)
-once all robots moved.  It stops early when nothing moves any more or when
-its output buffers could not hold another step.  Events and logged poses go
-to those buffers as rows; :class:`robot_agent.sim.SimCore` turns them into
-records.  :func:`control_fleet` is the follower step alone, for backends
-that are stepped through Python.
+backend up to ``max_steps`` control steps without returning to Python.  A
+step is: sense (:mod:`robot_agent.physics`), :func:`control_fleet` (the
+follower), actuate, collisions once all robots moved
+(:func:`robot_agent.contact.collide`), :func:`settle_fleet` (path states and
+event rows).  It stops early when nothing moves any more or when its output
+buffers could not hold another step.  Events and logged poses go to those
+buffers as rows; :class:`robot_agent.sim.SimCore` turns them into records.
+Backends that are stepped through Python run the same two fleet kernels
+around their own methods.
 
 Array groups (each passed as a tuple, modified in place):
 
@@ -17,7 +18,7 @@ Array groups (each passed as a tuple, modified in place):
 - ``phys`` = :attr:`Emulated.arrays`; ``world`` = :attr:`World.arrays`;
 - ``out`` = ``(events (E, 5) int64: step, robot, old wp, new wp, flags;
   pose_rows (P, 2) int64: step, robot; pose_xyt (P, 3); and per-robot
-  scratch: flags, old wp, check, hit, measurement (3,))``.
+  scratch: flags, old wp, moving, check, hit, measurement (3,))``.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from .contact import collide
 from .follower import DONE, STALLED, TIMED_OUT, Gains, control
 from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
 
-__all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "control_fleet", "run"]
+__all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "control_fleet", "run", "settle_fleet"]
 
 COLLIDED = 32  #: flag bit: the robot touched a wall, a block or a robot this step
 ENDED = DONE | STALLED | TIMED_OUT
@@ -48,16 +49,44 @@ class State(IntEnum):
 
 
 @kernel
-def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains, flags: np.ndarray) -> None:
-    """The follower's step for every robot (commands of robots not ``moving`` become 0)."""
+def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains, flags: np.ndarray,
+                  old: np.ndarray) -> None:
+    """The follower's step for every robot: its flags, its waypoint before the step in ``old``;
+    robots not ``moving`` get zero commands."""
     state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
     for i in range(len(belief)):
+        old[i] = wp[i]
         if moving[i]:
             flags[i] = control(i, belief[i, 0], belief[i, 1], belief[i, 2], points, offset, count, wp, aligning,
                                cmd, anchor, anchor_k, k, timeout, g)
         else:
             flags[i] = 0
             cmd[i, 0] = cmd[i, 1] = 0.0
+
+
+@kernel
+def settle_fleet(step: int, hit: np.ndarray, flags: np.ndarray, old: np.ndarray, ctrl: tuple,
+                 events: np.ndarray, n_ev: int) -> int:
+    """End every robot's step after the collision check: a hit stops its commands (and fails its
+    path), its path state follows its flags, and an event row goes to ``events`` from row
+    ``n_ev`` on when anything happened; returns the new row count."""
+    state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
+    for i in range(len(hit)):
+        if hit[i]:
+            cmd[i, 0] = cmd[i, 1] = 0.0
+            if state[i] == State.MOVING and not flags[i] & ENDED:
+                flags[i] |= COLLIDED
+        k[i] += 1
+        f = flags[i]
+        if f & DONE:
+            state[i] = State.DONE
+        elif f & (STALLED | TIMED_OUT | COLLIDED):
+            state[i] = State.FAILED
+        if f != 0 or wp[i] != old[i]:
+            events[n_ev, 0], events[n_ev, 1], events[n_ev, 2] = step, i, old[i]
+            events[n_ev, 3], events[n_ev, 4] = wp[i], f
+            n_ev += 1
+    return n_ev
 
 
 @kernel
@@ -78,54 +107,37 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
     state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
     pose, belief, tracks, gain, keys, ring, ring_ok, ring_pos, noise = phys
     origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until = world
-    events, pose_rows, pose_xyt, flags, old, check, hit, meas = out
+    events, pose_rows, pose_xyt, flags, old, moving, check, hit, meas = out
     n = len(state)
     n_ev = n_pose = 0
     s = 0
     while s < max_steps and n_ev + n <= len(events) and n_pose + n <= len(pose_rows) and _busy(kind, state, tracks):
         step = step0 + s
         for i in range(n):
-            moving = state[i] == State.MOVING
+            moving[i] = state[i] == State.MOVING
             if kind == FIELD:
                 seen = field_sense(i, k[i], keys[i], pose, belief, ring, ring_ok, ring_pos, noise, meas, fg)
-                logged = seen and moving
             else:
                 meas[:] = pose[i]
-                logged = moving
-            if logged and log_poses:
+                seen = True
+            if seen and moving[i] and log_poses:
                 pose_rows[n_pose, 0], pose_rows[n_pose, 1] = step, i
                 pose_xyt[n_pose, :] = meas
                 n_pose += 1
-            old[i] = wp[i]
-            if moving:
-                flags[i] = control(i, belief[i, 0], belief[i, 1], belief[i, 2], points, offset, count, wp,
-                                   aligning, cmd, anchor, anchor_k, k, timeout, g)
-            else:
-                flags[i] = 0
-                cmd[i, 0] = cmd[i, 1] = 0.0
+        control_fleet(belief, moving, ctrl, g, flags, old)
+        for i in range(n):
             if kind == FIELD:
                 field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, fg)
-                check[i] = (moving and not flags[i] & ENDED) or tracks[i, 0] != 0.0 or tracks[i, 1] != 0.0
+                check[i] = (moving[i] and not flags[i] & ENDED) or tracks[i, 0] != 0.0 or tracks[i, 1] != 0.0
             else:
                 ideal_actuate(i, cmd[i, 0], cmd[i, 1], pose, g.dt)
-                check[i] = moving and not flags[i] & ENDED
+                check[i] = moving[i] and not flags[i] & ENDED
         collide(pose, check, step, hit, origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until,
                 radius, step_travel)
-        for i in range(n):
-            if hit[i]:
-                tracks[i, 0] = tracks[i, 1] = 0.0
-                cmd[i, 0] = cmd[i, 1] = 0.0
-                if state[i] == State.MOVING and not flags[i] & ENDED:
-                    flags[i] |= COLLIDED
-            k[i] += 1
-            f = flags[i]
-            if f & DONE:
-                state[i] = State.DONE
-            elif f & (STALLED | TIMED_OUT | COLLIDED):
-                state[i] = State.FAILED
-            if f != 0 or wp[i] != old[i]:
-                events[n_ev, 0], events[n_ev, 1], events[n_ev, 2] = step, i, old[i]
-                events[n_ev, 3], events[n_ev, 4] = wp[i], f
-                n_ev += 1
+        if kind == FIELD:
+            for i in range(n):
+                if hit[i]:
+                    tracks[i, 0] = tracks[i, 1] = 0.0
+        n_ev = settle_fleet(step, hit, flags, old, ctrl, events, n_ev)
         s += 1
     return s, n_ev, n_pose
