@@ -3,8 +3,9 @@
 Every line sent and received goes to ``on_line(direction, line, t, estimated)``
 with the experiment time ``t`` on the agent's clock: taken from the line
 itself for ``ST``/``EV`` lines (``estimated`` False), else extrapolated from
-the last time the agent reported and the time scale (``estimated`` True).  Replies (``OK``/``ERR``/``ST``) answer requests in order;
-``EV`` lines go to an event queue.  A dead or silent agent raises
+the last time the agent reported and the time scale (``estimated`` True).
+Replies (``OK``/``ERR``/``ST``) answer requests in order; ``EV`` lines go to
+an event queue.  A dead or silent agent raises
 :class:`AgentUnavailable` — an infrastructure fault, not the job's.
 """
 
@@ -17,21 +18,11 @@ from typing import Callable, Optional
 
 from robot_agent.protocol import MAX_LINE_BYTES, ProtocolError, Reply, parse_reply
 
+from .errors import AgentRefused, AgentUnavailable
+
 __all__ = ["AgentLink", "AgentRefused", "AgentUnavailable"]
 
 LineLog = Callable[[str, str, Optional[float], bool], None]
-
-
-class AgentUnavailable(ConnectionError):
-    """The agent cannot be reached, closed the connection or stopped answering."""
-
-
-class AgentRefused(RuntimeError):
-    """The agent answered ``ERR,<code>,<message>``."""
-
-    def __init__(self, code: str, message: str) -> None:
-        super().__init__(f"{code}: {message}")
-        self.code, self.message = code, message
 
 
 class AgentLink:

@@ -1,4 +1,4 @@
-"""The FastAPI application factory and its lifespan (migrations, scheduler)."""
+"""The FastAPI application: routers, middleware, error bodies, and the testbed's life in its lifespan."""
 
 from __future__ import annotations
 
@@ -9,64 +9,15 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
+from .api.middleware import BodyLimit
 from .api.routes import dashboard, environments, events, experiments, field, health, planners, programs, runs, users
 from .core.settings import Settings
+from .errors import RequestRefused
 from .testbed import Testbed
 
 __all__ = ["create_app"]
 
 API_PREFIX = "/api/v1"
-
-
-class BodyLimit:
-    """ASGI middleware: refuse request bodies larger than ``limit`` bytes with 413, streamed or not.
-
-    A declared ``Content-Length`` over the limit is refused before reading; a
-    chunked body is cut off at the limit (the application sees an empty end
-    of body) and whatever it answers is replaced by the 413.
-    """
-
-    def __init__(self, app, limit: int) -> None:  # type: ignore[no-untyped-def]
-        self.app, self.limit = app, limit
-
-    async def __call__(self, scope, receive, send):  # type: ignore[no-untyped-def]
-        if scope["type"] != "http":
-            return await self.app(scope, receive, send)
-        for name, value in scope.get("headers", []):
-            if name == b"content-length" and value.isdigit() and int(value) > self.limit:
-                return await _too_large(send, self.limit)
-        seen, over, answered = 0, False, False
-
-        async def limited_receive():  # type: ignore[no-untyped-def]
-            nonlocal seen, over
-            if over:
-                return {"type": "http.request", "body": b"", "more_body": False}
-            message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > self.limit:
-                    over = True
-                    return {"type": "http.request", "body": b"", "more_body": False}
-            return message
-
-        async def guarded_send(message):  # type: ignore[no-untyped-def]
-            nonlocal answered
-            if not over:
-                return await send(message)
-            if not answered:
-                answered = True
-                await _too_large(send, self.limit)
-
-        await self.app(scope, limited_receive, guarded_send)
-        if over and not answered:
-            await _too_large(send, self.limit)
-
-
-async def _too_large(send, limit: int) -> None:  # type: ignore[no-untyped-def]
-    body = ('{"detail": "Request body larger than %d bytes"}' % limit).encode()
-    await send({"type": "http.response.start", "status": 413,
-                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
-    await send({"type": "http.response.body", "body": body})
 
 
 def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] = None) -> FastAPI:
@@ -93,6 +44,10 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
         lifespan=lifespan,
     )
     app.state.testbed = tb
+
+    @app.exception_handler(RequestRefused)
+    async def _refused(request: Request, exc: RequestRefused) -> JSONResponse:
+        return JSONResponse(status_code=exc.status_code, content={"detail": exc.detail}, headers=exc.headers)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -9,15 +9,16 @@ import logging
 import os
 from pathlib import Path
 
-from sqlalchemy import select, update
+from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from planners import builtin_names, load_environment
 
 from .core.security import hash_token, new_token
 from .core.settings import Settings
-from .jobs import ACTIVE_STATES
-from .models import Environment, Experiment, Run, Subfield, Token, User, utcnow
+from .models import Environment, Token, User
+from .store.field import reset_subfields
+from .store.runs import interrupt_active
 
 __all__ = ["bootstrap_store"]
 
@@ -60,23 +61,10 @@ def bootstrap_store(settings: Settings, sessions: sessionmaker[Session]) -> str:
             s.flush()
         if s.scalar(select(Token).where(Token.token_hash == hash_token(token))) is None:
             s.add(Token(user_id=admin.id, token_hash=hash_token(token), kind="admin", label="twb up"))
-        for i in range(1, 5):
-            if s.get(Subfield, i) is None:
-                s.add(Subfield(id=i))
-        s.execute(update(Subfield).values(state="idle", run_id=None, robot_id=None, environment=None))
+        reset_subfields(s)
         # runs cut by a server stop: the robots did not finish them under our watch
-        cut = s.scalars(select(Run).where(Run.status.in_(ACTIVE_STATES))).all()
-        for run in cut:
-            run.status = "interrupted"
-            run.error = "the server stopped while this run was in progress"
-            run.finished_at = utcnow()
+        cut = interrupt_active(s, "the server stopped while this run was in progress")
         if cut:
-            log.warning("marked %d run(s) interrupted by the last server stop", len(cut))
-        for exp in s.scalars(select(Experiment).where(Experiment.status.in_(ACTIVE_STATES))).all():
-            if not any(r.status == "queued" for r in exp.runs):
-                exp.status = "interrupted"
-                exp.finished_at = utcnow()
-            else:
-                exp.status = "queued"
+            log.warning("marked %d run(s) interrupted by the last server stop", cut)
     _write_token(settings.token_file, token)
     return token

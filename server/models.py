@@ -1,7 +1,8 @@
 """Database tables (SQLAlchemy 2, portable SQL: SQLite by default, PostgreSQL next).
 
-Units follow DESIGN §2: metres, radians, seconds.  Times named ``t*`` are
-experiment time on the robot agent's clock; ``*_at`` are wall-clock UTC.
+Units are SI (docs/design.md, "Units and frames"): metres, radians, seconds.
+Times named ``t*`` are experiment time on the robot agent's clock; ``*_at``
+are wall-clock UTC.  Statuses are the values of :mod:`server.status`.
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ class Token(Base):
 
 
 class Environment(Base):
-    """An environment file (DESIGN §3) stored as JSON; built-ins have no owner."""
+    """An environment file (docs/design.md, "Environment file") stored as JSON; built-ins have no owner."""
 
     __tablename__ = "environments"
 
@@ -92,6 +93,12 @@ class Program(Base):
     size: Mapped[int] = mapped_column(Integer)
     sha256: Mapped[str] = mapped_column(String(64))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    owner: Mapped[User] = relationship(lazy="joined", innerjoin=True)
+
+    @property
+    def owner_name(self) -> str:
+        return self.owner.name
 
 
 class Experiment(Base):
@@ -130,6 +137,11 @@ class Experiment(Base):
     runs: Mapped[list["Run"]] = relationship(
         back_populates="experiment", cascade="all, delete-orphan", order_by="Run.id"
     )
+    owner: Mapped[User] = relationship(lazy="joined", innerjoin=True)
+
+    @property
+    def owner_name(self) -> str:
+        return self.owner.name
 
 
 class Run(Base):

@@ -1,7 +1,8 @@
-"""Request and response bodies of the REST API (DESIGN §7), kept apart from the tables.
+"""Request and response bodies of the REST API (docs/design.md, "REST API"), kept apart from the tables.
 
 SI units throughout: metres, radians, seconds.  NaN and infinity are refused
-everywhere (``allow_inf_nan=False``).
+everywhere (``allow_inf_nan=False``).  Public models are built from table rows
+(``from_attributes``): ``RunPublic.model_validate(run)``.
 """
 
 from __future__ import annotations
@@ -9,7 +10,9 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from .status import RunStatus
 
 __all__ = [
     "EnvironmentCreate",
@@ -41,15 +44,16 @@ def _utc(v: datetime) -> datetime:
 UTCDateTime = Annotated[datetime, AfterValidator(_utc)]
 
 Mode = Literal["sim", "twb"]
-RUN_STATES = (
-    "queued", "building", "placing", "planning", "running", "analyzing",
-    "completed", "failed", "error", "cancelled", "interrupted",
-)
-TERMINAL_STATES = frozenset({"completed", "failed", "error", "cancelled", "interrupted"})
+#: the owner's name, from a row's ``owner_name`` (or a plain ``owner`` key)
+_OWNER = AliasChoices("owner_name", "owner")
 
 
 class Strict(BaseModel):
     model_config = ConfigDict(allow_inf_nan=False, extra="forbid")
+
+
+class FromRow(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
 
 
 class Page(BaseModel, Generic[T]):
@@ -67,7 +71,7 @@ class UserCreate(Strict):
     is_admin: bool = False
 
 
-class UserPublic(BaseModel):
+class UserPublic(FromRow):
     id: int
     name: str
     is_admin: bool
@@ -82,7 +86,7 @@ class UserWithToken(UserPublic):
 
 
 class EnvironmentCreate(Strict):
-    """An environment file (DESIGN §3); validated by the planners' environment model."""
+    """An environment file (docs/design.md, "Environment file"); validated by the planners' environment model."""
 
     model_config = ConfigDict(allow_inf_nan=False, extra="allow")
 
@@ -191,32 +195,38 @@ class ExperimentCreate(Strict):
         return self
 
 
-class RunPublic(BaseModel):
+class RunPublic(FromRow):
     id: int
     experiment_id: int
     mode: str
     repetition: int
-    status: str
+    status: RunStatus
     seed: int
     attempt: int
     subfield: Optional[int]
     robot_id: Optional[str]
     t_start: Optional[float]
     t_end: Optional[float]
-    metrics: dict[str, Any]
+    metrics: dict[str, Any] = Field(default_factory=dict)
     error: str
+
+    @field_validator("metrics", mode="before")
+    @classmethod
+    def _metrics(cls, v: Any) -> Any:
+        return v or {}
     created_at: UTCDateTime
     started_at: Optional[UTCDateTime]
     finished_at: Optional[UTCDateTime]
 
 
-class ExperimentSummary(BaseModel):
+class ExperimentSummary(FromRow):
     id: int
-    owner: str
-    status: str
+    owner: str = Field(validation_alias=_OWNER)
+    status: RunStatus
     environment: str
     planner: Optional[str]
-    program: Optional[int] = Field(default=None, description="The uploaded program planning this job, if any.")
+    program: Optional[int] = Field(default=None, validation_alias=AliasChoices("program_id", "program"),
+                                   description="The uploaded program planning this job, if any.")
     modes: list[str]
     repetitions: int
     field: str
@@ -240,6 +250,11 @@ class ExperimentPublic(ExperimentSummary):
     planning_info: dict[str, Any]
     started_at: Optional[UTCDateTime]
     runs: list[RunPublic]
+
+    @field_validator("planner_params", "planning_info", mode="before")
+    @classmethod
+    def _dicts(cls, v: Any) -> Any:
+        return v or {}
 
 
 # --------------------------------------------------------------------------- uploaded programs
@@ -279,10 +294,10 @@ class ProgramCreate(Strict):
         return self
 
 
-class ProgramPublic(BaseModel):
+class ProgramPublic(FromRow):
     id: int
     name: str
-    owner: str
+    owner: str = Field(validation_alias=_OWNER)
     kind: str
     interpreter: Optional[str]
     args: list[str]

@@ -10,6 +10,7 @@ published for the dashboard, at most a few per second per robot.
 from __future__ import annotations
 
 import asyncio
+import json
 import threading
 import time
 from dataclasses import dataclass
@@ -19,8 +20,9 @@ import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
 from .broker import EventBroker
+from .errors import Invalid
 
-__all__ = ["PoseRouter"]
+__all__ = ["PoseRouter", "parse_batch"]
 
 _LIVE_INTERVAL_S = 0.1
 
@@ -152,3 +154,34 @@ def _insert_sql(paramstyle: str) -> str:
     else:
         params = ", ".join([marks] * 5)
     return f"INSERT INTO poses (run_id, t, x, y, theta) VALUES ({params})"
+
+
+def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:
+    """``robot_id``, the valid rows ``(N, 4)`` and the number of rows of a tracker batch (JSON bytes).
+
+    Raises :class:`~server.errors.Invalid` naming what is wrong with the batch
+    as a whole; rows that are not four finite numbers are left out.
+    """
+    try:
+        doc = json.loads(raw)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise Invalid(f"body is not valid JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise Invalid("body must be a JSON object {robot_id, poses}")
+    robot_id, poses = doc.get("robot_id"), doc.get("poses")
+    if not isinstance(robot_id, str) or not 1 <= len(robot_id) <= 64:
+        raise Invalid("robot_id: must be a string of 1 to 64 characters")
+    if not isinstance(poses, list):
+        raise Invalid("poses: must be a list of [t, x, y, theta] rows")
+    if len(poses) > 100_000:
+        raise Invalid("poses: at most 100000 rows per batch")
+    try:
+        arr = np.array(poses, dtype=float)
+        ok = arr.ndim == 2 and arr.shape[1] == 4
+    except (ValueError, TypeError):
+        ok = False
+    if not ok:  # ragged or non-numeric rows: keep the good ones, row by row (the slow path)
+        good = [r for r in poses if isinstance(r, list) and len(r) == 4
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in r)]
+        arr = np.array(good, dtype=float).reshape(-1, 4)
+    return robot_id, arr[np.isfinite(arr).all(axis=1)], len(poses)

@@ -18,14 +18,10 @@ import numpy as np
 from planners import Environment, PlanningError, check_query, get_planner, parse_environment
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
+from .errors import PreflightError
 from .schemas import ExperimentCreate
 
 __all__ = ["FIELD_SIZE", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight"]
-
-
-
-class PreflightError(ValueError):
-    """The job cannot run; the message says why (HTTP 422)."""
 
 
 @dataclass(frozen=True)

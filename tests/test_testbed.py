@@ -270,6 +270,7 @@ def test_a_robot_dying_mid_run_is_an_error_retried_once_on_another_robot(tmp_pat
             assert robots[victim] == "offline"
             # with no working robot left the run waits, queued, for one to come back: nothing is lost
             agents[run["robot_id"]].kill()
+            agents[run["robot_id"]].wait()  # its port is closed: connecting is refused
             exp2 = c.post("/api/v1/experiments", json={**JOB, "modes": ["sim"], "repetitions": 1}).json()
             deadline = time.monotonic() + 30
             while (r2 := c.get(f"/api/v1/experiments/{exp2['id']}").json()["runs"][0])["attempt"] < 2:

@@ -42,7 +42,7 @@ async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ig
         await asyncio.sleep(0.05)
     bound = server.servers[0].sockets[0].getsockname()[1]
     url = f"http://{host}:{bound}"
-    cleanup = await on_ready(url)
+    await on_ready(url)
     # Start-up objects (the numerical stack, the app) live for the whole process: keep the
     # collector from walking them again and again, which showed as 50-100 ms latency spikes.
     gc.collect()
@@ -51,13 +51,9 @@ async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ig
         await stop.wait()
     finally:
         print("twb: stopping...", file=sys.stderr, flush=True)
-        try:
-            if cleanup is not None:
-                await cleanup()
-        finally:
-            # whatever happened to the robots, the server shuts down in order (lifespan included)
-            server.should_exit = True
-            await asyncio.shield(serving)
+        # the lifespan stops the testbed in order: runs end interrupted, then the robots stop
+        server.should_exit = True
+        await asyncio.shield(serving)
 
 
 def _run(main) -> None:  # type: ignore[no-untyped-def]
@@ -110,47 +106,22 @@ def up(
     enable_uploads: Annotated[bool, typer.Option("--enable-uploads", help=UPLOADS_HELP)] = False,
 ) -> None:
     """The whole testbed on this machine: server on SQLite, four field robots, a simulation pool."""
-    from robot_agent.host import AgentHost
-    from robot_agent.frames import FIELD_SIZE, SUBFIELD_ORIGINS, SUBFIELD_SIZE
+    from server.embedded import EmbeddedField
     from server.testbed import Testbed
 
     scale = parse_time_scale(time_scale)
     settings = _settings(data_dir, token, scale, **_uploads(enable_uploads))
-    testbed = Testbed(settings)
+    testbed = Testbed(settings, embedded=EmbeddedField(sim_robots=sim_robots, seed=seed, time_scale=scale))
     admin = testbed.prepare()
-    agent_token = testbed.issue_agent_token()
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
-        # the robot of sub-field 1 covers the whole field, for full-field jobs
-        field = AgentHost(robots=4, backend="field", time_scale=scale, seed=seed, world="shared",
-                          robot_ids=[f"field-{k}" for k in range(1, 5)],
-                          area=[FIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE],
-                          origins=list(SUBFIELD_ORIGINS),
-                          server_url=url, token=agent_token, advertise_host="127.0.0.1")
-        pool = AgentHost(robots=sim_robots, backend="ideal", time_scale=scale, seed=seed, world="separate",
-                         area=FIELD_SIZE, robot_ids=[f"sim-{i}" for i in range(1, sim_robots + 1)],
-                         server_url=url, token=agent_token, advertise_host="127.0.0.1")
-        hosts = [field, pool]
-        for h in hosts:
-            await h.start()
-            for r in h.robots:
-                testbed.seed_hooks[r.robot_id] = lambda s, h=h, rid=r.robot_id: h.set_path_seed(rid, s)
-                testbed.flush_hooks[r.robot_id] = h.flush_tracker
-        for h in hosts:
-            if h.link is not None:
-                await h.link.flush()
         shown = "max" if math.isinf(scale) else f"{scale:g}x"
         print(f"Teleworkbench is up: {url}  (dashboard {url}/ , API docs {url}/docs)", flush=True)
         print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
         print(f"Robots: 4 field robots (sub-fields 1-4), {sim_robots} simulated; time scale {shown}. "
               "Ctrl-C stops everything.", flush=True)
         await _print_uploads(testbed)
-
-        async def cleanup() -> None:
-            for h in hosts:
-                await h.stop()
-
-        return cleanup
+        return None
 
     _run(_serve(settings, testbed, host, port, ready))
 

@@ -1,13 +1,12 @@
-"""FastAPI dependencies: database sessions, the current user, the running testbed."""
+"""FastAPI dependencies: the running testbed, database sessions, who is asking."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Any, Iterator
+from typing import TYPE_CHECKING, Annotated, Iterator
 
 import anyio
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from ..core.security import Principal
@@ -15,7 +14,7 @@ from ..core.security import Principal
 if TYPE_CHECKING:
     from ..testbed import Testbed
 
-__all__ = ["AdminUser", "AgentToken", "CurrentUser", "SessionDep", "TestbedDep", "owned_row"]
+__all__ = ["AdminUser", "AgentToken", "CurrentUser", "SessionDep", "TestbedDep"]
 
 
 _bearer = HTTPBearer(auto_error=False, description="`Authorization: Bearer <token>`")
@@ -39,10 +38,10 @@ SessionDep = Annotated[Session, Depends(get_session)]
 async def _principal(request: Request, creds: HTTPAuthorizationCredentials | None) -> Principal:
     if creds is None or not creds.credentials:
         raise HTTPException(401, "Missing bearer token", headers={"WWW-Authenticate": "Bearer"})
-    testbed = request.app.state.testbed
-    who = testbed.auth.cached(creds.credentials)
+    auth = request.app.state.testbed.auth
+    who = auth.cached(creds.credentials)
     if who is None:
-        who = await anyio.to_thread.run_sync(testbed.auth.load, creds.credentials)
+        who = await anyio.to_thread.run_sync(auth.load, creds.credentials)
     if who is None:
         raise HTTPException(401, "Invalid token", headers={"WWW-Authenticate": "Bearer"})
     return who
@@ -80,19 +79,3 @@ async def get_agent_token(
 
 
 AgentToken = Annotated[Principal, Depends(get_agent_token)]
-
-
-def owned_row(session: Session, user: Principal, model: type, row_id: int, what: str) -> tuple[Any, str]:
-    """A row of ``model`` (which has ``owner_id``) and its owner's name.
-
-    404 "<what> not found" when it does not exist or belongs to someone else
-    (admins see everything): other users cannot even learn that it exists.
-    """
-    from ..models import User
-
-    row = session.execute(
-        select(model, User.name).join(User, model.owner_id == User.id).where(model.id == row_id)
-    ).first()
-    if row is None or (row[0].owner_id != user.id and not user.is_admin):
-        raise HTTPException(404, f"{what} not found")
-    return row[0], row[1]

@@ -1,13 +1,14 @@
-"""Environments (DESIGN §3): the built-ins and users' own."""
+"""Environments (docs/design.md, "Environment file"): the built-ins and users' own."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException
-from sqlalchemy import func, or_, select
+from fastapi import APIRouter
+from sqlalchemy import func, select
 
 from planners import InvalidEnvironment, parse_environment
 
-from ...core.security import Principal
+from ...access import visible_environments
+from ...errors import Conflict, Invalid, NotFound
 from ...models import Environment, User
 from ...schemas import EnvironmentCreate, EnvironmentPublic, Page
 from ..deps import CurrentUser, SessionDep
@@ -23,17 +24,10 @@ def _public(row: Environment, owner: str | None) -> EnvironmentPublic:
     )
 
 
-def visible(user: Principal):  # type: ignore[no-untyped-def]
-    """SQL condition: environments a user may see (built-ins, own; admins see all)."""
-    if user.is_admin:
-        return True
-    return or_(Environment.builtin.is_(True), Environment.owner_id == user.id)
-
-
 @router.get("", response_model=Page[EnvironmentPublic])
 def list_environments(session: SessionDep, user: CurrentUser, offset: int = 0, limit: int = 100) -> Page[EnvironmentPublic]:
     """Built-in environments and your own."""
-    cond = visible(user)
+    cond = visible_environments(user)
     q = select(Environment, User.name).outerjoin(User, Environment.owner_id == User.id).where(cond)
     rows = session.execute(q.order_by(Environment.id).offset(max(offset, 0)).limit(min(max(limit, 1), 1000)))
     count = session.scalar(select(func.count(Environment.id)).where(cond)) or 0
@@ -45,10 +39,10 @@ def get_environment(name: str, session: SessionDep, user: CurrentUser) -> Enviro
     """One environment by name."""
     row = session.execute(
         select(Environment, User.name).outerjoin(User, Environment.owner_id == User.id)
-        .where(Environment.name == name, visible(user))
+        .where(Environment.name == name, visible_environments(user))
     ).first()
     if row is None:
-        raise HTTPException(404, "Environment not found")
+        raise NotFound("Environment not found")
     return _public(*row)
 
 
@@ -58,9 +52,9 @@ def create_environment(body: EnvironmentCreate, session: SessionDep, user: Curre
     try:
         env = parse_environment(body.to_data())
     except InvalidEnvironment as exc:
-        raise HTTPException(422, str(exc)) from None
+        raise Invalid(str(exc)) from None
     if session.scalar(select(Environment).where(Environment.name == env.name)) is not None:
-        raise HTTPException(409, f"Environment {env.name!r} already exists")
+        raise Conflict(f"Environment {env.name!r} already exists")
     row = Environment(name=env.name, owner_id=user.id, builtin=False, data=env.to_dict())
     session.add(row)
     session.commit()

@@ -2,57 +2,40 @@
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Any, Optional
 
 import anyio
-from fastapi import APIRouter, HTTPException, Query, Response
+from fastapi import APIRouter, Query, Response
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
 
-from ...core.security import Principal
-
-from ...jobs import create_experiment, experiment_public, experiment_summary
-from ...models import Environment, Experiment, User
-from ...schemas import TERMINAL_STATES, ExperimentCreate, ExperimentPublic, ExperimentSummary, Page
-from ...validation import PreflightError, preflight
-from ..deps import CurrentUser, SessionDep, TestbedDep, owned_row
-from .environments import visible
-from .programs import check_usable
+from ...access import owned
+from ...dispatch import pending_of
+from ...errors import Conflict
+from ...models import Experiment
+from ...results import experiment_metrics
+from ...schemas import ExperimentCreate, ExperimentPublic, ExperimentSummary, Page
+from ...status import TERMINAL, RunStatus
+from ...submission import submit
+from ..deps import CurrentUser, SessionDep, TestbedDep
 
 router = APIRouter(prefix="/experiments", tags=["experiments"])
 
 
-def owned_experiment(session: Session, user: Principal, experiment_id: int) -> tuple[Experiment, str]:
-    """The experiment and its owner's name; 404 when it does not exist or is not the user's."""
-    return owned_row(session, user, Experiment, experiment_id, "Experiment")
-
-
 @router.post("", response_model=ExperimentPublic, status_code=202)
-def submit_experiment(body: ExperimentCreate, session: SessionDep, user: CurrentUser, testbed: TestbedDep) -> ExperimentPublic:
+async def submit_experiment(body: ExperimentCreate, user: CurrentUser, testbed: TestbedDep) -> ExperimentPublic:
     """Validate a job and queue its runs; 422 with the reason if it cannot run."""
-    settings = testbed.settings
-    if body.repetitions > settings.max_repetitions:
-        raise HTTPException(422, f"repetitions must be at most {settings.max_repetitions}")
-    if body.program is not None:
-        check_usable(session, user, body.program, settings)
-    env_row = session.scalar(select(Environment).where(Environment.name == body.environment, visible(user)))
-    if env_row is None:
-        raise HTTPException(422, f"unknown environment {body.environment!r}")
-    queued = session.scalar(
-        select(func.count(Experiment.id)).where(Experiment.owner_id == user.id, Experiment.status == "queued")
-    ) or 0
-    if queued >= settings.max_queued_per_user:
-        raise HTTPException(429, f"you already have {queued} queued experiments (limit {settings.max_queued_per_user})")
-    try:
-        checked = preflight(body, env_row.data, settings.robot_radius_m, settings.planning_margin_m)
-    except PreflightError as exc:
-        raise HTTPException(422, str(exc)) from None
-    exp = create_experiment(session, owner=user, body=body, checked=checked, robot_radius=settings.robot_radius_m,
-                            planning_margin=settings.planning_margin_m)
-    session.commit()
-    testbed.submitted(exp.id)
-    session.refresh(exp)
-    return experiment_public(exp, user.name, testbed.estimate_start(exp.id))
+
+    def add() -> tuple[ExperimentPublic, list[Any]]:
+        with testbed.sessions.begin() as s:
+            exp = submit(s, user=user, body=body, settings=testbed.settings)
+            return ExperimentPublic.model_validate(exp), [pending_of(r, exp) for r in exp.runs]
+
+    view, pending = await anyio.to_thread.run_sync(add)
+    testbed.dispatcher.add(pending)
+    testbed.broker.publish({"type": "experiment", "owner_id": user.id,
+                            "experiment": view.model_dump(mode="json", exclude={"planned_path", "runs"})})
+    view.estimated_start_s = testbed.dispatcher.estimate_start(view.id)
+    return view
 
 
 @router.get("", response_model=Page[ExperimentSummary])
@@ -60,7 +43,7 @@ def list_experiments(
     session: SessionDep,
     user: CurrentUser,
     testbed: TestbedDep,
-    status: Optional[str] = Query(default=None, description="Only experiments in this state."),
+    status: Optional[RunStatus] = Query(default=None, description="Only experiments in this state."),
     offset: int = Query(default=0, ge=0),
     limit: int = Query(default=50, ge=1, le=500),
 ) -> Page[ExperimentSummary]:
@@ -68,27 +51,33 @@ def list_experiments(
     cond = [] if user.is_admin else [Experiment.owner_id == user.id]
     if status:
         cond.append(Experiment.status == status)
-    rows = session.execute(
-        select(Experiment, User.name).join(User, Experiment.owner_id == User.id).where(*cond)
-        .order_by(Experiment.id.desc()).offset(offset).limit(limit)
-    ).all()
+    rows = session.scalars(select(Experiment).where(*cond).order_by(Experiment.id.desc()).offset(offset).limit(limit))
     count = session.scalar(select(func.count(Experiment.id)).where(*cond)) or 0
-    return Page(data=[experiment_summary(e, owner, testbed.estimate_start(e.id)) for e, owner in rows], count=count)
+    data = []
+    for e in rows:
+        view = ExperimentSummary.model_validate(e)
+        view.estimated_start_s = testbed.dispatcher.estimate_start(e.id)
+        data.append(view)
+    return Page(data=data, count=count)
 
 
 @router.get("/{experiment_id}", response_model=ExperimentPublic)
 async def get_experiment(experiment_id: int, user: CurrentUser, testbed: TestbedDep) -> Response:
     """Status, planned path and runs (mode, repetition, status, sub-field, metrics) of one experiment."""
-    hit = testbed.finished_views.get(experiment_id)
+    views = testbed.views
+    hit = views.get(experiment_id)
     if hit is not None and (hit[0] == user.id or user.is_admin):
         return Response(hit[1], media_type="application/json")
+    generation = views.generation(experiment_id)
 
     def load() -> bytes:
         with testbed.sessions() as session:
-            exp, owner = owned_experiment(session, user, experiment_id)
-            body = experiment_public(exp, owner, testbed.estimate_start(exp.id)).model_dump_json().encode()
-            if exp.status in TERMINAL_STATES:  # finished experiments no longer change
-                testbed.finished_views[exp.id] = (exp.owner_id, body)
+            exp = owned(session, user, Experiment, experiment_id, "Experiment")
+            view = ExperimentPublic.model_validate(exp)
+            view.estimated_start_s = testbed.dispatcher.estimate_start(exp.id)
+            body = view.model_dump_json().encode()
+            if exp.status in TERMINAL:  # finished experiments no longer change
+                views.put(exp.id, exp.owner_id, body, generation)
             return body
 
     return Response(await anyio.to_thread.run_sync(load), media_type="application/json")
@@ -100,57 +89,26 @@ async def cancel_experiment(experiment_id: int, user: CurrentUser, testbed: Test
 
     def check() -> None:
         with testbed.sessions() as s:
-            exp, _ = owned_experiment(s, user, experiment_id)
-            if exp.status in TERMINAL_STATES:
-                raise HTTPException(409, f"Experiment already {exp.status}")
+            exp = owned(s, user, Experiment, experiment_id, "Experiment")
+            if exp.status in TERMINAL:
+                raise Conflict(f"Experiment already {exp.status}")
 
     await anyio.to_thread.run_sync(check)
-    await testbed.cancel(experiment_id)
+    await testbed.dispatcher.cancel([experiment_id])
 
     def load() -> ExperimentPublic:
         with testbed.sessions() as s:
-            exp, owner = owned_experiment(s, user, experiment_id)
-            return experiment_public(exp, owner)
+            return ExperimentPublic.model_validate(owned(s, user, Experiment, experiment_id, "Experiment"))
 
     return await anyio.to_thread.run_sync(load)
 
 
 @router.get("/{experiment_id}/metrics")
-def experiment_metrics(experiment_id: int, session: SessionDep, user: CurrentUser) -> dict:
+def get_experiment_metrics(experiment_id: int, session: SessionDep, user: CurrentUser) -> dict:
     """Metrics per run, mean/std/95% CI per mode, and the direct sim-vs-twb comparison per repetition.
 
     ``direct`` is the paper's "ST": for each repetition with both a completed
     ``sim`` and ``twb`` run, the deviation (and Hausdorff / Fréchet distances)
     of the field path from the simulated one.
     """
-    from planners.stats import aggregate
-
-    from ...models import Pose, Run
-    from ...planning import compare_runs
-
-    exp, _ = owned_experiment(session, user, experiment_id)
-    runs = [r for r in exp.runs]
-    per_run = [{"run_id": r.id, "mode": r.mode, "repetition": r.repetition, "status": r.status,
-                "metrics": r.metrics or {}} for r in runs]
-    done = [r for r in runs if r.status == "completed" and r.metrics]
-    records = [{"mode": r.mode, **{k: v for k, v in r.metrics.items() if not isinstance(v, dict) and k != "poses"}}
-               for r in done]
-    aggregates = {g["mode"]: {"runs": g["runs"], "metrics": g["metrics"]}
-                  for g in aggregate(records, by=("mode",))} if records else {}
-    direct = []
-    by_rep: dict[int, dict[str, Run]] = {}
-    for r in done:
-        by_rep.setdefault(r.repetition, {})[r.mode] = r
-    for rep, modes in sorted(by_rep.items()):
-        if "sim" in modes and "twb" in modes:
-            def poses(run: Run) -> list[list[float]]:
-                rows = session.execute(select(Pose.t, Pose.x, Pose.y, Pose.theta).where(Pose.run_id == run.id)
-                                       .order_by(Pose.t)).all()
-                lo, hi = run.t_start, run.t_end
-                return [list(p) for p in rows if lo is None or hi is None or lo - 1e-9 <= p[0] <= hi + 1e-9]
-
-            direct.append({"repetition": rep, "sim_run_id": modes["sim"].id, "twb_run_id": modes["twb"].id,
-                           **compare_runs(poses(modes["sim"]), poses(modes["twb"]))})
-    planned = next((r.metrics.get("planned") for r in done if r.metrics.get("planned")), None)
-    return {"experiment_id": exp.id, "status": exp.status, "planned": planned, "runs": per_run,
-            "aggregates": aggregates, "direct": direct}
+    return experiment_metrics(session, owned(session, user, Experiment, experiment_id, "Experiment"))

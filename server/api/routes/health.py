@@ -10,6 +10,6 @@ router = APIRouter(tags=["health"])
 
 
 @router.get("/health")
-def health(testbed: TestbedDep) -> dict:
+async def health(testbed: TestbedDep) -> dict:
     """Liveness and a summary of the testbed (no token needed)."""
-    return {"status": "ok", "version": "1", **testbed.summary()}
+    return {"status": "ok", "version": "1", **testbed.dispatcher.summary()}

@@ -11,38 +11,17 @@ import base64
 import binascii
 import hashlib
 
-from fastapi import APIRouter, HTTPException, Query, Response
+from fastapi import APIRouter, Query, Response
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
 
-from ...core.security import Principal
-from ...core.settings import Settings
-from ...models import Program, User
+from ...access import owned
+from ...errors import Forbidden, Invalid, TooLarge
+from ...models import Program
 from ...schemas import Page, ProgramCreate, ProgramPublic
-from ..deps import CurrentUser, SessionDep, TestbedDep, owned_row
+from ...submission import UPLOADS_DISABLED
+from ..deps import CurrentUser, SessionDep, TestbedDep
 
 router = APIRouter(prefix="/programs", tags=["programs"])
-
-DISABLED = "uploads are disabled on this testbed"
-
-
-def program_public(p: Program, owner: str) -> ProgramPublic:
-    return ProgramPublic(id=p.id, name=p.name, owner=owner, kind=p.kind, interpreter=p.interpreter,
-                         args=list(p.args or []), size=p.size, sha256=p.sha256, created_at=p.created_at)
-
-
-def owned_program(session: Session, user: Principal, program_id: int) -> tuple[Program, str]:
-    """The program and its owner's name; 404 when it does not exist or is not the user's."""
-    return owned_row(session, user, Program, program_id, "Program")
-
-
-def check_usable(session: Session, user: Principal, program_id: int, settings: Settings) -> None:
-    """Pre-flight of a job naming a program: uploads enabled (403) and the program the user's (422)."""
-    if not settings.uploads_enabled:
-        raise HTTPException(403, DISABLED)
-    owner = session.scalar(select(Program.owner_id).where(Program.id == program_id))
-    if owner is None or (owner != user.id and not user.is_admin):
-        raise HTTPException(422, f"unknown program {program_id}")
 
 
 @router.get("/sandbox")
@@ -62,30 +41,30 @@ def upload_program(body: ProgramCreate, session: SessionDep, user: CurrentUser, 
     """Upload a planner program (base64); 403 if uploads are disabled, 413 if too large."""
     settings = testbed.settings
     if not settings.uploads_enabled:
-        raise HTTPException(403, DISABLED)
+        raise Forbidden(UPLOADS_DISABLED)
     limit = settings.max_program_bytes
     if len(body.content_base64) > (limit + 2) // 3 * 4 + 4:  # refuse before decoding
-        raise HTTPException(413, f"program larger than {limit} bytes")
+        raise TooLarge(f"program larger than {limit} bytes")
     try:
         content = base64.b64decode(body.content_base64, validate=True)
     except (binascii.Error, ValueError):
-        raise HTTPException(422, "content_base64: not valid base64") from None
+        raise Invalid("content_base64: not valid base64") from None
     if len(content) > limit:
-        raise HTTPException(413, f"program larger than {limit} bytes")
+        raise TooLarge(f"program larger than {limit} bytes")
     if not content:
-        raise HTTPException(422, "content_base64: the program is empty")
+        raise Invalid("content_base64: the program is empty")
     if body.kind == "executable" and body.interpreter is not None and body.interpreter not in settings.sandbox_interpreters:
-        raise HTTPException(422, f"interpreter {body.interpreter!r} is not available here; choose one of "
+        raise Invalid(f"interpreter {body.interpreter!r} is not available here; choose one of "
                                  f"{', '.join(sorted(settings.sandbox_interpreters))} or none (a binary or #! script)")
     if body.kind == "python" and "python3" not in settings.sandbox_interpreters:
-        raise HTTPException(422, "this testbed has no python3 for programs; upload an executable")
+        raise Invalid("this testbed has no python3 for programs; upload an executable")
     prog = Program(owner_id=user.id, name=body.name, kind=body.kind,
                    interpreter=body.interpreter if body.kind == "executable" else None, args=list(body.args),
                    content=content, size=len(content), sha256=hashlib.sha256(content).hexdigest())
     session.add(prog)
     session.commit()
     session.refresh(prog)
-    return program_public(prog, user.name)
+    return ProgramPublic.model_validate(prog)
 
 
 @router.get("", response_model=Page[ProgramPublic])
@@ -97,23 +76,20 @@ def list_programs(
 ) -> Page[ProgramPublic]:
     """Your programs, newest first (admins see everyone's)."""
     cond = [] if user.is_admin else [Program.owner_id == user.id]
-    rows = session.execute(
-        select(Program, User.name).join(User, Program.owner_id == User.id).where(*cond)
-        .order_by(Program.id.desc()).offset(offset).limit(limit)
-    ).all()
+    rows = session.scalars(select(Program).where(*cond).order_by(Program.id.desc()).offset(offset).limit(limit))
     count = session.scalar(select(func.count(Program.id)).where(*cond)) or 0
-    return Page(data=[program_public(p, owner) for p, owner in rows], count=count)
+    return Page(data=[ProgramPublic.model_validate(p) for p in rows], count=count)
 
 
 @router.get("/{program_id}", response_model=ProgramPublic)
 def get_program(program_id: int, session: SessionDep, user: CurrentUser) -> ProgramPublic:
     """One of your programs."""
-    return program_public(*owned_program(session, user, program_id))
+    return ProgramPublic.model_validate(owned(session, user, Program, program_id, "Program"))
 
 
 @router.get("/{program_id}/content", response_class=Response)
 def get_program_content(program_id: int, session: SessionDep, user: CurrentUser) -> Response:
     """The uploaded file itself."""
-    prog, _ = owned_program(session, user, program_id)
+    prog = owned(session, user, Program, program_id, "Program")
     return Response(prog.content, media_type="application/octet-stream",
                      headers={"Content-Disposition": f'attachment; filename="{prog.name}"'})

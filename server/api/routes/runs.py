@@ -1,39 +1,27 @@
-"""Runs: logged poses (JSON or CSV) and protocol messages."""
+"""Runs: one run, its logged poses (JSON or CSV) and protocol messages."""
 
 from __future__ import annotations
 
 import io
 from typing import Literal, Optional
 
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, Query
 from fastapi.responses import PlainTextResponse
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
 
-from ...core.security import Principal
-
-from ...jobs import run_public
-from ...models import Experiment, Message, Pose, Run
+from ...access import owned
+from ...models import Message, Run
 from ...schemas import RunPublic
+from ...store.poses import run_poses
 from ..deps import CurrentUser, SessionDep
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
 
-def owned_run(session: Session, user: Principal, run_id: int) -> Run:
-    run = session.get(Run, run_id)
-    if run is None:
-        raise HTTPException(404, "Run not found")
-    owner = session.scalar(select(Experiment.owner_id).where(Experiment.id == run.experiment_id))
-    if owner != user.id and not user.is_admin:
-        raise HTTPException(404, "Run not found")
-    return run
-
-
 @router.get("/{run_id}", response_model=RunPublic)
 def get_run(run_id: int, session: SessionDep, user: CurrentUser) -> RunPublic:
     """One run with its metrics."""
-    return run_public(owned_run(session, user, run_id))
+    return RunPublic.model_validate(owned(session, user, Run, run_id, "Run"))
 
 
 @router.get("/{run_id}/poses", response_model=None)
@@ -50,11 +38,8 @@ def get_poses(
     Times are experiment seconds on the robot's clock; x, y in metres and
     theta in radians, in the frame of the experiment's field.
     """
-    owned_run(session, user, run_id)
-    q = select(Pose.t, Pose.x, Pose.y, Pose.theta).where(Pose.run_id == run_id)
-    if after_t is not None:
-        q = q.where(Pose.t > after_t)
-    rows = session.execute(q.order_by(Pose.t)).all()
+    owned(session, user, Run, run_id, "Run")
+    rows = run_poses(session, run_id, after_t=after_t)
     if format == "csv":
         buf = io.StringIO()
         buf.write("t,x,y,theta\n")
@@ -62,7 +47,7 @@ def get_poses(
             buf.write(f"{t:.4f},{x:.5f},{y:.5f},{a:.5f}\n")
         return PlainTextResponse(buf.getvalue(), media_type="text/csv",
                                  headers={"Content-Disposition": f'attachment; filename="run-{run_id}-poses.csv"'})
-    return {"run_id": run_id, "count": len(rows), "columns": ["t", "x", "y", "theta"], "poses": [list(r) for r in rows]}
+    return {"run_id": run_id, "count": len(rows), "columns": ["t", "x", "y", "theta"], "poses": rows}
 
 
 @router.get("/{run_id}/messages")
@@ -80,7 +65,7 @@ def get_messages(
     uploaded program also log its stdout (``o``), stderr (``e``) and its
     conversation with the sandbox's robot port (``s``).
     """
-    owned_run(session, user, run_id)
+    owned(session, user, Run, run_id, "Run")
     rows = session.scalars(
         select(Message).where(Message.run_id == run_id).order_by(Message.id).offset(offset).limit(limit)
     ).all()

@@ -1,7 +1,8 @@
-"""CPU work of the testbed — planning and metrics — run in worker processes, never the event loop.
+"""CPU work of a run — planning and metrics — as pure functions for the worker processes.
 
 Functions here take and return plain JSON-ready data so they pickle cheaply
-to a ``ProcessPoolExecutor``.
+to the worker pool (:mod:`server.pipeline.pool`); they never touch the
+database or the network.  Units: metres, radians, seconds.
 """
 
 from __future__ import annotations
@@ -11,14 +12,12 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["compare_runs", "expected_duration_s", "measure_run", "plan_job", "warm_up", "worker_init"]
+__all__ = ["TooFewPoses", "compare_runs", "expected_duration_s", "explicit_path", "measure_run", "plan_job",
+           "warm_up"]
 
 
-def worker_init() -> None:
-    """Worker processes ignore Ctrl-C: the server decides when they stop."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+class TooFewPoses(Exception):
+    """Fewer than two poses were logged for a run: the tracker did not deliver (the testbed's fault)."""
 
 
 def warm_up() -> bool:
@@ -61,7 +60,10 @@ def expected_duration_s(path_length_m: float, n_blocks: int, *, speed_m_s: float
 def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: list[list[float]],
                 t_start: Optional[float], t_done: Optional[float], goal: list[float], robot_radius: float,
                 planning_time_s: Optional[float]) -> dict[str, Any]:
-    """DESIGN §6 metrics of one run from its planned path and logged poses ``[t, x, y, theta]``."""
+    """The metrics of one run (docs/metrics.md) from its planned path and logged poses ``[t, x, y, theta]``.
+
+    Raises :class:`TooFewPoses` when fewer than two poses lie in the run.
+    """
     from planners import parse_environment
     from planners.metrics import MetricSettings, run_metrics
 
@@ -72,7 +74,7 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
         if inside.sum() >= 2:
             pr = pr[inside]
     if len(pr) < 2:
-        raise ValueError(f"only {len(pr)} pose(s) were logged for this run; metrics need at least 2")
+        raise TooFewPoses(f"only {len(pr)} pose(s) were logged for this run; metrics need at least 2")
     settings = MetricSettings(robot_radius=robot_radius)
     g = np.asarray(goal[:2], dtype=float)
     out = run_metrics(np.asarray(planned, dtype=float), pr[:, 1:4], env=env, t=pr[:, 0], start_time=t_start,

@@ -1,0 +1,45 @@
+"""Who may see what: a user's own rows (admins see everything), visible environments.
+
+Rows of other users answer exactly like rows that do not exist
+(:class:`~server.errors.NotFound`): nobody learns that they exist.
+"""
+
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+from sqlalchemy import ColumnElement, or_, select, true
+from sqlalchemy.orm import Session
+
+from .core.security import Principal
+from .errors import NotFound
+from .models import Environment, Experiment, Program, Run
+
+__all__ = ["owned", "visible_environments"]
+
+Row = TypeVar("Row", Experiment, Program, Run)
+
+
+def owned(session: Session, user: Principal, model: type[Row], row_id: int, what: str) -> Row:
+    """The ``model`` row ``row_id`` if ``user`` owns it (runs: through their experiment) or is an admin.
+
+    Raises :class:`NotFound` ("<what> not found") otherwise.
+    """
+    q = select(model)
+    owner: Any = model.owner_id if model is not Run else Experiment.owner_id
+    if model is Run:
+        q = q.join(Experiment, Run.experiment_id == Experiment.id)
+    q = q.where(model.id == row_id)
+    if not user.is_admin:
+        q = q.where(owner == user.id)
+    row = session.scalar(q)
+    if row is None:
+        raise NotFound(f"{what} not found")
+    return row
+
+
+def visible_environments(user: Principal) -> ColumnElement[bool]:
+    """SQL condition: environments a user may see (built-ins and their own; admins see all)."""
+    if user.is_admin:
+        return true()
+    return or_(Environment.builtin.is_(True), Environment.owner_id == user.id)

@@ -1,0 +1,212 @@
+"""The dispatcher: queued runs to robots, each run's end to the store, retries, cancels, estimates.
+
+It owns the queue (a :class:`~server.scheduler.Scheduler` deciding on the
+field's robots and sub-fields) and one task per run under way
+(:func:`server.pipeline.runner.execute_run`).  When a run ends it writes the
+outcome, frees the robot and sub-fields, and looks at the queue again:
+
+- ``error`` (the testbed's fault): the robot goes offline and the run is
+  queued again once, avoiding that robot (while the testbed stops, such
+  runs end ``interrupted`` instead);
+- ``failed`` for the whole experiment (no path): its queued runs fail too.
+
+Offline robots are probed every few seconds.  Everything here runs on the
+event loop; database work goes through the recorder's threads.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from typing import Any, Iterable, Optional
+
+from .field import FieldState
+from .models import Experiment, Run, utcnow
+from .pipeline import compute
+from .pipeline.runner import RunEnd, RunServices, execute_run
+from .scheduler import Assignment, Pending, Scheduler
+from .status import RunStatus, SubfieldState
+
+__all__ = ["Dispatcher", "pending_of"]
+
+log = logging.getLogger("twb.server")
+
+
+def pending_of(run: Run, exp: Experiment, exclude: frozenset[str] = frozenset()) -> Pending:
+    """A queued run as the scheduler sees it, with its expected experiment duration (s)."""
+    n_blocks = len(exp.environment_data.get("blocks", []))
+    length = math.dist(exp.start[:2], exp.goal[:2]) * 1.4
+    if exp.planned_path:
+        length = sum(math.dist(a[:2], b[:2]) for a, b in zip(exp.planned_path[:-1], exp.planned_path[1:]))
+    return Pending(run.id, exp.id, run.mode, exp.field, exp.environment,
+                   compute.expected_duration_s(length, n_blocks), exclude)
+
+
+class Dispatcher:
+    """Runs queued runs on the field (see the module docstring)."""
+
+    def __init__(self, services: RunServices, *, probe_interval_s: float = 3.0) -> None:
+        self._svc = services
+        self._field: FieldState = services.field
+        self.scheduler = Scheduler(robots=self._field.robots, subfields=self._field.subfields)
+        self.stopping = False
+        self._probe_interval_s = probe_interval_s
+        self._wake = asyncio.Event()
+        self._tasks: dict[int, asyncio.Task] = {}
+        self._experiment: dict[int, int] = {}  # queued or running run -> its experiment
+        self._expected: dict[int, float] = {}  # queued or running run -> expected duration (s), for estimates
+        self._estimates: dict[int, float] = {}  # experiment -> wall seconds until its next run starts
+        self._background: list[asyncio.Task] = []
+
+    # ------------------------------------------------------------------ life cycle
+
+    def start(self, queued: Iterable[Pending] = ()) -> None:
+        """Start dispatching (on the loop), with the runs queued in the store."""
+        self.add(queued)
+        self._background = [asyncio.create_task(self._dispatch_loop(), name="twb-dispatch"),
+                            asyncio.create_task(self._probe_loop(), name="twb-robot-probe")]
+
+    async def stop(self) -> None:
+        """Stop dispatching; runs under way end ``interrupted``; queued runs stay queued."""
+        self.stopping = True
+        for t in self._background:
+            t.cancel()
+        tasks = list(self._tasks.values())
+        for t in tasks:
+            t.cancel()
+        if tasks:
+            await asyncio.wait(tasks, timeout=10)
+
+    def wake(self) -> None:
+        """Look at the queue again (something was queued or freed)."""
+        self._wake.set()
+
+    # ------------------------------------------------------------------ queue
+
+    def add(self, pending: Iterable[Pending]) -> None:
+        """Queue runs (in order)."""
+        for p in pending:
+            self._expected[p.run_id] = p.expected_s
+            self._experiment[p.run_id] = p.experiment_id
+            self.scheduler.add(p)
+        self._refresh_estimates()
+        self.wake()
+
+    async def cancel(self, experiment_ids: Iterable[int]) -> None:
+        """Cancel experiments: their queued runs end ``cancelled`` (in one write), running ones are stopped."""
+        ids = set(experiment_ids)
+        await self._svc.recorder.end(self._drop(ids), RunStatus.CANCELLED, "cancelled by its owner")
+        running = [t for rid, t in self._tasks.items() if self._experiment.get(rid) in ids]
+        for t in running:
+            t.cancel()
+        if running:
+            await asyncio.wait(running, timeout=10)
+        self._refresh_estimates()
+
+    async def _fail_experiment(self, experiment_id: int, reason: str) -> None:
+        """The experiment's path cannot be had: its queued runs fail with the reason."""
+        await self._svc.recorder.fail_experiment(experiment_id, reason)
+        await self._svc.recorder.end(self._drop({experiment_id}), RunStatus.FAILED, reason)
+
+    def _drop(self, experiment_ids: set[int]) -> list[int]:
+        """Take the experiments' queued runs off the queue; their ids."""
+        ids = [p.run_id for p in self.scheduler.queue if p.experiment_id in experiment_ids]
+        dropped = [rid for rid in ids if self.scheduler.drop(rid)]
+        for rid in dropped:
+            self._forget(rid)
+        return dropped
+
+    def _forget(self, run_id: int) -> None:
+        self._experiment.pop(run_id, None)
+        self._expected.pop(run_id, None)
+
+    # ------------------------------------------------------------------ runs
+
+    async def _dispatch_loop(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            try:
+                for a in self.scheduler.assign():
+                    self._start(a)
+                self._refresh_estimates()
+            except Exception:  # noqa: BLE001 - the dispatcher must survive any single bad state
+                log.exception("dispatching failed")
+
+    def _start(self, a: Assignment) -> None:
+        task = asyncio.create_task(self._run(a), name=f"twb-run-{a.run_id}")
+        self._tasks[a.run_id] = task
+        task.add_done_callback(lambda _t, rid=a.run_id: self._tasks.pop(rid, None))
+
+    async def _run(self, a: Assignment) -> None:
+        end = await execute_run(a, self._svc, stopping=lambda: self.stopping)
+        try:
+            await asyncio.shield(self._finish(a, end))
+        except asyncio.CancelledError:
+            pass
+
+    async def _finish(self, a: Assignment, end: RunEnd) -> None:
+        """Store how the run ended, free its robot and sub-fields, queue a retry, look at the queue."""
+        rec = self._svc.recorder
+        experiment_id = self._experiment.get(a.run_id, -1)
+        self._forget(a.run_id)
+        status, error = end.status, end.error
+        if status is RunStatus.ERROR and self.stopping:
+            status = RunStatus.INTERRUPTED  # the testbed stopping under the run is not the robot's fault
+        retried = False
+        if status is RunStatus.ERROR:
+            if end.robot_fault is not None:
+                self._field.set_offline(end.robot_fault)
+            rows = await rec.requeue(a.run_id, error)
+            if rows is not None:
+                log.warning("run %d: %s; retrying on another robot", a.run_id, error)
+                self.add([pending_of(*rows, frozenset({end.robot_fault} if end.robot_fault else ()))])
+                retried = True
+        if not retried:
+            # a completed second attempt keeps the note about the first one
+            await rec.update(a.run_id, status=status, finished_at=utcnow(), **({"error": error} if error else {}))
+        if status is RunStatus.FAILED and end.whole_experiment:
+            await self._fail_experiment(experiment_id, error)
+        self.scheduler.release(a.run_id)
+        for k in a.subfields:  # tell the dashboards the sub-field is free again
+            await self._field.set_subfield(k, state=SubfieldState.IDLE, run_id=None)
+        self.wake()
+
+    async def _probe_loop(self) -> None:
+        """Robots marked offline (a failed run, or known from an earlier start) are tried again."""
+        while True:
+            await asyncio.sleep(self._probe_interval_s)
+            if await self._field.probe_offline():
+                self.wake()
+
+    # ------------------------------------------------------------------ estimates and summary
+
+    def _refresh_estimates(self) -> None:
+        remaining = {rid: self._expected.get(rid, 60.0) / 2 for rid in self._tasks}
+        starts = self.scheduler.estimate_starts(remaining)
+        scale = self._svc.settings.time_scale
+        per_exp: dict[int, float] = {}
+        for p in self.scheduler.queue:
+            if p.run_id in starts:
+                wall = 0.0 if math.isinf(scale) else starts[p.run_id] / scale
+                per_exp[p.experiment_id] = min(per_exp.get(p.experiment_id, math.inf), wall)
+        self._estimates = per_exp
+
+    def estimate_start(self, experiment_id: int) -> Optional[float]:
+        """Estimated wall seconds until the experiment's next run starts (queued ones only)."""
+        v = self._estimates.get(experiment_id)
+        return None if v is None or math.isinf(v) else round(v, 1)
+
+    def summary(self) -> dict[str, Any]:
+        """Queue and fleet counts (``GET /health``)."""
+        robots = self._field.robots.values()
+        scale = self._svc.settings.time_scale
+        return {
+            "queued_runs": len(self.scheduler.queue),
+            "running_runs": len(self._tasks),
+            "field_robots": sum(1 for r in robots if r.pool == "field"),
+            "sim_robots": sum(1 for r in robots if r.pool == "sim"),
+            "time_scale": None if math.isinf(scale) else scale,
+        }
+

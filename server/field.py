@@ -1,0 +1,176 @@
+"""The field as the server knows it: registered robots, the four sub-fields, what is built where.
+
+:class:`FieldState` is owned by the event loop: every method that changes it
+runs there (API handlers that touch it are ``async``).  Worker threads read
+only :meth:`FieldState.known` and :meth:`FieldState.origin_of`, which use
+snapshots replaced as a whole on every change.  The scheduler
+(:mod:`server.scheduler`) decides on the same ``robots`` and ``subfields``
+dictionaries.  Changes are mirrored to the store and published as live
+events (``robot``, ``subfield``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from typing import Any, Callable, Optional
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from robot_agent.frames import SUBFIELD_SIZE
+
+from .broker import EventBroker
+from .models import utcnow
+from .scheduler import SUBFIELD_ORIGINS, RobotSlot, SubfieldSlot
+from .schemas import RobotPublic, RobotRegister, SubfieldPublic
+from .status import RobotStatus, SubfieldState
+from .store import field as store
+
+__all__ = ["FieldState", "agent_answers"]
+
+log = logging.getLogger("twb.server")
+
+
+class FieldState:
+    """Robots (``robot_id`` → :class:`RobotSlot`), sub-fields 1–4 and the environment built by each robot."""
+
+    def __init__(self, sessions: sessionmaker[Session], broker: EventBroker) -> None:
+        self._sessions = sessions
+        self._broker = broker
+        self.robots: dict[str, RobotSlot] = {}
+        self.subfields: dict[int, SubfieldSlot] = {k: SubfieldSlot(k) for k in range(1, 5)}
+        #: environment key built by each robot's gripper (None or absent: nothing)
+        self.built: dict[str, Optional[str]] = {}
+        self._origins: dict[str, tuple[float, float]] = {}
+
+    # ------------------------------------------------------------------ any thread
+
+    def known(self, robot_id: str) -> bool:
+        """Whether ``robot_id`` is registered (safe from any thread)."""
+        return robot_id in self._origins
+
+    def origin_of(self, robot_id: str) -> tuple[float, float]:
+        """Origin (m) of the robot's frame in the field (safe from any thread)."""
+        return self._origins.get(robot_id, (0.0, 0.0))
+
+    # ------------------------------------------------------------------ loop
+
+    async def load(self) -> None:
+        """Robots known from earlier starts, offline until they register again or answer a probe."""
+
+        def rows() -> list[Any]:
+            with self._sessions() as s:
+                return store.load_robots(s)
+
+        for r in await asyncio.to_thread(rows):
+            self._install(RobotSlot(r.robot_id, r.host, r.port, r.backend, r.profile, r.platform,
+                                    tuple(r.origin), tuple(r.area), healthy=False))
+
+    def _install(self, slot: RobotSlot) -> None:
+        old = self.robots.get(slot.robot_id)
+        if old is not None:
+            slot.run_id = old.run_id
+        self.robots[slot.robot_id] = slot
+        self._origins = {**self._origins, slot.robot_id: slot.origin}
+
+    async def register(self, body: RobotRegister) -> RobotSlot:
+        """Add or refresh a robot (a (re)started agent: nothing is built on it)."""
+
+        def save() -> None:
+            with self._sessions.begin() as s:
+                store.save_robot(s, body)
+
+        await asyncio.to_thread(save)
+        slot = RobotSlot(body.robot_id, body.host, body.port, body.backend, body.profile, body.platform,
+                         (float(body.origin[0]), float(body.origin[1])), (float(body.area[0]), float(body.area[1])))
+        self._install(slot)
+        self.built.pop(body.robot_id, None)
+        self._broker.publish({"type": "robot", "robot_id": body.robot_id})
+        return slot
+
+    def set_offline(self, robot_id: str) -> None:
+        """A run failed for this robot's fault: no runs for it until it answers again."""
+        self.robots[robot_id].healthy = False
+
+    def set_online(self, robot_id: str) -> None:
+        """An offline robot answers again (its world is as it left it, unknown to us: rebuild)."""
+        self.robots[robot_id].healthy = True
+        self.built.pop(robot_id, None)
+        self._broker.publish({"type": "robot", "robot_id": robot_id})
+
+    async def probe_offline(self) -> list[str]:
+        """Try the idle offline robots; the ones that answer are back online (returned)."""
+        back = []
+        for r in [r for r in self.robots.values() if not r.healthy and r.run_id is None]:
+            if await agent_answers(r.host, r.port):
+                log.info("robot %s answers again", r.robot_id)
+                self.set_online(r.robot_id)
+                back.append(r.robot_id)
+        return back
+
+    def field_robot(self, subfield: int) -> Optional[RobotSlot]:
+        """The robot standing on sub-field ``subfield`` (1–4), if one is registered."""
+        for r in self.robots.values():
+            if r.subfield == subfield:
+                return r
+        return None
+
+    async def set_subfield(self, k: int, **fields: Any) -> None:
+        """Change sub-field ``k`` (``state``, ``environment``, ``run_id``): publish it and mirror it to the store."""
+        slot = self.subfields[k]
+        for key, v in fields.items():
+            setattr(slot, key, v)
+        robot = self.field_robot(k)
+        state, environment, run_id = str(slot.state), slot.environment, slot.run_id
+        robot_id = robot.robot_id if robot else None
+        self._broker.publish({"type": "subfield", "subfield": self.subfield_view(k).model_dump(mode="json")})
+
+        def save() -> None:
+            with self._sessions.begin() as s:
+                store.save_subfield(s, k, state=state, environment=environment, run_id=run_id, robot_id=robot_id)
+
+        await asyncio.to_thread(save)
+
+    # ------------------------------------------------------------------ views
+
+    def subfield_view(self, k: int) -> SubfieldPublic:
+        slot = self.subfields[k]
+        robot = self.field_robot(k)
+        state = slot.state if slot.run_id is not None or slot.state == SubfieldState.BUILDING else SubfieldState.IDLE
+        if robot is None:
+            state = SubfieldState.OFFLINE
+        return SubfieldPublic(id=k, state=state, environment=slot.environment,
+                              robot_id=robot.robot_id if robot else None, run_id=slot.run_id,
+                              origin=list(SUBFIELD_ORIGINS[k]), size=list(SUBFIELD_SIZE))
+
+    def subfield_views(self) -> list[SubfieldPublic]:
+        return [self.subfield_view(k) for k in sorted(self.subfields)]
+
+    def robot_view(self, slot: RobotSlot, last_pose: Optional[list[float]] = None) -> RobotPublic:
+        """The robot as the API shows it; ``last_pose`` its last tracked pose ``[t, x, y, theta]`` (field frame)."""
+        status = RobotStatus.OFFLINE if not slot.healthy else (
+            RobotStatus.BUSY if slot.run_id is not None else RobotStatus.IDLE)
+        return RobotPublic(robot_id=slot.robot_id, host=slot.host, port=slot.port, platform=slot.platform,
+                           backend=slot.backend, profile=slot.profile, origin=list(slot.origin),
+                           area=list(slot.area), subfield=slot.subfield, pool=slot.pool, status=status,
+                           last_seen=utcnow(), last_pose=last_pose)
+
+    def robot_views(self, last_pose: Callable[[str], Optional[list[float]]]) -> list[RobotPublic]:
+        """Every robot, field robots first; ``last_pose(robot_id)`` gives each one's last tracked pose."""
+        return [self.robot_view(r, last_pose(r.robot_id))
+                for r in sorted(self.robots.values(), key=lambda r: (r.pool, r.robot_id))]
+
+
+async def agent_answers(host: str, port: int, timeout_s: float = 2.0) -> bool:
+    """Whether a robot agent greets on host:port."""
+    try:
+        reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout_s)
+    except (OSError, asyncio.TimeoutError):
+        return False
+    try:
+        line = await asyncio.wait_for(reader.readline(), timeout_s)
+        return line.startswith(b"HELLO,")
+    except (OSError, asyncio.TimeoutError):
+        return False
+    finally:
+        writer.close()

@@ -1,0 +1,155 @@
+"""An experiment's path, had once: its explicit path, a planner's in a worker process, or its program's.
+
+The first run of an experiment that reaches ``planning`` gets the path and
+stores it; runs after it (or waiting for it: another mode running in
+parallel) read the stored one.  When no path can be had, the experiment
+fails as a whole: every run that asks gets the same
+:class:`~server.errors.RunFailed` (``whole_experiment``) and the planner or
+program is not tried again.
+
+An uploaded program runs sandboxed (:mod:`server.sandbox`); its output and
+its robot-port conversation go to the log of the run that executed it, and
+the path it sent must go from the start to the goal clear of obstacles by
+the robot radius (:func:`server.validation.check_program_path`), like an
+explicit path.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import weakref
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Any, Callable, Optional
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from planners import PlanningError
+
+from ..core.settings import Settings
+from ..errors import FailureKind, PreflightError, ProgramFailed, RunFailed
+from ..models import Experiment, Program
+from ..sandbox import ProgramSpec, Sandbox
+from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_path
+from . import compute
+from .pool import WorkerPool
+from .recorder import RunRecorder
+
+__all__ = ["LineLog", "PathService", "Plan"]
+
+#: ``on_line(direction, line, t, t_estimated)``: one line for the run's protocol log
+LineLog = Callable[[str, str, Optional[float], bool], None]
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A path ``[[x, y, theta], ...]`` (m, m, rad) and how long planning took (s; None for explicit paths)."""
+
+    path: list[list[float]]
+    planning_time_s: Optional[float]
+
+
+class PathService:
+    """Gets each experiment's path once (see the module docstring)."""
+
+    def __init__(self, sessions: sessionmaker[Session], recorder: RunRecorder, pool: WorkerPool, sandbox: Sandbox,
+                 settings: Settings) -> None:
+        self._sessions = sessions
+        self._recorder = recorder
+        self._pool = pool
+        self._sandbox = sandbox
+        self._settings = settings
+        self._locks: weakref.WeakValueDictionary[int, asyncio.Lock] = weakref.WeakValueDictionary()
+        self._failures: OrderedDict[int, RunFailed] = OrderedDict()
+
+    async def path_for(self, experiment_id: int, *, run_id: Optional[int] = None, robot_id: str = "robot",
+                       platform: str = "BeBot", on_line: Optional[LineLog] = None) -> Plan:
+        """The experiment's path; raises :class:`RunFailed` (``whole_experiment``) when there is none.
+
+        ``run_id``, ``robot_id``, ``platform``, ``on_line``: the run asking, for
+        an uploaded program (its environment, and the run's log of its output).
+        """
+        lock = self._locks.get(experiment_id)
+        if lock is None:
+            lock = self._locks[experiment_id] = asyncio.Lock()
+        async with lock:
+            if experiment_id in self._failures:
+                raise self._failures[experiment_id]
+            try:
+                return await self._plan(experiment_id, run_id, robot_id, platform, on_line)
+            except RunFailed as exc:
+                self._failures[experiment_id] = exc
+                while len(self._failures) > 10_000:
+                    self._failures.popitem(last=False)
+                raise
+
+    async def _plan(self, experiment_id: int, run_id: Optional[int], robot_id: str, platform: str,
+                    on_line: Optional[LineLog]) -> Plan:
+        def load() -> Experiment:
+            with self._sessions() as s:
+                return s.get(Experiment, experiment_id)
+
+        exp = await asyncio.to_thread(load)
+        if exp.planned_path is not None:
+            return Plan(exp.planned_path, exp.planning_time_s)
+        if exp.explicit_path is not None:
+            path, seconds, info = compute.explicit_path(exp.explicit_path, exp.goal), None, {"explicit": True}
+        elif exp.program_id is not None or exp.planner is None:
+            path, seconds, info = await self._from_program(exp, run_id, robot_id, platform, on_line)
+        else:
+            try:
+                r = await self._pool.run(compute.plan_job, exp.environment_data, exp.start, exp.goal, exp.planner,
+                                         exp.planner_params or {}, exp.seed, exp.robot_radius + exp.planning_margin)
+            except PlanningError as exc:
+                raise RunFailed(f"planning failed: {exc}", FailureKind.PLANNING, whole_experiment=True) from None
+            path, seconds, info = r["path"], r["planning_time_s"], r.get("info", {})
+        await self._recorder.store_plan(experiment_id, path, seconds, info)
+        return Plan(path, seconds)
+
+    async def _from_program(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
+                            on_line: Optional[LineLog]) -> tuple[list[list[float]], Optional[float], dict[str, Any]]:
+        """Run the experiment's uploaded program; its path, planning time and info, or :class:`ProgramFailed`."""
+        try:
+            return await self._run_program(exp, run_id, robot_id, platform, on_line)
+        except ProgramFailed as exc:
+            await self._recorder.store_planning_info(exp.id, exc.info)
+            raise
+
+    async def _run_program(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
+                           on_line: Optional[LineLog]) -> tuple[list[list[float]], Optional[float], dict[str, Any]]:
+        if not self._settings.uploads_enabled:
+            raise ProgramFailed("uploads are disabled on this testbed")
+
+        def load() -> Optional[ProgramSpec]:
+            with self._sessions() as s:
+                p = s.get(Program, exp.program_id)
+                return None if p is None else ProgramSpec(p.id, p.name, p.kind, p.interpreter, list(p.args or []),
+                                                          p.content)
+
+        spec = await asyncio.to_thread(load)
+        if spec is None:
+            raise ProgramFailed("the experiment's program no longer exists")
+        start = list(exp.start)
+        if len(start) < 3:  # the heading the gripper places the robot with (steps.place)
+            start.append(math.atan2(exp.goal[1] - start[1], exp.goal[0] - start[0]))
+        outcome = await self._sandbox.run(
+            spec, env_data=exp.environment_data, start=start, goal=list(exp.goal),
+            field_size=SUBFIELD_SIZE if exp.field == "sub" else FIELD_SIZE, seed=exp.seed,
+            robot_radius=exp.robot_radius, planning_margin=exp.planning_margin, robot_id=robot_id,
+            platform=platform)
+        if on_line is not None:
+            for direction, line in outcome.log:
+                on_line(direction, line, None, False)
+        info = {"program": {**outcome.info, "run_id": run_id}}
+        if outcome.path is None:
+            raise ProgramFailed(outcome.reason or "program sent no path", info)
+        try:
+            await self._pool.run(check_program_path, exp.environment_data, start, list(exp.goal), outcome.path,
+                                 exp.robot_radius)
+        except PreflightError as exc:
+            reason = f"program's path is unusable: {exc}"
+            if on_line is not None:
+                on_line("s", reason, None, False)
+            raise ProgramFailed(reason, info) from None
+        return outcome.path, outcome.planning_time_s, info

@@ -1,0 +1,168 @@
+"""What the run pipeline records, off the event loop: run states, plans, retries, protocol lines.
+
+Every change of a run rolls its experiment's status up in the same
+transaction, forgets the experiment's cached view, and is published as a
+live event (``run``, and ``experiment`` when the experiment's status
+changed or it is finished).  Database work runs in threads; the loop never
+blocks on it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any, Iterable, Optional
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from ..broker import EventBroker
+from ..models import Experiment, Run
+from ..schemas import ExperimentPublic, RunPublic
+from ..status import TERMINAL, RunStatus
+from ..store import experiments as exp_store
+from ..store import poses as pose_store
+from ..store import runs as run_store
+from ..store.runs import RunJob
+from ..views import FinishedViews
+
+__all__ = ["RunRecorder"]
+
+
+class RunRecorder:
+    """Persistence and live events of runs, for the pipeline and the dispatcher."""
+
+    def __init__(self, sessions: sessionmaker[Session], broker: EventBroker, views: FinishedViews) -> None:
+        self._sessions = sessions
+        self._broker = broker
+        self._views = views
+
+    async def job(self, run_id: int) -> RunJob:
+        """What the pipeline needs of a run and its experiment."""
+
+        def load() -> RunJob:
+            with self._sessions() as s:
+                return run_store.load_job(s, run_id)
+
+        return await asyncio.to_thread(load)
+
+    async def update(self, run_id: int, **fields: Any) -> None:
+        """Write run fields (``status``, ``t_start``, ``metrics`` …), roll the experiment up, publish."""
+
+        def write() -> list[dict[str, Any]]:
+            with self._sessions.begin() as s:
+                run, exp, changed = run_store.update_run(s, run_id, fields)
+                return self._events([run], {exp.id: changed})
+
+        self._publish(await asyncio.to_thread(write))
+
+    async def end(self, run_ids: Iterable[int], status: RunStatus, error: str) -> None:
+        """End several runs at once (queued runs cancelled, or failed with their experiment)."""
+        ids = list(run_ids)
+        if not ids:
+            return
+
+        def write() -> list[dict[str, Any]]:
+            with self._sessions.begin() as s:
+                runs = run_store.end_runs(s, ids, status, error)
+                return self._events(runs, {r.experiment_id: True for r in runs})
+
+        self._publish(await asyncio.to_thread(write))
+
+    async def requeue(self, run_id: int, error: str) -> Optional[tuple[Run, Experiment]]:
+        """Queue a run that hit a testbed fault again (once): its run and experiment rows, or None."""
+
+        def write() -> tuple[Optional[tuple[Run, Experiment]], list[dict[str, Any]]]:
+            with self._sessions.begin() as s:
+                run = run_store.requeue_run(s, run_id, error)
+                if run is None:
+                    return None, []
+                return (run, run.experiment), self._events([run], {run.experiment_id: False})
+
+        rows, events = await asyncio.to_thread(write)
+        self._publish(events)
+        return rows
+
+    async def fail_experiment(self, experiment_id: int, error: str) -> None:
+        """The experiment's error text (its path could not be had)."""
+
+        def write() -> None:
+            with self._sessions.begin() as s:
+                exp_store.set_error(s, experiment_id=experiment_id, error=error)
+
+        await asyncio.to_thread(write)
+        self._views.forget(experiment_id)
+
+    async def store_plan(self, experiment_id: int, path: list[list[float]], planning_time_s: Optional[float],
+                         info: dict[str, Any]) -> None:
+        """Keep the experiment's planned path (m, m, rad) and planning time (s)."""
+
+        def write() -> None:
+            with self._sessions.begin() as s:
+                exp_store.store_plan(s, experiment_id=experiment_id, path=path, planning_time_s=planning_time_s,
+                                     info=info)
+
+        await asyncio.to_thread(write)
+        self._views.forget(experiment_id)
+
+    async def store_planning_info(self, experiment_id: int, info: dict[str, Any]) -> None:
+        """Keep what is known of a planning attempt that gave no path."""
+
+        def write() -> None:
+            with self._sessions.begin() as s:
+                exp_store.store_planning_info(s, experiment_id=experiment_id, info=info)
+
+        await asyncio.to_thread(write)
+        self._views.forget(experiment_id)
+
+    async def planned_path(self, experiment_id: int) -> tuple[Optional[list[list[float]]], Optional[float]]:
+        """The experiment's stored planned path and planning time, if planned already."""
+
+        def load() -> tuple[Optional[list[list[float]]], Optional[float]]:
+            with self._sessions() as s:
+                exp = s.get(Experiment, experiment_id)
+                return exp.planned_path, exp.planning_time_s
+
+        return await asyncio.to_thread(load)
+
+    async def driven(self, run_id: int) -> tuple[list[list[float]], Optional[float], Optional[float]]:
+        """Every logged pose ``[t, x, y, theta]`` of the run (oldest first), its ``t_start`` and ``t_end`` (s)."""
+
+        def load() -> tuple[list[list[float]], Optional[float], Optional[float]]:
+            with self._sessions() as s:
+                run = s.get(Run, run_id)
+                return pose_store.run_poses(s, run_id), run.t_start, run.t_end
+
+        return await asyncio.to_thread(load)
+
+    async def add_messages(self, batch: list[dict[str, Any]]) -> None:
+        """Store protocol-log rows ``{run_id, t, t_estimated, direction, line}``."""
+        if not batch:
+            return
+
+        def write() -> None:
+            with self._sessions.begin() as s:
+                run_store.add_messages(s, batch)
+
+        await asyncio.to_thread(write)
+
+    # ------------------------------------------------------------------ events
+
+    def _events(self, runs: list[Run], exp_changed: dict[int, bool]) -> list[dict[str, Any]]:
+        """The live events for changed runs (built inside the transaction, published after it)."""
+        out: list[dict[str, Any]] = []
+        exps: dict[int, Experiment] = {}
+        for run in runs:
+            out.append({"type": "run", "owner_id": run.experiment.owner_id,
+                        "run": RunPublic.model_validate(run).model_dump(mode="json")})
+            exps[run.experiment_id] = run.experiment
+        for exp_id, exp in exps.items():
+            if exp_changed.get(exp_id) or exp.status in TERMINAL:
+                view = ExperimentPublic.model_validate(exp).model_dump(mode="json", exclude={"planned_path", "runs"})
+                out.append({"type": "experiment", "owner_id": exp.owner_id, "experiment": view})
+        return out
+
+    def _publish(self, events: list[dict[str, Any]]) -> None:
+        for ev in events:
+            if ev["type"] == "run":
+                self._views.forget(ev["run"]["experiment_id"])
+        for ev in events:
+            self._broker.publish(ev)

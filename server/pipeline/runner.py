@@ -1,0 +1,194 @@
+"""One run, from its assignment to how it ended.
+
+The steps, in order (each in :mod:`server.pipeline.steps`)::
+
+    building   the gripper builds the environment (unless the robot has it built)
+    placing    the gripper puts the robot at the start
+    planning   the experiment's path, had once (server.pipeline.paths)
+    running    the T,T,P line is sent, events followed, tracker poses stored
+    analyzing  metrics, in a worker process
+    completed
+
+Whose fault an ending is (:mod:`server.errors`): ``failed`` is the job's
+(no path, collision, stall, timeout), ``error`` the testbed's (robot
+unreachable, died, refused a command the pre-flight accepted; the
+dispatcher retries it once elsewhere), ``interrupted`` a testbed stop,
+``cancelled`` the owner's wish.  A run that failed on the field is measured
+too: what it drove until then is data.  Every protocol line is logged.
+
+:func:`execute_run` never raises: it returns a :class:`RunEnd` and leaves
+the queue, the robots and the retry to its caller (:mod:`server.dispatch`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional, Protocol
+
+from ..core.settings import Settings
+from ..errors import AgentRefused, AgentUnavailable, FailureKind, RunEnded, RunFailed, TestbedFault
+from ..field import FieldState
+from ..models import utcnow
+from ..scheduler import Assignment, RobotSlot
+from ..status import RunStatus
+from ..tracking import PoseRouter
+from . import steps
+from .paths import PathService
+from .pool import WorkerPool
+from .recorder import RunRecorder
+
+__all__ = ["RobotHooks", "RunContext", "RunEnd", "RunServices", "execute_run"]
+
+log = logging.getLogger("twb.runner")
+
+
+class RobotHooks(Protocol):
+    """What the server can do to robot agents that run in its own process (``twb up``)."""
+
+    def seed_next_path(self, robot_id: str, seed: int) -> None:
+        """Seed the noise of the robot's next path (exact replay); a no-op for other robots."""
+
+    async def flush_tracker(self, robot_id: str) -> bool:
+        """Deliver the robot's pending tracker poses now; False if the robot is not in this process."""
+
+
+class NoHooks:
+    """Robots elsewhere: nothing to seed or flush directly."""
+
+    def seed_next_path(self, robot_id: str, seed: int) -> None:
+        return None
+
+    async def flush_tracker(self, robot_id: str) -> bool:
+        return False
+
+
+@dataclass(frozen=True)
+class RunServices:
+    """Everything a run uses, handed in by the testbed (no back-pointer to it)."""
+
+    settings: Settings
+    recorder: RunRecorder
+    paths: PathService
+    pool: WorkerPool
+    field: FieldState
+    tracker: PoseRouter
+    hooks: RobotHooks = field(default_factory=NoHooks)
+
+
+@dataclass(frozen=True)
+class RunEnd:
+    """How a run ended: its status and error text.
+
+    ``robot_fault``: the robot to avoid when retrying (``error`` only);
+    ``whole_experiment``: the experiment's path could not be had, so its
+    queued runs fail too (``failed`` only).
+    """
+
+    status: RunStatus
+    error: str = ""
+    robot_fault: Optional[str] = None
+    whole_experiment: bool = False
+
+
+class RunContext:
+    """One execution: its assignment, robot, time scale and protocol log."""
+
+    def __init__(self, assignment: Assignment, robot: RobotSlot, time_scale: float) -> None:
+        self.assignment = assignment
+        self.run_id = assignment.run_id
+        self.robot = robot
+        self.time_scale = time_scale
+        self.messages: list[dict[str, Any]] = []
+
+    @property
+    def subfields(self) -> tuple[int, ...]:
+        return self.assignment.subfields
+
+    def on_line(self, direction: str, line: str, t: Optional[float], estimated: bool) -> None:
+        """Log one protocol line (``>`` sent, ``<`` received; program lines ``o``/``e``/``s``)."""
+        self.messages.append({"run_id": self.run_id, "t": t, "t_estimated": estimated, "direction": direction,
+                              "line": line[:10_000]})
+
+    def take_messages(self) -> list[dict[str, Any]]:
+        batch, self.messages = self.messages, []
+        return batch
+
+    def wall(self, experiment_s: float, slack_s: float = 10.0) -> float:
+        """Wall seconds for ``experiment_s`` of experiment time, plus slack."""
+        return (0.0 if math.isinf(self.time_scale) else experiment_s / self.time_scale) + slack_s
+
+
+async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Callable[[], bool]) -> RunEnd:
+    """Carry out one assigned run; returns how it ended (never raises; everything is stored).
+
+    ``stopping()`` tells a testbed stop (``interrupted``) from a cancel
+    (``cancelled``) when the run's task is cancelled.
+    """
+    ctx = RunContext(assignment, svc.field.robots[assignment.robot_id], svc.settings.time_scale)
+    robot = ctx.robot.robot_id
+    try:
+        await _steps(ctx, svc)
+        end = RunEnd(RunStatus.COMPLETED)
+    except RunFailed as exc:
+        end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment)
+    except AgentRefused as exc:
+        end = RunEnd(RunStatus.ERROR, f"robot {robot} refused a command: {exc}", robot_fault=robot)
+    except AgentUnavailable as exc:
+        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot)
+    except TestbedFault as exc:
+        end = RunEnd(RunStatus.ERROR, str(exc), robot_fault=robot)
+    except RunEnded as exc:
+        end = RunEnd(exc.status, str(exc))
+    except OSError as exc:
+        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot)
+    except asyncio.CancelledError:
+        end = (RunEnd(RunStatus.INTERRUPTED, "the server stopped during this run") if stopping()
+               else RunEnd(RunStatus.CANCELLED, "cancelled by its owner"))
+    except Exception as exc:  # noqa: BLE001 - a bug must end the run as an error, not kill the testbed
+        log.exception("run %d crashed", ctx.run_id)
+        end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=robot)
+    finally:
+        svc.tracker.close(robot)
+    try:
+        await asyncio.shield(svc.recorder.add_messages(ctx.take_messages()))
+    except asyncio.CancelledError:
+        pass
+    return end
+
+
+async def _steps(ctx: RunContext, svc: RunServices) -> None:
+    rec = svc.recorder
+    job = await rec.job(ctx.run_id)
+    await rec.update(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
+                     subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
+    link = await steps.connect(ctx, svc)
+    try:
+        await link.request("T,T,Q", ctx.wall(0))  # anchors the agent's clock
+        await steps.build(ctx, svc, link, job)
+        await rec.update(ctx.run_id, status=RunStatus.PLACING)
+        await steps.place(ctx, link, job)
+        await rec.update(ctx.run_id, status=RunStatus.PLANNING)
+        plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
+                                        platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
+        await rec.update(ctx.run_id, status=RunStatus.RUNNING)
+        try:
+            await steps.drive(ctx, svc, link, job, plan.path)
+            failure: Optional[RunFailed] = None
+        except RunFailed as exc:
+            failure = exc
+    finally:
+        await link.close()
+        await rec.add_messages(ctx.take_messages())
+    await rec.update(ctx.run_id, status=RunStatus.ANALYZING)
+    # a run that failed on the field (collision, stall, timeout) is measured too: what it drove until
+    # then is data; its `collided` is the robot's own verdict, as for completed runs
+    try:
+        await steps.analyze(ctx, svc, job, plan, collided=failure is not None and failure.kind is FailureKind.COLLISION)
+    except TestbedFault:
+        if failure is None:
+            raise
+    if failure is not None:
+        raise failure

@@ -1,0 +1,158 @@
+"""The steps of a run on its robot: connect, build, place, drive, analyze (see :mod:`server.pipeline.runner`)."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from typing import TYPE_CHECKING, Optional
+
+from robot_agent.protocol import encode_build, encode_path, encode_place
+
+from ..agent_link import AgentLink
+from ..errors import AgentRefused, FailureKind, RunFailed, TestbedFault
+from ..status import SubfieldState
+from ..store.runs import RunJob
+from . import compute
+from .paths import Plan
+
+if TYPE_CHECKING:  # the runner hands its context and services to each step
+    from .runner import RunContext, RunServices
+
+__all__ = ["PARK", "analyze", "build", "connect", "drive", "place"]
+
+#: park positions (robot frame) of sub-field robots 2-4 during full-field runs: their outer corners
+PARK = {2: (1.7, 0.1, 0.0), 3: (0.1, 1.7, 0.0), 4: (1.7, 1.7, 0.0)}
+
+#: what the robot's ``EV,FAIL,<reason>`` means for the run
+_FAILURES = {
+    "COLLISION": (FailureKind.COLLISION, "collision: the robot hit an obstacle"),
+    "TIMEOUT": (FailureKind.CONTROLLER_TIMEOUT, "timeout: the robot's controller gave up on the path"),
+    "STALLED": (FailureKind.STALLED, "stalled: the robot could not make progress"),
+}
+
+
+async def connect(ctx: "RunContext", svc: "RunServices", robot_id: Optional[str] = None) -> AgentLink:
+    """A protocol connection to the run's robot (or ``robot_id``), logged to the run."""
+    r = svc.field.robots[robot_id or ctx.robot.robot_id]
+    return await AgentLink.connect(r.host, r.port, time_scale=ctx.time_scale, on_line=ctx.on_line)
+
+
+async def build(ctx: "RunContext", svc: "RunServices", link: AgentLink, job: RunJob) -> None:
+    """Have the gripper build the environment, unless the robot already has it built.
+
+    A full-field run first clears the other sub-fields and parks their robots
+    at their outer corners.
+    """
+    field = svc.field
+    key = job.environment + (":full" if job.field == "full" else "")
+    if len(ctx.subfields) == 4:
+        for k in (2, 3, 4):
+            other = field.field_robot(k)
+            if other is not None:
+                await _park(ctx, svc, other.robot_id, k)
+    if field.built.get(ctx.robot.robot_id) == key:
+        return
+    blocks = [(b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)) for b in job.environment_data.get("blocks", [])]
+    for k in ctx.subfields:
+        await field.set_subfield(k, state=SubfieldState.BUILDING)
+    await link.request(encode_build(blocks), ctx.wall(60 * (len(blocks) + 10)))
+    field.built[ctx.robot.robot_id] = key
+    shown = job.environment if len(ctx.subfields) == 1 else f"{job.environment} (full)"
+    for k in ctx.subfields:
+        await field.set_subfield(k, environment=shown)
+
+
+async def _park(ctx: "RunContext", svc: "RunServices", robot_id: str, k: int) -> None:
+    """Clear sub-field ``k`` and park its robot in its outer corner."""
+    field = svc.field
+    async with await connect(ctx, svc, robot_id) as other:
+        if field.built.get(robot_id) is not None:
+            await other.request("T,T,B", ctx.wall(60 * 10))
+            field.built[robot_id] = None
+            await field.set_subfield(k, environment=None)
+        try:
+            await other.request(encode_place(PARK[k]), ctx.wall(30))
+        except AgentRefused:
+            pass  # it may already stand there
+
+
+async def place(ctx: "RunContext", link: AgentLink, job: RunJob) -> None:
+    """The gripper puts the robot at the start (facing the goal when the start has no heading)."""
+    start = job.start
+    if len(start) < 3:
+        start = [*start[:2], math.atan2(job.goal[1] - start[1], job.goal[0] - start[0])]
+    try:
+        await link.request(encode_place(start), ctx.wall(30))
+    except AgentRefused as exc:
+        raise TestbedFault(f"the gripper could not place the robot at the start: {exc.message}") from None
+
+
+async def drive(ctx: "RunContext", svc: "RunServices", link: AgentLink, job: RunJob, path: list[list[float]]) -> None:
+    """Send the path and follow the events until ``DONE`` (returns) or ``FAIL`` / the timeout (:class:`RunFailed`)."""
+    rec, robot_id = svc.recorder, ctx.robot.robot_id
+    for k in ctx.subfields:
+        await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id)
+    length = sum(math.dist(a[:2], b[:2]) for a, b in zip(path[:-1], path[1:]))
+    settings = svc.settings
+    timeout_exp = max(settings.run_timeout_min_s, settings.run_timeout_factor * compute.expected_duration_s(length, 0))
+    svc.hooks.seed_next_path(robot_id, job.seed)
+    svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
+    await link.request(encode_path(path), ctx.wall(0))
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + ctx.wall(timeout_exp)
+    t_start: Optional[float] = None
+    while True:
+        left = deadline - loop.time()
+        ev = await link.next_event(max(left, 0.0)) if left > 0 else None
+        if ev is None:
+            try:
+                await link.request("T,T,S", ctx.wall(0))
+            finally:
+                await rec.update(ctx.run_id, t_start=t_start, t_end=link.now())
+            raise RunFailed(f"timeout: the robot did not finish within {timeout_exp:.0f} s of experiment time",
+                            FailureKind.TIMEOUT)
+        kind = ev.fields[0] if ev.fields else ""
+        if kind == "START":
+            t_start = ev.time
+            await rec.update(ctx.run_id, t_start=t_start)
+        elif kind in ("DONE", "FAIL"):
+            await rec.update(ctx.run_id, t_start=t_start, t_end=ev.time)
+            await _collect_poses(svc, robot_id, ev.time or 0.0)
+            if kind == "DONE":
+                return
+            reason = ev.fields[1] if len(ev.fields) > 1 else "UNKNOWN"
+            if reason == "STOPPED":
+                raise TestbedFault("the robot was stopped by someone else during the run")
+            fkind, message = _FAILURES.get(reason, (FailureKind.OTHER, reason.lower()))
+            raise RunFailed(message, fkind)
+
+
+async def _collect_poses(svc: "RunServices", robot_id: str, t_end: float) -> None:
+    """Make sure the tracker poses up to ``t_end`` are stored before the window closes.
+
+    Robots in this process are flushed directly; remote ones are waited for,
+    up to ``tracker_grace_s`` plus a second.
+    """
+    if not await svc.hooks.flush_tracker(robot_id):
+        await svc.tracker.wait_for_time(robot_id, t_end, svc.settings.tracker_grace_s + 1.0)
+
+
+async def analyze(ctx: "RunContext", svc: "RunServices", job: RunJob, plan: Plan, *, collided: bool) -> None:
+    """The run's metrics (docs/metrics.md), in a worker process.
+
+    ``collided`` is what the robot itself detected (it stops with
+    ``EV,FAIL,COLLISION``); the tracker's view of how close it came is
+    ``clearance_min_m``, which can dip below the robot radius by the
+    tracker's noise without a contact.  Too few logged poses is the
+    testbed's fault (:class:`TestbedFault`).
+    """
+    rec = svc.recorder
+    poses, t0, t1 = await rec.driven(ctx.run_id)
+    try:
+        metrics = await svc.pool.run(compute.measure_run, job.environment_data, plan.path, poses, t0, t1, job.goal,
+                                     job.robot_radius, plan.planning_time_s)
+    except compute.TooFewPoses as exc:
+        raise TestbedFault(f"cannot compute metrics: {exc}") from None
+    metrics["collided"] = collided
+    await rec.update(ctx.run_id, metrics=metrics)
+

@@ -1,0 +1,98 @@
+"""Experiments and their runs: creation with per-run seeds, the quota, plans, the status roll-up."""
+
+from __future__ import annotations
+
+import hashlib
+from typing import Any, Optional
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from ..core.security import Principal
+from ..models import Experiment, Run, utcnow
+from ..schemas import ExperimentCreate
+from ..status import ACTIVE, TERMINAL, RunStatus, roll_up
+from ..validation import Preflight
+
+__all__ = ["count_queued", "create_experiment", "finish_if_done", "run_seed", "set_error", "store_plan",
+           "store_planning_info"]
+
+
+def run_seed(experiment_seed: int, mode: str, repetition: int) -> int:
+    """Seed of one run's random elements (noise, dropouts), derived stably from the job's seed.
+
+    The same repetition gets different seeds in sim and twb (independent noise),
+    and replaying a job with the same seed replays every run exactly.
+    """
+    digest = hashlib.sha256(f"{experiment_seed}:{mode}:{repetition}".encode()).digest()
+    return int.from_bytes(digest[:8], "big") >> 1
+
+
+def count_queued(session: Session, *, owner_id: int) -> int:
+    """How many of the user's experiments are queued (the quota counts these)."""
+    return session.scalar(select(func.count(Experiment.id)).where(Experiment.owner_id == owner_id,
+                                                                  Experiment.status == RunStatus.QUEUED)) or 0
+
+
+def create_experiment(
+    session: Session, *, owner: Principal, body: ExperimentCreate, checked: Preflight, robot_radius: float,
+    planning_margin: float = 0.0,
+) -> Experiment:
+    """Add the experiment and one queued run per repetition and mode (flushes, no commit)."""
+    exp = Experiment(
+        owner_id=owner.id,
+        status=RunStatus.QUEUED,
+        environment=checked.env.name,
+        environment_data=checked.env.to_dict(),
+        start=checked.start,
+        goal=checked.goal,
+        planner=body.planner,
+        planner_params=checked.planner_params,
+        explicit_path=checked.path,
+        program_id=body.program,
+        modes=list(body.modes),
+        repetitions=body.repetitions,
+        seed=body.seed,
+        field=body.field,
+        robot_radius=robot_radius,
+        planning_margin=planning_margin if body.path is None else 0.0,
+    )
+    session.add(exp)
+    session.flush()
+    for rep in range(1, body.repetitions + 1):
+        for mode in body.modes:
+            session.add(Run(experiment_id=exp.id, mode=mode, repetition=rep, seed=run_seed(body.seed, mode, rep)))
+    session.flush()
+    return exp
+
+
+def finish_if_done(exp: Experiment) -> bool:
+    """Update ``exp.status`` from its runs; stamp ``started_at`` / ``finished_at``. True if the status changed."""
+    new = roll_up(r.status for r in exp.runs)
+    changed = new != exp.status
+    exp.status = new
+    if new in TERMINAL and exp.finished_at is None:
+        exp.finished_at = utcnow()
+    if new in ACTIVE and exp.started_at is None:
+        exp.started_at = utcnow()
+    return changed
+
+
+def store_plan(session: Session, *, experiment_id: int, path: list[list[float]], planning_time_s: Optional[float],
+               info: dict[str, Any]) -> None:
+    """Keep the experiment's planned path (m, m, rad), its planning time (s) and planner info."""
+    exp = session.get(Experiment, experiment_id)
+    exp.planned_path = path
+    exp.planning_time_s = planning_time_s
+    exp.planning_info = info
+    finish_if_done(exp)
+
+
+def store_planning_info(session: Session, *, experiment_id: int, info: dict[str, Any]) -> None:
+    """Keep what is known of a planning attempt that gave no path (e.g. the program's execution)."""
+    session.get(Experiment, experiment_id).planning_info = info
+
+
+def set_error(session: Session, *, experiment_id: int, error: str) -> None:
+    """The experiment's error text (why it failed as a whole)."""
+    session.get(Experiment, experiment_id).error = error

@@ -1,0 +1,46 @@
+"""Robots and sub-fields as stored: registrations survive restarts, sub-field states are mirrored."""
+
+from __future__ import annotations
+
+from typing import Optional
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session
+
+from ..models import Robot, Subfield, utcnow
+from ..schemas import RobotRegister
+
+__all__ = ["load_robots", "reset_subfields", "save_robot", "save_subfield"]
+
+
+def save_robot(session: Session, body: RobotRegister) -> None:
+    """Add or refresh a robot's registration."""
+    row = session.scalar(select(Robot).where(Robot.robot_id == body.robot_id))
+    if row is None:
+        row = Robot(robot_id=body.robot_id)
+        session.add(row)
+    for k in ("host", "port", "platform", "backend", "profile", "origin", "area"):
+        setattr(row, k, getattr(body, k))
+    row.status = "idle"
+    row.last_seen = utcnow()
+
+
+def load_robots(session: Session) -> list[Robot]:
+    """Every robot registered at some time."""
+    return list(session.scalars(select(Robot)))
+
+
+def save_subfield(session: Session, k: int, *, state: str, environment: Optional[str], run_id: Optional[int],
+                  robot_id: Optional[str]) -> None:
+    """Mirror sub-field ``k``'s state."""
+    row = session.get(Subfield, k)
+    row.state, row.environment, row.run_id, row.robot_id = state, environment, run_id, robot_id
+    row.updated_at = utcnow()
+
+
+def reset_subfields(session: Session) -> None:
+    """All four sub-fields exist and are idle with nothing built (at start-up)."""
+    for i in range(1, 5):
+        if session.get(Subfield, i) is None:
+            session.add(Subfield(id=i))
+    session.execute(update(Subfield).values(state="idle", run_id=None, robot_id=None, environment=None))

@@ -1,0 +1,112 @@
+"""Runs: what the pipeline needs of one, state changes with the experiment's roll-up, retries, messages."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Iterable, Optional
+
+from sqlalchemy import delete, insert, select
+from sqlalchemy.orm import Session
+
+from ..models import Experiment, Message, Pose, Run, utcnow
+from ..status import ACTIVE, RunStatus
+from .experiments import finish_if_done
+
+__all__ = ["RunJob", "add_messages", "end_runs", "interrupt_active", "load_job", "queued_runs", "requeue_run",
+           "update_run"]
+
+
+@dataclass(frozen=True)
+class RunJob:
+    """What the run pipeline needs to know of a run and its experiment (SI units)."""
+
+    run_id: int
+    seed: int
+    mode: str
+    experiment_id: int
+    owner_id: int
+    environment: str
+    environment_data: dict[str, Any]
+    start: list[float]
+    goal: list[float]
+    field: str
+    robot_radius: float
+
+
+def load_job(session: Session, run_id: int) -> RunJob:
+    """The :class:`RunJob` of ``run_id``."""
+    run = session.get(Run, run_id)
+    e = run.experiment
+    return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
+                  list(e.goal), e.field, e.robot_radius)
+
+
+def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
+    """Write ``fields`` on the run and roll the experiment's status up; (run, experiment, status changed)."""
+    run = session.get(Run, run_id)
+    for k, v in fields.items():
+        setattr(run, k, v)
+    exp = run.experiment
+    return run, exp, finish_if_done(exp)
+
+
+def requeue_run(session: Session, run_id: int, error: str) -> Optional[Run]:
+    """Queue a run that hit a testbed fault again, once; its poses go. None if it was retried already."""
+    run = session.get(Run, run_id)
+    if run.attempt >= 2:
+        return None
+    run.attempt += 1
+    run.status = RunStatus.QUEUED
+    run.error = f"attempt 1: {error}"
+    run.robot_id = None
+    run.subfield = None
+    run.t_start = run.t_end = None
+    session.execute(delete(Pose).where(Pose.run_id == run_id))
+    finish_if_done(run.experiment)
+    return run
+
+
+def end_runs(session: Session, run_ids: Iterable[int], status: RunStatus, error: str) -> list[Run]:
+    """End the given runs (queued ones: cancelled, failed with their experiment) in one go; returns them."""
+    ids = list(run_ids)
+    if not ids:
+        return []
+    runs = list(session.scalars(select(Run).where(Run.id.in_(ids))))
+    now = utcnow()
+    for run in runs:
+        run.status, run.error, run.finished_at = status, error, now
+    for exp in {run.experiment for run in runs}:
+        finish_if_done(exp)
+    return runs
+
+
+def queued_runs(session: Session, *, experiment_ids: Optional[Iterable[int]] = None) -> list[tuple[Run, Experiment]]:
+    """Queued runs with their experiments, oldest first (of the given experiments, or all)."""
+    q = select(Run, Experiment).join(Experiment).where(Run.status == RunStatus.QUEUED)
+    if experiment_ids is not None:
+        q = q.where(Run.experiment_id.in_(list(experiment_ids)))
+    return [(r, e) for r, e in session.execute(q.order_by(Run.id))]
+
+
+def add_messages(session: Session, batch: list[dict[str, Any]]) -> None:
+    """Insert protocol-log rows ``{run_id, t, t_estimated, direction, line}``."""
+    if batch:
+        session.execute(insert(Message), batch)
+
+
+def interrupt_active(session: Session, reason: str) -> int:
+    """Runs left active by a server that stopped end ``interrupted``; returns how many.
+
+    Their experiments wait ``queued`` when runs of theirs are still queued,
+    else roll up.
+    """
+    cut = list(session.scalars(select(Run).where(Run.status.in_(ACTIVE))))
+    now = utcnow()
+    for run in cut:
+        run.status, run.error, run.finished_at = RunStatus.INTERRUPTED, reason, now
+    for exp in session.scalars(select(Experiment).where(Experiment.status.in_(ACTIVE))):
+        if any(r.status == RunStatus.QUEUED for r in exp.runs):
+            exp.status = RunStatus.QUEUED
+        else:
+            finish_if_done(exp)
+    return len(cut)

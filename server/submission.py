@@ -1,0 +1,52 @@
+"""Accepting a job: the checks a submission passes before its runs are queued."""
+
+from __future__ import annotations
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from .access import visible_environments
+from .core.security import Principal
+from .core.settings import Settings
+from .errors import Forbidden, Invalid, QuotaExceeded
+from .models import Environment, Experiment, Program
+from .schemas import ExperimentCreate
+from .store.experiments import count_queued, create_experiment
+from .validation import preflight
+
+__all__ = ["UPLOADS_DISABLED", "submit"]
+
+UPLOADS_DISABLED = "uploads are disabled on this testbed"
+
+
+def submit(session: Session, *, user: Principal, body: ExperimentCreate, settings: Settings) -> Experiment:
+    """Check the job and add it with its queued runs (flushes, no commit).
+
+    Raises :class:`Invalid` (too many repetitions, unknown environment or
+    program, a job that cannot run: :class:`~server.errors.PreflightError`),
+    :class:`Forbidden` (a program while uploads are disabled) or
+    :class:`QuotaExceeded` (too many queued experiments).
+    """
+    if body.repetitions > settings.max_repetitions:
+        raise Invalid(f"repetitions must be at most {settings.max_repetitions}")
+    if body.program is not None:
+        _check_program(session, user, body.program, settings)
+    env_row = session.scalar(select(Environment).where(Environment.name == body.environment,
+                                                       visible_environments(user)))
+    if env_row is None:
+        raise Invalid(f"unknown environment {body.environment!r}")
+    queued = count_queued(session, owner_id=user.id)
+    if queued >= settings.max_queued_per_user:
+        raise QuotaExceeded(f"you already have {queued} queued experiments (limit {settings.max_queued_per_user})")
+    checked = preflight(body, env_row.data, settings.robot_radius_m, settings.planning_margin_m)
+    return create_experiment(session, owner=user, body=body, checked=checked, robot_radius=settings.robot_radius_m,
+                             planning_margin=settings.planning_margin_m)
+
+
+def _check_program(session: Session, user: Principal, program_id: int, settings: Settings) -> None:
+    """A job naming a program: uploads enabled (403) and the program the user's (422)."""
+    if not settings.uploads_enabled:
+        raise Forbidden(UPLOADS_DISABLED)
+    owner = session.scalar(select(Program.owner_id).where(Program.id == program_id))
+    if owner is None or (owner != user.id and not user.is_admin):
+        raise Invalid(f"unknown program {program_id}")
