@@ -24,7 +24,8 @@ from typing import Any, Iterable, Optional
 from .field import FieldState
 from .models import Experiment, Run, utcnow
 from .pipeline import compute
-from .pipeline.runner import RunEnd, RunServices, execute_run
+from .pipeline.context import RunServices
+from .pipeline.runner import RunEnd, execute_run
 from .scheduler import Assignment, Pending, Scheduler
 from .status import RunStatus, SubfieldState
 

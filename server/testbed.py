@@ -31,7 +31,7 @@ from .field import FieldState
 from .pipeline.paths import PathService
 from .pipeline.pool import WorkerPool
 from .pipeline.recorder import RunRecorder
-from .pipeline.runner import NoHooks, RunServices
+from .pipeline.context import NoHooks, RunServices
 from .sandbox import Sandbox
 from .scheduler import Pending
 from .store.runs import queued_runs
@@ -66,11 +66,12 @@ class Testbed:
         self.sandbox = Sandbox(settings)
         self.recorder = RunRecorder(self.sessions, self.broker, self.views)
         self.embedded = embedded
-        services = RunServices(
+        #: what each run uses (the pipeline's only view of the testbed)
+        self.services = RunServices(
             settings=settings, recorder=self.recorder,
             paths=PathService(self.sessions, self.recorder, self.pool, self.sandbox, settings),
             pool=self.pool, field=self.field, tracker=self.tracker, hooks=embedded or NoHooks())
-        self.dispatcher = Dispatcher(services)
+        self.dispatcher = Dispatcher(self.services)
         self.admin_token = ""
 
     def prepare(self) -> str:

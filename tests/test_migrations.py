@@ -7,13 +7,13 @@ from alembic.autogenerate import compare_metadata
 from alembic.config import Config
 from alembic.migration import MigrationContext
 
-from server.core.db import ALEMBIC_DIR, make_engine, migrate
+from server.core.db import MIGRATIONS, make_engine, migrate
 from server.models import Base
 
 
 def config(url: str) -> Config:
     cfg = Config()
-    cfg.set_main_option("script_location", str(ALEMBIC_DIR))
+    cfg.set_main_option("script_location", MIGRATIONS)
     cfg.set_main_option("sqlalchemy.url", url)
     return cfg
 

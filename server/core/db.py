@@ -2,19 +2,20 @@
 
 SQLite runs in WAL mode with a busy timeout, so the API threads and the run
 pipeline can write concurrently; Alembic migrations are applied automatically
-when the server starts (``upgrade head``).
+when the server starts (``upgrade head``).  They ship inside the package
+(``server/migrations``) and are found as a package resource, so an installed
+wheel migrates like a checkout.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.orm import Session, sessionmaker
 
-__all__ = ["ALEMBIC_DIR", "make_engine", "make_session_factory", "migrate"]
+__all__ = ["MIGRATIONS", "make_engine", "make_session_factory", "migrate"]
 
-ALEMBIC_DIR = Path(__file__).resolve().parents[2] / "alembic"
+#: Alembic's script location: the ``migrations`` directory of the ``server`` package
+MIGRATIONS = "server:migrations"
 
 
 def make_engine(url: str) -> Engine:
@@ -45,7 +46,7 @@ def migrate(engine: Engine) -> None:
     from alembic.config import Config
 
     cfg = Config()
-    cfg.set_main_option("script_location", str(ALEMBIC_DIR))
+    cfg.set_main_option("script_location", MIGRATIONS)
     cfg.set_main_option("sqlalchemy.url", engine.url.render_as_string(hide_password=False))
     with engine.begin() as conn:
         cfg.attributes["connection"] = conn

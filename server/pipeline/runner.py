@@ -24,58 +24,19 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
-from dataclasses import dataclass, field
-from typing import Any, Callable, Optional, Protocol
+from dataclasses import dataclass
+from typing import Callable, Optional
 
-from ..core.settings import Settings
 from ..errors import AgentRefused, AgentUnavailable, FailureKind, RunEnded, RunFailed, TestbedFault
-from ..field import FieldState
 from ..models import utcnow
-from ..scheduler import Assignment, RobotSlot
+from ..scheduler import Assignment
 from ..status import RunStatus
-from ..tracking import PoseRouter
 from . import steps
-from .paths import PathService
-from .pool import WorkerPool
-from .recorder import RunRecorder
+from .context import RunContext, RunServices
 
-__all__ = ["RobotHooks", "RunContext", "RunEnd", "RunServices", "execute_run"]
+__all__ = ["RunEnd", "execute_run"]
 
 log = logging.getLogger("twb.runner")
-
-
-class RobotHooks(Protocol):
-    """What the server can do to robot agents that run in its own process (``twb up``)."""
-
-    def seed_next_path(self, robot_id: str, seed: int) -> None:
-        """Seed the noise of the robot's next path (exact replay); a no-op for other robots."""
-
-    async def flush_tracker(self, robot_id: str) -> bool:
-        """Deliver the robot's pending tracker poses now; False if the robot is not in this process."""
-
-
-class NoHooks:
-    """Robots elsewhere: nothing to seed or flush directly."""
-
-    def seed_next_path(self, robot_id: str, seed: int) -> None:
-        return None
-
-    async def flush_tracker(self, robot_id: str) -> bool:
-        return False
-
-
-@dataclass(frozen=True)
-class RunServices:
-    """Everything a run uses, handed in by the testbed (no back-pointer to it)."""
-
-    settings: Settings
-    recorder: RunRecorder
-    paths: PathService
-    pool: WorkerPool
-    field: FieldState
-    tracker: PoseRouter
-    hooks: RobotHooks = field(default_factory=NoHooks)
 
 
 @dataclass(frozen=True)
@@ -91,34 +52,6 @@ class RunEnd:
     error: str = ""
     robot_fault: Optional[str] = None
     whole_experiment: bool = False
-
-
-class RunContext:
-    """One execution: its assignment, robot, time scale and protocol log."""
-
-    def __init__(self, assignment: Assignment, robot: RobotSlot, time_scale: float) -> None:
-        self.assignment = assignment
-        self.run_id = assignment.run_id
-        self.robot = robot
-        self.time_scale = time_scale
-        self.messages: list[dict[str, Any]] = []
-
-    @property
-    def subfields(self) -> tuple[int, ...]:
-        return self.assignment.subfields
-
-    def on_line(self, direction: str, line: str, t: Optional[float], estimated: bool) -> None:
-        """Log one protocol line (``>`` sent, ``<`` received; program lines ``o``/``e``/``s``)."""
-        self.messages.append({"run_id": self.run_id, "t": t, "t_estimated": estimated, "direction": direction,
-                              "line": line[:10_000]})
-
-    def take_messages(self) -> list[dict[str, Any]]:
-        batch, self.messages = self.messages, []
-        return batch
-
-    def wall(self, experiment_s: float, slack_s: float = 10.0) -> float:
-        """Wall seconds for ``experiment_s`` of experiment time, plus slack."""
-        return (0.0 if math.isinf(self.time_scale) else experiment_s / self.time_scale) + slack_s
 
 
 async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Callable[[], bool]) -> RunEnd:

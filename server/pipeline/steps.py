@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import math
-from typing import TYPE_CHECKING, Optional
+from typing import Optional
 
 from robot_agent.protocol import encode_build, encode_path, encode_place
 
@@ -13,10 +13,8 @@ from ..errors import AgentRefused, FailureKind, RunFailed, TestbedFault
 from ..status import SubfieldState
 from ..store.runs import RunJob
 from . import compute
+from .context import RunContext, RunServices
 from .paths import Plan
-
-if TYPE_CHECKING:  # the runner hands its context and services to each step
-    from .runner import RunContext, RunServices
 
 __all__ = ["PARK", "analyze", "build", "connect", "drive", "place"]
 
@@ -31,13 +29,13 @@ _FAILURES = {
 }
 
 
-async def connect(ctx: "RunContext", svc: "RunServices", robot_id: Optional[str] = None) -> AgentLink:
+async def connect(ctx: RunContext, svc: RunServices, robot_id: Optional[str] = None) -> AgentLink:
     """A protocol connection to the run's robot (or ``robot_id``), logged to the run."""
     r = svc.field.robots[robot_id or ctx.robot.robot_id]
     return await AgentLink.connect(r.host, r.port, time_scale=ctx.time_scale, on_line=ctx.on_line)
 
 
-async def build(ctx: "RunContext", svc: "RunServices", link: AgentLink, job: RunJob) -> None:
+async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob) -> None:
     """Have the gripper build the environment, unless the robot already has it built.
 
     A full-field run first clears the other sub-fields and parks their robots
@@ -62,7 +60,7 @@ async def build(ctx: "RunContext", svc: "RunServices", link: AgentLink, job: Run
         await field.set_subfield(k, environment=shown)
 
 
-async def _park(ctx: "RunContext", svc: "RunServices", robot_id: str, k: int) -> None:
+async def _park(ctx: RunContext, svc: RunServices, robot_id: str, k: int) -> None:
     """Clear sub-field ``k`` and park its robot in its outer corner."""
     field = svc.field
     async with await connect(ctx, svc, robot_id) as other:
@@ -76,7 +74,7 @@ async def _park(ctx: "RunContext", svc: "RunServices", robot_id: str, k: int) ->
             pass  # it may already stand there
 
 
-async def place(ctx: "RunContext", link: AgentLink, job: RunJob) -> None:
+async def place(ctx: RunContext, link: AgentLink, job: RunJob) -> None:
     """The gripper puts the robot at the start (facing the goal when the start has no heading)."""
     start = job.start
     if len(start) < 3:
@@ -87,7 +85,7 @@ async def place(ctx: "RunContext", link: AgentLink, job: RunJob) -> None:
         raise TestbedFault(f"the gripper could not place the robot at the start: {exc.message}") from None
 
 
-async def drive(ctx: "RunContext", svc: "RunServices", link: AgentLink, job: RunJob, path: list[list[float]]) -> None:
+async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob, path: list[list[float]]) -> None:
     """Send the path and follow the events until ``DONE`` (returns) or ``FAIL`` / the timeout (:class:`RunFailed`)."""
     rec, robot_id = svc.recorder, ctx.robot.robot_id
     for k in ctx.subfields:
@@ -127,7 +125,7 @@ async def drive(ctx: "RunContext", svc: "RunServices", link: AgentLink, job: Run
             raise RunFailed(message, fkind)
 
 
-async def _collect_poses(svc: "RunServices", robot_id: str, t_end: float) -> None:
+async def _collect_poses(svc: RunServices, robot_id: str, t_end: float) -> None:
     """Make sure the tracker poses up to ``t_end`` are stored before the window closes.
 
     Robots in this process are flushed directly; remote ones are waited for,
@@ -137,7 +135,7 @@ async def _collect_poses(svc: "RunServices", robot_id: str, t_end: float) -> Non
         await svc.tracker.wait_for_time(robot_id, t_end, svc.settings.tracker_grace_s + 1.0)
 
 
-async def analyze(ctx: "RunContext", svc: "RunServices", job: RunJob, plan: Plan, *, collided: bool) -> None:
+async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *, collided: bool) -> None:
     """The run's metrics (docs/metrics.md), in a worker process.
 
     ``collided`` is what the robot itself detected (it stops with

@@ -2,7 +2,7 @@
 
 The server calls migrations itself at start-up with an open connection
 (``server.core.db.migrate``); ``alembic upgrade head`` from the repository
-root also works and reads ``TWB_DATABASE_URL`` / ``TWB_DATA_DIR``.
+root also works (alembic.ini) and reads ``TWB_DATABASE_URL`` / ``TWB_DATA_DIR``.
 """
 
 from __future__ import annotations

@@ -1,0 +1,78 @@
+"""What one run carries through its steps: its context (protocol log, time scale) and the services it uses."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Optional, Protocol
+
+from ..core.settings import Settings
+from ..field import FieldState
+from ..scheduler import Assignment, RobotSlot
+from ..tracking import PoseRouter
+from .paths import PathService
+from .pool import WorkerPool
+from .recorder import RunRecorder
+
+__all__ = ["NoHooks", "RobotHooks", "RunContext", "RunServices"]
+
+
+class RobotHooks(Protocol):
+    """What the server can do to robot agents that run in its own process (``twb up``)."""
+
+    def seed_next_path(self, robot_id: str, seed: int) -> None:
+        """Seed the noise of the robot's next path (exact replay); a no-op for other robots."""
+
+    async def flush_tracker(self, robot_id: str) -> bool:
+        """Deliver the robot's pending tracker poses now; False if the robot is not in this process."""
+
+
+class NoHooks:
+    """Robots elsewhere: nothing to seed or flush directly."""
+
+    def seed_next_path(self, robot_id: str, seed: int) -> None:
+        return None
+
+    async def flush_tracker(self, robot_id: str) -> bool:
+        return False
+
+
+@dataclass(frozen=True)
+class RunServices:
+    """Everything a run uses, handed in by the testbed (no back-pointer to it)."""
+
+    settings: Settings
+    recorder: RunRecorder
+    paths: PathService
+    pool: WorkerPool
+    field: FieldState
+    tracker: PoseRouter
+    hooks: RobotHooks = field(default_factory=NoHooks)
+
+
+class RunContext:
+    """One execution: its assignment, robot, time scale and protocol log."""
+
+    def __init__(self, assignment: Assignment, robot: RobotSlot, time_scale: float) -> None:
+        self.assignment = assignment
+        self.run_id = assignment.run_id
+        self.robot = robot
+        self.time_scale = time_scale
+        self.messages: list[dict[str, Any]] = []
+
+    @property
+    def subfields(self) -> tuple[int, ...]:
+        return self.assignment.subfields
+
+    def on_line(self, direction: str, line: str, t: Optional[float], estimated: bool) -> None:
+        """Log one protocol line (``>`` sent, ``<`` received; program lines ``o``/``e``/``s``)."""
+        self.messages.append({"run_id": self.run_id, "t": t, "t_estimated": estimated, "direction": direction,
+                              "line": line[:10_000]})
+
+    def take_messages(self) -> list[dict[str, Any]]:
+        batch, self.messages = self.messages, []
+        return batch
+
+    def wall(self, experiment_s: float, slack_s: float = 10.0) -> float:
+        """Wall seconds for ``experiment_s`` of experiment time, plus slack."""
+        return (0.0 if math.isinf(self.time_scale) else experiment_s / self.time_scale) + slack_s

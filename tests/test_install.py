@@ -1,0 +1,78 @@
+"""The project as a wheel: built, installed into a fresh virtualenv, and the server started from it.
+
+The Docker image installs the wheel too; this is what shows that the server
+finds everything it needs (migrations, built-in environments, dashboard
+files) as package data, not next to a source tree.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _uv() -> list[str] | None:
+    """How to run uv (the Makefile installs it into the machine's python3 when it can), if it is here."""
+    if shutil.which("uv"):
+        return ["uv"]
+    if shutil.which("python3") and subprocess.run(["python3", "-m", "uv", "--version"],
+                                                  capture_output=True).returncode == 0:
+        return ["python3", "-m", "uv"]
+    return None
+
+
+def test_the_server_runs_from_an_installed_wheel(tmp_path):
+    uv = _uv()
+    if uv is None:
+        pytest.skip("uv is not installed (the Makefile installs it with pip when it can)")
+    env = {**os.environ, "UV_NO_PROGRESS": "1"}
+    env.pop("VIRTUAL_ENV", None)
+    built = subprocess.run([*uv, "build", "--wheel", "--out-dir", str(tmp_path / "dist"), str(ROOT)],
+                           capture_output=True, text=True, env=env, timeout=300)
+    assert built.returncode == 0, built.stderr
+    wheel = next((tmp_path / "dist").glob("teleworkbench-*.whl"))
+    venv = tmp_path / "venv"
+    subprocess.run([*uv, "venv", "-q", "--python", sys.executable, str(venv)], check=True, env=env, timeout=120)
+    python = venv / "bin" / "python"
+    installed = subprocess.run([*uv, "pip", "install", "-q", "--python", str(python), str(wheel)],
+                               capture_output=True, text=True, env=env, timeout=600)
+    assert installed.returncode == 0, installed.stderr
+    where = subprocess.run([str(python), "-c", "import server; print(server.__file__)"], cwd=tmp_path,
+                           capture_output=True, text=True, check=True).stdout.strip()
+    assert Path(where).is_relative_to(venv), where  # the wheel's copy, not this checkout
+
+    out = open(tmp_path / "server.log", "w")
+    proc = subprocess.Popen([str(venv / "bin" / "twb"), "server", "--port", "0", "--data-dir", str(tmp_path / "data"),
+                             "--token", "wheel-token"], cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT,
+                            env={**env, "PYTHONUNBUFFERED": "1"})
+    try:
+        deadline = time.monotonic() + 60
+        url = None
+        while url is None:
+            text = (tmp_path / "server.log").read_text()
+            m = re.search(r"(http://127\.0\.0\.1:\d+)", text)
+            if m and "API docs" in text:
+                url = m.group(1)
+            assert proc.poll() is None, text
+            assert time.monotonic() < deadline, text
+            time.sleep(0.1)
+        with httpx.Client(base_url=url, headers={"Authorization": "Bearer wheel-token"}, timeout=30) as c:
+            assert c.get("/health").json()["status"] == "ok"
+            names = {e["name"] for e in c.get("/api/v1/environments").json()["data"]}
+            assert {"room", "blocks"} <= names  # migrated store, built-ins from package data
+            assert "Teleworkbench" in c.get("/").text  # the dashboard's files
+            assert c.get("/static/js/app.js").status_code == 200
+    finally:
+        proc.terminate()
+        proc.wait(30)
+        out.close()

@@ -1,0 +1,146 @@
+"""The run pipeline in-process: a real testbed's services, real robot agents on 127.0.0.1 sockets, a real
+SQLite file; no server process.  Each test points at the step that decides the outcome."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from pathlib import Path
+from typing import AsyncIterator
+
+import pytest
+from sqlalchemy import select
+
+from server.core.settings import Settings
+from server.embedded import EmbeddedField
+from server.errors import RunFailed
+from server.models import Experiment, Message, Pose, Run, User
+from server.pipeline.runner import execute_run
+from server.scheduler import Assignment
+from server.schemas import ExperimentCreate
+from server.status import RunStatus
+from server.store.experiments import create_experiment
+from server.testbed import Testbed
+from server.validation import Preflight
+
+from planners import parse_environment
+
+ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
+
+
+@contextlib.asynccontextmanager
+async def running(tmp_path: Path, *, time_scale: float = math.inf, **settings) -> AsyncIterator[Testbed]:
+    tb = Testbed(Settings(data_dir=tmp_path, time_scale=time_scale, planning_workers=1, **settings),
+                 embedded=EmbeddedField(sim_robots=1, time_scale=time_scale))
+    await asyncio.to_thread(tb.prepare)
+    await tb.start()
+    try:
+        yield tb
+    finally:
+        await tb.stop()
+
+
+def add_experiment(tb: Testbed, *, env: dict = ONE_BLOCK, start=(0.3, 0.3, 0.0), goal=(1.5, 1.5, 0.0),
+                   planner: str | None = "fmm", params: dict | None = None, mode: str = "twb",
+                   planned_path: list | None = None) -> tuple[int, int]:
+    """An experiment with one run of ``mode`` straight into the store (no pre-flight: tests choose the fault)."""
+    with tb.sessions.begin() as s:
+        admin = s.scalar(select(User).where(User.name == "admin"))
+        body = ExperimentCreate(environment=env["name"], start=list(start), goal=list(goal), planner=planner,
+                                planner_params=params or {}, modes=[mode], repetitions=1, seed=3)
+        checked = Preflight(parse_environment(env), list(start), list(goal), params or {}, None)
+        exp = create_experiment(s, owner=admin, body=body, checked=checked, robot_radius=0.045,
+                                planning_margin=0.02)
+        exp.planned_path = planned_path
+        return exp.id, exp.runs[0].id
+
+
+def assignment(tb: Testbed, run_id: int, mode: str = "twb") -> Assignment:
+    robot = "field-2" if mode == "twb" else "sim-1"
+    return Assignment(run_id, robot, (2,) if mode == "twb" else ())
+
+
+def run_row(tb: Testbed, run_id: int) -> tuple[Run, int, int]:
+    with tb.sessions() as s:
+        run = s.get(Run, run_id)
+        poses = len(s.scalars(select(Pose.id).where(Pose.run_id == run_id)).all())
+        messages = len(s.scalars(select(Message.id).where(Message.run_id == run_id)).all())
+        return run, poses, messages
+
+
+async def test_a_run_goes_through_every_step_to_completed(tmp_path):
+    async with running(tmp_path) as tb:
+        exp_id, run_id = add_experiment(tb)
+        end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)
+        assert end.status is RunStatus.COMPLETED and end.error == "", end
+        run, poses, messages = run_row(tb, run_id)
+        assert run.status == "analyzing"  # the last step's state: the dispatcher writes the end
+        assert run.robot_id == "field-2" and run.subfield == 2 and run.t_end > run.t_start
+        assert run.metrics["goal_reached"] is True and run.metrics["collided"] is False
+        assert run.metrics["planning_time_s"] > 0  # the experiment's, on every run
+        assert poses > 50 and messages > 5
+        assert tb.field.built["field-2"] == "one-block"
+        with tb.sessions() as s:
+            assert s.get(Experiment, exp_id).planned_path[0][:2] == [0.3, 0.3]
+
+
+async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path):
+    async with running(tmp_path) as tb:
+        through = [[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]  # straight through the block
+        _, run_id = add_experiment(tb, start=(0.3, 0.9, 0.0), goal=(1.5, 0.9, 0.0), planned_path=through)
+        end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)
+        assert end.status is RunStatus.FAILED and end.error.startswith("collision"), end
+        assert not end.whole_experiment and end.robot_fault is None
+        run, poses, _ = run_row(tb, run_id)
+        assert run.metrics["collided"] is True and poses > 2  # what it drove until the contact is data
+
+
+async def test_no_path_fails_the_whole_experiment_and_is_not_planned_twice(tmp_path):
+    async with running(tmp_path) as tb:
+        exp_id, run_id = add_experiment(tb, planner="prm", params={"samples": 2, "k": 1}, mode="sim")
+        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        assert end.status is RunStatus.FAILED and end.whole_experiment
+        assert end.error.startswith("planning failed: PRM found no path")
+        with pytest.raises(RunFailed) as exc:  # the remembered failure, not a second planning
+            await tb.services.paths.path_for(exp_id)
+        assert str(exc.value) == end.error and exc.value.whole_experiment
+
+
+async def test_a_robot_that_dies_mid_run_is_the_testbeds_fault(tmp_path):
+    async with running(tmp_path, time_scale=5.0) as tb:
+        _, run_id = add_experiment(tb, mode="sim")
+        task = asyncio.create_task(execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False))
+        for _ in range(300):
+            if run_row(tb, run_id)[0].status == "running":
+                break
+            await asyncio.sleep(0.05)
+        await tb.embedded.stop()
+        end = await asyncio.wait_for(task, 30)
+        assert end.status is RunStatus.ERROR and end.robot_fault == "sim-1", end
+        assert end.error.startswith("robot sim-1: "), end
+
+
+async def test_too_few_tracker_poses_is_the_testbeds_fault(tmp_path):
+    async with running(tmp_path, tracker_grace_s=0.0) as tb:
+        _, run_id = add_experiment(tb, mode="sim")
+        tb.tracker.open = lambda *a: None  # no pose window: the tracker stores nothing for the run
+        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        assert end.status is RunStatus.ERROR and end.error.startswith("cannot compute metrics: only 0 pose(s)")
+
+
+@pytest.mark.parametrize("stopping", [False, True])
+async def test_a_cancelled_run_ends_cancelled_or_interrupted_and_keeps_its_log(tmp_path, stopping):
+    async with running(tmp_path, time_scale=2.0) as tb:
+        _, run_id = add_experiment(tb, mode="sim")
+        task = asyncio.create_task(execute_run(assignment(tb, run_id, "sim"), tb.services,
+                                               stopping=lambda: stopping))
+        for _ in range(300):
+            if run_row(tb, run_id)[0].status == "running":
+                break
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(0.3)
+        task.cancel()
+        end = await asyncio.wait_for(task, 30)
+        assert end.status is (RunStatus.INTERRUPTED if stopping else RunStatus.CANCELLED)
+        assert run_row(tb, run_id)[2] > 3  # the protocol log up to the cut is kept
