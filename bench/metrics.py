@@ -8,7 +8,7 @@ with the points of P0 (the same size), the usual building block of
 nearest-point metrics.  Each figure is the median of ``--runs`` (default 5)
 interleaved rounds; ``ratio`` = time / baseline.
 
-Metrics timed, as DESIGN §6 defines them (``n`` = 200 samples, segments
+Metrics timed, as docs/design.md, "Metrics" defines them (``n`` = 200 samples, segments
 of 0.05 m) — the targets (<= 0.1 s and <= 5x baseline) apply to these:
 
 - ``deviation``: P0 resampled to 200 points, exact distance to the polyline Pr;

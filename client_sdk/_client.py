@@ -114,7 +114,7 @@ class Client(BaseClient):
         return self._send(self._get_environment(name))
 
     def create_environment(self, environment: Mapping[str, Any] | Environment) -> Environment:
-        """Add an environment file (DESIGN §3); :class:`Conflict` if the name is taken."""
+        """Add an environment file (docs/design.md, "Environment file"); :class:`Conflict` if the name is taken."""
         return self._send(self._create_environment(environment))
 
     # ------------------------------------------------------------------ uploaded programs

@@ -1,4 +1,4 @@
-"""Typed results: dataclasses mirroring the server's JSON responses (DESIGN §7).
+"""Typed results: dataclasses mirroring the server's JSON responses (docs/design.md, "REST API").
 
 They are defined here, not imported from the server, so the SDK runs without
 the server's dependencies.  Units are SI: metres, radians, seconds.  Unknown
@@ -92,7 +92,7 @@ class Plan(_FromJson):
 
 @dataclass
 class Environment(_FromJson):
-    """An environment (DESIGN §3): ``size`` (m) and rectangular ``blocks`` (centre, size, angle)."""
+    """An environment (docs/design.md, "Environment file"): ``size`` (m) and rectangular ``blocks`` (centre, size, angle)."""
 
     name: str
     size: list[float]
@@ -112,7 +112,7 @@ class Environment(_FromJson):
         raise KeyError(f"environment {self.name!r} has no plan {name!r} (plans: {', '.join(p.name for p in self.plans) or 'none'})")
 
     def to_json(self) -> dict[str, Any]:
-        """The environment file (DESIGN §3) of this environment."""
+        """The environment file (docs/design.md, "Environment file") of this environment."""
         d: dict[str, Any] = {"name": self.name, "size": list(self.size), "blocks": [dict(b) for b in self.blocks]}
         if self.plans:
             d["plans"] = [dataclasses.asdict(p) for p in self.plans]
@@ -123,7 +123,7 @@ class Environment(_FromJson):
 
 @dataclass
 class Run(_FromJson):
-    """One run: an experiment's ``mode`` (``sim``/``twb``) and ``repetition``, with its metrics (DESIGN §6)."""
+    """One run: an experiment's ``mode`` (``sim``/``twb``) and ``repetition``, with its metrics (docs/design.md, "Metrics")."""
 
     id: int
     experiment_id: int

@@ -1,4 +1,4 @@
-"""``send_path``: drive a robot agent directly over TCP with one ``T,T,P`` line (DESIGN §4).
+"""``send_path``: drive a robot agent directly over TCP with one ``T,T,P`` line (docs/design.md, "Robot protocol").
 
 This is the testbed's raw way, open to planners in any language: connect, read
 the ``HELLO`` greeting, send the path in millimetres and degrees, read the

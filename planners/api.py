@@ -49,7 +49,7 @@ class PlanResult:
     info: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (DESIGN §8): ``path``, ``length_m``, ``planning_time_s`` and details."""
+        """JSON-ready form (docs/design.md, "Command line"): ``path``, ``length_m``, ``planning_time_s`` and details."""
         return {
             "planner": self.planner,
             "path": np.round(self.path, 6).tolist(),

@@ -1,4 +1,4 @@
-"""Environment model (DESIGN §3): a rectangular field with rectangular blocks.
+"""Environment model (docs/design.md, "Environment file"): a rectangular field with rectangular blocks.
 
 An environment file is JSON::
 

@@ -1,4 +1,4 @@
-"""Path metrics (DESIGN §6): compare a planned path P0 with the path Pr a robot performed.
+"""Path metrics (docs/design.md, "Metrics"): compare a planned path P0 with the path Pr a robot performed.
 
 Pure numpy/scipy, no I/O.  Paths are ``(N, 2)`` or ``(N, 3)`` float arrays of
 ``x, y[, theta]`` in metres (and radians); the heading column is ignored,

@@ -1,4 +1,4 @@
-"""The robot wire protocol v1 (DESIGN §4): the one codec for agent, server and SDK.
+"""The robot wire protocol v1 (docs/design.md, "Robot protocol"): the one codec for agent, server and SDK.
 
 Lines are ASCII, end in ``\\n`` (``\\r\\n`` accepted), fields are separated by
 ``,`` and points by ``;``; spaces around fields are ignored.  On the wire,

@@ -37,7 +37,9 @@ def test_the_server_runs_from_an_installed_wheel(tmp_path):
         pytest.skip("uv is not installed (the Makefile installs it with pip when it can)")
     env = {**os.environ, "UV_NO_PROGRESS": "1"}
     env.pop("VIRTUAL_ENV", None)
-    built = subprocess.run([*uv, "build", "--wheel", "--out-dir", str(tmp_path / "dist"), str(ROOT)],
+    # sdist first, then the wheel from it (in a temporary tree: no build/ left in the checkout,
+    # and only what the sdist ships reaches the wheel)
+    built = subprocess.run([*uv, "build", "--out-dir", str(tmp_path / "dist"), str(ROOT)],
                            capture_output=True, text=True, env=env, timeout=300)
     assert built.returncode == 0, built.stderr
     wheel = next((tmp_path / "dist").glob("teleworkbench-*.whl"))

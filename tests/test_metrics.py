@@ -1,4 +1,4 @@
-"""Path metrics (DESIGN §6): hand-computed values, edge cases, and brute-force references."""
+"""Path metrics (docs/design.md, "Metrics"): hand-computed values, edge cases, and brute-force references."""
 
 import doctest
 import json

@@ -1,4 +1,4 @@
-"""``twb metrics`` through the real console script (DESIGN §8): JSON out, one-line errors."""
+"""``twb metrics`` through the real console script (docs/design.md, "Command line"): JSON out, one-line errors."""
 
 import json
 import math

@@ -1,4 +1,4 @@
-"""``twb agent``: run emulated robots speaking the wire protocol (DESIGN §4, §8)."""
+"""``twb agent``: run emulated robots speaking the wire protocol (docs/design.md, "Robot protocol" and "Command line")."""
 
 from __future__ import annotations
 

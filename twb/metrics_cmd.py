@@ -1,4 +1,4 @@
-"""``twb metrics``: compare a planned path with an executed one from CSV files (DESIGN §6, §8).
+"""``twb metrics``: compare a planned path with an executed one from CSV files (docs/design.md, "Metrics" and "Command line").
 
 File format: CSV with a header naming the columns ``t,x,y,theta`` (any
 order; extra columns are ignored).  ``x`` and ``y`` (m) are required on
@@ -114,7 +114,7 @@ def metrics(
         float, typer.Option("--goal-tolerance", help="Distance (m) from the planned end that counts as goal reached.")
     ] = 0.05,
 ) -> None:
-    """Print the metrics of an executed path against the planned one as JSON (DESIGN §6)."""
+    """Print the metrics of an executed path against the planned one as JSON (docs/design.md, "Metrics")."""
     from planners import load_environment
     from planners.metrics import MetricSettings, run_metrics
     from robot_agent.robot_profile import load_profile

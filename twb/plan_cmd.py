@@ -1,4 +1,4 @@
-"""``twb plan`` and ``twb planners``: plan a path from the shell (DESIGN §8)."""
+"""``twb plan`` and ``twb planners``: plan a path from the shell (docs/design.md, "Command line")."""
 
 from __future__ import annotations
 

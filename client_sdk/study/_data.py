@@ -4,7 +4,7 @@ The collector writes, in the output directory:
 
 - ``study.json``: the study file, the server, timings, the environments and
   every experiment (job, status, planned path, run ids);
-- ``runs.csv``: one row per run with every metric (DESIGN §6; ``planned_*``
+- ``runs.csv``: one row per run with every metric (docs/design.md, "Metrics"; ``planned_*``
   are the planned path's, ``st_*`` the direct sim-vs-twb comparison of the
   run's repetition);
 - ``direct.csv``: one row per experiment and repetition with both modes;

@@ -19,7 +19,7 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray, *, planned: Optiona
 
     Parameters
     ----------
-    env : environment file (DESIGN §3) the run was made in
+    env : environment file (docs/design.md, "Environment file") the run was made in
     poses : (N, 4) float array, s, m, m, rad
         Logged poses t, x, y, theta, oldest first.
     planned : (M, 2|3) float array, m, optional
