@@ -1,0 +1,97 @@
+"""Processes the testbed starts end with it, and a stop (Ctrl-C) ends runs under way ``interrupted``."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+from servers import Process, wait_for
+
+ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
+SLOW_JOB = {"environment": "one-block", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0], "planner": "fmm"}
+
+
+def descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` (from /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        ppid = int(stat.rsplit(")", 1)[1].split()[1])
+        children.setdefault(ppid, []).append(int(entry.name))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_worker_processes_die_with_a_killed_server(tmp_path):
+    p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
+    try:
+        deadline = time.monotonic() + 30
+        while len(kids := descendants(p.proc.pid)) < 2:  # the planning workers (and their tracker)
+            assert time.monotonic() < deadline, kids
+            time.sleep(0.2)
+        with p.client() as c:  # the workers work: a planned job completes
+            exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "environment": "room", "modes": ["sim"]}).json()
+            assert wait_for(c, exp["id"], timeout=60)["status"] == "completed"
+        kids = descendants(p.proc.pid)
+    finally:
+        p.stop(signal.SIGKILL)
+    deadline = time.monotonic() + 20
+    while left := [k for k in kids if alive(k)]:
+        assert time.monotonic() < deadline, f"processes outlived their server: {left}"
+        time.sleep(0.2)
+
+
+def test_ctrl_c_mid_run_ends_it_interrupted_and_retries_nothing(tmp_path):
+    p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path)
+    with p.client() as c:
+        assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
+        exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["twb"], "repetitions": 2}).json()
+        deadline = time.monotonic() + 60
+        while c.get(f"/api/v1/experiments/{exp['id']}").json()["runs"][0]["status"] != "running":
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+        time.sleep(1.0)  # it drives
+    assert p.stop(signal.SIGINT) == 0, p.output()
+    assert "Traceback" not in p.output(), p.output()
+    again = Process(["server"], tmp_path)
+    try:
+        with again.client() as c:
+            e = c.get(f"/api/v1/experiments/{exp['id']}").json()
+            for run in e["runs"]:  # both ran at once, on two sub-fields
+                assert run["status"] == "interrupted" and run["attempt"] == 1, run
+                assert run["error"] == "the server stopped during this run", run
+            twb = e["runs"][0]
+            poses = c.get(f"/api/v1/runs/{twb['id']}/poses").json()
+            messages = c.get(f"/api/v1/runs/{twb['id']}/messages").json()
+            assert poses["count"] > 0 and messages["count"] > 3  # what it did until the stop is kept
+    finally:
+        again.stop()
+
+
+def test_a_stopped_testbed_leaves_no_process_behind(tmp_path):
+    p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
+    kids = descendants(p.proc.pid)
+    assert p.stop(signal.SIGINT) == 0
+    deadline = time.monotonic() + 20
+    while left := [k for k in kids if alive(k) and k != os.getpid()]:
+        assert time.monotonic() < deadline, f"processes outlived their server: {left}"
+        time.sleep(0.2)
