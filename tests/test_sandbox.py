@@ -150,6 +150,34 @@ def test_the_robot_port_answers_with_the_protocol_codec():
     assert port.feed(b"", 0.8) == (b"", True)  # the program hung up
 
 
+HYBRID_MOUNTS = """\
+31 23 0:28 / /sys/fs/cgroup rw,relatime - tmpfs tmpfs rw,mode=755
+35 31 0:32 / /sys/fs/cgroup/memory rw,relatime - cgroup cgroup rw,memory
+36 31 0:33 / /sys/fs/cgroup/cpu,cpuacct rw,relatime - cgroup cgroup rw,cpu,cpuacct
+39 31 0:36 / /sys/fs/cgroup/pids rw,relatime - cgroup cgroup rw,pids
+41 31 0:38 / /sys/fs/cgroup/unified rw,relatime - cgroup2 cgroup2 rw
+"""
+
+
+@pytest.mark.parametrize("proc_cgroup, mountinfo, dirs", [
+    # this machine: v1 memory and pids, cgroup2 with no controllers beside them
+    ("8:pids:/\n4:memory:/process_api/abc\n2:cpu,cpuacct:/\n0::/\n", HYBRID_MOUNTS,
+     {"memory": "/sys/fs/cgroup/memory/process_api/abc", "pids": "/sys/fs/cgroup/pids",
+      "cpu": "/sys/fs/cgroup/cpu,cpuacct", "cpuacct": "/sys/fs/cgroup/cpu,cpuacct", "": "/sys/fs/cgroup/unified"}),
+    # a systemd service on a cgroup v2 host
+    ("0::/system.slice/twb.service\n", "30 23 0:26 / /sys/fs/cgroup rw - cgroup2 cgroup2 rw,nsdelegate\n",
+     {"": "/sys/fs/cgroup/system.slice/twb.service"}),
+    # a container with its own cgroup namespace, and a mount point with a space in its name
+    ("0::/\n", "5 1 0:26 / /sys/fs/cgroup ro - cgroup2 cgroup2 rw\n6 1 0:26 / /mnt/a\\040b rw - cgroup2 c rw\n",
+     {"": "/sys/fs/cgroup"}),
+    # only a subtree mounted, the process's cgroup outside it: not visible
+    ("0::/user.slice\n", "30 23 0:26 /system.slice /sys/fs/cgroup rw - cgroup2 cgroup2 rw\n", {}),
+    ("0::/system.slice/x\n", "30 23 0:26 /system.slice /cg rw - cgroup2 cgroup2 rw\n", {"": "/cg/x"}),
+])
+def test_cgroup_directories_come_from_proc(proc_cgroup, mountinfo, dirs):
+    assert cgroups.cgroup_dirs(proc_cgroup, mountinfo) == dirs
+
+
 # --------------------------------------------------------------------------- as root
 
 
@@ -251,13 +279,18 @@ if not all(ready) or any(codes):
 """ + SEND_GOOD_PATH
 
 
-def cgroups_left(name: str) -> list[str]:
-    """Directories of the cgroup ``name`` still there (the launcher made it beside this process's cgroups)."""
+def program_cgroup_parents() -> list[str]:
+    """Where launchers started by this process make program cgroups (in each hierarchy)."""
     try:
         dirs = cgroups.own_dirs()
     except cgroups.Unavailable:
         return []
-    return [os.path.join(d, name) for d in dirs.values() if os.path.exists(os.path.join(d, name))]
+    return [os.path.dirname(d) if os.path.basename(d) == cgroups.LEAF else d for d in dirs.values()]
+
+
+def cgroups_left(name: str) -> list[str]:
+    """Directories of the program cgroup ``name`` still there."""
+    return [os.path.join(d, name) for d in program_cgroup_parents() if os.path.exists(os.path.join(d, name))]
 
 
 MEMORY_LIMITS = {**LIMITS, "memory_bytes": 512 << 20, "wall_s": 30, "cpu_s": 10}
@@ -294,6 +327,20 @@ def test_a_program_under_the_memory_limit_completes(program_cgroups, data_dir):
     assert "codes [0, 0, 0, 0]" in r["stdout"] and r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]]
     assert 4 * 60 << 10 <= r["memory_peak_kib"] < 512 << 10
     assert explain(r, MEMORY_LIMITS) is None and cgroups_left(r["isolation"]["cgroup_name"]) == []
+
+
+def test_cgroups_left_by_killed_launchers_are_removed(program_cgroups, data_dir):
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    name = f"{cgroups.PREFIX}{gone.pid}-left"
+    dirs = cgroups.own_dirs()
+    keys = ["memory", "pids"] if program_cgroups["cgroup"] == "v1" else [""]
+    for d in {os.path.dirname(dirs[k]) if os.path.basename(dirs[k]) == cgroups.LEAF else dirs[k]
+              for k in keys if k in dirs}:
+        os.mkdir(os.path.join(d, name))
+    assert cgroups_left(name)
+    r = launch(job("print('ran')", data_dir=data_dir))
+    assert r["stdout"] == "ran\n" and cgroups_left(name) == []
 
 
 @needs_root
@@ -368,9 +415,8 @@ def test_the_launcher_and_its_program_end_when_the_server_is_killed(data_dir, na
         server.wait()
     wait_until(lambda: not alive(launcher) and not processes_of(uid), 20,
                f"launcher alive: {alive(launcher)}; program: {processes_of(uid)}")
-    if cgroups.own_dirs():
-        wait_until(lambda: not any(e.startswith(f"{cgroups.PREFIX}{launcher}-") for d in cgroups.own_dirs().values()
-                                   for e in os.listdir(d)), 10, "the program's cgroup was not removed")
+    wait_until(lambda: not any(e.startswith(f"{cgroups.PREFIX}{launcher}-") for d in program_cgroup_parents()
+                               for e in os.listdir(d)), 10, "the program's cgroup was not removed")
 
 
 @needs_root

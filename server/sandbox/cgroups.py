@@ -33,7 +33,8 @@ import time
 from dataclasses import dataclass
 from typing import ClassVar, Optional
 
-__all__ = ["LEAF", "PREFIX", "CgroupV1", "CgroupV2", "ProgramCgroup", "Unavailable", "create", "own_dirs"]
+__all__ = ["LEAF", "PREFIX", "CgroupV1", "CgroupV2", "ProgramCgroup", "Unavailable", "cgroup_dirs", "create",
+           "own_dirs"]
 
 #: names of program cgroups: twb-program-<launcher pid>-<random>
 PREFIX = "twb-program-"
@@ -247,26 +248,36 @@ def own_dirs() -> dict[str, str]:
 
     Raises :class:`Unavailable` when neither is mounted where this process can see it.
     """
-    member: dict[str, str] = {}
-    with open("/proc/self/cgroup") as f:
-        for line in f:
-            _, controllers, path = line.rstrip("\n").split(":", 2)
-            for c in controllers.split(",") if controllers else [""]:
-                member[c] = path
-    found: dict[str, str] = {}
-    with open("/proc/self/mountinfo") as f:
-        for line in f:
-            left, _, right = line.partition(" - ")
-            fields, fs = left.split(), right.split()
-            if len(fs) < 3 or fs[0] not in ("cgroup", "cgroup2"):
-                continue
-            root, point = _unescape(fields[3]), _unescape(fields[4])
-            for c in ([""] if fs[0] == "cgroup2" else fs[2].split(",")):
-                path = member.get(c)
-                if path is not None and c not in found and (path == root or path.startswith(root.rstrip("/") + "/")):
-                    found[c] = os.path.normpath(os.path.join(point, os.path.relpath(path, root)))
+    with open("/proc/self/cgroup") as f, open("/proc/self/mountinfo") as g:
+        found = cgroup_dirs(f.read(), g.read())
     if not found:
         raise Unavailable("no cgroup file system mounted")
+    return found
+
+
+def cgroup_dirs(proc_cgroup: str, mountinfo: str) -> dict[str, str]:
+    """Where a process's cgroups are: ``""`` (v2) and each v1 controller -> directory.
+
+    ``proc_cgroup`` and ``mountinfo`` are the texts of its ``/proc/<pid>/cgroup``
+    and ``/proc/<pid>/mountinfo``; a cgroup outside every mount's root is not
+    visible (and left out).
+    """
+    member: dict[str, str] = {}
+    for line in proc_cgroup.splitlines():
+        _, controllers, path = line.split(":", 2)
+        for c in controllers.split(",") if controllers else [""]:
+            member[c] = path
+    found: dict[str, str] = {}
+    for line in mountinfo.splitlines():
+        left, _, right = line.partition(" - ")
+        fields, fs = left.split(), right.split()
+        if len(fs) < 3 or fs[0] not in ("cgroup", "cgroup2"):
+            continue
+        root, point = _unescape(fields[3]), _unescape(fields[4])
+        for c in ([""] if fs[0] == "cgroup2" else fs[2].split(",")):
+            path = member.get(c)
+            if path is not None and c not in found and (path == root or path.startswith(root.rstrip("/") + "/")):
+                found[c] = os.path.normpath(os.path.join(point, os.path.relpath(path, root)))
     return found
 
 
