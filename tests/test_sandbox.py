@@ -8,9 +8,11 @@ server, simulated on a root machine.
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import json
 import os
+import random
 import shutil
 import signal
 import socket
@@ -18,13 +20,14 @@ import stat
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
 import pytest
 
 from robot_agent.protocol import MAX_LINE_BYTES, RobotState, format_hello, format_ok, format_status
-from server.sandbox import cgroups, explain, launcher_env, robot_port
+from server.sandbox import cgroups, explain, launcher_env, robot_port, service
 from server.sandbox.robot_port import RobotPort
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -176,6 +179,38 @@ HYBRID_MOUNTS = """\
 ])
 def test_cgroup_directories_come_from_proc(proc_cgroup, mountinfo, dirs):
     assert cgroups.cgroup_dirs(proc_cgroup, mountinfo) == dirs
+
+
+async def test_sandbox_uids_are_locked_off_the_event_loop_and_freed_when_cancelled(monkeypatch):
+    base = 3_990_000 + random.randrange(0, 900) * 10
+    threads = []
+    take = service.take_uid
+
+    def take_uid(b: int) -> tuple[int, int]:
+        threads.append(threading.get_ident())
+        time.sleep(0.2)  # slow lock files: the event loop must not wait for them
+        return take(b)
+
+    monkeypatch.setattr(service, "take_uid", take_uid)
+    (uid, lock), (uid2, lock2) = await asyncio.gather(service._take_uid_off_loop(base),
+                                                      service._take_uid_off_loop(base))
+    assert sorted([uid, uid2]) == [base, base + 1] and len(threads) == 2
+    assert threading.get_ident() not in threads  # the lock files were handled in threads, not on the loop
+    os.close(lock)
+    os.close(lock2)
+    task = asyncio.create_task(service._take_uid_off_loop(base))
+    await asyncio.sleep(0.05)  # the thread has started and takes the lock after its caller is gone
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    deadline = time.monotonic() + 10
+    while True:  # the cancelled caller's lock is freed once its thread is done
+        uid, lock = take(base)
+        os.close(lock)
+        if uid == base:
+            break
+        assert time.monotonic() < deadline, "the lock taken for a cancelled caller was never freed"
+        await asyncio.sleep(0.05)
 
 
 # --------------------------------------------------------------------------- as root
