@@ -1,6 +1,6 @@
 """The sandbox launcher on its own: what each isolation level enforces (docs/uploads.md, "what is enforced where").
 
-Jobs go straight to ``python -m server.sandbox_launch``.  The unprivileged
+Jobs go straight to ``python -m server.sandbox.launch``.  The unprivileged
 cases run the launcher as uid 65534 without capabilities (``setpriv``) in a
 private mount namespace where this Python stays reachable — a non-root
 server, simulated on a root machine.
@@ -8,9 +8,11 @@ server, simulated on a root machine.
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import json
 import os
+import random
 import shutil
 import signal
 import socket
@@ -18,13 +20,15 @@ import stat
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 from pathlib import Path
 
 import pytest
 
-from robot_agent.protocol import MAX_LINE_BYTES
-from server import sandbox_launch
-from server.sandbox import explain, launcher_env
+from robot_agent.protocol import MAX_LINE_BYTES, RobotState, format_hello, format_ok, format_status
+from server.sandbox import cgroups, explain, launcher_env, robot_port, service
+from server.sandbox.robot_port import RobotPort
 
 ROOT = Path(__file__).resolve().parent.parent
 NOBODY = 65534
@@ -62,7 +66,7 @@ def job(program: str, *, data_dir: Path, namespaces: str = "auto", interpreter: 
 
 
 def launch(spec: dict, prefix: list[str] = ()) -> dict:
-    r = subprocess.run([*prefix, sys.executable, "-m", "server.sandbox_launch"], input=json.dumps(spec).encode(),
+    r = subprocess.run([*prefix, sys.executable, "-m", "server.sandbox.launch"], input=json.dumps(spec).encode(),
                        capture_output=True, timeout=60, cwd=ROOT, env=launcher_env())
     assert r.returncode == 0, r.stderr.decode()
     return json.loads(r.stdout.decode().splitlines()[-1])
@@ -104,7 +108,7 @@ except OSError as exc:
 
 
 def test_the_launcher_keeps_the_protocol_line_limit():
-    assert sandbox_launch.MAX_LINE_BYTES == MAX_LINE_BYTES
+    assert robot_port.MAX_LINE_BYTES == MAX_LINE_BYTES
 
 
 @pytest.mark.parametrize("result, reason", [
@@ -123,10 +127,90 @@ def test_the_launcher_keeps_the_protocol_line_limit():
     ({"signal": signal.SIGSEGV}, "program crashed: killed by signal SIGSEGV"),
     ({"exit_code": 0, "connected": True}, "program sent no path: it exited without sending a T,T,P line"),
     ({"exit_code": 0}, "program sent no path: it exited without connecting to the robot port"),
+    ({"memory_oom_kills": 1, "signal": signal.SIGKILL, "exit_code": None},
+     "program memory limit: it used all of its 256 MiB of memory (all its processes together) and was killed"),
+    ({"fork_refusals": 3, "exit_code": 1}, "program process limit: it reached its limit of 8 processes"),
 ])
 def test_explain_names_the_reason(result, reason):
     got = explain({"path": None, **result}, LIMITS)
     assert got is None if reason is None else got.startswith(reason), got
+
+
+def test_the_robot_port_answers_with_the_protocol_codec():
+    port = RobotPort(robot_id="sim-1", platform="BeBot", field_size=(1.8, 1.8), start_pose=(0.3, 0.3, 0.0))
+    assert port.greeting() == (format_hello("sim-1", "BeBot") + "\n").encode() and port.connected
+    out, done = port.feed(b"T,T,Q\r\nT,T,S\nT,T,B\nT,T,P,300,300\nT,T,", 0.5)
+    assert out.decode().splitlines() == [
+        format_status(RobotState.IDLE, (0.3, 0.3, 0.0), 0.0), format_ok("S"),
+        "ERR,UNSUPPORTED,this robot port only takes a path (T,T,P), a query or a stop",
+        "ERR,SYNTAX,point 1: expected 3 fields, got 2"] and not done
+    out, done = port.feed(b"P," + b"1" * MAX_LINE_BYTES, 0.6)  # still no newline: refused once, dropped
+    assert out == f"ERR,TOOLONG,line longer than {MAX_LINE_BYTES} bytes\n".encode() and not done
+    out, done = port.feed(b"1" * 10 + b"\nT,T,P,300,300,0;1500,300,90\nT,T,Q\n", 0.7)
+    assert out == b"OK,P,2\n" and done  # the rest of the long line is dropped; nothing after the path
+    assert port.path == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]] and port.path_at == 0.7
+    assert len(port.refused) == 3 and port.log[-1] == [">", "OK,P,2"]
+    assert port.feed(b"", 0.8) == (b"", True)  # the program hung up
+
+
+HYBRID_MOUNTS = """\
+31 23 0:28 / /sys/fs/cgroup rw,relatime - tmpfs tmpfs rw,mode=755
+35 31 0:32 / /sys/fs/cgroup/memory rw,relatime - cgroup cgroup rw,memory
+36 31 0:33 / /sys/fs/cgroup/cpu,cpuacct rw,relatime - cgroup cgroup rw,cpu,cpuacct
+39 31 0:36 / /sys/fs/cgroup/pids rw,relatime - cgroup cgroup rw,pids
+41 31 0:38 / /sys/fs/cgroup/unified rw,relatime - cgroup2 cgroup2 rw
+"""
+
+
+@pytest.mark.parametrize("proc_cgroup, mountinfo, dirs", [
+    # this machine: v1 memory and pids, cgroup2 with no controllers beside them
+    ("8:pids:/\n4:memory:/process_api/abc\n2:cpu,cpuacct:/\n0::/\n", HYBRID_MOUNTS,
+     {"memory": "/sys/fs/cgroup/memory/process_api/abc", "pids": "/sys/fs/cgroup/pids",
+      "cpu": "/sys/fs/cgroup/cpu,cpuacct", "cpuacct": "/sys/fs/cgroup/cpu,cpuacct", "": "/sys/fs/cgroup/unified"}),
+    # a systemd service on a cgroup v2 host
+    ("0::/system.slice/twb.service\n", "30 23 0:26 / /sys/fs/cgroup rw - cgroup2 cgroup2 rw,nsdelegate\n",
+     {"": "/sys/fs/cgroup/system.slice/twb.service"}),
+    # a container with its own cgroup namespace, and a mount point with a space in its name
+    ("0::/\n", "5 1 0:26 / /sys/fs/cgroup ro - cgroup2 cgroup2 rw\n6 1 0:26 / /mnt/a\\040b rw - cgroup2 c rw\n",
+     {"": "/sys/fs/cgroup"}),
+    # only a subtree mounted, the process's cgroup outside it: not visible
+    ("0::/user.slice\n", "30 23 0:26 /system.slice /sys/fs/cgroup rw - cgroup2 cgroup2 rw\n", {}),
+    ("0::/system.slice/x\n", "30 23 0:26 /system.slice /cg rw - cgroup2 cgroup2 rw\n", {"": "/cg/x"}),
+])
+def test_cgroup_directories_come_from_proc(proc_cgroup, mountinfo, dirs):
+    assert cgroups.cgroup_dirs(proc_cgroup, mountinfo) == dirs
+
+
+async def test_sandbox_uids_are_locked_off_the_event_loop_and_freed_when_cancelled(monkeypatch):
+    base = 3_990_000 + random.randrange(0, 900) * 10
+    threads = []
+    take = service.take_uid
+
+    def take_uid(b: int) -> tuple[int, int]:
+        threads.append(threading.get_ident())
+        time.sleep(0.2)  # slow lock files: the event loop must not wait for them
+        return take(b)
+
+    monkeypatch.setattr(service, "take_uid", take_uid)
+    (uid, lock), (uid2, lock2) = await asyncio.gather(service._take_uid_off_loop(base),
+                                                      service._take_uid_off_loop(base))
+    assert sorted([uid, uid2]) == [base, base + 1] and len(threads) == 2
+    assert threading.get_ident() not in threads  # the lock files were handled in threads, not on the loop
+    os.close(lock)
+    os.close(lock2)
+    task = asyncio.create_task(service._take_uid_off_loop(base))
+    await asyncio.sleep(0.05)  # the thread has started and takes the lock after its caller is gone
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    deadline = time.monotonic() + 10
+    while True:  # the cancelled caller's lock is freed once its thread is done
+        uid, lock = take(base)
+        os.close(lock)
+        if uid == base:
+            break
+        assert time.monotonic() < deadline, "the lock taken for a cancelled caller was never freed"
+        await asyncio.sleep(0.05)
 
 
 # --------------------------------------------------------------------------- as root
@@ -200,6 +284,186 @@ def test_without_namespaces_required_refuses_and_auto_falls_back(data_dir):
     assert "no namespaces available" in r["isolation"]["reason"]
 
 
+# --------------------------------------------------------------------------- the memory limit is per program
+
+SEND_GOOD_PATH = """
+import os, socket
+with socket.create_connection((os.environ["TWB_ROBOT_HOST"], int(os.environ["TWB_ROBOT_PORT"]))) as s:
+    f = s.makefile("rwb")
+    f.readline()
+    f.write(b"T,T,P,300,300,0;1500,300,90\\n")
+    f.flush()
+    print(f.readline().decode().strip())
+"""
+
+
+def children_touching(mib: int, n: int = 4) -> str:
+    """A program whose ``n`` children each fill ``mib`` MiB and hold it until all have; a path if they all could."""
+    child = f"import sys; x = b'x' * ({mib} << 20); print('ready', flush=True); sys.stdin.read()"
+    return f"""
+import subprocess, sys
+kids = [subprocess.Popen([sys.executable, "-c", {child!r}], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        for _ in range({n})]
+ready = [k.stdout.readline() == b"ready\\n" for k in kids]
+for k in kids:
+    k.stdin.close()
+codes = [k.wait() for k in kids]
+print("ready", ready, "codes", codes, flush=True)
+if not all(ready) or any(codes):
+    sys.exit(1)
+""" + SEND_GOOD_PATH
+
+
+def program_cgroup_parents() -> list[str]:
+    """Where launchers started by this process make program cgroups (in each hierarchy)."""
+    try:
+        dirs = cgroups.own_dirs()
+    except cgroups.Unavailable:
+        return []
+    return [os.path.dirname(d) if os.path.basename(d) == cgroups.LEAF else d for d in dirs.values()]
+
+
+def cgroups_left(name: str) -> list[str]:
+    """Directories of the program cgroup ``name`` still there."""
+    return [os.path.join(d, name) for d in program_cgroup_parents() if os.path.exists(os.path.join(d, name))]
+
+
+MEMORY_LIMITS = {**LIMITS, "memory_bytes": 512 << 20, "wall_s": 30, "cpu_s": 10}
+
+
+@pytest.fixture(scope="module")
+def program_cgroups():
+    """Skip unless programs get a cgroup here (as root on this machine they do: cgroup v1 memory and pids)."""
+    if not is_root or PYTHON is None:
+        pytest.skip("needs root and a system python3")
+    probe = launch({"probe": True, "namespaces": "auto"})
+    if probe["memory_limit"] != "cgroup":
+        pytest.skip(f"no cgroup for programs on this machine: {probe['memory_note']}")
+    return probe
+
+
+@pytest.mark.parametrize("namespaces", ["auto", "off"])
+def test_the_memory_limit_holds_for_all_processes_of_a_program_together(program_cgroups, data_dir, namespaces):
+    """4 children x 200 MiB under 512 MiB: each is under the limit, the program is not; the kernel kills it."""
+    r = launch(job(children_touching(200), data_dir=data_dir, namespaces=namespaces, limits=MEMORY_LIMITS))
+    iso = r["isolation"]
+    assert iso["memory_limit"] == "cgroup" and iso["cgroup"] == program_cgroups["cgroup"]
+    assert r["path"] is None and r["memory_oom_kills"] >= 1, r
+    assert explain(r, MEMORY_LIMITS) == ("program memory limit: it used all of its 512 MiB of memory "
+                                         "(all its processes together) and was killed")
+    assert r["memory_peak_kib"] <= 512 << 10
+    assert cgroups_left(iso["cgroup_name"]) == []
+    assert processes_of(3_950_000) == []
+
+
+def test_a_program_under_the_memory_limit_completes(program_cgroups, data_dir):
+    r = launch(job(children_touching(60), data_dir=data_dir, limits=MEMORY_LIMITS))
+    assert r["isolation"]["memory_limit"] == "cgroup" and r["memory_oom_kills"] == 0, r
+    assert "codes [0, 0, 0, 0]" in r["stdout"] and r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]]
+    assert 4 * 60 << 10 <= r["memory_peak_kib"] < 512 << 10
+    assert explain(r, MEMORY_LIMITS) is None and cgroups_left(r["isolation"]["cgroup_name"]) == []
+
+
+def test_cgroups_left_by_killed_launchers_are_removed(program_cgroups, data_dir):
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    name = f"{cgroups.PREFIX}{gone.pid}-left"
+    dirs = cgroups.own_dirs()
+    keys = ["memory", "pids"] if program_cgroups["cgroup"] == "v1" else [""]
+    for d in {os.path.dirname(dirs[k]) if os.path.basename(dirs[k]) == cgroups.LEAF else dirs[k]
+              for k in keys if k in dirs}:
+        os.mkdir(os.path.join(d, name))
+    assert cgroups_left(name)
+    r = launch(job("print('ran')", data_dir=data_dir))
+    assert r["stdout"] == "ran\n" and cgroups_left(name) == []
+
+
+@needs_root
+def test_without_cgroups_the_memory_limit_is_per_process(data_dir):
+    """The documented fallback: RLIMIT_AS bounds each process, so 4 x 200 MiB pass a 512 MiB limit."""
+    r = launch({**job(children_touching(200), data_dir=data_dir, limits=MEMORY_LIMITS), "cgroups": "off"})
+    assert r["isolation"]["memory_limit"] == "per-process" and r["isolation"]["cgroup"] is None
+    assert r["memory_oom_kills"] is None and r["path"] is not None, r
+    r = launch({**job("x = b'x' * (600 << 20)", data_dir=data_dir, limits=MEMORY_LIMITS), "cgroups": "off"})
+    assert explain(r, MEMORY_LIMITS) == "program memory limit: it ran out of its 512 MiB of memory"
+
+
+# --------------------------------------------------------------------------- the launcher ends with its server
+
+#: starts the launcher from a thread that ends at once, prints its pid, then prints its result or sleeps
+INTERMEDIATE = """
+import subprocess, sys, threading, time
+job = sys.stdin.buffer.read()
+started = []
+def start():
+    p = subprocess.Popen([sys.executable, "-m", "server.sandbox.launch"], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE)
+    p.stdin.write(job)
+    p.stdin.close()
+    started.append(p)
+thread = threading.Thread(target=start)
+thread.start()
+thread.join()  # the launcher's parent thread is gone, its parent process is not
+print(started[0].pid, flush=True)
+if sys.argv[1] == "result":
+    print(started[0].stdout.read().decode().strip(), flush=True)
+else:
+    time.sleep(600)
+"""
+
+
+def intermediate(spec: dict, mode: str) -> tuple[subprocess.Popen, int]:
+    """An intermediate process (the server's stand-in) running the launcher; (it, the launcher's pid)."""
+    p = subprocess.Popen([sys.executable, "-c", INTERMEDIATE, mode], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         cwd=ROOT, env=launcher_env())
+    p.stdin.write(json.dumps(spec).encode())
+    p.stdin.close()
+    return p, int(p.stdout.readline())
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in "ZX"
+    except OSError:
+        return False
+
+
+def wait_until(condition, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+
+
+@needs_root
+@pytest.mark.parametrize("namespaces, uid", [("auto", 3_950_003), ("off", 3_950_004)])
+def test_the_launcher_and_its_program_end_when_the_server_is_killed(data_dir, namespaces, uid):
+    spec = job("import time\ntime.sleep(600)", data_dir=data_dir, namespaces=namespaces, uid=uid,
+               limits={**LIMITS, "wall_s": 300, "cpu_s": 60})
+    server, launcher = intermediate(spec, "sleep")
+    try:
+        wait_until(lambda: processes_of(uid), 30, "the program never started")
+    finally:
+        server.kill()
+        server.wait()
+    wait_until(lambda: not alive(launcher) and not processes_of(uid), 20,
+               f"launcher alive: {alive(launcher)}; program: {processes_of(uid)}")
+    wait_until(lambda: not any(e.startswith(f"{cgroups.PREFIX}{launcher}-") for d in program_cgroup_parents()
+                               for e in os.listdir(d)), 10, "the program's cgroup was not removed")
+
+
+@needs_root
+def test_the_launcher_outlives_the_server_thread_that_started_it(data_dir):
+    """The parent-death signal also comes when that thread ends; the launcher checks its parent and goes on."""
+    program = "import time\ntime.sleep(1.5)\n" + SEND_GOOD_PATH
+    server, _ = intermediate(job(program, data_dir=data_dir), "result")
+    r = json.loads(server.stdout.read().decode().splitlines()[-1])
+    assert server.wait() == 0
+    assert r["launch_error"] is None and r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]], r
+
+
 # --------------------------------------------------------------------------- an unprivileged server (simulated)
 
 
@@ -226,7 +490,7 @@ def _as_user_prefix(uid: int) -> list[str] | None:
             script += [f"mkdir -p '{d}/{child}'", f"mount --bind {stage}/{k}-{j} '{d}/{child}'"]
     script.append(f'exec setpriv --reuid {uid} --regid {uid} --clear-groups --inh-caps=-all --bounding-set=-all "$@"')
     prefix = ["unshare", "--mount", "sh", "-c", "\n".join(script), "sh"]
-    ok = subprocess.run([*prefix, sys.executable, "-c", "import numpy, server.sandbox_launch"], capture_output=True)
+    ok = subprocess.run([*prefix, sys.executable, "-c", "import numpy, server.sandbox.launch"], capture_output=True)
     return prefix if ok.returncode == 0 else None
 
 

@@ -250,6 +250,9 @@ def test_the_failures_ran_beside_good_jobs_within_their_limits(batch):
     assert batch["done"]["sleeps"]["planning_info"]["program"]["timed_out"] is True
     assert batch["done"]["cpu_loop"]["planning_info"]["program"]["cpu_s"] == pytest.approx(1, abs=0.5)
     assert batch["done"]["fork_bomb"]["planning_info"]["program"]["processes_max"] <= 12
+    bomb = batch["done"]["memory_bomb"]["planning_info"]["program"]
+    if bomb["isolation"]["memory_limit"] == "cgroup":  # the kernel's count of all its processes
+        assert bomb["memory_peak_kib"] <= 160 << 10
     assert sandbox_processes() == []
 
 
@@ -299,6 +302,7 @@ def test_upload_limits_and_validation(client):
     info = client.get("/api/v1/programs/sandbox").json()
     assert info["uploads_enabled"] is True and "python3" in info["interpreters"]
     assert info["limits"]["wall_s"] == 5 and info["limits"]["processes"] == 12
+    assert info["isolation"]["memory_limit"] in ("cgroup", "per-process")  # which one: docs/uploads.md
     if os.geteuid() == 0:
         assert info["isolation"]["network"] == "loopback only" and info["isolation"]["runs_as"] == "a uid of its own"
 

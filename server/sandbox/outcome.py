@@ -1,0 +1,130 @@
+"""What a program's execution gave: the launcher's result turned into a path or a reason, and log lines."""
+
+from __future__ import annotations
+
+import signal
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from .program import ProgramSpec
+
+__all__ = ["ProgramOutcome", "explain", "to_outcome"]
+
+_FORK_SIGNS = ("Resource temporarily unavailable", "BlockingIOError", "fork: retry", "Cannot fork",
+               "can't fork", "fork failed")
+_MEMORY_SIGNS = ("MemoryError", "Cannot allocate memory", "cannot allocate", "out of memory", "bad_alloc",
+                 "Out of memory", "failed to map segment", "mmap failed")
+
+
+@dataclass
+class ProgramOutcome:
+    """What one execution gave: a path (m, m, rad) or the reason there is none."""
+
+    path: Optional[list[list[float]]]
+    reason: Optional[str]
+    #: (direction, line) for the run's log: ``o`` stdout, ``e`` stderr, ``s`` sandbox and robot port
+    log: list[tuple[str, str]] = field(default_factory=list)
+    info: dict[str, Any] = field(default_factory=dict)
+    planning_time_s: Optional[float] = None
+
+
+def explain(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
+    """Why a finished program gave no path (``None``: it did); ``limits`` as in the job (bytes, s).
+
+    Limits first (they explain the crash or the silence that follows), then
+    a refused line, a crash, and at last plain silence.  With a cgroup the
+    kernel's counts say it (out-of-memory kills, refused forks); otherwise
+    running out of processes or memory shows as failed forks / allocations in
+    the program's stderr (or, for processes, as the count reaching the limit).
+    """
+    if r.get("launch_error"):
+        return f"program could not start: {r['launch_error']}"
+    if r.get("path") is not None:
+        return None
+    err = r.get("stderr") or ""
+    sig = r.get("signal")
+    refused = r.get("refused") or []
+    after = f" (its last line was refused: {refused[-1]})" if refused else ""
+    wall, mib = limits["wall_s"], limits["memory_bytes"] >> 20
+    if r.get("memory_oom_kills"):
+        return f"program memory limit: it used all of its {mib} MiB of memory (all its processes together) and was killed"
+    if ((r.get("procs_max") or 0) >= limits["processes"] or r.get("fork_refusals")
+            or any(x in err for x in _FORK_SIGNS)):
+        return f"program process limit: it reached its limit of {limits['processes']} processes"
+    if any(x in err for x in _MEMORY_SIGNS):
+        return f"program memory limit: it ran out of its {mib} MiB of memory"
+    if sig == signal.SIGXCPU or (sig == signal.SIGKILL and (r.get("cpu_s") or 0) >= limits["cpu_s"] - 0.5):
+        return f"program CPU limit: it used more than {limits['cpu_s']} s of CPU time"
+    if sig == signal.SIGXFSZ:
+        return f"program file size limit: it wrote a file larger than {limits['file_bytes'] >> 20} MiB"
+    if r.get("timed_out"):
+        return f"program time limit: no path within {wall:g} s" + after
+    if refused:
+        ended = (f"; it then exited with code {r['exit_code']}" if r.get("exit_code") not in (None, 0)
+                 else f"; it was then killed by {_signame(sig)}" if sig is not None else "")
+        return f"program sent an invalid path: {refused[-1]}{ended}"
+    if r.get("exit_code") not in (None, 0):
+        return f"program crashed: exit code {r['exit_code']}" + _last_line(err)
+    if sig is not None:
+        return f"program crashed: killed by signal {_signame(sig)}" + _last_line(err)
+    if not r.get("connected"):
+        return "program sent no path: it exited without connecting to the robot port"
+    return "program sent no path: it exited without sending a T,T,P line"
+
+
+def to_outcome(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str, Any]) -> ProgramOutcome:
+    """The outcome of the launcher's result ``r`` for ``spec`` run as ``argv`` under ``limits`` (the job's)."""
+    iso = r.get("isolation") or {}
+    reason = explain(r, limits)
+    info = {
+        "id": spec.id, "name": spec.name, "exit_code": r.get("exit_code"), "signal": r.get("signal"),
+        "timed_out": r.get("timed_out", False), "wall_s": r.get("wall_s"), "cpu_s": r.get("cpu_s"),
+        "max_rss_kib": r.get("max_rss_kib"), "memory_peak_kib": r.get("memory_peak_kib"),
+        "processes_max": r.get("procs_max"),
+        "stdout_dropped_bytes": r.get("stdout_dropped", 0), "stderr_dropped_bytes": r.get("stderr_dropped", 0),
+        "isolation": {"namespaces": iso.get("namespaces", []), "user_namespace": iso.get("user_namespace", False),
+                      "own_uid": iso.get("uid") is not None, "proc": iso.get("proc"),
+                      "server_files_hidden": bool(iso.get("hidden")), "seccomp": iso.get("seccomp", False),
+                      "memory_limit": iso.get("memory_limit", "per-process")},
+    }
+    return ProgramOutcome(r.get("path") if reason is None else None, reason, _log(spec, argv, r, limits, reason),
+                          info, r.get("path_at_s"))
+
+
+def _log(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str, Any],
+         reason: Optional[str]) -> list[tuple[str, str]]:
+    iso = r.get("isolation") or {}
+    shown = " ".join(a.replace("{workdir}/", "") for a in argv)
+    memory = (f"memory limit per program (cgroup {iso['cgroup']})" if iso.get("memory_limit") == "cgroup"
+              else "memory limit per process")
+    lines: list[tuple[str, str]] = [
+        ("s", f"program {spec.name!r} (#{spec.id}) started: {shown}; isolation: "
+              f"{'+'.join(iso.get('namespaces') or []) or 'no namespaces'}"
+              f"{', own uid' if iso.get('uid') is not None else ''}, {memory}")]
+    for direction, text in r.get("port_log", []):
+        lines.append(("s", f"robot port {'<' if direction == '<' else '>'} {text}"))
+    for d, name in (("o", "stdout"), ("e", "stderr")):
+        for ln in (r.get(name) or "").splitlines():
+            lines.append((d, ln[:10_000]))
+        if r.get(f"{name}_dropped"):
+            lines.append(("s", f"{name} truncated: {r[f'{name}_dropped']} more bytes were dropped "
+                               f"(the log keeps {limits['output_bytes'] >> 10} KiB)"))
+    status = ("exit code %s" % r["exit_code"] if r.get("exit_code") is not None
+              else f"signal {_signame(r['signal'])}" if r.get("signal") is not None
+              else "stopped by the sandbox")
+    peak = f", memory {r['memory_peak_kib'] / 1024:.1f} MiB" if r.get("memory_peak_kib") is not None else ""
+    lines.append(("s", f"program ended ({status}) after {r.get('wall_s', 0):.2f} s, CPU {r.get('cpu_s', 0):.2f} s"
+                       + peak + (f"; {reason}" if reason else f"; path of {len(r['path'])} points received")))
+    return lines
+
+
+def _signame(sig: int) -> str:
+    try:
+        return signal.Signals(sig).name
+    except ValueError:
+        return str(sig)
+
+
+def _last_line(err: str) -> str:
+    lines = [ln.strip() for ln in err.strip().splitlines() if ln.strip()]
+    return f" ({lines[-1][:300]})" if lines else ""

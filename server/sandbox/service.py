@@ -1,0 +1,209 @@
+"""Running uploaded planner programs in the sandbox, from the server's event loop.
+
+:class:`Sandbox` starts the launcher (``python -m server.sandbox.launch``,
+as an asyncio subprocess: the event loop never blocks) with a JSON job,
+reads its result and turns it into a :class:`~.outcome.ProgramOutcome`.
+At most ``sandbox_workers`` programs run at once; as root each running
+program has a uid/gid of its own (from ``sandbox_uid_base`` up, locked
+machine-wide), so the process limit counts only its own processes and
+programs cannot signal or read each other.
+
+What is enforced where is in docs/uploads.md.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import fcntl
+import json
+import logging
+import os
+import signal
+import sys
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Optional
+
+from .outcome import ProgramOutcome, to_outcome
+from .program import ProgramSpec, program_argv, program_env, program_files
+
+if TYPE_CHECKING:  # the launcher imports this package: keep it light
+    from ..core.settings import Settings
+
+__all__ = ["LAUNCHER", "Sandbox", "launcher_env", "take_uid"]
+
+log = logging.getLogger("twb.sandbox")
+
+#: the launcher's module (``python -m``)
+LAUNCHER = "server.sandbox.launch"
+#: sandbox uids tried from the base up
+UID_RANGE = 4096
+
+
+def launcher_env() -> dict[str, str]:
+    """The launcher's environment: a few of ours, and one thread for numpy's BLAS/OpenMP.
+
+    One thread matters: the launcher imports the codec (numpy) before it
+    unshares namespaces and forks, which must happen single-threaded.
+    """
+    env = {k: v for k, v in os.environ.items() if k in ("PATH", "PYTHONPATH", "LANG", "VIRTUAL_ENV")}
+    env.update({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                "PYTHONDONTWRITEBYTECODE": "1"})
+    return env
+
+
+def take_uid(base: int) -> tuple[int, int]:
+    """A sandbox uid from ``base`` up that no other program on this machine uses now: (uid, fd of its lock).
+
+    Close the fd to free the uid.  Locks (``flock``) live in a directory only
+    this user may write, so several testbeds on one machine never share a uid
+    (they would share a process limit, and the end of one sandbox would kill
+    the other's).  Blocking file work: call it in a thread.
+    """
+    locks = Path(tempfile.gettempdir()) / f"twb-sandbox-uids-{os.geteuid()}"
+    locks.mkdir(mode=0o700, exist_ok=True)
+    st = locks.stat()
+    if st.st_uid != os.geteuid() or st.st_mode & 0o077:
+        raise RuntimeError(f"{locks} must be a directory of uid {os.geteuid()} with mode 0700")
+    for uid in range(base, base + UID_RANGE):
+        fd = os.open(locks / f"{uid}.lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return uid, fd
+        except BlockingIOError:
+            os.close(fd)
+    raise RuntimeError(f"no free sandbox uid in {base}..{base + UID_RANGE - 1}")
+
+
+async def _take_uid_off_loop(base: int) -> tuple[int, int]:
+    """:func:`take_uid` in a thread; if the caller is cancelled meanwhile, the lock it takes is freed."""
+    task = asyncio.ensure_future(asyncio.to_thread(take_uid, base))
+    try:
+        return await asyncio.shield(task)
+    except asyncio.CancelledError:
+        task.add_done_callback(lambda t: t.cancelled() or t.exception() is not None or os.close(t.result()[1]))
+        raise
+
+
+class Sandbox:
+    """Runs programs; one per testbed (``testbed.sandbox``)."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        self._running: Optional[asyncio.Semaphore] = None
+        self._probe: Optional[dict[str, Any]] = None
+
+    @property
+    def limits(self) -> dict[str, Any]:
+        """The limits in the units users read (docs, ``GET /api/v1/programs/sandbox``)."""
+        s = self.settings
+        return {"wall_s": s.sandbox_wall_s, "cpu_s": s.sandbox_cpu_s, "memory_mb": s.sandbox_memory_mb,
+                "file_mb": s.sandbox_file_mb, "processes": s.sandbox_processes, "open_files": s.sandbox_open_files,
+                "output_kib": s.sandbox_output_kib, "tmp_mb": s.sandbox_tmpfs_mb,
+                "max_program_bytes": s.max_program_bytes, "concurrent_programs": s.sandbox_workers}
+
+    def _job_limits(self) -> dict[str, Any]:
+        s = self.settings
+        return {"wall_s": s.sandbox_wall_s, "cpu_s": s.sandbox_cpu_s, "memory_bytes": s.sandbox_memory_mb << 20,
+                "file_bytes": s.sandbox_file_mb << 20, "processes": s.sandbox_processes,
+                "open_files": s.sandbox_open_files, "output_bytes": s.sandbox_output_kib << 10,
+                "tmpfs_bytes": s.sandbox_tmpfs_mb << 20}
+
+    def hidden_paths(self) -> list[str]:
+        """Paths the program must not see: the data dir and the SQLite database's directory."""
+        s = self.settings
+        paths = [str(s.data_dir.resolve())]
+        if s.database_url.startswith("sqlite:///"):
+            db_dir = str(Path(s.database_url[len("sqlite:///"):]).resolve().parent)
+            if db_dir not in paths:
+                paths.append(db_dir)
+        return paths
+
+    async def _launch(self, job: dict[str, Any], timeout_s: float) -> tuple[Optional[dict[str, Any]], str]:
+        """Run the launcher with ``job``; (result or None, its stderr)."""
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", LAUNCHER, stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=launcher_env(),
+            start_new_session=True)
+        try:
+            out, err = await asyncio.wait_for(proc.communicate(json.dumps(job).encode()), timeout_s)
+        except BaseException:
+            # cancelled (the experiment, the server) or the launcher hangs: end the sandbox
+            await _stop(proc)
+            raise
+        result = None
+        for line in out.decode("utf-8", "replace").splitlines():
+            try:
+                result = json.loads(line)
+            except ValueError:
+                continue
+        return result, err.decode("utf-8", "replace")
+
+    async def probe(self) -> dict[str, Any]:
+        """What isolation this machine gives programs (cached)."""
+        if self._probe is None:
+            result, err = await self._launch({"probe": True, "namespaces": self.settings.sandbox_namespaces}, 30)
+            iso = result or {"namespaces": [], "user_namespace": False, "uid_switch": False,
+                             "reason": f"the sandbox launcher failed: {err.strip()[-300:]}"}
+            self._probe = {
+                "namespaces": iso.get("namespaces", []),
+                "user_namespace": iso.get("user_namespace", False),
+                "network": "loopback only" if "net" in iso.get("namespaces", []) else "not isolated",
+                "seccomp": iso.get("seccomp", False),
+                "runs_as": ("a uid of its own" if iso.get("uid_switch")
+                            else "root of a user namespace (the server's uid outside)" if iso.get("user_namespace")
+                            else "the server's uid"),
+                "memory_limit": iso.get("memory_limit", "per-process"),
+                "cgroup": iso.get("cgroup"),
+                "memory_note": iso.get("memory_note", ""),
+                "note": iso.get("reason", ""),
+            }
+        return self._probe
+
+    async def run(self, spec: ProgramSpec, *, env_data: dict[str, Any], start: list[float], goal: list[float],
+                  field_size: tuple[float, float], seed: int, robot_radius: float, planning_margin: float,
+                  robot_id: str, platform: str) -> ProgramOutcome:
+        """Run ``spec`` once (lengths in m, angles in rad); never raises for the program's faults (the outcome says why)."""
+        s = self.settings
+        try:
+            argv = program_argv(spec, s.sandbox_interpreters)
+        except ValueError as exc:
+            return ProgramOutcome(None, f"program could not start: {exc}")
+        if self._running is None:
+            self._running = asyncio.Semaphore(s.sandbox_workers)
+        env = program_env(start=start, goal=goal, field_size=field_size, seed=seed, robot_radius=robot_radius,
+                          planning_margin=planning_margin, robot_id=robot_id, wall_s=s.sandbox_wall_s)
+        job = {"files": program_files(spec, env_data), "argv": argv, "env": env, "namespaces": s.sandbox_namespaces,
+               "hide": self.hidden_paths(), "limits": self._job_limits(), "field_size": list(field_size),
+               "robot_id": robot_id, "platform": platform, "start_pose": list(start[:3]), "grace_s": 1.0}
+        async with self._running:
+            uid, lock = await _take_uid_off_loop(s.sandbox_uid_base)
+            try:
+                result, err = await self._launch({**job, "uid": uid, "gid": uid}, s.sandbox_wall_s + 30)
+            except asyncio.TimeoutError:
+                raise RuntimeError("the sandbox launcher did not finish in time") from None
+            finally:
+                os.close(lock)
+        if result is None:
+            raise RuntimeError(f"the sandbox launcher failed: {err.strip()[-500:] or 'no result'}")
+        return to_outcome(spec, argv, result, self._job_limits())
+
+
+async def _stop(proc: asyncio.subprocess.Process) -> None:
+    """End a launcher early: SIGTERM (it kills its sandbox), then SIGKILL."""
+    if proc.returncode is not None:
+        return
+    try:
+        proc.send_signal(signal.SIGTERM)
+        await asyncio.wait_for(asyncio.shield(proc.wait()), 3)
+    except (asyncio.TimeoutError, ProcessLookupError, asyncio.CancelledError):
+        pass
+    if proc.returncode is None:
+        try:
+            proc.kill()
+        except ProcessLookupError:
+            pass
+        try:
+            await asyncio.wait_for(asyncio.shield(proc.wait()), 5)
+        except (asyncio.TimeoutError, asyncio.CancelledError):
+            log.warning("sandbox launcher %s did not stop", proc.pid)
