@@ -44,7 +44,8 @@ class Settings(BaseSettings):
     # the sandbox of uploaded programs (docs/uploads.md)
     sandbox_wall_s: float = Field(default=30.0, gt=0, description="Wall-clock seconds a program may run.")
     sandbox_cpu_s: int = Field(default=20, gt=0, description="CPU seconds per process (RLIMIT_CPU).")
-    sandbox_memory_mb: int = Field(default=512, gt=0, description="Address space per process, MiB (RLIMIT_AS).")
+    sandbox_memory_mb: int = Field(default=512, gt=0, description="Memory of a program, MiB: all its processes together (cgroup) "
+                                                                 "where the machine allows, else per process (RLIMIT_AS).")
     sandbox_file_mb: int = Field(default=16, gt=0, description="Largest file a program may write, MiB.")
     sandbox_processes: int = Field(default=32, gt=0, description="Processes a program may have at once.")
     sandbox_open_files: int = Field(default=64, gt=3, description="Open files per process.")

@@ -95,7 +95,7 @@ export class ProgramsPage {
       ["Namespaces", (iso.namespaces || []).join(" + ") || "none"],
       ["System-call filter", iso.seccomp ? "seccomp" : "none"],
       ["Wall / CPU time", `${num(L.wall_s, 0)} s / ${num(L.cpu_s, 0)} s`],
-      ["Memory", `${L.memory_mb} MiB a process`],
+      ["Memory", `${L.memory_mb} MiB ${iso.memory_limit === "per-process" ? "a process" : "for all its processes together"}`],
       ["Processes", L.processes],
       ["Output kept", `${L.output_kib} KiB each of stdout and stderr`],
     ];
