@@ -78,7 +78,7 @@ class Client(BaseClient):
     # ------------------------------------------------------------------ testbed
 
     def health(self) -> dict[str, Any]:
-        """``GET /health`` (no token needed): status, version and a summary of the testbed."""
+        """``GET /health`` (no token needed): status and version; with a valid token also the queue and fleet counts."""
         return self._send(self._health())
 
     def list_subfields(self) -> list[Subfield]:

@@ -5,10 +5,14 @@ from __future__ import annotations
 from contextlib import asynccontextmanager
 from typing import AsyncIterator, Optional
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import compile_path
 
+from .api.deps import authenticate, bearer_token
 from .api.middleware import BodyLimit
 from .api.routes import dashboard, environments, events, experiments, field, health, planners, programs, runs, users
 from .core.settings import Settings
@@ -49,12 +53,28 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
     async def _refused(request: Request, exc: RequestRefused) -> JSONResponse:
         return JSONResponse(status_code=exc.status_code, content={"detail": exc.detail}, headers=exc.headers)
 
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, exc: StarletteHTTPException) -> Response:
+        if exc.status_code == 400 and isinstance(exc.__cause__, ValueError):  # a body that is not UTF-8
+            denied = await _token_first(request)
+            return denied or JSONResponse(status_code=422, content={
+                "detail": "body is not valid JSON (not UTF-8 text)",
+                "errors": [{"loc": ["body"], "msg": "not UTF-8 text", "type": "json_invalid"}]})
+        if exc.status_code == 405:
+            return JSONResponse(status_code=405, content={"detail": exc.detail},
+                                headers={"Allow": ", ".join(_allowed_methods(app, request.url.path))})
+        return await http_exception_handler(request, exc)
+
     @app.exception_handler(RequestValidationError)
-    async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
-        # one readable message first, the details after
+    async def _invalid(request: Request, exc: RequestValidationError) -> Response:
         errs = exc.errors()
+        if any(e.get("type") == "json_invalid" for e in errs):
+            denied = await _token_first(request)
+            if denied is not None:
+                return denied
+        # one readable message first, the details after
         first = errs[0] if errs else {}
-        where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
+        where = _where(first.get("loc", ()))
         msg = f"{where}: {first.get('msg', 'invalid input')}" if where else first.get("msg", "invalid input")
         return JSONResponse(status_code=422, content={"detail": msg, "errors": _jsonable(errs)})
 
@@ -64,6 +84,40 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
         app.include_router(module.router, prefix=API_PREFIX)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     return app
+
+
+async def _token_first(request: Request) -> Optional[JSONResponse]:
+    """The 401/429 answer for a request without a valid token, else None.
+
+    FastAPI parses a body before it resolves dependencies; a malformed body
+    still gets the token checked first, so nobody without one learns
+    anything from our answers.
+    """
+    try:
+        await authenticate(request, bearer_token(request))
+    except HTTPException as denied:
+        return JSONResponse(status_code=denied.status_code, content={"detail": denied.detail}, headers=denied.headers)
+    return None
+
+
+def _allowed_methods(app: FastAPI, path: str) -> list[str]:
+    """Every method the API serves on ``path`` (from its OpenAPI paths), for a 405's ``Allow``."""
+    methods: set[str] = set()
+    for template, operations in app.openapi().get("paths", {}).items():
+        regex, _, _ = compile_path(template)
+        if regex.match(path):
+            methods.update(m.upper() for m in operations)
+    return sorted(methods)
+
+
+def _where(loc: tuple) -> str:
+    """A validation error's location as a reader writes it: ``blocks[0].w``, ``query.offset``."""
+    out = ""
+    for part in loc:
+        if part == "body":
+            continue
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
 
 
 def _jsonable(errs: list) -> list:

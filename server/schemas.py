@@ -7,6 +7,8 @@ everywhere (``allow_inf_nan=False``).  Public models are built from table rows
 
 from __future__ import annotations
 
+import ipaddress
+import re
 from datetime import datetime, timezone
 from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
 
@@ -49,7 +51,9 @@ _OWNER = AliasChoices("owner_name", "owner")
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(allow_inf_nan=False, extra="forbid")
+    """Request bodies: unknown keys refused, no coercion (``false`` is not 0, ``1.0`` is not an integer)."""
+
+    model_config = ConfigDict(allow_inf_nan=False, extra="forbid", strict=True)
 
 
 class FromRow(BaseModel):
@@ -66,8 +70,12 @@ class Page(BaseModel, Generic[T]):
 # --------------------------------------------------------------------------- users
 
 
+#: names of users and environments: letters, digits, ``_ . -``, starting with a letter or digit
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
+
+
 class UserCreate(Strict):
-    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")
+    name: str = Field(min_length=1, max_length=64, pattern=NAME_PATTERN)
     is_admin: bool = False
 
 
@@ -85,12 +93,34 @@ class UserWithToken(UserPublic):
 # --------------------------------------------------------------------------- environments
 
 
+class BlockIn(Strict):
+    """A rectangular block: centre ``x``, ``y``, size ``w``, ``h`` (m), rotation ``angle`` (rad)."""
+
+    x: float
+    y: float
+    w: float = Field(gt=0)
+    h: float = Field(gt=0)
+    angle: float = 0.0
+
+
+class PlanIn(Strict):
+    """A named start/goal pair, poses ``[x, y]`` or ``[x, y, theta]`` (m, rad)."""
+
+    name: str = Field(min_length=1, max_length=64)
+    start: list[float] = Field(min_length=2, max_length=3)
+    goal: list[float] = Field(min_length=2, max_length=3)
+
+
 class EnvironmentCreate(Strict):
-    """An environment file (docs/design.md, "Environment file"); validated by the planners' environment model."""
+    """An environment file (docs/design.md, "Environment file"); then checked by the planners' model
+    (blocks inside the field, and the like)."""
 
-    model_config = ConfigDict(allow_inf_nan=False, extra="allow")
-
-    name: str = Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
+    name: str = Field(min_length=1, max_length=100, pattern=NAME_PATTERN)
+    size: list[Annotated[float, Field(gt=0, le=100)]] = Field(min_length=2, max_length=2,
+                                                              description="[width, height], m.")
+    blocks: list[BlockIn] = Field(default_factory=list, max_length=1000)
+    plans: list[PlanIn] = Field(default_factory=list, max_length=100)
+    description: str = Field(default="", max_length=10_000)
 
     def to_data(self) -> dict[str, Any]:
         return self.model_dump()
@@ -315,13 +345,39 @@ class RobotRegister(Strict):
     model_config = ConfigDict(allow_inf_nan=False, extra="ignore")
 
     robot_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")
-    host: str = Field(min_length=1, max_length=255)
+    host: str = Field(min_length=1, max_length=253, description="Host name (IDNA is converted) or IP address.")
     port: int = Field(ge=1, le=65535)
-    platform: str = Field(default="", max_length=64)
+    platform: str = Field(default="", max_length=64, pattern=r"^[A-Za-z0-9_. ()+-]*$")
     backend: Literal["ideal", "field"]
-    profile: str = Field(default="bebot", max_length=32)
-    origin: list[float] = Field(default_factory=lambda: [0.0, 0.0], min_length=2, max_length=2)
-    area: list[float] = Field(default_factory=lambda: [1.8, 1.8], min_length=2, max_length=2)
+    profile: str = Field(default="bebot", max_length=32, pattern=r"^[A-Za-z0-9_.-]+$")
+    origin: list[Annotated[float, Field(ge=0, le=100)]] = Field(default_factory=lambda: [0.0, 0.0], min_length=2,
+                                                                max_length=2)
+    area: list[Annotated[float, Field(gt=0, le=100)]] = Field(default_factory=lambda: [1.8, 1.8], min_length=2,
+                                                              max_length=2)
+
+    @field_validator("host")
+    @classmethod
+    def _host(cls, v: str) -> str:
+        return host_name(v)
+
+
+_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
+
+
+def host_name(text: str) -> str:
+    """``text`` as an ASCII host name (IDNA-encoded) or IP address; ValueError for anything else (URLs, ports)."""
+    try:
+        return str(ipaddress.ip_address(text))
+    except ValueError:
+        pass
+    try:
+        ascii_name = text.encode("idna").decode("ascii")
+    except UnicodeError:
+        raise ValueError("must be a host name or an IP address") from None
+    labels = ascii_name[:-1].split(".") if ascii_name.endswith(".") else ascii_name.split(".")
+    if len(ascii_name) > 253 or not all(_LABEL.fullmatch(label) for label in labels):
+        raise ValueError("must be a host name or an IP address (no scheme, port or path)")
+    return ascii_name
 
 
 class RobotPublic(BaseModel):
@@ -354,12 +410,15 @@ class SubfieldPublic(BaseModel):
 class TrackerBatch(BaseModel):
     """Tracker poses of one robot: ``[t, x, y, theta]`` rows (s, m, m, rad), robot frame.
 
-    Rows are checked one by one when stored (a NaN or a short row is refused
-    and counted, the valid rows of the batch are kept), so the model itself
-    accepts any numbers.
+    Rows are checked one by one: a row that is not four finite numbers
+    (``NaN``, a short row, ``true``) is left out and counted in ``rejected``,
+    the others are kept, so a bad row never costs a batch.  (The route parses
+    the body itself, faster than this model would; the model documents it.)
     """
 
     model_config = ConfigDict(allow_inf_nan=True, extra="ignore")
 
     robot_id: str = Field(min_length=1, max_length=64)
-    poses: list[list[float]] = Field(max_length=100_000)
+    poses: list[Any] = Field(max_length=100_000, description="Rows [t, x, y, theta] (s, m, m, rad); "
+                                                              "rows that are not four finite numbers are counted "
+                                                              "in `rejected`.")

@@ -23,7 +23,7 @@ from typing import Optional
 from .bootstrap import bootstrap_store
 from .broker import EventBroker
 from .core.db import make_engine, make_session_factory, migrate
-from .core.security import AuthCache, Principal
+from .core.security import AuthCache, FailedTokens, Principal
 from .core.settings import Settings
 from .dispatch import Dispatcher, pending_of
 from .embedded import EmbeddedField
@@ -57,6 +57,7 @@ class Testbed:
         self.engine = make_engine(settings.database_url)
         self.sessions = make_session_factory(self.engine)
         self.auth = AuthCache(self._principal)
+        self.failed_tokens = FailedTokens(settings.auth_failures_per_minute)
         self.broker = EventBroker()
         self.views = FinishedViews()
         self.field = FieldState(self.sessions, self.broker)

@@ -10,6 +10,7 @@ published for the dashboard, at most a few per second per robot.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import threading
 import time
@@ -160,7 +161,8 @@ def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:
     """``robot_id``, the valid rows ``(N, 4)`` and the number of rows of a tracker batch (JSON bytes).
 
     Raises :class:`~server.errors.Invalid` naming what is wrong with the batch
-    as a whole; rows that are not four finite numbers are left out.
+    as a whole; rows that are not four finite numbers (``true`` is not a
+    number) are left out.
     """
     try:
         doc = json.loads(raw)
@@ -175,13 +177,10 @@ def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:
         raise Invalid("poses: must be a list of [t, x, y, theta] rows")
     if len(poses) > 100_000:
         raise Invalid("poses: at most 100000 rows per batch")
-    try:
-        arr = np.array(poses, dtype=float)
-        ok = arr.ndim == 2 and arr.shape[1] == 4
-    except (ValueError, TypeError):
-        ok = False
-    if not ok:  # ragged or non-numeric rows: keep the good ones, row by row (the slow path)
-        good = [r for r in poses if isinstance(r, list) and len(r) == 4
-                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in r)]
-        arr = np.array(good, dtype=float).reshape(-1, 4)
+    if all(type(r) is list and len(r) == 4 for r in poses) and \
+            set(map(type, itertools.chain.from_iterable(poses))) <= {int, float}:
+        arr = np.array(poses, dtype=float).reshape(-1, 4)
+    else:  # the slow path: keep the rows of four numbers (booleans, strings and null are not numbers)
+        arr = np.array([r for r in poses if type(r) is list and len(r) == 4 and all(type(v) in (int, float) for v in r)],
+                       dtype=float).reshape(-1, 4)
     return robot_id, arr[np.isfinite(arr).all(axis=1)], len(poses)

@@ -17,8 +17,8 @@ TOKEN = "test-admin-token"
 class Process(LocalTestbed):
     """A running `twb` server for tests (the project's :class:`~twb.launch.LocalTestbed`), token ``TOKEN``."""
 
-    def __init__(self, args: list[str], data_dir: Path, timeout: float = 60.0) -> None:
-        super().__init__(data_dir, *args[1:], command=args[0], token=TOKEN, timeout=timeout)
+    def __init__(self, args: list[str], data_dir: Path, timeout: float = 60.0, env: dict | None = None) -> None:
+        super().__init__(data_dir, *args[1:], command=args[0], token=TOKEN, timeout=timeout, env=env)
 
     def client(self, token: str | None = TOKEN, **kw) -> httpx.Client:
         headers = {"Authorization": f"Bearer {token}"} if token else {}

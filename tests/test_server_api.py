@@ -78,7 +78,7 @@ def test_environments(alice, bob):
     assert bob.get("/api/v1/environments/alice-corridor").status_code == 404  # not his
     bad = {**mine, "name": "bad-env", "blocks": [{"x": 0.9, "y": 0.6, "w": -1, "h": 0.05}]}
     r = alice.post("/api/v1/environments", json=bad)
-    assert r.status_code == 422 and "blocks[0].w must be > 0" in r.json()["detail"]
+    assert r.status_code == 422 and r.json()["detail"] == "blocks[0].w: Input should be greater than 0"
     assert alice.get("/api/v1/environments/nowhere").status_code == 404
 
 
@@ -187,6 +187,9 @@ def test_tracker_ingestion_needs_an_agent_token(server, alice):
         mixed = '{"robot_id": "r1", "poses": [[0.0, 0.1, 0.1, 0.0], [0.1, NaN, 0.1, 0.0], [0.2, 0.1], [0.3, 1, 1, 1]]}'
         r = agent.post("/api/v1/tracker/poses", content=mixed, headers={"content-type": "application/json"})
         assert r.status_code == 200 and (r.json()["accepted"], r.json()["rejected"]) == (2, 2)
+        booleans = {"robot_id": "r1", "poses": [[True, 0.1, 0.1, 0.0], [0.3, 1, 1, False], [0.4, 1, 1, 1]]}
+        r = agent.post("/api/v1/tracker/poses", json=booleans)  # true is not 1.0
+        assert r.status_code == 200 and (r.json()["accepted"], r.json()["rejected"]) == (1, 2)
         bad = agent.post("/api/v1/tracker/poses", json={"robot_id": "r1", "poses": "nope"})
         assert bad.status_code == 422 and "poses" in bad.json()["detail"]
         # agent tokens are for agents only

@@ -28,12 +28,13 @@ class LaunchError(RuntimeError):
 class LocalTestbed:
     """``twb <command> --port 0 --data-dir DATA_DIR --token TOKEN *args`` as a child process.
 
-    ``url`` is known once the process printed it; ``stop()`` sends SIGINT
+    ``env``: variables added to this process's environment for it.  ``url`` is
+    known once the process printed it; ``stop()`` sends SIGINT
     (Ctrl-C) and waits, killing it after ``timeout`` seconds.
     """
 
     def __init__(self, data_dir: Path, *args: str, command: str = "up", token: Optional[str] = None,
-                 timeout: float = 60.0) -> None:
+                 timeout: float = 60.0, env: Optional[dict[str, str]] = None) -> None:
         self.data_dir = Path(data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.token = token or secrets.token_urlsafe(24)
@@ -42,7 +43,7 @@ class LocalTestbed:
         cmd = [sys.executable, "-m", "twb", command, "--port", "0", "--data-dir", str(self.data_dir),
                "--token", self.token, *args]
         self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=subprocess.STDOUT,
-                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                     env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
         self.url = ""
         deadline = time.monotonic() + timeout
         while not self.url:

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Iterator
+import math
+from typing import TYPE_CHECKING, Annotated, Iterator, Optional
 
 import anyio
-from fastapi import Depends, HTTPException, Request
+from fastapi import Depends, HTTPException, Path, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
@@ -14,7 +15,15 @@ from ..core.security import Principal
 if TYPE_CHECKING:
     from ..testbed import Testbed
 
-__all__ = ["AdminUser", "AgentToken", "CurrentUser", "SessionDep", "TestbedDep"]
+__all__ = ["MAX_OFFSET", "AdminUser", "AgentToken", "CurrentUser", "IdPath", "NamePath", "SessionDep", "TestbedDep",
+           "UserNamePath", "authenticate", "bearer_token"]
+
+#: row ids are 64-bit; larger numbers are refused (422), never passed to the database
+IdPath = Annotated[int, Path(ge=1, le=2**63 - 1, description="Row id.")]
+NamePath = Annotated[str, Path(min_length=1, max_length=100)]
+UserNamePath = Annotated[str, Path(min_length=1, max_length=64)]
+#: the largest list offset (rows); far beyond any store, and safe for every database
+MAX_OFFSET = 2**31 - 1
 
 
 _bearer = HTTPBearer(auto_error=False, description="`Authorization: Bearer <token>`")
@@ -35,16 +44,34 @@ def get_session(request: Request) -> Iterator[Session]:
 SessionDep = Annotated[Session, Depends(get_session)]
 
 
-async def _principal(request: Request, creds: HTTPAuthorizationCredentials | None) -> Principal:
-    if creds is None or not creds.credentials:
+async def authenticate(request: Request, token: Optional[str]) -> Principal:
+    """Who holds ``token``: 401 when missing or unknown, 429 after too many unknown ones from this client."""
+    if not token:
         raise HTTPException(401, "Missing bearer token", headers={"WWW-Authenticate": "Bearer"})
-    auth = request.app.state.testbed.auth
-    who = auth.cached(creds.credentials)
+    testbed = request.app.state.testbed
+    who = testbed.auth.cached(token)
+    if who is not None:
+        return who
+    client = request.client.host if request.client else "unknown"
+    wait = testbed.failed_tokens.wait_s(client)
+    if wait > 0:
+        raise HTTPException(429, f"Too many unknown tokens from {client}; try again in {math.ceil(wait)} s",
+                            headers={"Retry-After": str(math.ceil(wait))})
+    who = await anyio.to_thread.run_sync(testbed.auth.load, token)
     if who is None:
-        who = await anyio.to_thread.run_sync(auth.load, creds.credentials)
-    if who is None:
+        testbed.failed_tokens.failed(client)
         raise HTTPException(401, "Invalid token", headers={"WWW-Authenticate": "Bearer"})
     return who
+
+
+def bearer_token(request: Request) -> Optional[str]:
+    """The request's bearer token, if it has one."""
+    scheme, _, token = request.headers.get("authorization", "").partition(" ")
+    return token.strip() or None if scheme.lower() == "bearer" else None
+
+
+async def _principal(request: Request, creds: HTTPAuthorizationCredentials | None) -> Principal:
+    return await authenticate(request, creds.credentials if creds else None)
 
 
 async def get_current_user(

@@ -28,6 +28,8 @@ class Settings(BaseSettings):
     time_scale: float = Field(default=1.0, gt=0, description="Experiment seconds per wall second.")
     max_body_bytes: int = Field(default=4 << 20, gt=0, description="Largest accepted request body.")
     max_queued_per_user: int = Field(default=200, gt=0, description="Queued experiments per user (429 beyond).")
+    auth_failures_per_minute: int = Field(
+        default=30, gt=0, description="Unknown tokens a client may present per minute; then 429 until a minute passed.")
     max_repetitions: int = Field(default=20, gt=0)
     run_timeout_factor: float = Field(default=4.0, gt=1, description="Timeout = factor x expected run time.")
     run_timeout_min_s: float = Field(default=30.0, gt=0, description="Shortest run timeout, experiment seconds.")

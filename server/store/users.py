@@ -15,6 +15,6 @@ __all__ = ["principal_of"]
 
 def principal_of(session: Session, token_hash: str) -> Optional[Principal]:
     """Who holds the token with this hash (None: no such token)."""
-    row = session.execute(select(Token.kind, User.id, User.name, User.is_admin).join(User)
+    row = session.execute(select(Token.kind, User.id, User.name, User.is_admin, Token.id).join(User)
                            .where(Token.token_hash == token_hash)).first()
-    return None if row is None else Principal(id=row[1], name=row[2], is_admin=row[3], kind=row[0])
+    return None if row is None else Principal(id=row[1], name=row[2], is_admin=row[3], kind=row[0], token_id=row[4])

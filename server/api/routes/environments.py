@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Query
 from sqlalchemy import func, select
 
 from planners import InvalidEnvironment, parse_environment
@@ -11,9 +11,10 @@ from ...access import visible_environments
 from ...errors import Conflict, Invalid, NotFound
 from ...models import Environment, User
 from ...schemas import EnvironmentCreate, EnvironmentPublic, Page
-from ..deps import CurrentUser, SessionDep
+from ..deps import MAX_OFFSET, CurrentUser, NamePath, SessionDep
+from ..responses import AUTHENTICATED, errors
 
-router = APIRouter(prefix="/environments", tags=["environments"])
+router = APIRouter(prefix="/environments", tags=["environments"], responses=AUTHENTICATED)
 
 
 def _public(row: Environment, owner: str | None) -> EnvironmentPublic:
@@ -25,17 +26,22 @@ def _public(row: Environment, owner: str | None) -> EnvironmentPublic:
 
 
 @router.get("", response_model=Page[EnvironmentPublic])
-def list_environments(session: SessionDep, user: CurrentUser, offset: int = 0, limit: int = 100) -> Page[EnvironmentPublic]:
+def list_environments(
+    session: SessionDep,
+    user: CurrentUser,
+    offset: int = Query(default=0, ge=0, le=MAX_OFFSET),
+    limit: int = Query(default=100, ge=1, le=1000),
+) -> Page[EnvironmentPublic]:
     """Built-in environments and your own."""
     cond = visible_environments(user)
     q = select(Environment, User.name).outerjoin(User, Environment.owner_id == User.id).where(cond)
-    rows = session.execute(q.order_by(Environment.id).offset(max(offset, 0)).limit(min(max(limit, 1), 1000)))
+    rows = session.execute(q.order_by(Environment.id).offset(offset).limit(limit))
     count = session.scalar(select(func.count(Environment.id)).where(cond)) or 0
     return Page(data=[_public(e, owner) for e, owner in rows], count=count)
 
 
-@router.get("/{name}", response_model=EnvironmentPublic)
-def get_environment(name: str, session: SessionDep, user: CurrentUser) -> EnvironmentPublic:
+@router.get("/{name}", response_model=EnvironmentPublic, responses=errors(404))
+def get_environment(name: NamePath, session: SessionDep, user: CurrentUser) -> EnvironmentPublic:
     """One environment by name."""
     row = session.execute(
         select(Environment, User.name).outerjoin(User, Environment.owner_id == User.id)
@@ -46,7 +52,7 @@ def get_environment(name: str, session: SessionDep, user: CurrentUser) -> Enviro
     return _public(*row)
 
 
-@router.post("", response_model=EnvironmentPublic, status_code=201)
+@router.post("", response_model=EnvironmentPublic, status_code=201, responses=errors(409, 413))
 def create_environment(body: EnvironmentCreate, session: SessionDep, user: CurrentUser) -> EnvironmentPublic:
     """Add an environment (validated like an environment file); names are unique."""
     try:

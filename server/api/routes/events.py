@@ -8,8 +8,9 @@ from fastapi import APIRouter, Request
 from fastapi.responses import StreamingResponse
 
 from ..deps import CurrentUser, TestbedDep
+from ..responses import AUTHENTICATED
 
-router = APIRouter(tags=["events"])
+router = APIRouter(tags=["events"], responses=AUTHENTICATED)
 
 
 @router.get("/events")

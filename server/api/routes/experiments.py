@@ -16,12 +16,13 @@ from ...results import experiment_metrics
 from ...schemas import ExperimentCreate, ExperimentPublic, ExperimentSummary, Page
 from ...status import TERMINAL, RunStatus
 from ...submission import submit
-from ..deps import CurrentUser, SessionDep, TestbedDep
+from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep, TestbedDep
+from ..responses import AUTHENTICATED, errors
 
-router = APIRouter(prefix="/experiments", tags=["experiments"])
+router = APIRouter(prefix="/experiments", tags=["experiments"], responses=AUTHENTICATED)
 
 
-@router.post("", response_model=ExperimentPublic, status_code=202)
+@router.post("", response_model=ExperimentPublic, status_code=202, responses=errors(413))
 async def submit_experiment(body: ExperimentCreate, user: CurrentUser, testbed: TestbedDep) -> ExperimentPublic:
     """Validate a job and queue its runs; 422 with the reason if it cannot run."""
 
@@ -44,7 +45,7 @@ def list_experiments(
     user: CurrentUser,
     testbed: TestbedDep,
     status: Optional[RunStatus] = Query(default=None, description="Only experiments in this state."),
-    offset: int = Query(default=0, ge=0),
+    offset: int = Query(default=0, ge=0, le=MAX_OFFSET),
     limit: int = Query(default=50, ge=1, le=500),
 ) -> Page[ExperimentSummary]:
     """Your experiments, newest first (admins see everyone's)."""
@@ -61,8 +62,8 @@ def list_experiments(
     return Page(data=data, count=count)
 
 
-@router.get("/{experiment_id}", response_model=ExperimentPublic)
-async def get_experiment(experiment_id: int, user: CurrentUser, testbed: TestbedDep) -> Response:
+@router.get("/{experiment_id}", response_model=ExperimentPublic, responses=errors(404))
+async def get_experiment(experiment_id: IdPath, user: CurrentUser, testbed: TestbedDep) -> Response:
     """Status, planned path and runs (mode, repetition, status, sub-field, metrics) of one experiment."""
     views = testbed.views
     hit = views.get(experiment_id)
@@ -83,8 +84,8 @@ async def get_experiment(experiment_id: int, user: CurrentUser, testbed: Testbed
     return Response(await anyio.to_thread.run_sync(load), media_type="application/json")
 
 
-@router.post("/{experiment_id}/cancel", response_model=ExperimentPublic)
-async def cancel_experiment(experiment_id: int, user: CurrentUser, testbed: TestbedDep) -> ExperimentPublic:
+@router.post("/{experiment_id}/cancel", response_model=ExperimentPublic, responses=errors(404, 409))
+async def cancel_experiment(experiment_id: IdPath, user: CurrentUser, testbed: TestbedDep) -> ExperimentPublic:
     """Cancel queued runs and stop running ones; 409 if the experiment has already finished."""
 
     def check() -> None:
@@ -103,8 +104,8 @@ async def cancel_experiment(experiment_id: int, user: CurrentUser, testbed: Test
     return await anyio.to_thread.run_sync(load)
 
 
-@router.get("/{experiment_id}/metrics")
-def get_experiment_metrics(experiment_id: int, session: SessionDep, user: CurrentUser) -> dict:
+@router.get("/{experiment_id}/metrics", responses=errors(404))
+def get_experiment_metrics(experiment_id: IdPath, session: SessionDep, user: CurrentUser) -> dict:
     """Metrics per run, mean/std/95% CI per mode, and the direct sim-vs-twb comparison per repetition.
 
     ``direct`` is the paper's "ST": for each repetition with both a completed

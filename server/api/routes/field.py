@@ -9,8 +9,9 @@ from ...errors import NotFound
 from ...schemas import Page, RobotPublic, RobotRegister, SubfieldPublic, TrackerBatch
 from ...tracking import parse_batch
 from ..deps import AgentToken, CurrentUser, TestbedDep
+from ..responses import AUTHENTICATED, errors
 
-router = APIRouter(tags=["field"])
+router = APIRouter(tags=["field"], responses=AUTHENTICATED)
 
 
 @router.get("/subfields", response_model=Page[SubfieldPublic])
@@ -27,7 +28,7 @@ async def list_robots(_: CurrentUser, testbed: TestbedDep) -> Page[RobotPublic]:
     return Page(data=data, count=len(data))
 
 
-@router.post("/robots", response_model=RobotPublic, status_code=201)
+@router.post("/robots", response_model=RobotPublic, status_code=201, responses=errors(413))
 async def register_robot(body: RobotRegister, _: AgentToken, testbed: TestbedDep) -> RobotPublic:
     """A robot agent announces itself (agent or admin token)."""
     slot = await testbed.field.register(body)
@@ -35,7 +36,7 @@ async def register_robot(body: RobotRegister, _: AgentToken, testbed: TestbedDep
     return testbed.field.robot_view(slot, testbed.tracker.last_pose(slot.robot_id))
 
 
-@router.post("/tracker/poses", openapi_extra={"requestBody": {"required": True, "content": {
+@router.post("/tracker/poses", responses=errors(404, 413), openapi_extra={"requestBody": {"required": True, "content": {
     "application/json": {"schema": TrackerBatch.model_json_schema()}}}})
 async def ingest_poses(request: Request, _: AgentToken, testbed: TestbedDep) -> dict:
     """A batch of tracker poses ``[t, x, y, theta]`` of one robot (agent or admin token).

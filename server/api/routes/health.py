@@ -2,14 +2,22 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, HTTPException, Request
 
-from ..deps import TestbedDep
+from ..deps import TestbedDep, authenticate, bearer_token
 
 router = APIRouter(tags=["health"])
 
 
 @router.get("/health")
-async def health(testbed: TestbedDep) -> dict:
-    """Liveness and a summary of the testbed (no token needed)."""
-    return {"status": "ok", "version": "1", **testbed.dispatcher.summary()}
+async def health(request: Request, testbed: TestbedDep) -> dict:
+    """Liveness (no token needed); with a valid token also the queue and the fleet."""
+    out = {"status": "ok", "version": "1"}
+    token = bearer_token(request)
+    if token:
+        try:
+            await authenticate(request, token)
+        except HTTPException:
+            return out
+        out.update(testbed.dispatcher.summary())
+    return out

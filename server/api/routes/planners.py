@@ -5,8 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from ..deps import CurrentUser
+from ..responses import AUTHENTICATED
 
-router = APIRouter(prefix="/planners", tags=["planners"])
+router = APIRouter(prefix="/planners", tags=["planners"], responses=AUTHENTICATED)
 
 
 @router.get("")

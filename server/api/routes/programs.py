@@ -19,9 +19,10 @@ from ...errors import Forbidden, Invalid, TooLarge
 from ...models import Program
 from ...schemas import Page, ProgramCreate, ProgramPublic
 from ...submission import UPLOADS_DISABLED
-from ..deps import CurrentUser, SessionDep, TestbedDep
+from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep, TestbedDep
+from ..responses import AUTHENTICATED, errors
 
-router = APIRouter(prefix="/programs", tags=["programs"])
+router = APIRouter(prefix="/programs", tags=["programs"], responses=AUTHENTICATED)
 
 
 @router.get("/sandbox")
@@ -36,7 +37,7 @@ async def sandbox_info(user: CurrentUser, testbed: TestbedDep) -> dict:
     }
 
 
-@router.post("", response_model=ProgramPublic, status_code=201)
+@router.post("", response_model=ProgramPublic, status_code=201, responses=errors(413))
 def upload_program(body: ProgramCreate, session: SessionDep, user: CurrentUser, testbed: TestbedDep) -> ProgramPublic:
     """Upload a planner program (base64); 403 if uploads are disabled, 413 if too large."""
     settings = testbed.settings
@@ -71,7 +72,7 @@ def upload_program(body: ProgramCreate, session: SessionDep, user: CurrentUser, 
 def list_programs(
     session: SessionDep,
     user: CurrentUser,
-    offset: int = Query(default=0, ge=0),
+    offset: int = Query(default=0, ge=0, le=MAX_OFFSET),
     limit: int = Query(default=50, ge=1, le=500),
 ) -> Page[ProgramPublic]:
     """Your programs, newest first (admins see everyone's)."""
@@ -81,14 +82,14 @@ def list_programs(
     return Page(data=[ProgramPublic.model_validate(p) for p in rows], count=count)
 
 
-@router.get("/{program_id}", response_model=ProgramPublic)
-def get_program(program_id: int, session: SessionDep, user: CurrentUser) -> ProgramPublic:
+@router.get("/{program_id}", response_model=ProgramPublic, responses=errors(404))
+def get_program(program_id: IdPath, session: SessionDep, user: CurrentUser) -> ProgramPublic:
     """One of your programs."""
     return ProgramPublic.model_validate(owned(session, user, Program, program_id, "Program"))
 
 
-@router.get("/{program_id}/content", response_class=Response)
-def get_program_content(program_id: int, session: SessionDep, user: CurrentUser) -> Response:
+@router.get("/{program_id}/content", response_class=Response, responses=errors(404))
+def get_program_content(program_id: IdPath, session: SessionDep, user: CurrentUser) -> Response:
     """The uploaded file itself."""
     prog = owned(session, user, Program, program_id, "Program")
     return Response(prog.content, media_type="application/octet-stream",

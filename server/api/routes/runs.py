@@ -13,20 +13,28 @@ from ...access import owned
 from ...models import Message, Run
 from ...schemas import RunPublic
 from ...store.poses import run_poses
-from ..deps import CurrentUser, SessionDep
+from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep
+from ..responses import AUTHENTICATED, errors
 
-router = APIRouter(prefix="/runs", tags=["runs"])
+router = APIRouter(prefix="/runs", tags=["runs"], responses=AUTHENTICATED)
 
 
-@router.get("/{run_id}", response_model=RunPublic)
-def get_run(run_id: int, session: SessionDep, user: CurrentUser) -> RunPublic:
+@router.get("/{run_id}", response_model=RunPublic, responses=errors(404))
+def get_run(run_id: IdPath, session: SessionDep, user: CurrentUser) -> RunPublic:
     """One run with its metrics."""
     return RunPublic.model_validate(owned(session, user, Run, run_id, "Run"))
 
 
-@router.get("/{run_id}/poses", response_model=None)
+_POSES_CONTENT = {"application/json": {"schema": {"type": "object", "properties": {
+    "run_id": {"type": "integer"}, "count": {"type": "integer"}, "columns": {"type": "array", "items": {"type": "string"}},
+    "poses": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}}}}},
+    "text/csv": {"schema": {"type": "string"}}}
+
+
+@router.get("/{run_id}/poses", response_model=None,
+            responses={200: {"description": "The poses, as JSON or CSV.", "content": _POSES_CONTENT}, **errors(404)})
 def get_poses(
-    run_id: int,
+    run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
     format: Literal["json", "csv"] = Query(default="json", description="json or csv (header t,x,y,theta)."),
@@ -50,12 +58,12 @@ def get_poses(
     return {"run_id": run_id, "count": len(rows), "columns": ["t", "x", "y", "theta"], "poses": rows}
 
 
-@router.get("/{run_id}/messages")
+@router.get("/{run_id}/messages", responses=errors(404))
 def get_messages(
-    run_id: int,
+    run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
-    offset: int = Query(default=0, ge=0),
+    offset: int = Query(default=0, ge=0, le=MAX_OFFSET),
     limit: int = Query(default=1000, ge=1, le=10000),
 ) -> dict:
     """Every protocol line sent to (``>``) or received from (``<``) the robot, with experiment time.
