@@ -262,7 +262,7 @@ def _number_error(field: str) -> str | None:
         return f"number {s[:20]!r}... has {len(s)} characters (at most {MAX_NUMBER_CHARS})"
     if _is_decimal(s):
         return None
-    shown = s[:20] or "(empty)"
+    shown = s or "(empty)"  # at most MAX_NUMBER_CHARS
     kind = "finite" if shown.lower().lstrip("+-") in ("nan", "inf", "infinity") else "a decimal"
     return f"{shown!r} is not {kind} number"
 
@@ -306,15 +306,29 @@ def _layout(raw: bytes, width: int, count: int) -> _Layout:
     return _Layout(item, length, np.append(seps[semi], len(raw)), first_bad)
 
 
+class _Unparsable(Exception):
+    """Field ``index`` of a list is not a number."""
+
+    def __init__(self, index: int) -> None:
+        super().__init__(index)
+        self.index = index
+
+
 def _to_floats(fields: list[str]) -> np.ndarray:
-    """``fields`` as floats (``ValueError`` if one is not a number), converted in chunks so that a
-    worker thread parsing a long line lets the event loop run in between."""
-    chunks = [np.array(fields[i : i + _CONVERT_CHUNK], dtype=float) for i in range(0, len(fields), _CONVERT_CHUNK)]
+    """``fields`` as floats, converted by numpy in chunks so that a worker thread parsing a long
+    line lets the event loop run in between; :class:`_Unparsable` names the first bad field."""
+    chunks = []
+    for start in range(0, len(fields), _CONVERT_CHUNK):
+        chunk = fields[start : start + _CONVERT_CHUNK]
+        try:
+            chunks.append(np.array(chunk, dtype=float))
+        except ValueError:
+            raise _Unparsable(start + _first_unparsable(chunk)) from None
     return np.concatenate(chunks) if chunks else np.zeros(0)
 
 
 def _first_unparsable(fields: list[str]) -> int:
-    """Index of the first field ``float()`` refuses (the list has one)."""
+    """Index of the first field ``float()`` refuses (numpy refused the list)."""
     for j, f in enumerate(fields):
         try:
             float(f)
@@ -346,8 +360,8 @@ def _parse_tuples(payload: str, width: int, what: str, limit: int) -> np.ndarray
     fields = head.replace(";", ",").split(",") if head else []
     try:
         values = _to_floats(fields)
-    except ValueError:
-        stop = _first_unparsable(fields) // width
+    except _Unparsable as exc:
+        stop = exc.index // width
     if stop < count:
         why = _item_error((items or payload.split(";"))[stop], width)
         raise ProtocolError(ErrorCode.SYNTAX, f"{what} {stop + 1}: {why or 'malformed'}")
