@@ -34,7 +34,13 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 import numpy as np  # noqa: E402
 
 from bench._common import interleaved, report  # noqa: E402
-from robot_agent.protocol import MAX_LINE_BYTES, MAX_NUMBER_CHARS, MAX_POINTS, ProtocolError, parse_command  # noqa: E402
+from robot_agent.protocol import (  # noqa: E402
+    MAX_LINE_BYTES,
+    MAX_NUMBER_CHARS,
+    MAX_POINTS,
+    ProtocolError,
+    parse_command,
+)
 
 AREA = (1.8, 1.8)
 

@@ -217,7 +217,8 @@ def _check_controls(raw: bytes) -> None:
     code = raw[col]
     name = "DEL" if code == 0x7F else _CONTROL_NAMES[code]
     raise ProtocolError(
-        ErrorCode.SYNTAX, f"control character 0x{code:02X} ({name}) at column {col + 1}; only spaces may surround fields"
+        ErrorCode.SYNTAX,
+        f"control character 0x{code:02X} ({name}) at column {col + 1}; only spaces may surround fields",
     )
 
 
@@ -405,8 +406,9 @@ def _check_blocks_inside(blocks_m: np.ndarray, field_size: tuple[float, float] |
         i = int(np.flatnonzero(out)[0])
         raise ProtocolError(
             ErrorCode.RANGE,
-            f"block {i + 1} ({bw[i] * 1000:.0f} x {bh[i] * 1000:.0f} mm at ({cx[i] * 1000:.0f}, {cy[i] * 1000:.0f}) mm, "
-            f"{math.degrees(a[i]):.0f} deg) reaches beyond the area 0..{w * 1000:.0f} x 0..{h * 1000:.0f} mm",
+            f"block {i + 1} ({bw[i] * 1000:.0f} x {bh[i] * 1000:.0f} mm at "
+            f"({cx[i] * 1000:.0f}, {cy[i] * 1000:.0f}) mm, {math.degrees(a[i]):.0f} deg) reaches beyond the area "
+            f"0..{w * 1000:.0f} x 0..{h * 1000:.0f} mm",
         )
 
 

@@ -159,7 +159,8 @@ class Robot:
         if conn.probation and verb != "A":
             raise ProtocolError(ErrorCode.STATE, "too many connections")
         if verb in GUARDED_VERBS and not self.authorized(conn):
-            raise ProtocolError(ErrorCode.AUTH, f"T,T,{verb} needs an authenticated connection: send T,T,A,<secret> first")
+            raise ProtocolError(ErrorCode.AUTH,
+                                f"T,T,{verb} needs an authenticated connection: send T,T,A,<secret> first")
 
     def cmd_auth(self, conn: "Connection", cmd: AuthCommand) -> list[str]:
         """``T,T,A``: authenticate with the control key or the current lease (any secret without a key)."""
@@ -172,9 +173,10 @@ class Robot:
             conn.auth, conn.lease_grant = "lease", self.lease_grant
         else:
             conn.auth_failures += 1
-            log.warning("%s: wrong secret from %s (%d)", self.robot_id, conn.peer, conn.auth_failures)
+            log.info("%s: wrong secret from %s (%d)", self.robot_id, conn.peer, conn.auth_failures)
             left = MAX_AUTH_FAILURES - conn.auth_failures
-            raise ProtocolError(ErrorCode.AUTH, "wrong secret" + (f" ({left} attempts left)" if left > 0 else "; closing"))
+            why = f"wrong secret ({left} attempts left)" if left > 0 else "wrong secret; closing"
+            raise ProtocolError(ErrorCode.AUTH, why)
         conn.probation = False
         return [format_ok("A")]
 
