@@ -27,7 +27,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Awaitable, Callable, TypeVar
 
 from .protocol import MAX_LINE_BYTES, ErrorCode, RobotState, format_error
 
@@ -42,6 +42,7 @@ TOOLONG = object()  #: marker returned by :func:`read_line` for a discarded over
 TOO_MANY = "too many connections"
 MAX_AUTH_FAILURES = 5  #: wrong secrets after which a connection is closed
 _BIG_LINE = 64 * 1024  # lines longer than this are parsed in a worker thread
+_T = TypeVar("_T")
 
 
 @dataclass(frozen=True)
@@ -195,12 +196,12 @@ class Connection:
             return self.opened + self.limits.probation_s
         return self._last_accepted + self.limits.idle_timeout_s
 
-    async def _until_deadline(self, awaitable_factory):  # type: ignore[no-untyped-def]
-        """Await ``awaitable_factory()`` until the wait deadline; an exempt connection waits on."""
+    async def _until_deadline(self, wait: Callable[[], Awaitable[_T]]) -> _T:
+        """Await ``wait()`` until the wait deadline (``_Expired`` after it); an exempt connection waits on."""
         while True:
             try:
                 async with asyncio.timeout_at(self._wait_deadline()):
-                    return await awaitable_factory()
+                    return await wait()
             except TimeoutError:
                 if self.probation:
                     raise _Expired(TOO_MANY) from None
