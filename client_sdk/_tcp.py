@@ -1,10 +1,10 @@
 """``send_path``: drive a robot agent directly over TCP with one ``T,T,P`` line (docs/design.md, "Robot protocol").
 
 This is the testbed's raw way, open to planners in any language: connect, read
-the ``HELLO`` greeting, send the path in millimetres and degrees, read the
-``OK``/``ERR`` reply and, optionally, the events until ``EV,DONE`` or
-``EV,FAIL``.  The wire codec is :mod:`robot_agent.protocol`, the one the agent
-itself uses.
+the ``HELLO`` greeting, authenticate with ``T,T,A,<secret>`` if the robot
+needs it, send the path in millimetres and degrees, read the ``OK``/``ERR``
+reply and, optionally, the events until ``EV,DONE`` or ``EV,FAIL``.  The wire
+codec is :mod:`robot_agent.protocol`, the one the agent itself uses.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from robot_agent.protocol import ProtocolError, encode_path, parse_reply
+from robot_agent.protocol import ProtocolError, check_secret, encode_path, parse_reply
 
 from ._exceptions import RobotError, TransportError
 
@@ -69,7 +69,7 @@ def path_with_headings(path: Sequence[Sequence[float]] | np.ndarray) -> np.ndarr
 
 def send_path(host: str, port: int, path: Sequence[Sequence[float]] | np.ndarray | str, *,
               follow: bool = False, timeout: float = 10.0,
-              follow_timeout: Optional[float] = 600.0) -> PathReply:
+              follow_timeout: Optional[float] = 600.0, secret: Optional[str] = None) -> PathReply:
     """Send one path to the robot agent at ``host:port`` and return its reply.
 
     Parameters
@@ -86,6 +86,11 @@ def send_path(host: str, port: int, path: Sequence[Sequence[float]] | np.ndarray
         Connecting and each reply.
     follow_timeout : float or None, s
         Wall seconds to wait for the final event (None: no limit).
+    secret : str, optional
+        Sent as ``T,T,A,<secret>`` before the path, for robots with a control
+        key: the key, or the lease the testbed granted for a run.  If the
+        robot refuses it the path is not sent and the reply is that
+        ``ERR,AUTH,...`` line (``ok`` False, ``error_code`` ``"AUTH"``).
 
     Raises
     ------
@@ -94,9 +99,12 @@ def send_path(host: str, port: int, path: Sequence[Sequence[float]] | np.ndarray
     RobotError
         The agent's lines are not protocol v1.
     ValueError
-        ``path`` is not a finite ``(N, 2|3)`` array of at most 10 000 points.
+        ``path`` is not a finite ``(N, 2|3)`` array of at most 10 000 points, or
+        ``secret`` is not 16-128 printable ASCII characters without ``,`` ``;``.
     """
     line = path.strip() if isinstance(path, str) else encode_path(path_with_headings(path))
+    if secret is not None:
+        check_secret(secret)
     where = f"{host}:{port}"
     try:
         with socket.create_connection((host, int(port)), timeout=timeout) as sock:
@@ -104,10 +112,12 @@ def send_path(host: str, port: int, path: Sequence[Sequence[float]] | np.ndarray
             hello = _read(reader, where, "greeting")
             if hello.kind != "HELLO" or len(hello.fields) < 3:
                 raise RobotError(f"{where} did not greet with HELLO,<robot_id>,<platform>,1")
-            sock.sendall(line.encode("ascii") + b"\n")
-            reply_line, reply = _read_line(reader, where, "reply")
-            while reply.kind == "EV":  # events of a path this connection sent before cannot exist; be lenient
-                reply_line, reply = _read_line(reader, where, "reply")
+            if secret is not None:
+                sock.sendall(f"T,T,A,{secret}\n".encode("ascii"))
+                reply_line, reply = _reply(reader, where)
+            if secret is None or reply.kind == "OK":
+                sock.sendall(line.encode("ascii") + b"\n")
+                reply_line, reply = _reply(reader, where)
             out = PathReply(robot_id=hello.fields[0], platform=hello.fields[1], line_sent=line,
                             reply=reply_line, ok=reply.kind == "OK")
             if reply.kind == "OK" and len(reply.fields) >= 2:
@@ -142,6 +152,14 @@ def _follow(reader, where: str, out: PathReply) -> None:  # type: ignore[no-unty
             if kind == "FAIL" and len(ev.fields) > 1:
                 out.reason = ev.fields[1]
             return
+
+
+def _reply(reader, where: str):  # type: ignore[no-untyped-def]
+    """The next line that is not an event (none can come before this connection sent a path; be lenient)."""
+    reply_line, reply = _read_line(reader, where, "reply")
+    while reply.kind == "EV":
+        reply_line, reply = _read_line(reader, where, "reply")
+    return reply_line, reply
 
 
 def _read_line(reader, where: str, what: str):  # type: ignore[no-untyped-def]

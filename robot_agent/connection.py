@@ -1,4 +1,4 @@
-"""One client connection of the wire protocol: line framing and a bounded outgoing queue.
+"""One client connection of the wire protocol: line framing, deadlines and a bounded outgoing queue.
 
 After aiosmtpd's connection handler: this class only frames lines
 (``readuntil(b"\\n")`` with a 1 MiB limit and recovery from an over-long line),
@@ -11,25 +11,66 @@ commands without reading the replies is throttled (its next line is read only
 when its queue has room again); a client that reads nothing while its robot
 emits events is disconnected once ``max_queue`` lines wait, so the
 simulation never waits for a socket.
+
+Deadlines (:class:`Limits`, wall seconds): a connection is closed with
+``ERR,STATE,idle timeout`` when no line was accepted for ``idle_timeout_s``
+(unless it drives the moving robot or has authenticated and its robot
+moves), and with ``ERR,STATE,line timeout`` when a line is not complete
+``line_timeout_s`` after its first byte.  A connection accepted *on
+probation* (its robot had no room left) must authenticate with ``T,T,A`` as
+its first line within ``probation_s``, else it gets ``ERR,STATE,too many
+connections`` and is closed.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Awaitable, Callable, TypeVar
 
-from .protocol import MAX_LINE_BYTES, ErrorCode, format_error
+from .protocol import MAX_LINE_BYTES, ErrorCode, RobotState, format_error
 
 if TYPE_CHECKING:
     from .robot import Robot
 
-__all__ = ["Connection", "TOOLONG"]
+__all__ = ["MAX_AUTH_FAILURES", "TOOLONG", "TOO_MANY", "Connection", "Limits"]
 
 log = logging.getLogger("robot_agent.connection")
 
 TOOLONG = object()  #: marker returned by :func:`read_line` for a discarded over-long line
+TOO_MANY = "too many connections"
+MAX_AUTH_FAILURES = 5  #: wrong secrets after which a connection is closed
 _BIG_LINE = 64 * 1024  # lines longer than this are parsed in a worker thread
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Connection limits of each robot port; times in wall seconds.
+
+    ``max_connections`` connections in all and ``max_per_peer`` from one IP
+    address; beyond either, a robot with a control key still admits
+    ``max_probation`` connections on probation (each must authenticate within
+    ``probation_s``; the oldest is dropped for a newer one), a robot without
+    one refuses.  ``idle_timeout_s``: longest wait for an accepted line;
+    ``line_timeout_s``: longest time from a line's first byte to its end.
+    """
+
+    max_connections: int = 256
+    max_per_peer: int = 32
+    max_probation: int = 16
+    idle_timeout_s: float = 300.0
+    line_timeout_s: float = 30.0
+    probation_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_connections", "max_per_peer", "max_probation"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"`{name}` must be >= 1, got {getattr(self, name)}")
+        for name in ("idle_timeout_s", "line_timeout_s", "probation_s"):
+            if not getattr(self, name) > 0:  # also refuses NaN
+                raise ValueError(f"`{name}` must be > 0 seconds, got {getattr(self, name)}")
 
 
 async def read_line(reader: asyncio.StreamReader) -> bytes | object:
@@ -52,14 +93,36 @@ async def read_line(reader: asyncio.StreamReader) -> bytes | object:
             consumed = exc.consumed
 
 
+class _Expired(Exception):
+    """A deadline passed; ``reason`` goes into the final ``ERR,STATE`` line."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
 class Connection:
-    """Serves one client of ``robot`` over ``reader``/``writer``."""
+    """Serves one client of ``robot`` over ``reader``/``writer``.
+
+    Authentication state (kept by the robot's ``T,T,A`` / ``T,T,L`` verbs):
+    ``auth`` is None, ``"key"`` (the control key), ``"lease"`` (the lease of
+    grant number ``lease_grant``) or ``"open"`` (a robot without a control key);
+    ``auth_failures`` counts wrong secrets.
+    """
 
     def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, robot: "Robot",
-                 *, max_queue: int = 50_000) -> None:
+                 *, limits: Limits | None = None, probation: bool = False, max_queue: int = 50_000) -> None:
         self.reader, self.writer, self.robot = reader, writer, robot
         self.peer = writer.get_extra_info("peername")
+        self.peer_host = str(self.peer[0]) if isinstance(self.peer, tuple) and self.peer else str(self.peer)
+        self.limits = limits or Limits()
+        self.probation = probation
         self.max_queue = max_queue
+        self.auth: str | None = None
+        self.lease_grant = 0
+        self.auth_failures = 0
+        self.opened = asyncio.get_running_loop().time()
+        self._last_accepted = self.opened
         self._queue: asyncio.Queue[str | None] = asyncio.Queue()
         self._room = asyncio.Event()
         self._room.set()
@@ -91,6 +154,11 @@ class Connection:
         if abort:
             self.writer.transport.abort()
 
+    def refuse(self, reason: str) -> None:
+        """Send ``ERR,STATE,<reason>`` as the last line and close."""
+        self.send(format_error(ErrorCode.STATE, reason))
+        self.close()
+
     async def _write_loop(self) -> None:
         try:
             while True:
@@ -113,29 +181,71 @@ class Connection:
         finally:
             self.writer.close()
 
+    # ------------------------------------------------------------------ deadlines
+
+    def _idle_exempt(self) -> bool:
+        """Whether this connection drives, or has authenticated for, its robot while it moves."""
+        robot = self.robot
+        if robot.state() is not RobotState.MOVING:
+            return False
+        return robot.owner is self or (self.auth is not None and robot.authorized(self))
+
+    def _wait_deadline(self) -> float:
+        """Loop time until which this connection may wait for its next line to start."""
+        if self.probation:
+            return self.opened + self.limits.probation_s
+        return self._last_accepted + self.limits.idle_timeout_s
+
+    async def _until_deadline(self, wait: Callable[[], Awaitable[_T]]) -> _T:
+        """Await ``wait()`` until the wait deadline (``_Expired`` after it); an exempt connection waits on."""
+        while True:
+            try:
+                async with asyncio.timeout_at(self._wait_deadline()):
+                    return await wait()
+            except TimeoutError:
+                if self.probation:
+                    raise _Expired(TOO_MANY) from None
+                if not self._idle_exempt():
+                    raise _Expired("idle timeout") from None
+                self._last_accepted = asyncio.get_running_loop().time()
+
+    async def _next_line(self) -> bytes | object:
+        """The next line or :data:`TOOLONG`; ``_Expired`` when a deadline passes, and
+        ``IncompleteReadError`` at the end of the stream."""
+        first = await self._until_deadline(lambda: self.reader.readexactly(1))
+        if first == b"\n":
+            return first
+        budget = self.limits.line_timeout_s
+        if self.probation:
+            budget = min(budget, self._wait_deadline() - asyncio.get_running_loop().time())
+        try:
+            async with asyncio.timeout(max(budget, 0.0)):
+                rest = await read_line(self.reader)
+        except TimeoutError:
+            raise _Expired(TOO_MANY if self.probation else "line timeout") from None
+        return rest if rest is TOOLONG else first + rest  # type: ignore[operator]
+
     # ------------------------------------------------------------------ input
 
     async def run(self) -> None:
-        """Greet, then read and dispatch lines until the client leaves or is disconnected."""
+        """Greet, then read and dispatch lines until the client leaves, is disconnected or times out."""
         writer_task = asyncio.create_task(self._write_loop(), name=f"twb-writer-{self.peer}")
         self.send(self.robot.hello())
         try:
             while not self.closed:
-                await self._room.wait()
+                await self._until_deadline(self._room.wait)
                 try:
-                    line = await read_line(self.reader)
+                    line = await self._next_line()
                 except asyncio.IncompleteReadError as exc:
                     if exc.partial:
                         log.info("%r: disconnected after half a line (%d bytes ignored)", self, len(exc.partial))
                     break
                 if self.closed:
                     break
-                if line is TOOLONG:
-                    self.send(format_error(ErrorCode.TOOLONG, f"line longer than {MAX_LINE_BYTES} bytes discarded"))
-                    continue
-                assert isinstance(line, bytes)
-                for reply in await self.robot.handle(self, line, in_thread=len(line) > _BIG_LINE):
-                    self.send(reply)
+                await self._serve(line)
+        except _Expired as exc:
+            log.info("%r: %s; closing", self, exc.reason)
+            self.refuse(exc.reason)
         except (ConnectionError, OSError) as exc:
             log.info("%r: connection lost: %s", self, exc)
         finally:
@@ -148,3 +258,21 @@ class Connection:
                 raise
             except Exception:  # noqa: BLE001 - a client that never reads: the socket goes anyway
                 self.writer.transport.abort()
+
+    async def _serve(self, line: bytes | object) -> None:
+        """Reply to one line; apply the probation and wrong-secret rules."""
+        if line is TOOLONG:
+            replies = [format_error(ErrorCode.TOOLONG, f"line longer than {MAX_LINE_BYTES} bytes discarded")]
+        else:
+            assert isinstance(line, bytes)
+            replies = await self.robot.handle(self, line, in_thread=len(line) > _BIG_LINE)
+        if self.probation:  # the first line did not authenticate
+            self.refuse(TOO_MANY)
+            return
+        for reply in replies:
+            self.send(reply)
+        if self.auth_failures >= MAX_AUTH_FAILURES:
+            log.warning("%r: %d wrong secrets; closing", self, self.auth_failures)
+            self.close()
+        elif replies and not replies[0].startswith("ERR,"):
+            self._last_accepted = asyncio.get_running_loop().time()

@@ -20,6 +20,12 @@ reported (EV, ST, tracker) are experiment time.
 Seeds: each path's noise key is ``path_key(seed, robot_id, path_count)``
 from the host's ``seed``, or ``path_key(s)`` when :meth:`set_path_seed` gave
 the next path a seed ``s`` (the same ``s`` replays the same run on any robot).
+
+Robot ports: with a ``control_key`` (or, registered with a server and
+``derive_control_key``, a key per robot from :mod:`robot_agent.auth`) only
+authenticated connections move robots or change the world; without one,
+every connection may, as in the paper.  Connections are bounded in number,
+per peer address and in idle time (:class:`robot_agent.connection.Limits`).
 """
 
 from __future__ import annotations
@@ -33,10 +39,11 @@ import socket
 import time
 from typing import Callable
 
+from . import auth
 from .backends import make_backend
-from .connection import Connection
+from .connection import TOO_MANY, Connection, Limits
 from .params import RobotParams, robot_params
-from .protocol import MAX_LINE_BYTES, ErrorCode, format_error
+from .protocol import MAX_LINE_BYTES, ErrorCode, check_secret, format_error
 from .robot import Robot
 from .robot_profile import DEFAULT_PROFILE
 from .server_link import ServerLink
@@ -90,6 +97,13 @@ class AgentHost:
         advertise_host: str | None = None,
         max_connections: int = 256,
         flush_interval_s: float = 0.25,
+        control_key: str | None = None,
+        derive_control_key: bool = False,
+        max_connections_per_peer: int = 32,
+        max_probation_connections: int = 16,
+        idle_timeout_s: float = 300.0,
+        line_timeout_s: float = 30.0,
+        probation_s: float = 5.0,
     ) -> None:
         if not (time_scale > 0):  # also refuses NaN
             raise ValueError(f"`time_scale` must be > 0 (math.inf: as fast as possible), got {time_scale}")
@@ -97,13 +111,22 @@ class AgentHost:
             raise ValueError(f"`port` must be 0..65535 (and leave room for {robots} robots), got {port}")
         if server_url and not token:
             raise ValueError("`server_url` needs a `token`")
+        if derive_control_key and not (server_url and token):
+            raise ValueError("`derive_control_key` needs `server_url` and `token`")
+        if control_key is not None:
+            try:
+                check_secret(control_key)
+            except ValueError as exc:
+                raise ValueError(f"`control_key`: {exc}") from None
+        self.limits = Limits(max_connections=max_connections, max_per_peer=max_connections_per_peer,
+                             max_probation=max_probation_connections, idle_timeout_s=idle_timeout_s,
+                             line_timeout_s=line_timeout_s, probation_s=probation_s)
         self.params: RobotParams = robot_params(profile)
         self.backend_name = backend
         self.time_scale = float(time_scale)
         self.seed = int(seed)
         self.bind_host, self.base_port = host, port
         self.advertise_host = advertise_host or (socket.gethostname() if host in ("", "0.0.0.0", "::") else host)
-        self.max_connections = max_connections
         self.flush_interval_s = flush_interval_s
         sizes, world_of, origin, areas = field_layout(robots, world, area, origins)
         self.world = World(sizes, world_of, origin, areas, self.params.collision_radius_m)
@@ -117,7 +140,12 @@ class AgentHost:
             robot_ids = [robot_id] if (robot_id and robots == 1) else [f"{base}-{i + 1}" for i in range(robots)]
         if len(robot_ids) != robots or len(set(robot_ids)) != robots:
             raise ValueError(f"`robot_ids` must be {robots} distinct names")
-        self.robots = [Robot(self, i, rid) for i, rid in enumerate(robot_ids)]
+        token_hash = auth.token_hash(token) if derive_control_key and token else None
+        self.robots = [
+            Robot(self, i, rid, control_key=control_key if control_key is not None or token_hash is None
+                  else auth.control_key(token_hash, rid))
+            for i, rid in enumerate(robot_ids)
+        ]
         homes: dict[tuple, int] = {}
         for r in self.robots:
             r.hello()  # validates the id (ASCII, no separators)
@@ -360,14 +388,15 @@ class AgentHost:
 
     async def _accept(self, robot: Robot, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
-        if len(robot.connections) >= self.max_connections or not self._running:
-            writer.write((format_error(ErrorCode.STATE, "too many connections") + "\n").encode())
-            try:
-                await writer.drain()
-            finally:
-                writer.close()
-            return
-        conn = Connection(reader, writer, robot)
+        probation = False
+        full = self._full(robot, writer)
+        if full or not self._running:
+            if robot.control_key is None or not self._running:
+                await _refuse(writer, full or TOO_MANY)
+                return
+            probation = True  # the robot's controller must always get in: it authenticates at once
+            self._make_room_on_probation(robot)
+        conn = Connection(reader, writer, robot, limits=self.limits, probation=probation)
         robot.connected(conn)
         if task is not None:
             self._conn_tasks.add(task)
@@ -378,6 +407,34 @@ class AgentHost:
         finally:
             if task is not None:
                 self._conn_tasks.discard(task)
+
+    def _full(self, robot: Robot, writer: asyncio.StreamWriter) -> str | None:
+        """Why ``robot`` has no regular place for a new connection from ``writer``'s peer, or None."""
+        regular = [c for c in robot.connections if not c.probation]
+        if len(regular) >= self.limits.max_connections:
+            return TOO_MANY
+        peer = writer.get_extra_info("peername")
+        host = str(peer[0]) if isinstance(peer, tuple) and peer else str(peer)
+        if sum(1 for c in regular if c.peer_host == host) >= self.limits.max_per_peer:
+            return f"{TOO_MANY} from {host}"
+        return None
+
+    def _make_room_on_probation(self, robot: Robot) -> None:
+        """Drop the oldest connections on probation until a new one fits."""
+        waiting = sorted((c for c in robot.connections if c.probation and not c.closed), key=lambda c: c.opened)
+        for c in waiting[: max(0, len(waiting) - self.limits.max_probation + 1)]:
+            c.refuse(TOO_MANY)
+
+
+async def _refuse(writer: asyncio.StreamWriter, reason: str) -> None:
+    """Answer a connection that gets no place with ``ERR,STATE,<reason>`` and close it."""
+    writer.write((format_error(ErrorCode.STATE, reason) + "\n").encode())
+    try:
+        await writer.drain()
+    except (ConnectionError, OSError):
+        pass
+    finally:
+        writer.close()
 
 
 async def start_agents(**kwargs: object) -> AgentHost:

@@ -6,15 +6,20 @@ lengths are millimetres and angles degrees; every function here takes and
 returns SI units (metres, radians) so callers never convert by hand.
 
 Commands (client -> agent) parse into small dataclasses with
-:func:`parse_command`; replies and events (agent -> client) are built with the
-``format_*`` functions and parsed with :func:`parse_reply`.  Bad input raises
+:func:`parse_command` (or in two steps: :func:`split_command` checks the
+framing and splits off the verb, :func:`parse_arguments` parses the rest);
+replies and events (agent -> client) are built with the ``format_*``
+functions and parsed with :func:`parse_reply`.  Bad input raises
 :class:`ProtocolError` carrying the ``ERR`` code to send back.
+
+Lines come from anybody who can reach a robot port, so parsing takes linear
+time whatever the input and uses no regular expressions: split first, then
+check each field with a bounded rule (see ``docs/protocol.md``, "Numbers").
 """
 
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 from enum import Enum
 from typing import Iterable, Sequence
@@ -22,13 +27,19 @@ from typing import Iterable, Sequence
 import numpy as np
 
 __all__ = [
+    "MAX_BLOCKS",
     "MAX_LINE_BYTES",
+    "MAX_NUMBER_CHARS",
     "MAX_POINTS",
+    "MAX_SECRET_CHARS",
+    "MIN_SECRET_CHARS",
     "PROTOCOL_VERSION",
+    "AuthCommand",
     "BuildCommand",
     "Command",
     "ErrorCode",
     "Event",
+    "LeaseCommand",
     "PathCommand",
     "PlaceCommand",
     "ProtocolError",
@@ -36,6 +47,7 @@ __all__ = [
     "Reply",
     "RobotState",
     "StopCommand",
+    "check_secret",
     "decode_path",
     "encode_build",
     "encode_path",
@@ -45,14 +57,19 @@ __all__ = [
     "format_hello",
     "format_ok",
     "format_status",
+    "parse_arguments",
     "parse_command",
     "parse_reply",
+    "split_command",
 ]
 
 PROTOCOL_VERSION = 1
 MAX_LINE_BYTES = 1 << 20  # 1 MiB, terminator included
 MAX_POINTS = 10_000
 MAX_BLOCKS = 1000
+MAX_NUMBER_CHARS = 32  # a number's characters, surrounding spaces not counted
+MIN_SECRET_CHARS, MAX_SECRET_CHARS = 16, 128
+BLOCK_TOLERANCE_M = 0.001  # how far a block may reach beyond its robot's area (wire rounding)
 
 
 class ErrorCode(str, Enum):
@@ -134,48 +151,226 @@ class BuildCommand:
     blocks: np.ndarray
 
 
-Command = PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand
+@dataclass(frozen=True)
+class AuthCommand:
+    """``T,T,A``: authenticate this connection with ``secret`` (the control key or the current lease)."""
 
-_NUM = r"\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\s*"
-_NUM_RE = re.compile(_NUM)
-
-
-def _tuples_re(n: int) -> re.Pattern[str]:
-    one = ",".join([_NUM] * n)
-    return re.compile(rf"(?:{one})(?:;(?:{one}))*")
+    secret: str
 
 
-_POINTS_RE = _tuples_re(3)
-_BLOCKS_RE = _tuples_re(5)
+@dataclass(frozen=True)
+class LeaseCommand:
+    """``T,T,L``: grant ``lease`` as a second secret of this robot; None revokes the current lease."""
+
+    lease: str | None
 
 
-def _parse_tuples(payload: str, width: int, what: str, pattern: re.Pattern[str], limit: int) -> np.ndarray:
-    """Parse ``a,b,c;d,e,f;...`` into a ``(N, width)`` float array of wire units."""
-    if payload.count(";") + 1 > limit:
-        raise ProtocolError(ErrorCode.RANGE, f"too many {what}s: {payload.count(';') + 1} > {limit}")
-    if pattern.fullmatch(payload) is None:
-        _explain_syntax(payload, width, what)
-    values = np.array(payload.replace(";", ",").split(","), dtype=float).reshape(-1, width)
+Command = PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
+
+# --------------------------------------------------------------------------- parsing
+#
+# Untrusted input: no regular expressions.  Every step is a split, a count or a
+# byte-class check in linear time; a number is at most MAX_NUMBER_CHARS long
+# before float() sees it.  Once _line_bytes has refused control characters and
+# non-ASCII bytes, the space is the only whitespace left, so the fast
+# str.strip() strips exactly the spaces around fields.
+
+_CONTROL = bytes(range(0x20)) + b"\x7f"
+_CONTROL_NAMES = (
+    "NUL SOH STX ETX EOT ENQ ACK BEL BS TAB LF VT FF CR SO SI "
+    "DLE DC1 DC2 DC3 DC4 NAK SYN ETB CAN EM SUB ESC FS GS RS US"
+).split()
+_LIST_BYTES = b"0123456789+-.eE ,;"  # everything a list of numbers may contain
+_IS_CONTROL = np.zeros(256, dtype=bool)
+_IS_CONTROL[list(_CONTROL)] = True
+_NOT_LIST = np.ones(256, dtype=bool)
+_NOT_LIST[list(_LIST_BYTES)] = False
+_SIGNS = ("+", "-")
+_CONVERT_CHUNK = 4096  # fields per numpy conversion (a few ms at most)
+
+
+def _line_bytes(line: str | bytes) -> bytes:
+    """``line`` as ASCII bytes without its terminator (``\\n``, optionally after one ``\\r``)."""
+    if len(line) > MAX_LINE_BYTES:
+        raise ProtocolError(ErrorCode.TOOLONG, f"line longer than {MAX_LINE_BYTES} bytes")
+    if isinstance(line, str):
+        if not line.isascii():
+            raise ProtocolError(ErrorCode.SYNTAX, "line is not ASCII")
+        raw = line.encode("ascii")
+    else:
+        raw = bytes(line)
+        if not raw.isascii():
+            raise ProtocolError(ErrorCode.SYNTAX, "line is not ASCII")
+    if raw.endswith(b"\n"):
+        raw = raw[:-1]
+    if raw.endswith(b"\r"):
+        raw = raw[:-1]
+    _check_controls(raw)
+    return raw
+
+
+def _check_controls(raw: bytes) -> None:
+    """Refuse any control character (0x00-0x1F, 0x7F), naming it and its 1-based column."""
+    if len(raw.translate(None, _CONTROL)) == len(raw):
+        return
+    col = int(np.flatnonzero(_IS_CONTROL[np.frombuffer(raw, dtype=np.uint8)])[0])
+    code = raw[col]
+    name = "DEL" if code == 0x7F else _CONTROL_NAMES[code]
+    raise ProtocolError(
+        ErrorCode.SYNTAX,
+        f"control character 0x{code:02X} ({name}) at column {col + 1}; only spaces may surround fields",
+    )
+
+
+def split_command(line: str | bytes) -> tuple[str, str | None]:
+    """Check the framing of one client line and split off its verb: ``(verb, arguments)``.
+
+    ``arguments`` is everything after ``T,T,<verb>,`` (None without that
+    comma).  Raises :class:`ProtocolError` for a line over
+    :data:`MAX_LINE_BYTES`, non-ASCII bytes, control characters, an empty line
+    or one that does not start with ``T,T,``.  Linear time.
+    """
+    text = _line_bytes(line).decode("ascii")
+    if not text.strip():
+        raise ProtocolError(ErrorCode.SYNTAX, "empty line")
+    head = text.split(",", 3)
+    if len(head) < 3 or head[0].strip() != "T" or head[1].strip() != "T":
+        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|A|L>")
+    return head[2].strip(), (head[3] if len(head) == 4 else None)
+
+
+def _is_decimal(s: str) -> bool:
+    """Whether ``s`` (no surrounding spaces) is ``[+-]digits[.digits][e[+-]digits]`` (digits on one side
+    of the dot may be missing, not on both)."""
+    if not s.isascii():
+        return False
+    mantissa, e, exponent = s.replace("E", "e").partition("e")
+    if e:
+        if exponent[:1] in _SIGNS:
+            exponent = exponent[1:]
+        if not exponent.isdigit():  # also refuses a second e
+            return False
+    if mantissa[:1] in _SIGNS:
+        mantissa = mantissa[1:]
+    whole, _, frac = mantissa.partition(".")
+    return bool(whole or frac) and (not whole or whole.isdigit()) and (not frac or frac.isdigit())
+
+
+def _number_error(field: str) -> str | None:
+    """Why ``field`` is not a protocol number, or None."""
+    s = field.strip()
+    if len(s) > MAX_NUMBER_CHARS:
+        return f"number {s[:20]!r}... has {len(s)} characters (at most {MAX_NUMBER_CHARS})"
+    if _is_decimal(s):
+        return None
+    shown = s or "(empty)"  # at most MAX_NUMBER_CHARS
+    kind = "finite" if shown.lower().lstrip("+-") in ("nan", "inf", "infinity") else "a decimal"
+    return f"{shown!r} is not {kind} number"
+
+
+def _item_error(item: str, width: int) -> str | None:
+    """Why ``item`` (one point or block) is not ``width`` protocol numbers, or None."""
+    fields = item.split(",")
+    if len(fields) != width:
+        return f"expected {width} fields, got {len(fields)}"
+    for f in fields:
+        why = _number_error(f)
+        if why:
+            return why
+    return None
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where the fields of a list are: per field its item and length, where each item ends,
+    and the first item that is surely malformed (wrong field count, a character no number has)."""
+
+    item: np.ndarray
+    length: np.ndarray
+    ends: np.ndarray
+    first_bad: int
+
+
+def _layout(raw: bytes, width: int, count: int) -> _Layout:
+    """One vectorised pass over the separators and character classes of a ``count``-item list."""
+    a = np.frombuffer(raw, dtype=np.uint8)
+    seps = np.flatnonzero((a == 44) | (a == 59))  # "," and ";"
+    semi = a[seps] == 59
+    item = np.zeros(len(seps) + 1, dtype=np.int64)
+    np.cumsum(semi, out=item[1:])
+    length = np.diff(np.concatenate(([-1], seps, [len(raw)]))) - 1
+    wrong = np.flatnonzero(np.bincount(item, minlength=count) != width)
+    first_bad = int(wrong[0]) if len(wrong) else count
+    if raw.translate(None, _LIST_BYTES):  # a character no number has
+        pos = int(np.flatnonzero(_NOT_LIST[a])[0])
+        first_bad = min(first_bad, int(item[np.searchsorted(seps, pos)]))
+    return _Layout(item, length, np.append(seps[semi], len(raw)), first_bad)
+
+
+class _Unparsable(Exception):
+    """Field ``index`` of a list is not a number."""
+
+    def __init__(self, index: int) -> None:
+        super().__init__(index)
+        self.index = index
+
+
+def _to_floats(fields: list[str]) -> np.ndarray:
+    """``fields`` as floats, converted by numpy in chunks so that a worker thread parsing a long
+    line lets the event loop run in between; :class:`_Unparsable` names the first bad field."""
+    chunks = []
+    for start in range(0, len(fields), _CONVERT_CHUNK):
+        chunk = fields[start : start + _CONVERT_CHUNK]
+        try:
+            chunks.append(np.array(chunk, dtype=float))
+        except ValueError:
+            raise _Unparsable(start + _first_unparsable(chunk)) from None
+    return np.concatenate(chunks) if chunks else np.zeros(0)
+
+
+def _first_unparsable(fields: list[str]) -> int:
+    """Index of the first field ``float()`` refuses (numpy refused the list)."""
+    for j, f in enumerate(fields):
+        try:
+            float(f)
+        except ValueError:
+            return j
+    raise ProtocolError(ErrorCode.SYNTAX, "malformed number list")  # numpy refused what float() accepts
+
+
+def _parse_tuples(payload: str, width: int, what: str, limit: int) -> np.ndarray:
+    """Parse ``a,b,c;d,e,f;...`` into a ``(N, width)`` float array of wire units, in linear time.
+
+    The fast path finds the fields, their lengths and any character no number
+    has in one vectorised pass, and numpy converts the fields.  Only a
+    malformed list is looked at item by item, to explain its first bad item.
+    """
+    count = payload.count(";") + 1
+    if count > limit:
+        raise ProtocolError(ErrorCode.RANGE, f"too many {what}s: {count} > {limit}")
+    layout = _layout(payload.encode("ascii"), width, count)
+    stop = layout.first_bad  # items from here on are not converted
+    long_items = np.unique(layout.item[layout.length > MAX_NUMBER_CHARS])
+    long_items = long_items[long_items < stop]
+    items = payload.split(";") if len(long_items) else None
+    for i in long_items.tolist():  # a long field is fine only when spaces pad a short number
+        if _item_error(items[i], width):  # type: ignore[index]
+            stop = i
+            break
+    head = payload[: layout.ends[stop - 1]] if stop else ""  # the items before `stop`
+    fields = head.replace(";", ",").split(",") if head else []
+    try:
+        values = _to_floats(fields)
+    except _Unparsable as exc:
+        stop = exc.index // width
+    if stop < count:
+        why = _item_error((items or payload.split(";"))[stop], width)
+        raise ProtocolError(ErrorCode.SYNTAX, f"{what} {stop + 1}: {why or 'malformed'}")
+    values = values.reshape(-1, width)
     if not np.isfinite(values).all():  # e.g. 1e999 overflows to inf
         bad = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
         raise ProtocolError(ErrorCode.SYNTAX, f"{what} {bad + 1}: numbers must be finite")
     return values
-
-
-def _explain_syntax(payload: str, width: int, what: str) -> None:
-    """Find the first malformed tuple and raise a precise SYNTAX error (slow path, errors only)."""
-    for i, item in enumerate(payload.split(";")):
-        fields = item.split(",")
-        if len(fields) != width:
-            raise ProtocolError(
-                ErrorCode.SYNTAX, f"{what} {i + 1}: expected {width} fields, got {len(fields)}"
-            )
-        for f in fields:
-            if _NUM_RE.fullmatch(f) is None:
-                shown = f.strip()[:20] or "(empty)"
-                kind = "finite" if shown.lower().lstrip("+-") in ("nan", "inf", "infinity") else "a decimal"
-                raise ProtocolError(ErrorCode.SYNTAX, f"{what} {i + 1}: {shown!r} is not {kind} number")
-    raise ProtocolError(ErrorCode.SYNTAX, f"malformed {what} list")
 
 
 def _wrap(a: np.ndarray | float) -> np.ndarray | float:
@@ -197,35 +392,62 @@ def _check_range(xy_m: np.ndarray, field_size: tuple[float, float] | None, what:
         )
 
 
-def parse_command(line: str | bytes, *, field_size: tuple[float, float] | None = None) -> Command:
-    """Parse one client line (terminator optional) into a command, SI units.
+def _check_blocks_inside(blocks_m: np.ndarray, field_size: tuple[float, float] | None) -> None:
+    """Refuse blocks whose rotated rectangle reaches beyond the area ``[0,w] x [0,h]`` (m)."""
+    if field_size is None or not len(blocks_m):
+        return
+    w, h = field_size
+    cx, cy, bw, bh, a = blocks_m.T
+    c, s = np.abs(np.cos(a)), np.abs(np.sin(a))
+    ex, ey = (bw * c + bh * s) / 2, (bw * s + bh * c) / 2  # half extents of the rotated rectangle
+    tol = BLOCK_TOLERANCE_M
+    out = (cx - ex < -tol) | (cx + ex > w + tol) | (cy - ey < -tol) | (cy + ey > h + tol)
+    if out.any():
+        i = int(np.flatnonzero(out)[0])
+        raise ProtocolError(
+            ErrorCode.RANGE,
+            f"block {i + 1} ({bw[i] * 1000:.0f} x {bh[i] * 1000:.0f} mm at "
+            f"({cx[i] * 1000:.0f}, {cy[i] * 1000:.0f}) mm, {math.degrees(a[i]):.0f} deg) reaches beyond the area "
+            f"0..{w * 1000:.0f} x 0..{h * 1000:.0f} mm",
+        )
 
-    ``field_size`` (metres) enables the RANGE check of path points and
-    placements.  Raises :class:`ProtocolError` for anything malformed.
+
+def check_secret(secret: str) -> str:
+    """Return ``secret`` if it may serve as a control key or lease, else raise ``ValueError``.
+
+    A secret is 16 to 128 printable ASCII characters (0x20-0x7E) without ``,``
+    or ``;`` and without a space at either end.
     """
-    if isinstance(line, bytes):
-        if len(line) > MAX_LINE_BYTES:
-            raise ProtocolError(ErrorCode.TOOLONG, f"line longer than {MAX_LINE_BYTES} bytes")
-        try:
-            line = line.decode("ascii")
-        except UnicodeDecodeError:
-            raise ProtocolError(ErrorCode.SYNTAX, "line is not ASCII") from None
-    elif len(line) > MAX_LINE_BYTES:
-        raise ProtocolError(ErrorCode.TOOLONG, f"line longer than {MAX_LINE_BYTES} bytes")
-    if not line.isascii():
-        raise ProtocolError(ErrorCode.SYNTAX, "line is not ASCII")
-    text = line.rstrip("\r\n").strip()
+    if not MIN_SECRET_CHARS <= len(secret) <= MAX_SECRET_CHARS:
+        raise ValueError(f"a secret has {MIN_SECRET_CHARS} to {MAX_SECRET_CHARS} characters, got {len(secret)}")
+    if not (secret.isascii() and secret.isprintable()) or "," in secret or ";" in secret:
+        raise ValueError("a secret is printable ASCII without , or ;")
+    if secret != secret.strip(" "):
+        raise ValueError("a secret neither starts nor ends with a space")
+    return secret
+
+
+def _secret(rest: str | None, verb: str) -> str:
+    text = "" if rest is None else rest.strip()
     if not text:
-        raise ProtocolError(ErrorCode.SYNTAX, "empty line")
-    head = text.split(",", 3)
-    if len(head) < 3 or head[0].strip() != "T" or head[1].strip() != "T":
-        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B>")
-    verb = head[2].strip()
-    rest = head[3] if len(head) == 4 else None
+        raise ProtocolError(ErrorCode.SYNTAX, f"T,T,{verb} needs a secret: T,T,{verb},<secret>")
+    try:
+        return check_secret(text)
+    except ValueError as exc:
+        raise ProtocolError(ErrorCode.SYNTAX, str(exc)) from None
+
+
+def parse_arguments(verb: str, rest: str | None, *, field_size: tuple[float, float] | None = None) -> Command:
+    """The command for ``verb`` and its ``rest`` (as :func:`split_command` returns them), SI units.
+
+    ``field_size`` (metres) enables the RANGE checks of path points,
+    placements and blocks.  Raises :class:`ProtocolError` for anything
+    malformed.  Linear time in ``len(rest)``.
+    """
     if verb == "P":
         if rest is None or not rest.strip():
             raise ProtocolError(ErrorCode.SYNTAX, "empty path: T,T,P needs at least one point x,y,a")
-        pts = _parse_tuples(rest, 3, "point", _POINTS_RE, MAX_POINTS)
+        pts = _parse_tuples(rest, 3, "point", MAX_POINTS)
         out = np.column_stack([pts[:, :2] / 1000.0, _wrap(np.radians(pts[:, 2]))])
         _check_range(out, field_size, "point")
         return PathCommand(out)
@@ -238,21 +460,37 @@ def parse_command(line: str | bytes, *, field_size: tuple[float, float] | None =
             raise ProtocolError(ErrorCode.SYNTAX, "T,T,I needs x,y,a")
         if ";" in rest:
             raise ProtocolError(ErrorCode.SYNTAX, "T,T,I takes exactly one pose x,y,a")
-        pose = _parse_tuples(rest, 3, "pose", _POINTS_RE, 1)[0]
+        pose = _parse_tuples(rest, 3, "pose", 1)[0]
         xy = pose[None, :2] / 1000.0
         _check_range(xy, field_size, "pose")
         return PlaceCommand((float(xy[0, 0]), float(xy[0, 1]), float(_wrap(math.radians(pose[2])))))
     if verb == "B":
         if rest is None or not rest.strip():
             return BuildCommand(np.zeros((0, 5)))
-        blocks = _parse_tuples(rest, 5, "block", _BLOCKS_RE, MAX_BLOCKS)
+        blocks = _parse_tuples(rest, 5, "block", MAX_BLOCKS)
         if (blocks[:, 2:4] <= 0).any():
             i = int(np.flatnonzero((blocks[:, 2:4] <= 0).any(axis=1))[0])
             raise ProtocolError(ErrorCode.RANGE, f"block {i + 1}: width and height must be > 0")
         out = np.column_stack([blocks[:, :4] / 1000.0, np.radians(blocks[:, 4])])
         _check_range(out[:, :2], field_size, "block")
+        _check_blocks_inside(out, field_size)
         return BuildCommand(out)
+    if verb == "A":
+        return AuthCommand(_secret(rest, "A"))
+    if verb == "L":
+        return LeaseCommand(None if rest is None or not rest.strip() else _secret(rest, "L"))
     raise ProtocolError(ErrorCode.UNSUPPORTED, f"unknown command T,T,{verb[:10]}")
+
+
+def parse_command(line: str | bytes, *, field_size: tuple[float, float] | None = None) -> Command:
+    """Parse one client line (terminator optional) into a command, SI units.
+
+    ``field_size`` (metres) enables the RANGE checks of path points,
+    placements and blocks.  Raises :class:`ProtocolError` for anything
+    malformed.  Linear time in the length of the line, whatever it holds.
+    """
+    verb, rest = split_command(line)
+    return parse_arguments(verb, rest, field_size=field_size)
 
 
 # --------------------------------------------------------------------------- encoding

@@ -17,18 +17,29 @@ Rules (documented in ``docs/protocol.md``):
 - **Disconnect rule**: when the connection that sent the path in progress
   closes, the robot stops at once (the path ends as ``FAIL,STOPPED``, logged
   by the agent since nobody is left to tell): nothing drives unattended.
+- **Authentication** (only when the robot has a ``control_key``): ``T,T,P``,
+  ``T,T,S``, ``T,T,I`` and ``T,T,B`` need a connection authenticated with
+  ``T,T,A,<secret>``, the secret being the control key or the current lease;
+  ``T,T,L,<lease>`` (control key only) grants the one lease, ``T,T,L`` alone
+  revokes it, and so does the granting connection closing.  Connections
+  authenticated with a revoked lease lose their authentication.
 """
 
 from __future__ import annotations
 
 import asyncio
+import hmac
 import logging
 from typing import TYPE_CHECKING
 
+from .connection import MAX_AUTH_FAILURES
 from .noise import path_key
 from .protocol import (
+    AuthCommand,
     BuildCommand,
+    Command,
     ErrorCode,
+    LeaseCommand,
     PathCommand,
     PlaceCommand,
     ProtocolError,
@@ -39,7 +50,8 @@ from .protocol import (
     format_hello,
     format_ok,
     format_status,
-    parse_command,
+    parse_arguments,
+    split_command,
 )
 from .sim import SimEvent, State
 
@@ -47,16 +59,22 @@ if TYPE_CHECKING:
     from .connection import Connection
     from .host import AgentHost
 
-__all__ = ["Robot"]
+__all__ = ["GUARDED_VERBS", "Robot"]
 
 log = logging.getLogger("robot_agent.robot")
+
+GUARDED_VERBS = frozenset("PSIB")  #: verbs that need an authenticated connection when there is a control key
 
 
 class Robot:
     """Robot ``index`` of ``host``, called ``robot_id``."""
 
-    def __init__(self, host: "AgentHost", index: int, robot_id: str) -> None:
+    def __init__(self, host: "AgentHost", index: int, robot_id: str, *, control_key: str | None = None) -> None:
         self.host, self.index, self.robot_id = host, index, robot_id
+        self.control_key = control_key
+        self.lease: str | None = None  # the second secret, granted by a key holder
+        self.lease_grant = 0  # number of the current (or last) grant
+        self.lease_holder: "Connection | None" = None
         self.port = 0
         self.connections: set["Connection"] = set()
         self.owner: "Connection | None" = None  # sender of the path in progress
@@ -90,25 +108,99 @@ class Robot:
     # ------------------------------------------------------------------ dispatch
 
     async def handle(self, conn: "Connection", line: bytes, *, in_thread: bool = False) -> list[str]:
-        """Reply lines for one client line (``ERR`` for anything refused)."""
+        """Reply lines for one client line (``ERR`` for anything refused).
+
+        The verb is checked against the connection's authentication before its
+        arguments are parsed; with ``in_thread`` (long lines) both parsing
+        steps run in a worker thread.
+        """
         try:
             if in_thread:
-                cmd = await asyncio.to_thread(parse_command, line, field_size=self.area)
+                verb, rest = await asyncio.to_thread(split_command, line)
             else:
-                cmd = parse_command(line, field_size=self.area)
-            if isinstance(cmd, PathCommand):
-                return self.cmd_path(conn, cmd)
-            if isinstance(cmd, StopCommand):
-                return self.cmd_stop()
-            if isinstance(cmd, QueryCommand):
-                return self.cmd_query()
-            if isinstance(cmd, PlaceCommand):
-                return await self.cmd_place(cmd)
-            if isinstance(cmd, BuildCommand):
-                return await self.cmd_build(cmd)
-            raise ProtocolError(ErrorCode.UNSUPPORTED, "unsupported command")
+                verb, rest = split_command(line)
+            self._admit(conn, verb)
+            if in_thread:
+                cmd = await asyncio.to_thread(parse_arguments, verb, rest, field_size=self.area)
+            else:
+                cmd = parse_arguments(verb, rest, field_size=self.area)
+            return await self._dispatch(conn, cmd)
         except ProtocolError as exc:
             return [exc.line()]
+
+    async def _dispatch(self, conn: "Connection", cmd: Command) -> list[str]:
+        """One method per verb."""
+        if isinstance(cmd, PathCommand):
+            return self.cmd_path(conn, cmd)
+        if isinstance(cmd, StopCommand):
+            return self.cmd_stop()
+        if isinstance(cmd, QueryCommand):
+            return self.cmd_query()
+        if isinstance(cmd, PlaceCommand):
+            return await self.cmd_place(cmd)
+        if isinstance(cmd, BuildCommand):
+            return await self.cmd_build(cmd)
+        if isinstance(cmd, AuthCommand):
+            return self.cmd_auth(conn, cmd)
+        if isinstance(cmd, LeaseCommand):
+            return self.cmd_lease(conn, cmd)
+        raise ProtocolError(ErrorCode.UNSUPPORTED, "unsupported command")
+
+    # ------------------------------------------------------------------ authentication
+
+    def authorized(self, conn: "Connection") -> bool:
+        """Whether ``conn`` may move the robot or change the world (always, without a control key)."""
+        if self.control_key is None or conn.auth == "key":
+            return True
+        return conn.auth == "lease" and self.lease is not None and conn.lease_grant == self.lease_grant
+
+    def _admit(self, conn: "Connection", verb: str) -> None:
+        """Refuse a verb this connection may not use now."""
+        if conn.probation and verb != "A":
+            raise ProtocolError(ErrorCode.STATE, "too many connections")
+        if verb in GUARDED_VERBS and not self.authorized(conn):
+            raise ProtocolError(ErrorCode.AUTH,
+                                f"T,T,{verb} needs an authenticated connection: send T,T,A,<secret> first")
+
+    def cmd_auth(self, conn: "Connection", cmd: AuthCommand) -> list[str]:
+        """``T,T,A``: authenticate with the control key or the current lease (any secret without a key)."""
+        key, lease = self.control_key, self.lease
+        if key is None:
+            conn.auth = "open"
+        elif hmac.compare_digest(cmd.secret, key):
+            conn.auth = "key"
+        elif lease is not None and hmac.compare_digest(cmd.secret, lease):
+            conn.auth, conn.lease_grant = "lease", self.lease_grant
+        else:
+            conn.auth_failures += 1
+            log.info("%s: wrong secret from %s (%d)", self.robot_id, conn.peer, conn.auth_failures)
+            left = MAX_AUTH_FAILURES - conn.auth_failures
+            why = f"wrong secret ({left} attempts left)" if left > 0 else "wrong secret; closing"
+            raise ProtocolError(ErrorCode.AUTH, why)
+        conn.probation = False
+        return [format_ok("A")]
+
+    def cmd_lease(self, conn: "Connection", cmd: LeaseCommand) -> list[str]:
+        """``T,T,L``: grant (or with no lease, revoke) the robot's one lease; control key only."""
+        if self.control_key is None:
+            return [format_ok("L")]  # an open robot: nothing to grant
+        if conn.auth != "key":
+            raise ProtocolError(ErrorCode.AUTH, "only a connection authenticated with the control key grants leases")
+        if cmd.lease is None:
+            self.revoke_lease()
+        elif hmac.compare_digest(cmd.lease, self.control_key):
+            raise ProtocolError(ErrorCode.RANGE, "a lease must differ from the control key")
+        else:
+            self.lease, self.lease_holder = cmd.lease, conn
+            self.lease_grant += 1
+            log.info("%s: lease granted by %s", self.robot_id, conn.peer)
+        return [format_ok("L")]
+
+    def revoke_lease(self) -> None:
+        """End the current lease: connections authenticated with it lose their authentication."""
+        if self.lease is not None:
+            log.info("%s: lease revoked", self.robot_id)
+        self.lease, self.lease_holder = None, None
 
     def _noise_key(self) -> int:
         if self.next_seed is not None:
@@ -209,8 +301,10 @@ class Robot:
         self.connections.add(conn)
 
     def disconnected(self, conn: "Connection") -> None:
-        """The disconnect rule: the path of a closing sender stops at once."""
+        """The disconnect rule: the path of a closing sender stops at once; its lease ends."""
         self.connections.discard(conn)
+        if self.lease_holder is conn:
+            self.revoke_lease()
         if self.owner is conn:
             self.owner = None
             ev = self.host.core.stop(self.index)

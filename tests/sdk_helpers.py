@@ -38,10 +38,11 @@ def invoke(capsys, monkeypatch, *args: str, env: dict[str, str | None] | None = 
 
 
 @contextlib.contextmanager
-def agent_process(robot_id: str) -> Iterator[int]:
-    """One ideal robot (``twb agent --port 0 --time-scale max``); yields its TCP port, stops it with Ctrl-C."""
+def agent_process(robot_id: str, *options: str) -> Iterator[int]:
+    """One ideal robot (``twb agent --port 0 --time-scale max [options]``); yields its TCP port, stops it
+    with Ctrl-C."""
     proc = subprocess.Popen([str(TWB), "agent", "--port", "0", "--backend", "ideal", "--time-scale", "max",
-                             "--robot-id", robot_id], stderr=subprocess.PIPE, text=True)
+                             "--robot-id", robot_id, *options], stderr=subprocess.PIPE, text=True)
     try:
         port = None
         while port is None:

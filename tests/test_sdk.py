@@ -214,6 +214,20 @@ def test_send_path_raw_tcp(agent_port):
         send_path("127.0.0.1", agent_port, [[0, 0], [np.nan, 1]])
 
 
+def test_send_path_with_a_secret_to_a_robot_with_a_control_key():
+    key = "sdk-control-key-0001"
+    path = [[0.1, 0.1], [0.5, 0.1]]
+    with agent_process("sdk-key", "--control-key", key) as port:
+        refused = send_path("127.0.0.1", port, path)
+        assert not refused.ok and refused.error_code == "AUTH"
+        wrong = send_path("127.0.0.1", port, path, secret="not-the-control-key")
+        assert not wrong.ok and wrong.error_code == "AUTH" and wrong.points is None
+        r = send_path("127.0.0.1", port, path, secret=key, follow=True)
+        assert r.ok and r.reply == "OK,P,2" and r.outcome == "DONE"
+    with pytest.raises(ValueError, match="16 to 128"):
+        send_path("127.0.0.1", 9, path, secret="short")
+
+
 def test_send_path_no_agent():
     with pytest.raises(TransportError, match="cannot reach the robot agent at 127.0.0.1:9"):
         send_path("127.0.0.1", 9, [[0.1, 0.1], [0.2, 0.2]], timeout=5)
