@@ -33,6 +33,7 @@ from ._exceptions import (
 )
 from ._models import (
     TERMINAL_STATES,
+    CancelResult,
     DirectComparison,
     Environment,
     Experiment,
@@ -57,6 +58,7 @@ __all__ = sorted(
         "ApiError",
         "AsyncClient",
         "BaseClient",
+        "CancelResult",
         "Client",
         "Conflict",
         "DEFAULT_URL",

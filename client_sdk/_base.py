@@ -26,6 +26,7 @@ import numpy as np
 from ._config import resolve_token, resolve_url
 from ._exceptions import STATUS_ERRORS, ApiError, TransportError, TwbError, WaitTimeout
 from ._models import (
+    CancelResult,
     Environment,
     Experiment,
     ExperimentMetrics,
@@ -214,6 +215,10 @@ class BaseClient:
 
     def _cancel(self, experiment_id: int) -> Call:
         return Call("POST", f"{API_PREFIX}/experiments/{int(experiment_id)}/cancel", _one(Experiment.from_json))
+
+    def _cancel_many(self, experiment_ids: Sequence[int]) -> Call:
+        return Call("POST", f"{API_PREFIX}/experiments/cancel", _one(CancelResult.from_json),
+                    json={"ids": [int(i) for i in experiment_ids]})
 
     def _get_metrics(self, experiment_id: int) -> Call:
         return Call("GET", f"{API_PREFIX}/experiments/{int(experiment_id)}/metrics", _one(ExperimentMetrics.from_json))

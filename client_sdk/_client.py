@@ -17,6 +17,7 @@ import numpy as np
 
 from ._base import BaseClient, Call, Waiter, program_body, translate_errors
 from ._models import (
+    CancelResult,
     Environment,
     Experiment,
     ExperimentMetrics,
@@ -182,6 +183,10 @@ class Client(BaseClient):
         """Cancel queued runs and stop running ones; :class:`Conflict` if already finished."""
         return self._send(self._cancel(experiment_id))
 
+    def cancel_many(self, experiment_ids: Sequence[int]) -> CancelResult:
+        """Cancel up to 1000 experiments in one request; the result says which were and why not the others."""
+        return self._send(self._cancel_many(experiment_ids))
+
     def get_metrics(self, experiment_id: int) -> ExperimentMetrics:
         """Metrics per run, mean/std per mode, and the direct sim-vs-twb comparison per repetition."""
         return self._send(self._get_metrics(experiment_id))
@@ -332,6 +337,10 @@ class AsyncClient(BaseClient):
     async def cancel(self, experiment_id: int) -> Experiment:
         """See :meth:`Client.cancel`."""
         return await self._send(self._cancel(experiment_id))
+
+    async def cancel_many(self, experiment_ids: Sequence[int]) -> CancelResult:
+        """See :meth:`Client.cancel_many`."""
+        return await self._send(self._cancel_many(experiment_ids))
 
     async def get_metrics(self, experiment_id: int) -> ExperimentMetrics:
         """See :meth:`Client.get_metrics`."""

@@ -82,6 +82,19 @@ class Page(Generic[T]):
 
 
 @dataclass
+class CancelResult(_FromJson):
+    """What a cancel of many experiments did: ``cancelled`` ids, and why the others were not
+    (``not_cancelled``: id -> ``"not found"`` or ``"already <status>"``)."""
+
+    cancelled: list[int]
+    not_cancelled: dict[int, str]
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "CancelResult":
+        return cls(list(data["cancelled"]), {int(n["id"]): n["reason"] for n in data["not_cancelled"]})
+
+
+@dataclass
 class Plan(_FromJson):
     """A named start/goal pair of an environment: poses ``[x, y, theta]`` (m, m, rad)."""
 

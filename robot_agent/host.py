@@ -21,10 +21,11 @@ Seeds: each path's noise key is ``path_key(seed, robot_id, path_count)``
 from the host's ``seed``, or ``path_key(s)`` when :meth:`set_path_seed` gave
 the next path a seed ``s`` (the same ``s`` replays the same run on any robot).
 
-Robot ports: with a ``control_key`` (or, registered with a server and
-``derive_control_key``, a key per robot from :mod:`robot_agent.auth`) only
-authenticated connections move robots or change the world; without one,
-every connection may, as in the paper.  Connections are bounded in number,
+Robot ports: registered with a testbed server, each robot has the control
+key the server derives from the token (:mod:`robot_agent.auth`); with an
+explicit ``control_key`` all robots have that one.  Then only authenticated
+connections move robots or change the world; a standalone agent (no server,
+no key) lets every connection, as in the paper.  Connections are bounded in number,
 per peer address and in idle time (:class:`robot_agent.connection.Limits`).
 """
 
@@ -98,7 +99,7 @@ class AgentHost:
         max_connections: int = 256,
         flush_interval_s: float = 0.25,
         control_key: str | None = None,
-        derive_control_key: bool = False,
+        derive_control_key: bool | None = None,
         max_connections_per_peer: int = 32,
         max_probation_connections: int = 16,
         idle_timeout_s: float = 300.0,
@@ -113,6 +114,8 @@ class AgentHost:
             raise ValueError("`server_url` needs a `token`")
         if derive_control_key and not (server_url and token):
             raise ValueError("`derive_control_key` needs `server_url` and `token`")
+        if derive_control_key is None:  # registered with a server: the server drives with the derived keys
+            derive_control_key = bool(server_url and token) and control_key is None
         if control_key is not None:
             try:
                 check_secret(control_key)

@@ -6,7 +6,7 @@ Rows of other users answer exactly like rows that do not exist
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+from typing import Any, Optional, TypeVar
 
 from sqlalchemy import ColumnElement, or_, select, true
 from sqlalchemy.orm import Session
@@ -15,7 +15,7 @@ from .core.security import Principal
 from .errors import NotFound
 from .models import Environment, Experiment, Program, Run
 
-__all__ = ["owned", "visible_environments"]
+__all__ = ["event_for", "owned", "visible_environments"]
 
 Row = TypeVar("Row", Experiment, Program, Run)
 
@@ -43,3 +43,23 @@ def visible_environments(user: Principal) -> ColumnElement[bool]:
     if user.is_admin:
         return true()
     return or_(Environment.builtin.is_(True), Environment.owner_id == user.id)
+
+
+def event_for(user: Principal, event: dict[str, Any]) -> Optional[dict[str, Any]]:
+    """A live event as ``user`` may see it (None: not at all); admins see everything.
+
+    Experiments and runs: only one's own.  Robot positions: of robots that
+    run nobody's run or one's own (another user's run is not followed live).
+    Sub-fields: another user's run is not named.  Nobody sees who owns what.
+    """
+    if user.is_admin:
+        return event
+    owner = event.get("owner_id")
+    mine = owner == user.id
+    kind = event.get("type")
+    if kind in ("experiment", "run") or (kind == "pose" and event.get("run_id") is not None):
+        return event if mine else None
+    shown = {k: v for k, v in event.items() if k != "owner_id"}
+    if kind == "subfield" and not mine and shown["subfield"].get("run_id") is not None:
+        shown["subfield"] = {**shown["subfield"], "run_id": None}
+    return shown

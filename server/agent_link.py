@@ -43,12 +43,12 @@ class AgentLink:
 
     @classmethod
     async def connect(cls, host: str, port: int, *, time_scale: float, on_line: LineLog,
-                      timeout_s: float = 5.0) -> "AgentLink":
-        """Open the connection and read the ``HELLO`` greeting."""
+                      control_key: Optional[str] = None, timeout_s: float = 5.0) -> "AgentLink":
+        """Open the connection, read the ``HELLO`` greeting and, with a ``control_key``, authenticate."""
         try:
             reader, writer = await asyncio.wait_for(
                 asyncio.open_connection(host, port, limit=MAX_LINE_BYTES), timeout_s)
-        except (OSError, asyncio.TimeoutError) as exc:
+        except (OSError, asyncio.TimeoutError, UnicodeError, ValueError) as exc:
             raise AgentUnavailable(f"cannot connect to robot agent {host}:{port}: {exc or 'timeout'}") from None
         link = cls(reader, writer, time_scale=time_scale, on_line=on_line)
         try:
@@ -66,6 +66,13 @@ class AgentLink:
             raise AgentUnavailable(f"{host}:{port} is not a robot agent (greeting {line[:40]!r})")
         link.hello = hello
         link._reader_task = asyncio.create_task(link._read_loop(), name=f"twb-agent-link-{port}")
+        if control_key is not None:
+            try:
+                await link.request(f"T,T,A,{control_key}", timeout_s, shown="T,T,A,<control key>")
+            except AgentRefused as exc:
+                await link.close()
+                raise AgentRefused(exc.code, f"the robot did not accept the testbed's control key ({exc.message})") \
+                    from None
         return link
 
     async def __aenter__(self) -> "AgentLink":
@@ -122,12 +129,15 @@ class AgentLink:
             self._replies.put_nowait(None)
             self.events.put_nowait(None)
 
-    async def request(self, line: str, timeout_s: float) -> Reply:
-        """Send one command and return its reply (``ERR`` raises :class:`AgentRefused`)."""
+    async def request(self, line: str, timeout_s: float, *, shown: Optional[str] = None) -> Reply:
+        """Send one command and return its reply (``ERR`` raises :class:`AgentRefused`).
+
+        ``shown``: what the protocol log records instead of ``line`` (secrets).
+        """
         async with self._lock:
             if self.closed:
                 raise AgentUnavailable("the connection to the robot agent is closed")
-            self._log(">", line)
+            self._log(">", shown if shown is not None else line)
             try:
                 self._writer.write(line.encode("ascii") + b"\n")
                 await asyncio.wait_for(self._writer.drain(), timeout_s)

@@ -74,6 +74,11 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
                 return denied
         # one readable message first, the details after
         first = errs[0] if errs else {}
+        if first.get("type") == "json_invalid":
+            loc = first.get("loc", ())
+            at = f" (at character {loc[-1]})" if loc and isinstance(loc[-1], int) else ""
+            msg = f"body is not valid JSON: {(first.get('ctx') or {}).get('error', 'decode error')}{at}"
+            return JSONResponse(status_code=422, content={"detail": msg, "errors": _jsonable(errs)})
         where = _where(first.get("loc", ()))
         msg = f"{where}: {first.get('msg', 'invalid input')}" if where else first.get("msg", "invalid input")
         return JSONResponse(status_code=422, content={"detail": msg, "errors": _jsonable(errs)})

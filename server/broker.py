@@ -15,15 +15,20 @@ from typing import Any, AsyncIterator, Callable, Optional
 __all__ = ["EventBroker"]
 
 
+View = Callable[[dict[str, Any]], Optional[dict[str, Any]]]
+
+
 class _Subscriber:
-    def __init__(self, accept: Callable[[dict[str, Any]], bool], size: int) -> None:
+    def __init__(self, view: View, size: int) -> None:
         self.queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=size)
-        self.accept = accept
+        self.view = view
         self.dropped = 0
 
     def put(self, event: dict[str, Any]) -> None:
-        if not self.accept(event):
+        shown = self.view(event)
+        if shown is None:
             return
+        event = shown
         if self.queue.full():
             self.queue.get_nowait()
             self.dropped += 1
@@ -31,7 +36,7 @@ class _Subscriber:
 
 
 class EventBroker:
-    """Fan-out of JSON-ready event dicts to subscribers, each with a filter."""
+    """Fan-out of JSON-ready event dicts to subscribers, each seeing them through its own view."""
 
     def __init__(self, queue_size: int = 2000) -> None:
         self._subs: set[_Subscriber] = set()
@@ -63,11 +68,10 @@ class EventBroker:
         for sub in subs:
             sub.put(event)
 
-    async def stream(
-        self, accept: Callable[[dict[str, Any]], bool], *, heartbeat_s: float = 15.0
-    ) -> AsyncIterator[str]:
-        """Server-sent-event text for every accepted event; a comment line as heartbeat."""
-        sub = _Subscriber(accept, self._size)
+    async def stream(self, view: View, *, heartbeat_s: float = 15.0) -> AsyncIterator[str]:
+        """Server-sent-event text for every event as ``view(event)`` shows it (None: not at all);
+        a comment line as heartbeat."""
+        sub = _Subscriber(view, self._size)
         with self._lock:
             self._subs.add(sub)
         try:

@@ -158,7 +158,7 @@ class Dispatcher:
         retried = False
         if status is RunStatus.ERROR:
             if end.robot_fault is not None:
-                self._field.set_offline(end.robot_fault)
+                self._field.set_offline(end.robot_fault, error)
             rows = await rec.requeue(a.run_id, error)
             if rows is not None:
                 log.warning("run %d: %s; retrying on another robot", a.run_id, error)

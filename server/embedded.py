@@ -12,6 +12,7 @@ pipeline seeds their next path and flushes their tracker through
 from __future__ import annotations
 
 import asyncio
+import secrets
 from typing import TYPE_CHECKING, Optional
 
 import numpy as np
@@ -54,8 +55,10 @@ class EmbeddedField:
         from robot_agent.host import AgentHost  # the simulation core (numba) only where robots run
 
         sink = _RouterSink(router)
+        # their ports listen on 127.0.0.1 like any agent's: only the testbed (which knows the key) drives them
+        key = secrets.token_hex(32)
         common = {"time_scale": self.time_scale, "seed": self.seed, "tracker_sink": sink,
-                  "advertise_host": "127.0.0.1"}
+                  "advertise_host": "127.0.0.1", "control_key": key}
         self._hosts = [
             AgentHost(robots=4, backend="field", world="shared", robot_ids=[f"field-{k}" for k in range(1, 5)],
                       area=[FIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE], origins=list(SUBFIELD_ORIGINS),
@@ -67,7 +70,7 @@ class EmbeddedField:
             await host.start()
             for r in host.robots:
                 self._host_of[r.robot_id] = host
-                await field.register(RobotRegister(**r.info()))
+                await field.register(RobotRegister(**r.info()), control_key=key)
 
     async def stop(self) -> None:
         """Stop every robot (their connections close; pending tracker poses are delivered)."""

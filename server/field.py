@@ -17,9 +17,12 @@ from typing import Any, Callable, Optional
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from robot_agent.auth import control_key as derive_key
 from robot_agent.frames import SUBFIELD_SIZE
 
 from .broker import EventBroker
+from .core.security import Principal
+from .errors import Forbidden
 from .models import utcnow
 from .scheduler import SUBFIELD_ORIGINS, RobotSlot, SubfieldSlot
 from .schemas import RobotPublic, RobotRegister, SubfieldPublic
@@ -41,7 +44,15 @@ class FieldState:
         self.subfields: dict[int, SubfieldSlot] = {k: SubfieldSlot(k) for k in range(1, 5)}
         #: environment key built by each robot's gripper (None or absent: nothing)
         self.built: dict[str, Optional[str]] = {}
+        #: each robot's control key, sent as T,T,A (None: the robot's port is open)
+        self.keys: dict[str, Optional[str]] = {}
+        #: why each offline robot is offline
+        self.offline_reason: dict[str, str] = {}
+        # snapshots replaced as a whole, for worker threads: frames, and the token that registered each robot
         self._origins: dict[str, tuple[float, float]] = {}
+        self._tokens: dict[str, Optional[int]] = {}
+        #: the owner of the run on each sub-field (for who may see which run is there)
+        self.subfield_owner: dict[int, Optional[int]] = {}
 
     # ------------------------------------------------------------------ any thread
 
@@ -53,6 +64,11 @@ class FieldState:
         """Origin (m) of the robot's frame in the field (safe from any thread)."""
         return self._origins.get(robot_id, (0.0, 0.0))
 
+    def may_track(self, robot_id: str, who: Principal) -> bool:
+        """Whether ``who`` may post tracker poses of ``robot_id``: the token that registered it, or an admin
+        (safe from any thread)."""
+        return who.is_admin or (robot_id in self._tokens and self._tokens[robot_id] == who.token_id)
+
     # ------------------------------------------------------------------ loop
 
     async def load(self) -> None:
@@ -62,40 +78,62 @@ class FieldState:
             with self._sessions() as s:
                 return store.load_robots(s)
 
-        for r in await asyncio.to_thread(rows):
-            self._install(RobotSlot(r.robot_id, r.host, r.port, r.backend, r.profile, r.platform,
-                                    tuple(r.origin), tuple(r.area), healthy=False))
+        for r, token_hash in await asyncio.to_thread(rows):
+            slot = RobotSlot(r.robot_id, r.host, r.port, r.backend, r.profile, r.platform, tuple(r.origin),
+                             tuple(r.area), healthy=False)
+            self._install(slot, r.token_id, derive_key(token_hash, r.robot_id) if token_hash else None)
+            self.offline_reason[r.robot_id] = "known from an earlier start; waiting for it to answer"
 
-    def _install(self, slot: RobotSlot) -> None:
+    def _install(self, slot: RobotSlot, token_id: Optional[int], key: Optional[str]) -> None:
         old = self.robots.get(slot.robot_id)
         if old is not None:
             slot.run_id = old.run_id
         self.robots[slot.robot_id] = slot
+        self.keys[slot.robot_id] = key
         self._origins = {**self._origins, slot.robot_id: slot.origin}
+        self._tokens = {**self._tokens, slot.robot_id: token_id}
 
-    async def register(self, body: RobotRegister) -> RobotSlot:
-        """Add or refresh a robot (a (re)started agent: nothing is built on it)."""
+    async def register(self, body: RobotRegister, *, by: Optional[Principal] = None,
+                       control_key: Optional[str] = None) -> RobotSlot:
+        """Add or refresh a robot (a (re)started agent: nothing is built on it).
+
+        ``by``: the token registering it over the API (None: a robot of this
+        process, with ``control_key``).  A robot registered before may be
+        registered again only by the same token or an admin
+        (:class:`~server.errors.Forbidden`); its control key derives from the
+        registering token (:mod:`robot_agent.auth`).
+        """
+        rid = body.robot_id
+        if by is not None and not by.is_admin and rid in self._tokens and self._tokens[rid] != by.token_id:
+            raise Forbidden(f"robot {rid!r} was registered with another token; only that token or an admin "
+                            "may register it again")
+        key = control_key if by is None else (derive_key(by.token_hash, rid) if by.token_hash else None)
+        token_id = by.token_id if by is not None else None
 
         def save() -> None:
             with self._sessions.begin() as s:
-                store.save_robot(s, body)
+                store.save_robot(s, body, token_id=token_id)
 
         await asyncio.to_thread(save)
-        slot = RobotSlot(body.robot_id, body.host, body.port, body.backend, body.profile, body.platform,
+        slot = RobotSlot(rid, body.host, body.port, body.backend, body.profile, body.platform,
                          (float(body.origin[0]), float(body.origin[1])), (float(body.area[0]), float(body.area[1])))
-        self._install(slot)
-        self.built.pop(body.robot_id, None)
-        self._broker.publish({"type": "robot", "robot_id": body.robot_id})
+        self._install(slot, token_id, key)
+        self.built.pop(rid, None)
+        self.offline_reason.pop(rid, None)
+        self._broker.publish({"type": "robot", "robot_id": rid})
         return slot
 
-    def set_offline(self, robot_id: str) -> None:
-        """A run failed for this robot's fault: no runs for it until it answers again."""
+    def set_offline(self, robot_id: str, reason: str) -> None:
+        """A run failed for this robot's fault (``reason``): no runs for it until it answers again."""
         self.robots[robot_id].healthy = False
+        self.offline_reason[robot_id] = reason
+        self._broker.publish({"type": "robot", "robot_id": robot_id})
 
     def set_online(self, robot_id: str) -> None:
         """An offline robot answers again (its world is as it left it, unknown to us: rebuild)."""
         self.robots[robot_id].healthy = True
         self.built.pop(robot_id, None)
+        self.offline_reason.pop(robot_id, None)
         self._broker.publish({"type": "robot", "robot_id": robot_id})
 
     async def probe_offline(self) -> list[str]:
@@ -115,15 +153,24 @@ class FieldState:
                 return r
         return None
 
-    async def set_subfield(self, k: int, **fields: Any) -> None:
-        """Change sub-field ``k`` (``state``, ``environment``, ``run_id``): publish it and mirror it to the store."""
+    def claim(self, subfields: tuple[int, ...], owner_id: int) -> None:
+        """The run starting on ``subfields`` is ``owner_id``'s (who may see which run is where)."""
+        for k in subfields:
+            self.subfield_owner[k] = owner_id
+
+    async def set_subfield(self, k: int, *, owner_id: Optional[int] = None, **fields: Any) -> None:
+        """Change sub-field ``k`` (``state``, ``environment``, ``run_id`` of the user ``owner_id``):
+        publish it and mirror it to the store."""
         slot = self.subfields[k]
         for key, v in fields.items():
             setattr(slot, key, v)
+        if "run_id" in fields:
+            self.subfield_owner[k] = owner_id if slot.run_id is not None else None
         robot = self.field_robot(k)
         state, environment, run_id = str(slot.state), slot.environment, slot.run_id
         robot_id = robot.robot_id if robot else None
-        self._broker.publish({"type": "subfield", "subfield": self.subfield_view(k).model_dump(mode="json")})
+        self._broker.publish({"type": "subfield", "owner_id": self.subfield_owner.get(k),
+                              "subfield": self.subfield_view(k).model_dump(mode="json")})
 
         def save() -> None:
             with self._sessions.begin() as s:
@@ -153,6 +200,7 @@ class FieldState:
         return RobotPublic(robot_id=slot.robot_id, host=slot.host, port=slot.port, platform=slot.platform,
                            backend=slot.backend, profile=slot.profile, origin=list(slot.origin),
                            area=list(slot.area), subfield=slot.subfield, pool=slot.pool, status=status,
+                           status_reason=self.offline_reason.get(slot.robot_id) if not slot.healthy else None,
                            last_seen=utcnow(), last_pose=last_pose)
 
     def robot_views(self, last_pose: Callable[[str], Optional[list[float]]]) -> list[RobotPublic]:
@@ -165,7 +213,7 @@ async def agent_answers(host: str, port: int, timeout_s: float = 2.0) -> bool:
     """Whether a robot agent greets on host:port."""
     try:
         reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout_s)
-    except (OSError, asyncio.TimeoutError):
+    except (OSError, asyncio.TimeoutError, UnicodeError, ValueError):
         return False
     try:
         line = await asyncio.wait_for(reader.readline(), timeout_s)

@@ -213,6 +213,10 @@ class Robot(Base):
     origin: Mapped[list[Any]] = mapped_column(JSON)
     area: Mapped[list[Any]] = mapped_column(JSON)
     subfield: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
+    #: the token that registered the robot: only it (or an admin) may register it again or post its poses;
+    #: the robot's control key derives from it (robot_agent.auth); none for robots in the server's process
+    token_id: Mapped[Optional[int]] = mapped_column(ForeignKey("tokens.id", ondelete="SET NULL", name="fk_robots_token_id"),
+                                                    nullable=True)
     status: Mapped[str] = mapped_column(String(16), default="idle")
     registered_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     last_seen: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)

@@ -287,6 +287,22 @@ class ExperimentPublic(ExperimentSummary):
         return v or {}
 
 
+class CancelMany(Strict):
+    """Experiments to cancel in one request."""
+
+    ids: list[Annotated[int, Field(ge=1, le=2**63 - 1)]] = Field(min_length=1, max_length=1000)
+
+
+class NotCancelled(BaseModel):
+    id: int
+    reason: str = Field(description="`not found` (unknown, or not yours) or `already <status>`.")
+
+
+class CancelledMany(BaseModel):
+    cancelled: list[int] = Field(description="Experiments whose queued runs were cancelled and running ones stopped.")
+    not_cancelled: list[NotCancelled]
+
+
 # --------------------------------------------------------------------------- uploaded programs
 
 
@@ -392,6 +408,7 @@ class RobotPublic(BaseModel):
     subfield: Optional[int]
     pool: str
     status: str
+    status_reason: Optional[str] = Field(default=None, description="Why an offline robot is offline.")
     last_seen: UTCDateTime
     last_pose: Optional[list[float]] = Field(
         default=None, description="Last tracked pose [t, x, y, theta] in field coordinates (s, m, rad), if any.")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
@@ -9,18 +11,34 @@ from .access import visible_environments
 from .core.security import Principal
 from .core.settings import Settings
 from .errors import Forbidden, Invalid, QuotaExceeded
-from .models import Environment, Experiment, Program
+from .models import Environment, Experiment, Program, User
 from .schemas import ExperimentCreate
 from .store.experiments import count_queued, create_experiment
 from .validation import preflight
 
-__all__ = ["UPLOADS_DISABLED", "submit"]
+__all__ = ["UPLOADS_DISABLED", "UserLocks", "submit"]
 
 UPLOADS_DISABLED = "uploads are disabled on this testbed"
 
 
+class UserLocks:
+    """One lock per user: a user's submissions are counted against the quota one at a time (any thread)."""
+
+    def __init__(self) -> None:
+        self._locks: dict[int, threading.Lock] = {}
+        self._guard = threading.Lock()
+
+    def __call__(self, user_id: int) -> threading.Lock:
+        with self._guard:
+            return self._locks.setdefault(user_id, threading.Lock())
+
+
 def submit(session: Session, *, user: Principal, body: ExperimentCreate, settings: Settings) -> Experiment:
     """Check the job and add it with its queued runs (flushes, no commit).
+
+    Hold the user's :class:`UserLocks` lock until the transaction commits:
+    the quota is a count, then an insert.  (On PostgreSQL the user's row is
+    locked as well, for several server processes.)
 
     Raises :class:`Invalid` (too many repetitions, unknown environment or
     program, a job that cannot run: :class:`~server.errors.PreflightError`),
@@ -35,6 +53,7 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
                                                        visible_environments(user)))
     if env_row is None:
         raise Invalid(f"unknown environment {body.environment!r}")
+    session.execute(select(User.id).where(User.id == user.id).with_for_update())
     queued = count_queued(session, owner_id=user.id)
     if queued >= settings.max_queued_per_user:
         raise QuotaExceeded(f"you already have {queued} queued experiments (limit {settings.max_queued_per_user})")

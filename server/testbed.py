@@ -22,7 +22,7 @@ from typing import Optional
 
 from .bootstrap import bootstrap_store
 from .broker import EventBroker
-from .core.db import make_engine, make_session_factory, migrate
+from .core.db import make_engine, make_session_factory, migrate, private_sqlite_file
 from .core.security import AuthCache, FailedTokens, Principal
 from .core.settings import Settings
 from .dispatch import Dispatcher, pending_of
@@ -35,6 +35,7 @@ from .pipeline.context import NoHooks, RunServices
 from .sandbox import Sandbox
 from .scheduler import Pending
 from .store.runs import queued_runs
+from .submission import UserLocks
 from .store.users import principal_of
 from .tracking import PoseRouter
 from .views import FinishedViews
@@ -51,13 +52,15 @@ class Testbed:
 
     def __init__(self, settings: Settings, *, embedded: Optional[EmbeddedField] = None) -> None:
         self.settings = settings
+        # the database and the token file are for the server alone (and uploaded programs must not read them)
         settings.data_dir.mkdir(parents=True, exist_ok=True)
-        if settings.uploads_enabled:  # uploaded programs must not read the database or the token file
-            settings.data_dir.chmod(0o700)
+        settings.data_dir.chmod(0o700)
+        private_sqlite_file(settings.database_url)
         self.engine = make_engine(settings.database_url)
         self.sessions = make_session_factory(self.engine)
         self.auth = AuthCache(self._principal)
         self.failed_tokens = FailedTokens(settings.auth_failures_per_minute)
+        self.submit_locks = UserLocks()
         self.broker = EventBroker()
         self.views = FinishedViews()
         self.field = FieldState(self.sessions, self.broker)

@@ -57,6 +57,12 @@ class PoseRouter:
         with self._lock:
             self._windows[robot_id] = _Window(run_id, owner_id)
 
+    def window_owner(self, robot_id: str) -> Optional[int]:
+        """The owner of the run whose window is open on ``robot_id`` (None: the robot runs nobody's)."""
+        with self._lock:
+            w = self._windows.get(robot_id)
+        return w.owner_id if w else None
+
     def close(self, robot_id: str) -> int:
         """Stop storing; returns how many poses the window stored."""
         with self._lock:

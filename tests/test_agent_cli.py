@@ -74,7 +74,7 @@ def test_agent_process_drives_writes_csv_and_stops_on_ctrl_c(tmp_path):
     (["--robots", "5", "--world", "shared"], "4 sub-fields"),
     (["--server", "http://127.0.0.1:9"], "--token"),
     (["--control-key", "short"], "control_key"),
-    (["--derive-control-key"], "--derive-control-key needs --server"),
+    (["--server", "http://127.0.0.1:9", "--token", "t", "--control-key", "x" * 20], "--control-key is for standalone"),
 ])
 def test_agent_bad_options_fail_with_one_line(twb, args, message):
     r = twb("agent", "--port", "0", *args, env={"TWB_TOKEN": ""} if "--server" in args else None, timeout=30)

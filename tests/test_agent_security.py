@@ -191,10 +191,10 @@ def test_the_derived_key_is_hmac_sha256_of_the_robot_id_keyed_with_the_token_has
         control_key("twb_example-token", "field-1")  # the token itself, not its hash
 
 
-async def test_registered_agents_derive_a_key_per_robot_only_when_asked():
+async def test_agents_registered_with_a_server_derive_a_key_per_robot():
     token = "twb_a-token-for-the-derived-keys"
     server = {"server_url": "http://127.0.0.1:9", "token": token}  # nobody listens: registration just retries
-    async with running_agents(backend="ideal", robots=2, derive_control_key=True, **server) as agents:
+    async with running_agents(backend="ideal", robots=2, **server) as agents:
         keys = [control_key(token_hash(token), r.robot_id) for r in agents.robots]
         assert [r.control_key for r in agents.robots] == keys and keys[0] != keys[1]
         c = await LineClient.connect(agents.ports[1])
@@ -203,9 +203,11 @@ async def test_registered_agents_derive_a_key_per_robot_only_when_asked():
         assert await c.ask("T,T,A," + keys[1]) == OK_A
         assert await c.ask("T,T,S") == OK_S
         await c.close()
-    async with running_agents(backend="ideal", **server) as agents:  # not asked: open, as before
+    async with running_agents(backend="ideal", derive_control_key=False, **server) as agents:  # asked not to
         assert agents.robots[0].control_key is None
-    async with running_agents(backend="ideal", derive_control_key=True, control_key=KEY, **server) as agents:
+    async with running_agents(backend="ideal") as agents:  # standalone: open, as in the paper
+        assert agents.robots[0].control_key is None
+    async with running_agents(backend="ideal", control_key=KEY, **server) as agents:
         assert agents.robots[0].control_key == KEY  # an explicit key wins
 
 

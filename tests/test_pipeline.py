@@ -30,9 +30,11 @@ ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y":
 
 
 @contextlib.asynccontextmanager
-async def running(tmp_path: Path, *, time_scale: float = math.inf, **settings) -> AsyncIterator[Testbed]:
+async def running(tmp_path: Path, *, time_scale: float = math.inf, robots_time_scale: float | None = None,
+                  **settings) -> AsyncIterator[Testbed]:
+    """A testbed in this process; ``robots_time_scale``: its robots run at another speed than it believes."""
     tb = Testbed(Settings(data_dir=tmp_path, time_scale=time_scale, planning_workers=1, **settings),
-                 embedded=EmbeddedField(sim_robots=1, time_scale=time_scale))
+                 embedded=EmbeddedField(sim_robots=1, time_scale=robots_time_scale or time_scale))
     await asyncio.to_thread(tb.prepare)
     await tb.start()
     try:
@@ -144,3 +146,29 @@ async def test_a_cancelled_run_ends_cancelled_or_interrupted_and_keeps_its_log(t
         end = await asyncio.wait_for(task, 30)
         assert end.status is (RunStatus.INTERRUPTED if stopping else RunStatus.CANCELLED)
         assert run_row(tb, run_id)[2] > 3  # the protocol log up to the cut is kept
+
+
+async def test_the_run_timeout_counts_the_robots_time_not_the_testbeds(tmp_path):
+    """The testbed expects the robot 1000x faster than it runs (as when the machine falls behind): the
+    wall-clock budget is spent long before the robot's own time is, and the run completes."""
+    async with running(tmp_path, time_scale=1000.0, robots_time_scale=5.0, run_slack_s=0.3,
+                       run_timeout_min_s=30.0) as tb:
+        _, run_id = add_experiment(tb, mode="sim")
+        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        assert end.status is RunStatus.COMPLETED, end
+        with tb.sessions() as s:
+            queries = s.scalars(select(Message.line).where(Message.run_id == run_id, Message.line == "T,T,Q")).all()
+        assert len(queries) > 3  # it asked the robot's clock again and again, and waited
+
+
+async def test_a_robot_whose_own_time_runs_out_is_stopped_and_the_run_fails(tmp_path, monkeypatch):
+    from server.pipeline import compute
+
+    monkeypatch.setattr(compute, "expected_duration_s", lambda *a, **k: 0.5)  # the run's budget: 1 s of its time
+    async with running(tmp_path, time_scale=5.0, run_slack_s=0.3, run_timeout_min_s=1.0) as tb:
+        _, run_id = add_experiment(tb, mode="sim")
+        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        assert end.status is RunStatus.FAILED and end.error.startswith("timeout: the robot did not finish"), end
+        with tb.sessions() as s:
+            lines = s.scalars(select(Message.line).where(Message.run_id == run_id)).all()
+        assert "T,T,S" in lines

@@ -304,3 +304,56 @@ def test_planners_robot_positions_and_incremental_poses(client):
     middle = poses[len(poses) // 2][0]
     later = client.get(f"/api/v1/runs/{run['id']}/poses", params={"after_t": middle}).json()
     assert later["count"] == sum(p[0] > middle for p in poses) and later["poses"][0][0] > middle
+
+
+def test_the_robots_ports_refuse_strangers(client):
+    """Anyone on the machine can reach a robot's port; only the testbed moves the robot or builds."""
+    import socket
+
+    robots = {r["robot_id"]: r for r in client.get("/api/v1/robots").json()["data"]}
+    for rid in ("field-2", "sim-1"):
+        with socket.create_connection((robots[rid]["host"], robots[rid]["port"]), timeout=10) as sock:
+            f = sock.makefile("rwb")
+            assert f.readline().startswith(b"HELLO,")
+            for line in (b"T,T,B,900,900,100000000,100000000,0", b"T,T,P,300,300,0", b"T,T,S", b"T,T,I,500,500,0",
+                         b"T,T,A,not-the-key-of-this-robot"):
+                f.write(line + b"\n")
+                f.flush()
+                assert f.readline().startswith(b"ERR,AUTH"), line
+            f.write(b"T,T,Q\n")
+            f.flush()
+            assert f.readline().startswith(b"ST,")  # looking is allowed
+
+
+def test_a_user_follows_only_their_own_runs_live(testbed, client):
+    user = client.post("/api/v1/users", json={"name": "watcher"}).json()["token"]
+    seen: list[dict] = []
+    ready, done = threading.Event(), threading.Event()
+
+    def listen() -> None:
+        with httpx.Client(base_url=testbed.url, headers={"Authorization": f"Bearer {user}"}, timeout=60) as c:
+            with c.stream("GET", "/api/v1/events") as resp:
+                event = None
+                for line in resp.iter_lines():
+                    ready.set()
+                    if line.startswith("event: "):
+                        event = line[7:]
+                    elif line.startswith("data: "):
+                        seen.append({"event": event, **json.loads(line[6:])})
+                    if done.is_set():
+                        return
+
+    t = threading.Thread(target=listen, daemon=True)
+    t.start()
+    assert ready.wait(10)
+    exp = client.post("/api/v1/experiments", json={**JOB, "repetitions": 1}).json()  # the admin's
+    wait_for(client, exp["id"], timeout=60)
+    done.set()
+    with httpx.Client(base_url=testbed.url, headers={"Authorization": f"Bearer {user}"}, timeout=10) as c:
+        c.get("/health")  # wakes the stream once more
+    t.join(20)
+    assert any(e["event"] == "subfield" for e in seen)  # the field's own events do arrive
+    assert not [e for e in seen if e["event"] in ("run", "experiment")]
+    assert not [e for e in seen if e["event"] == "pose" and e["run_id"] is not None]
+    assert not [e for e in seen if "owner_id" in e]
+    assert all(e["subfield"]["run_id"] is None for e in seen if e["event"] == "subfield")

@@ -53,8 +53,7 @@ def agent(
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     subfield: Annotated[Optional[int], typer.Option(help="Put a single robot on sub-field K (1-4) of the field: its frame's origin is that sub-field's lower-left corner.", min=1, max=4)] = None,
     advertise_host: Annotated[Optional[str], typer.Option(help="Host name the server should use to reach these robots (e.g. a container name) (default: --host).")] = None,
-    control_key: Annotated[Optional[str], typer.Option(help="Robot-port control key (16-128 printable ASCII characters, no , or ;): only connections that send T,T,A,KEY (or a lease it grants) may move the robots or build; T,T,Q stays open. Default: none, every connection may.", envvar="TWB_CONTROL_KEY")] = None,
-    derive_control_key: Annotated[bool, typer.Option("--derive-control-key", help="With --server and --token and no --control-key: give each robot the key the server derives from the token (robot_agent.auth.control_key).")] = False,
+    control_key: Annotated[Optional[str], typer.Option(help="Robot-port control key of a standalone agent (16-128 printable ASCII characters, no , or ;): only connections that send T,T,A,KEY (or a lease it grants) may move the robots or build; T,T,Q stays open. Default: none, every connection may. With --server the key of each robot is the one the server derives from --token.", envvar="TWB_CONTROL_KEY")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log every path and event.")] = False,
 ) -> None:
     """Run emulated robots speaking the T,T,P line protocol until Ctrl-C (logs on stderr)."""
@@ -69,8 +68,9 @@ def agent(
     scale = parse_time_scale(time_scale)
     if server and not token:
         fail("--server needs --token (or TWB_TOKEN)")
-    if derive_control_key and not server:
-        fail("--derive-control-key needs --server and --token")
+    if server and control_key:
+        fail("--control-key is for standalone agents: with --server each robot's key derives from --token, "
+             "so that the server can drive it")
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     logging.getLogger("robot_agent.host").setLevel(logging.INFO)
@@ -86,7 +86,7 @@ def agent(
         robots=robots, backend=backend.value, profile=profile, host=host, port=port, time_scale=scale,
         seed=seed, robot_id=robot_id, world=world.value, area=_pair(area, "area"), origins=origins,
         tracker_sink=sink, server_url=server, token=token, advertise_host=advertise_host,
-        control_key=control_key or None, derive_control_key=derive_control_key,
+        control_key=control_key or None,
     )
 
     async def run() -> None:

@@ -311,14 +311,23 @@ def results(
 
 
 def cancel(
-    experiment_id: Annotated[int, typer.Argument(help="Experiment id.")],
+    experiment_ids: Annotated[list[int], typer.Argument(help="Experiment ids (up to 1000 at once).")],
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
-    """Cancel an experiment: queued runs are dropped, running ones stopped."""
+    """Cancel experiments: queued runs are dropped, running ones stopped."""
     with sdk_client(url, token) as client:
-        exp = client.cancel(experiment_id)
-    typer.echo(f"experiment {exp.id}: {exp.status}")
+        if len(experiment_ids) == 1:
+            exp = client.cancel(experiment_ids[0])
+            typer.echo(f"experiment {exp.id}: {exp.status}")
+            return
+        result = client.cancel_many(experiment_ids)
+    for i in result.cancelled:
+        typer.echo(f"experiment {i}: cancelled")
+    for i, why in result.not_cancelled.items():
+        typer.echo(f"experiment {i}: not cancelled ({why})")
+    if result.not_cancelled:
+        raise typer.Exit(1)
 
 
 def envs(

@@ -9,10 +9,13 @@ wheel migrates like a checkout.
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.orm import Session, sessionmaker
 
-__all__ = ["MIGRATIONS", "make_engine", "make_session_factory", "migrate"]
+__all__ = ["MIGRATIONS", "make_engine", "make_session_factory", "migrate", "private_sqlite_file"]
 
 #: Alembic's script location: the ``migrations`` directory of the ``server`` package
 MIGRATIONS = "server:migrations"
@@ -34,6 +37,21 @@ def make_engine(url: str) -> Engine:
 
         return engine
     return create_engine(url, pool_pre_ping=True)
+
+
+def private_sqlite_file(url: str) -> None:
+    """Create a SQLite database file readable by its owner only (0600), or make an existing one so.
+
+    SQLite gives its ``-wal`` and ``-shm`` files the database file's mode.
+    """
+    if not url.startswith("sqlite:///") or url.endswith(":memory:"):
+        return
+    path = Path(url[len("sqlite:///"):])
+    for p in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+        if p.exists():
+            p.chmod(0o600)
+    if not path.exists():
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT, 0o600))
 
 
 def make_session_factory(engine: Engine) -> sessionmaker[Session]:

@@ -6,12 +6,13 @@ stretching needed) and lookups stay a single indexed query.
 
 from __future__ import annotations
 
-import hashlib
 import secrets
 import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Optional
+
+from robot_agent.auth import token_hash
 
 __all__ = ["AuthCache", "FailedTokens", "Principal", "hash_token", "new_token"]
 
@@ -24,8 +25,8 @@ def new_token() -> str:
 
 
 def hash_token(token: str) -> str:
-    """Hex SHA-256 of ``token``: what the database stores."""
-    return hashlib.sha256(token.encode("utf-8")).hexdigest()
+    """Hex SHA-256 of ``token``: what the database stores (and what robots' control keys derive from)."""
+    return token_hash(token)
 
 
 @dataclass(frozen=True)
@@ -37,6 +38,7 @@ class Principal:
     is_admin: bool
     kind: str  # user, admin or agent
     token_id: Optional[int] = None
+    token_hash: str = ""
 
 
 class AuthCache:

@@ -34,6 +34,9 @@ class Settings(BaseSettings):
     run_timeout_factor: float = Field(default=4.0, gt=1, description="Timeout = factor x expected run time.")
     run_timeout_min_s: float = Field(default=30.0, gt=0, description="Shortest run timeout, experiment seconds.")
     tracker_grace_s: float = Field(default=0.5, ge=0, description="Wall seconds to wait for late tracker poses.")
+    run_slack_s: float = Field(
+        default=10.0, gt=0, description="Wall seconds a run waits for a robot beyond the time an answer takes at the "
+                                        "time scale (then a run in progress asks the robot's own clock).")
     planning_workers: int = Field(default=2, gt=0, description="Processes planning and computing metrics.")
     robot_radius_m: float = Field(default=0.045, gt=0, description="Robot radius: validation, metrics (collided).")
     planning_margin_m: float = Field(

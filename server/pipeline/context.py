@@ -53,11 +53,12 @@ class RunServices:
 class RunContext:
     """One execution: its assignment, robot, time scale and protocol log."""
 
-    def __init__(self, assignment: Assignment, robot: RobotSlot, time_scale: float) -> None:
+    def __init__(self, assignment: Assignment, robot: RobotSlot, time_scale: float, slack_s: float = 10.0) -> None:
         self.assignment = assignment
         self.run_id = assignment.run_id
         self.robot = robot
         self.time_scale = time_scale
+        self.slack_s = slack_s
         self.messages: list[dict[str, Any]] = []
 
     @property
@@ -73,6 +74,6 @@ class RunContext:
         batch, self.messages = self.messages, []
         return batch
 
-    def wall(self, experiment_s: float, slack_s: float = 10.0) -> float:
-        """Wall seconds for ``experiment_s`` of experiment time, plus slack."""
-        return (0.0 if math.isinf(self.time_scale) else experiment_s / self.time_scale) + slack_s
+    def wall(self, experiment_s: float) -> float:
+        """Wall seconds for ``experiment_s`` of experiment time at the time scale, plus the slack."""
+        return (0.0 if math.isinf(self.time_scale) else experiment_s / self.time_scale) + self.slack_s

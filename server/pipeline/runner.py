@@ -60,7 +60,8 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     ``stopping()`` tells a testbed stop (``interrupted``) from a cancel
     (``cancelled``) when the run's task is cancelled.
     """
-    ctx = RunContext(assignment, svc.field.robots[assignment.robot_id], svc.settings.time_scale)
+    ctx = RunContext(assignment, svc.field.robots[assignment.robot_id], svc.settings.time_scale,
+                     svc.settings.run_slack_s)
     robot = ctx.robot.robot_id
     try:
         await _steps(ctx, svc)
@@ -95,6 +96,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
 async def _steps(ctx: RunContext, svc: RunServices) -> None:
     rec = svc.recorder
     job = await rec.job(ctx.run_id)
+    svc.field.claim(ctx.subfields, job.owner_id)
     await rec.update(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
                      subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
     link = await steps.connect(ctx, svc)

@@ -30,9 +30,11 @@ _FAILURES = {
 
 
 async def connect(ctx: RunContext, svc: RunServices, robot_id: Optional[str] = None) -> AgentLink:
-    """A protocol connection to the run's robot (or ``robot_id``), logged to the run."""
-    r = svc.field.robots[robot_id or ctx.robot.robot_id]
-    return await AgentLink.connect(r.host, r.port, time_scale=ctx.time_scale, on_line=ctx.on_line)
+    """An authenticated protocol connection to the run's robot (or ``robot_id``), logged to the run."""
+    rid = robot_id or ctx.robot.robot_id
+    r = svc.field.robots[rid]
+    return await AgentLink.connect(r.host, r.port, time_scale=ctx.time_scale, on_line=ctx.on_line,
+                                   control_key=svc.field.keys.get(rid))
 
 
 async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob) -> None:
@@ -86,23 +88,33 @@ async def place(ctx: RunContext, link: AgentLink, job: RunJob) -> None:
 
 
 async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob, path: list[list[float]]) -> None:
-    """Send the path and follow the events until ``DONE`` (returns) or ``FAIL`` / the timeout (:class:`RunFailed`)."""
+    """Send the path and follow the events until ``DONE`` (returns) or ``FAIL`` / the timeout (:class:`RunFailed`).
+
+    The timeout counts experiment time on the robot's own clock: a testbed
+    that falls behind the time scale (a busy machine, a long queue) never
+    fails a run that the robot is still driving within its time.
+    """
     rec, robot_id = svc.recorder, ctx.robot.robot_id
     for k in ctx.subfields:
-        await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id)
+        await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id, owner_id=job.owner_id)
     length = sum(math.dist(a[:2], b[:2]) for a, b in zip(path[:-1], path[1:]))
     settings = svc.settings
     timeout_exp = max(settings.run_timeout_min_s, settings.run_timeout_factor * compute.expected_duration_s(length, 0))
     svc.hooks.seed_next_path(robot_id, job.seed)
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
+    t_sent = (await link.request("T,T,Q", ctx.wall(0))).time or 0.0  # the robot's clock, not ours
     await link.request(encode_path(path), ctx.wall(0))
+    t_start: Optional[float] = None
     loop = asyncio.get_running_loop()
     deadline = loop.time() + ctx.wall(timeout_exp)
-    t_start: Optional[float] = None
     while True:
         left = deadline - loop.time()
-        ev = await link.next_event(max(left, 0.0)) if left > 0 else None
-        if ev is None:
+        ev = await link.next_event(left) if left > 0 else None
+        if ev is None:  # the wall-clock budget is spent: did the robot's own time run out too?
+            elapsed = ((await link.request("T,T,Q", ctx.wall(0))).time or 0.0) - t_sent
+            if elapsed < timeout_exp:  # the testbed was slower than the time scale, not the robot
+                deadline = loop.time() + ctx.wall(timeout_exp - elapsed)
+                continue
             try:
                 await link.request("T,T,S", ctx.wall(0))
             finally:

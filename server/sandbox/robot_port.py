@@ -10,8 +10,9 @@ from __future__ import annotations
 import socket
 from typing import Any, Callable, Optional
 
-from robot_agent.protocol import (MAX_LINE_BYTES, Command, ErrorCode, PathCommand, ProtocolError, QueryCommand,
-                                  RobotState, StopCommand, format_hello, format_ok, format_status, parse_command)
+from robot_agent.protocol import (MAX_LINE_BYTES, AuthCommand, Command, ErrorCode, LeaseCommand, PathCommand,
+                                  ProtocolError, QueryCommand, RobotState, StopCommand, format_hello, format_ok,
+                                  format_status, parse_command)
 
 __all__ = ["MAX_LINE_BYTES", "RobotPort", "send"]
 
@@ -78,7 +79,8 @@ class RobotPort:
         except ProtocolError as exc:
             return self._refuse(exc), False
         verbs: dict[type, Callable[[Any, float], tuple[bytes, bool]]] = {
-            PathCommand: self._path, QueryCommand: self._query, StopCommand: self._stop}
+            PathCommand: self._path, QueryCommand: self._query, StopCommand: self._stop,
+            AuthCommand: self._open, LeaseCommand: self._open}
         return verbs.get(type(cmd), self._unsupported)(cmd, now)
 
     def _path(self, cmd: PathCommand, now: float) -> tuple[bytes, bool]:
@@ -91,6 +93,10 @@ class RobotPort:
 
     def _stop(self, cmd: StopCommand, now: float) -> tuple[bytes, bool]:
         return self._say(format_ok("S")), False
+
+    def _open(self, cmd: Command, now: float) -> tuple[bytes, bool]:
+        """``T,T,A`` / ``T,T,L``: this port has no key, like a standalone robot (any secret is fine)."""
+        return self._say(format_ok("A" if isinstance(cmd, AuthCommand) else "L")), False
 
     def _unsupported(self, cmd: Command, now: float) -> tuple[bytes, bool]:
         message = "this robot port only takes a path (T,T,P), a query or a stop"

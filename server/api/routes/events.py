@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 from fastapi import APIRouter, Request
 from fastapi.responses import StreamingResponse
 
+from ...access import event_for
 from ..deps import CurrentUser, TestbedDep
 from ..responses import AUTHENTICATED
 
@@ -17,19 +18,16 @@ router = APIRouter(tags=["events"], responses=AUTHENTICATED)
 async def events(request: Request, user: CurrentUser, testbed: TestbedDep) -> StreamingResponse:
     """Server-sent events: ``experiment``, ``run``, ``subfield``, ``robot`` and ``pose`` (JSON data).
 
-    You receive your own experiments' and runs' events and every robot's live
-    position (admins receive everything).  Poses are in field coordinates.
+    You receive your own experiments' and runs' events, the sub-fields, and
+    the live positions of robots that run no run or yours (admins receive
+    everything).  Poses are in field coordinates.
     """
-    uid, admin = user.id, user.is_admin
 
-    def accept(ev: dict[str, Any]) -> bool:
-        owner = ev.get("owner_id")
-        if ev["type"] in ("experiment", "run"):
-            return admin or owner == uid
-        return True
+    def view(ev: dict[str, Any]) -> Optional[dict[str, Any]]:
+        return event_for(user, ev)
 
     async def stream():  # type: ignore[no-untyped-def]
-        async for chunk in testbed.broker.stream(accept):
+        async for chunk in testbed.broker.stream(view):
             if await request.is_disconnected():
                 break
             yield chunk

@@ -1,4 +1,4 @@
-"""Experiments: submit (202), list, inspect, cancel, metrics."""
+"""Experiments: submit (202), list, inspect, cancel (one or many), metrics."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ from ...dispatch import pending_of
 from ...errors import Conflict
 from ...models import Experiment
 from ...results import experiment_metrics
-from ...schemas import ExperimentCreate, ExperimentPublic, ExperimentSummary, Page
+from ...schemas import (CancelledMany, CancelMany, ExperimentCreate, ExperimentPublic, ExperimentSummary,
+                        NotCancelled, Page)
 from ...status import TERMINAL, RunStatus
 from ...submission import submit
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep, TestbedDep
@@ -27,7 +28,7 @@ async def submit_experiment(body: ExperimentCreate, user: CurrentUser, testbed: 
     """Validate a job and queue its runs; 422 with the reason if it cannot run."""
 
     def add() -> tuple[ExperimentPublic, list[Any]]:
-        with testbed.sessions.begin() as s:
+        with testbed.submit_locks(user.id), testbed.sessions.begin() as s:
             exp = submit(s, user=user, body=body, settings=testbed.settings)
             return ExperimentPublic.model_validate(exp), [pending_of(r, exp) for r in exp.runs]
 
@@ -37,6 +38,26 @@ async def submit_experiment(body: ExperimentCreate, user: CurrentUser, testbed: 
                             "experiment": view.model_dump(mode="json", exclude={"planned_path", "runs"})})
     view.estimated_start_s = testbed.dispatcher.estimate_start(view.id)
     return view
+
+
+@router.post("/cancel", response_model=CancelledMany, responses=errors(413))
+async def cancel_experiments(body: CancelMany, user: CurrentUser, testbed: TestbedDep) -> CancelledMany:
+    """Cancel many experiments in one request: their queued runs end in one write, running ones are stopped."""
+
+    def check() -> tuple[list[int], list[NotCancelled]]:
+        with testbed.sessions() as s:
+            q = select(Experiment.id, Experiment.status).where(Experiment.id.in_(set(body.ids)))
+            if not user.is_admin:
+                q = q.where(Experiment.owner_id == user.id)
+            found = dict(s.execute(q).all())
+        ok = [i for i in dict.fromkeys(body.ids) if i in found and found[i] not in TERMINAL]
+        refused = [NotCancelled(id=i, reason="not found" if i not in found else f"already {found[i]}")
+                   for i in dict.fromkeys(body.ids) if i not in ok]
+        return ok, refused
+
+    ok, refused = await anyio.to_thread.run_sync(check)
+    await testbed.dispatcher.cancel(ok)
+    return CancelledMany(cancelled=ok, not_cancelled=refused)
 
 
 @router.get("", response_model=Page[ExperimentSummary])
