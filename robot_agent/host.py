@@ -405,6 +405,10 @@ class AgentHost:
             self._conn_tasks.add(task)
         try:
             await conn.run()
+        except asyncio.CancelledError:
+            # the agent stops (a gripper wait cancelled, or the task itself): end quietly; Python 3.11's
+            # stream callback would report a cancelled connection task as an unhandled exception
+            pass
         except Exception:  # noqa: BLE001 - one client's trouble never reaches the others
             log.exception("%r failed", conn)
         finally:

@@ -201,10 +201,25 @@ async def test_a_client_that_never_reads_does_not_stall_the_robot():
         flood = b"T,T,Q\n" * 20000  # many replies it will not read
         hog.writer.write(flood)
         c = await LineClient.connect(agents.ports[0])
-        await c.ask(encode_path(SQUARE))
-        await c.until("EV,DONE")
+        assert await c.ask(encode_path(SQUARE)) == format_ok("P", 3)
+        assert (await c.until("EV,DONE", "EV,FAIL"))[-1].startswith("EV,DONE")  # the robot drove on
+        assert (await c.ask("T,T,Q")).startswith("ST,DONE,")
         hog.writer.transport.abort()
         await c.close()
+
+
+async def test_stopping_the_agent_mid_build_ends_the_connection_quietly():
+    """A connection waiting for the gripper when the agent stops ends without an unhandled exception."""
+    reported: list[dict] = []
+    loop = asyncio.get_running_loop()
+    loop.set_exception_handler(lambda _loop, ctx: reported.append(ctx))
+    async with running_agents(backend="field", time_scale=1.0) as agents:
+        c = await LineClient.connect(agents.ports[0])
+        await c.send(encode_build([(0.9, 0.9, 0.1, 0.1, 0.0)]))  # the gripper takes seconds
+        await asyncio.sleep(0.2)
+    await asyncio.sleep(0.2)
+    loop.set_exception_handler(None)
+    assert reported == []
 
 
 @pytest.mark.parametrize("backend", ["field", "ideal"])
