@@ -23,18 +23,24 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
 from .errors import InvalidEnvironment
 
 __all__ = [
+    "BLOCK_TOLERANCE_M",
     "Block",
     "Environment",
     "Plan",
     "builtin_names",
+    "half_extents",
     "load_environment",
     "parse_environment",
 ]
 
 MAX_BLOCKS = 1000
+#: how far (m) a block may reach beyond the field (rounding on the wire); robots refuse more too
+BLOCK_TOLERANCE_M = 0.001
 MAX_FIELD_SIZE_M = 100.0
 _TOP_KEYS = {"name", "size", "blocks", "plans", "description"}
 _BLOCK_KEYS = {"x", "y", "w", "h", "angle"}
@@ -150,7 +156,21 @@ def _block(obj: Any, i: int, size: tuple[float, float]) -> Block:
         raise InvalidEnvironment(
             f"{where} centre ({x}, {y}) must lie inside the field 0..{size[0]} x 0..{size[1]} m"
         )
+    ex, ey = half_extents(w, h, angle)
+    tol = BLOCK_TOLERANCE_M
+    if x - ex < -tol or x + ex > size[0] + tol or y - ey < -tol or y + ey > size[1] + tol:
+        raise InvalidEnvironment(
+            f"{where} ({w} x {h} m at ({x}, {y}), angle {angle}) reaches beyond the field 0..{size[0]} x "
+            f"0..{size[1]} m: the gripper cannot build it"
+        )
     return Block(x, y, w, h, angle)
+
+
+def half_extents(w: Any, h: Any, angle: Any) -> tuple[Any, Any]:
+    """Half width and half height (m) of the axis-aligned box around a ``w`` x ``h`` rectangle rotated by
+    ``angle`` (rad); numbers or arrays."""
+    c, s = np.abs(np.cos(angle)), np.abs(np.sin(angle))
+    return (w * c + h * s) / 2, (w * s + h * c) / 2
 
 
 def parse_environment(data: Mapping[str, Any]) -> Environment:

@@ -69,7 +69,9 @@ MAX_POINTS = 10_000
 MAX_BLOCKS = 1000
 MAX_NUMBER_CHARS = 32  # a number's characters, surrounding spaces not counted
 MIN_SECRET_CHARS, MAX_SECRET_CHARS = 16, 128
-BLOCK_TOLERANCE_M = 0.001  # how far a block may reach beyond its robot's area (wire rounding)
+#: how far a block may reach beyond its robot's area (wire rounding); the same rule as environment files
+#: (planners.environment: not imported here, the codec stays light for the sandbox and the SDK)
+BLOCK_TOLERANCE_M = 0.001
 
 
 class ErrorCode(str, Enum):

@@ -82,3 +82,31 @@ def test_file_errors_are_clear(tmp_path):
     binary.write_bytes(b"\xff\xfe\x00")
     with pytest.raises(InvalidEnvironment, match="cannot read environment file"):
         load_environment(binary)
+
+
+def test_environment_files_and_robots_agree_on_which_blocks_fit():
+    """A block the environment model accepts is one the robots build, and the other way round."""
+    import random
+
+    from robot_agent.protocol import ProtocolError, encode_build, parse_command
+    from planners import InvalidEnvironment, parse_environment
+
+    rng = random.Random(5)
+    agreed = {True: 0, False: 0}
+    for _ in range(400):
+        block = {"x": rng.uniform(0.0, 1.8), "y": rng.uniform(0.0, 1.8), "w": rng.uniform(0.01, 0.8),
+                 "h": rng.uniform(0.01, 0.8), "angle": rng.uniform(-3.2, 3.2)}
+        try:
+            parse_environment({"name": "fit", "size": [1.8, 1.8], "blocks": [block]})
+            file_ok = True
+        except InvalidEnvironment:
+            file_ok = False
+        line = encode_build([(block["x"], block["y"], block["w"], block["h"], block["angle"])])
+        try:
+            parse_command(line, field_size=(1.8, 1.8))
+            robot_ok = True
+        except ProtocolError:
+            robot_ok = False
+        assert file_ok == robot_ok, block
+        agreed[file_ok] += 1
+    assert agreed[True] > 50 and agreed[False] > 50  # both kinds were tried
