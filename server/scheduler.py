@@ -16,23 +16,42 @@ Policy (DESIGN §7, issue "Teleworkbench server"):
 - Estimated start times come from simulating this policy forward with each
   run's expected duration.
 
+How it stays cheap with thousands of queued runs: queued runs are kept in
+*classes* — same kind (``sim``/``twb``), same field kind (sub-field/full) and
+same excluded robots — each a FIFO keyed by arrival number.  Whether a run can
+start depends only on its class and on the free resources, which only shrink
+while :meth:`Scheduler.assign` hands them out; so a class whose head cannot
+start is skipped as a whole, and :meth:`~Scheduler.assign` merges the class
+heads in arrival order and stops a kind when its classes are exhausted.
+``add`` and ``drop`` are O(1); ``assign`` costs O((s + c) log c) for s started
+runs and c classes (a handful: the excludes of retried runs make new ones),
+plus O(robots) to read the fleet; ``estimate_starts`` is O(n log n).
+
 No I/O here: the runtime (:mod:`server.testbed`) feeds robots and runs in and
 carries out the assignments.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Optional
+import heapq
+import math
+from collections import OrderedDict
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
+from itertools import count, islice
+from operator import attrgetter, itemgetter
+from typing import Callable, Optional, Union, overload
 
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 from robot_agent.frames import SUBFIELD_ORIGINS as _ORIGINS
 
-__all__ = ["Assignment", "Pending", "RobotSlot", "Scheduler", "SubfieldSlot", "SUBFIELD_ORIGINS"]
+__all__ = ["Assignment", "Pending", "QueueView", "RobotSlot", "Scheduler", "SubfieldSlot", "SUBFIELD_ORIGINS"]
 
 #: origin of each sub-field 1..4 in the field frame (m)
 SUBFIELD_ORIGINS = dict(enumerate(_ORIGINS, start=1))
 FULL = FIELD_SIZE
+_ALL_SUBFIELDS = (1, 2, 3, 4)  # what a full-field run occupies
+_OTHER_SUBFIELDS = (2, 3, 4)  # whose robots must be idle (parked) for a full-field run
 
 
 @dataclass
@@ -103,75 +122,268 @@ class Assignment:
     subfields: tuple[int, ...]
 
 
+# ---------------------------------------------------------------------- helpers
+
+#: a class of queued runs: (kind ``sim``/``twb``, field kind ``sub``/``full``, excluded robots)
+_Class = tuple[str, str, frozenset[str]]
+#: what a chooser answers for one run: where it starts, None (this class cannot start), or _BLOCKED
+_Choice = Union[Assignment, None, object]
+_BLOCKED = object()  # no later run of this kind may start in this pass
+
+
+def _class_of(p: Pending) -> _Class:
+    return ("sim" if p.mode == "sim" else "twb", "full" if p.field == "full" else "sub", frozenset(p.exclude))
+
+
+def _need(field_kind: str) -> tuple[float, float]:
+    """The area (m) a simulated robot needs for a run on this field kind."""
+    return FULL if field_kind == "full" else SUBFIELD_SIZE
+
+
+def _fits(r: RobotSlot, need: tuple[float, float]) -> bool:
+    return r.area[0] >= need[0] - 1e-6 and r.area[1] >= need[1] - 1e-6
+
+
+_robot_id = attrgetter("robot_id")
+
+
+class QueueView(Sequence[Pending]):
+    """The queued runs in arrival order: a live, read-only view (``len`` is O(1), iteration O(n))."""
+
+    __slots__ = ("_runs",)
+
+    def __init__(self, runs: OrderedDict[int, Pending]) -> None:
+        self._runs = runs
+
+    def __len__(self) -> int:
+        return len(self._runs)
+
+    def __iter__(self) -> Iterator[Pending]:
+        return iter(self._runs.values())
+
+    @overload
+    def __getitem__(self, i: int) -> Pending: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> list[Pending]: ...
+
+    def __getitem__(self, i: Union[int, slice]) -> Union[Pending, list[Pending]]:
+        """O(i): the queue is not stored as a list."""
+        if isinstance(i, slice):
+            return list(self)[i]
+        n = len(self._runs)
+        j = i + n if i < 0 else i
+        if not 0 <= j < n:
+            raise IndexError("queue index out of range")
+        return next(islice(self._runs.values(), j, None))
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, (QueueView, list, tuple)):
+            return list(self) == list(other)
+        return NotImplemented
+
+    def __repr__(self) -> str:
+        return f"QueueView({list(self)!r})"
+
+
 @dataclass
+class _Layout:
+    """The resources as :meth:`Scheduler._estimate_fifo` sees them (see :meth:`Scheduler._fifo_layout`)."""
+
+    pool: list[RobotSlot]  # the simulation robots every queued sim run may use
+    sub: frozenset[int]  # the sub-fields every queued sub-field twb run may use
+    full: dict[frozenset[str], bool]  # per exclude set: can full-field runs ever start (on sub-field 1's robot)
+    field_robots: dict[int, RobotSlot]
+
+
+# ---------------------------------------------------------------------- the scheduler
+
+
 class Scheduler:
-    robots: dict[str, RobotSlot] = field(default_factory=dict)
-    subfields: dict[int, SubfieldSlot] = field(default_factory=lambda: {k: SubfieldSlot(k) for k in range(1, 5)})
-    queue: list[Pending] = field(default_factory=list)
+    """The queue and the testbed's resources; :meth:`assign` applies the policy.
+
+    ``robots`` and ``subfields`` are plain dicts the runtime may change
+    directly (health, registration, a sub-field's environment); the queue is
+    changed only through :meth:`add` and :meth:`drop` and read through
+    :attr:`queue`.
+    """
+
+    def __init__(self, robots: Optional[dict[str, RobotSlot]] = None,
+                 subfields: Optional[dict[int, SubfieldSlot]] = None,
+                 queue: Iterable[Pending] = ()) -> None:
+        self.robots: dict[str, RobotSlot] = {} if robots is None else robots
+        self.subfields: dict[int, SubfieldSlot] = \
+            {k: SubfieldSlot(k) for k in range(1, 5)} if subfields is None else subfields
+        self._runs: OrderedDict[int, Pending] = OrderedDict()  # run id -> run, in arrival order
+        self._where: dict[int, tuple[int, _Class]] = {}  # run id -> (arrival number, class)
+        self._classes: dict[_Class, OrderedDict[int, Pending]] = {}  # class -> arrival number -> run
+        self._arrivals = count()
+        self.queue = queue
+
+    def __repr__(self) -> str:
+        return f"Scheduler(robots={self.robots!r}, subfields={self.subfields!r}, queue={list(self.queue)!r})"
+
+    @property
+    def queue(self) -> QueueView:
+        """The queued runs in arrival order (read-only; change it with :meth:`add` and :meth:`drop`)."""
+        return QueueView(self._runs)
+
+    @queue.setter
+    def queue(self, runs: Iterable[Pending]) -> None:
+        """Replace the whole queue (O(n))."""
+        runs = list(runs)  # the new queue may be a view of this one
+        self._runs.clear()
+        self._where.clear()
+        self._classes.clear()
+        for p in runs:
+            self.add(p)
 
     # ------------------------------------------------------------------ bookkeeping
 
-    def add(self, pending: Pending) -> None:
-        self.queue.append(pending)
+    def add(self, pending: Pending) -> bool:
+        """Queue a run at the tail, O(1); False (and nothing changes) if its id is already queued."""
+        if pending.run_id in self._where:
+            return False
+        seq, key = next(self._arrivals), _class_of(pending)
+        self._runs[pending.run_id] = pending
+        self._where[pending.run_id] = (seq, key)
+        self._classes.setdefault(key, OrderedDict())[seq] = pending
+        return True
 
     def drop(self, run_id: int) -> bool:
-        """Remove a queued run (cancel); True if it was queued."""
-        n = len(self.queue)
-        self.queue = [p for p in self.queue if p.run_id != run_id]
-        return len(self.queue) != n
+        """Remove a queued run (cancel), O(1); True if it was queued."""
+        where = self._where.pop(run_id, None)
+        if where is None:
+            return False
+        seq, key = where
+        del self._runs[run_id]
+        runs = self._classes[key]
+        del runs[seq]
+        if not runs:
+            del self._classes[key]
+        return True
 
     def release(self, run_id: int, *, environment: Optional[str] = None) -> None:
         """A run ended: free its robot and sub-fields (``environment`` stays built on them)."""
+        self._release(run_id)
+
+    def _release(self, run_id: int) -> set[str]:
+        """Free what ``run_id`` holds; returns the kinds (``sim``/``twb``) whose resources were freed."""
+        kinds = set()
         for r in self.robots.values():
             if r.run_id == run_id:
                 r.run_id = None
+                kinds.add("sim" if r.pool == "sim" else "twb")
         for s in self.subfields.values():
             if s.run_id == run_id:
                 s.run_id = None
                 s.state = "idle"
+                kinds.add("twb")
+        return kinds
 
     def field_robot(self, subfield: int) -> Optional[RobotSlot]:
+        """The robot standing on ``subfield`` (the first registered one), else None."""
         for r in self.robots.values():
             if r.subfield == subfield:
                 return r
         return None
 
+    def _field_robots(self) -> dict[int, RobotSlot]:
+        """:meth:`field_robot` of every sub-field at once (one pass over the robots)."""
+        out: dict[int, RobotSlot] = {}
+        for r in self.robots.values():
+            k = r.subfield
+            if k is not None and k not in out:
+                out[k] = r
+        return out
+
     # ------------------------------------------------------------------ policy
 
     def assign(self) -> list[Assignment]:
-        """Start what can start now; marks robots and sub-fields busy and removes the runs from the queue."""
-        out: list[Assignment] = []
-        twb_blocked = False
-        for p in list(self.queue):
-            a: Optional[Assignment] = None
-            if p.mode == "sim":
-                a = self._sim(p)
-            elif not twb_blocked:
-                a = self._twb_full(p) if p.field == "full" else self._twb_sub(p)
-                if a is None and p.field == "full" and self._full_possible(p):
-                    twb_blocked = True  # reserve the field for this job
-            if a is None:
+        """Start what can start now; marks robots and sub-fields busy and removes the runs from the queue.
+
+        The assignments come in queue order.
+        """
+        return self._assign(("sim", "twb"))
+
+    def _assign(self, kinds: Iterable[str]) -> list[Assignment]:
+        started: list[tuple[int, Assignment]] = []
+        for kind in kinds:
+            choose = self._sim_chooser() if kind == "sim" else self._twb_chooser()
+            if choose is not None:
+                started += self._start_in_order(kind, choose)
+        started.sort(key=itemgetter(0))
+        return [a for _, a in started]
+
+    def _start_in_order(self, kind: str, choose: Callable[[Pending], _Choice]) -> list[tuple[int, Assignment]]:
+        """Offer the runs of ``kind`` to ``choose`` in arrival order, skipping a class once its head fails."""
+        heads = [(next(iter(runs)), key) for key, runs in self._classes.items() if key[0] == kind]
+        heapq.heapify(heads)
+        started: list[tuple[int, Assignment]] = []
+        while heads:
+            seq, key = heads[0]
+            runs = self._classes[key]
+            p = runs[seq]
+            a = choose(p)
+            if a is _BLOCKED:
+                break
+            if a is None:  # nothing of this class can start before resources free up
+                heapq.heappop(heads)
                 continue
-            self.queue.remove(p)
-            self.robots[a.robot_id].run_id = p.run_id
-            for k in a.subfields:
-                self.subfields[k].run_id = p.run_id
-                self.subfields[k].state = "reserved"
-            out.append(a)
-        return out
+            assert isinstance(a, Assignment)
+            self._start(p, a)
+            started.append((seq, a))
+            if runs:
+                heapq.heapreplace(heads, (next(iter(runs)), key))
+            else:
+                heapq.heappop(heads)
+        return started
 
-    def _sim(self, p: Pending) -> Optional[Assignment]:
-        need = FULL if p.field == "full" else SUBFIELD_SIZE
-        for r in sorted(self.robots.values(), key=lambda r: r.robot_id):
-            if r.pool == "sim" and r.idle and r.robot_id not in p.exclude and \
-                    r.area[0] >= need[0] - 1e-6 and r.area[1] >= need[1] - 1e-6:
-                return Assignment(p.run_id, r.robot_id, ())
-        return None
+    def _start(self, p: Pending, a: Assignment) -> None:
+        self.drop(p.run_id)
+        self.robots[a.robot_id].run_id = p.run_id
+        for k in a.subfields:
+            self.subfields[k].run_id = p.run_id
+            self.subfields[k].state = "reserved"
 
-    def _twb_sub(self, p: Pending) -> Optional[Assignment]:
+    def _sim_chooser(self) -> Optional[Callable[[Pending], _Choice]]:
+        """For sim runs: the lowest-id idle pool robot big enough and not excluded; None if none is idle."""
+        idle = [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == "sim" and r.idle]
+        if not idle:
+            return None
+
+        def choose(p: Pending) -> _Choice:
+            if not idle:
+                return _BLOCKED
+            need = _need(p.field)
+            for i, r in enumerate(idle):
+                if r.robot_id not in p.exclude and _fits(r, need):
+                    del idle[i]
+                    return Assignment(p.run_id, r.robot_id, ())
+            return None
+
+        return choose
+
+    def _twb_chooser(self) -> Optional[Callable[[Pending], _Choice]]:
+        """For twb runs: sub-field or full field; a full run that waits blocks the rest. None if no sub-field is free."""
+        if all(s.run_id is not None for s in self.subfields.values()):
+            return None
+        robots = self._field_robots()
+
+        def choose(p: Pending) -> _Choice:
+            if p.field != "full":
+                return self._twb_sub(p, robots)
+            a = self._twb_full(p, robots)
+            if a is None and self._full_possible(p):
+                return _BLOCKED  # reserve the field for this job
+            return a
+
+        return choose
+
+    def _twb_sub(self, p: Pending, robots: dict[int, RobotSlot]) -> Optional[Assignment]:
         options = []
         for k, s in self.subfields.items():
-            robot = self.field_robot(k)
+            robot = robots.get(k)
             if s.run_id is None and robot is not None and robot.idle and robot.robot_id not in p.exclude:
                 options.append((s.environment != p.environment, k, robot.robot_id))
         if not options:
@@ -182,22 +394,21 @@ class Scheduler:
     def _full_possible(self, p: Pending) -> bool:
         return any(r.full_field and r.healthy and r.robot_id not in p.exclude for r in self.robots.values())
 
-    def _twb_full(self, p: Pending) -> Optional[Assignment]:
+    def _twb_full(self, p: Pending, robots: dict[int, RobotSlot]) -> Optional[Assignment]:
         if any(s.run_id is not None for s in self.subfields.values()):
+            return None
+        if not all(robots.get(k) is None or robots[k].idle for k in _OTHER_SUBFIELDS):
             return None
         for r in self.robots.values():
             if r.full_field and r.idle and r.robot_id not in p.exclude:
-                others = [self.field_robot(k) for k in (2, 3, 4)]
-                if all(o is None or o.idle for o in others):
-                    return Assignment(p.run_id, r.robot_id, (1, 2, 3, 4))
+                return Assignment(p.run_id, r.robot_id, _ALL_SUBFIELDS)
         return None
 
     def can_ever_run(self, mode: str, field_kind: str) -> bool:
         """Whether some registered robot could serve this kind of run at all."""
         if mode == "sim":
-            need = FULL if field_kind == "full" else SUBFIELD_SIZE
-            return any(r.pool == "sim" and r.area[0] >= need[0] - 1e-6 and r.area[1] >= need[1] - 1e-6
-                       for r in self.robots.values())
+            need = _need(field_kind)
+            return any(r.pool == "sim" and _fits(r, need) for r in self.robots.values())
         if field_kind == "full":
             return any(r.full_field for r in self.robots.values())
         return any(r.subfield is not None for r in self.robots.values())
@@ -209,23 +420,143 @@ class Scheduler:
 
         ``remaining_s`` maps each running run to its expected remaining time.
         Returns ``{run_id: seconds}`` for queued runs that can start at all.
+        O(n log n) in queued runs; the real state is not changed.
         """
-        sim = Scheduler(
-            robots={k: RobotSlot(**{**vars(r)}) for k, r in self.robots.items()},
-            subfields={k: SubfieldSlot(**vars(s)) for k, s in self.subfields.items()},
-            queue=list(self.queue),
-        )
-        busy = {r.run_id for r in sim.robots.values() if r.run_id is not None}
-        finish = {rid: max(remaining_s.get(rid, 0.0), 0.0) for rid in busy}
-        durations = {p.run_id: p.expected_s for p in sim.queue}
-        now, out = 0.0, {}
+        finish = {r.run_id: max(remaining_s.get(r.run_id, 0.0), 0.0)
+                  for r in self.robots.values() if r.run_id is not None}
+        layout = self._fifo_layout()
+        if layout is not None:
+            return self._estimate_fifo(layout, finish)
+        return self._estimate_events(finish)
+
+    def _fifo_layout(self) -> Optional[_Layout]:
+        """The resources, when every queued run of a kind competes for the same ones; else None.
+
+        Then each kind is a first-come first-served queue in front of
+        interchangeable servers (pool robots; sub-fields, all four taken at
+        once by a full-field run), and start times follow from the servers'
+        free times alone (:meth:`_estimate_fifo`).  Anything unusual — two
+        runs of a kind with different usable robots, a second full-field
+        robot, a queued run id that also holds a resource — is left to the
+        step-by-step simulation (:meth:`_estimate_events`).
+        """
+        if set(self.subfields) != set(_ALL_SUBFIELDS) or any(k != r.robot_id for k, r in self.robots.items()):
+            return None
+        held = {r.run_id for r in self.robots.values()} | {s.run_id for s in self.subfields.values()}
+        if any(rid in self._where for rid in held if rid is not None):
+            return None
+        robots = self._field_robots()
+        pools, subs, full = set(), set(), {}
+        for kind, field_kind, exclude in self._classes:
+            if kind == "sim":
+                pools.add(tuple(r.robot_id for r in self._pool_for(field_kind, exclude)))
+            elif field_kind == "sub":
+                subs.add(frozenset(k for k, r in robots.items()
+                                   if k in self.subfields and r.healthy and r.robot_id not in exclude))
+            else:
+                able = [r for r in self.robots.values() if r.full_field and r.healthy and r.robot_id not in exclude]
+                if able and (len(able) > 1 or able[0] is not robots.get(1)):
+                    return None
+                full[exclude] = bool(able)
+        if len(pools) > 1 or len(subs) > 1:
+            return None
+        pool = [self.robots[rid] for rid in next(iter(pools), ())]
+        return _Layout(pool, next(iter(subs), frozenset()), full, robots)
+
+    def _pool_for(self, field_kind: str, exclude: frozenset[str]) -> list[RobotSlot]:
+        """The healthy simulation robots a sim run of this class may ever use, by robot id."""
+        need = _need(field_kind)
+        return [r for r in sorted(self.robots.values(), key=_robot_id)
+                if r.pool == "sim" and r.healthy and r.robot_id not in exclude and _fits(r, need)]
+
+    def _estimate_fifo(self, layout: _Layout, finish: dict[int, float]) -> dict[int, float]:
+        """Start times per kind from a heap of the servers' free times (the regular case)."""
+        out: dict[int, float] = {}
+        self._estimate_pool(layout, finish, out)
+        self._estimate_field(layout, finish, out)
+        return out
+
+    def _estimate_pool(self, layout: _Layout, finish: dict[int, float], out: dict[int, float]) -> None:
+        """Sim runs in arrival order, each on the pool robot that frees first."""
+        free = [0.0 if r.run_id is None else finish[r.run_id] for r in layout.pool]
+        if not free:
+            return
+        heapq.heapify(free)
+        for p in self._runs.values():
+            if p.mode == "sim":
+                t = free[0]
+                out[p.run_id] = t
+                heapq.heapreplace(free, t + p.expected_s)
+
+    def _estimate_field(self, layout: _Layout, finish: dict[int, float], out: dict[int, float]) -> None:
+        """Twb runs in arrival order: a sub-field run on the usable sub-field that frees first; a
+        full-field run when all four are free (nothing after it starts earlier)."""
+        free_at = self._subfield_free_times(layout, finish)
+        sub = [free_at[k] for k in _ALL_SUBFIELDS if k in layout.sub]  # a heap
+        rest = [free_at[k] for k in _ALL_SUBFIELDS if k not in layout.sub]
+        heapq.heapify(sub)
+        for p in self._runs.values():
+            if p.mode == "sim":
+                continue
+            if p.field == "full":
+                if not layout.full[frozenset(p.exclude)]:
+                    continue  # no robot for it: it waits for ever without holding anyone back
+                t = max(*sub, *rest)
+                if t == math.inf:
+                    return  # it waits for ever and holds back every later twb run
+                sub, rest = [t + p.expected_s] * len(sub), [t + p.expected_s] * len(rest)
+            else:
+                if not sub or sub[0] == math.inf:
+                    continue
+                t = sub[0]
+                heapq.heapreplace(sub, t + p.expected_s)
+            out[p.run_id] = t
+
+    def _subfield_free_times(self, layout: _Layout, finish: dict[int, float]) -> dict[int, float]:
+        """When each sub-field and its robot are both free (inf: never — an offline robot, or a
+        sub-field held by a run no robot carries)."""
+        def free(run_id: Optional[int]) -> float:
+            return 0.0 if run_id is None else finish.get(run_id, math.inf)
+
+        out = {}
+        for k in _ALL_SUBFIELDS:
+            robot = layout.field_robots.get(k)
+            robot_free = 0.0 if robot is None else free(robot.run_id) if robot.healthy else math.inf
+            out[k] = max(free(self.subfields[k].run_id), robot_free)
+        return out
+
+    def _estimate_events(self, finish: dict[int, float]) -> dict[int, float]:
+        """The general case: replay the policy event by event on a copy (heap of finish times).
+
+        After a pass nothing more can start until something is released, and a
+        release only wakes the kinds whose resources it freed.
+        """
+        twin = self._copy()
+        durations = {p.run_id: p.expected_s for p in twin._runs.values()}
+        events = [(t, rid) for rid, t in finish.items()]
+        heapq.heapify(events)
+        now, out, kinds = 0.0, {}, {"sim", "twb"}
         while True:
-            for a in sim.assign():
+            for a in twin._assign(sorted(kinds)):
                 out[a.run_id] = now
-                finish[a.run_id] = now + durations[a.run_id]
-            if not sim.queue or not finish:
+                finish[a.run_id] = t = now + durations[a.run_id]
+                heapq.heappush(events, (t, a.run_id))
+            if not twin._runs or not finish:
                 return out
-            now = min(finish.values())
-            for rid in [rid for rid, t in finish.items() if t <= now]:
-                sim.release(rid)
-                del finish[rid]
+            while finish.get(events[0][1]) != events[0][0]:
+                heapq.heappop(events)  # superseded: that run id started again in the simulation
+            now, kinds = events[0][0], set()
+            while events and events[0][0] <= now:
+                t, rid = heapq.heappop(events)
+                if finish.get(rid) == t:
+                    del finish[rid]
+                    kinds |= twin._release(rid)
+
+    def _copy(self) -> Scheduler:
+        """An independent copy of the robots, sub-fields and queue (O(n))."""
+        twin = Scheduler({k: replace(r) for k, r in self.robots.items()},
+                         {k: replace(s) for k, s in self.subfields.items()})
+        twin._runs = OrderedDict(self._runs)
+        twin._where = dict(self._where)
+        twin._classes = {key: OrderedDict(runs) for key, runs in self._classes.items()}
+        return twin
