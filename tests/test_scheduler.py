@@ -231,6 +231,10 @@ def random_scenario(seed: int) -> Scenario:
             sc.ops.append(("environment", rng.randint(1, 4), rng.choice([None, *envs])))
         elif u < 0.92:
             sc.ops.append(("retry", rng.random(), rng.random()))
+        elif u < 0.93:
+            sc.ops.append(("register", rng.choice([*twb_up_fleet(rng), *wild_fleet(rng)])))
+        elif u < 0.94:  # states the testbed does not make: a resource held by a queued or unknown run
+            sc.ops.append(("hold", rng.random(), rng.random(), rng.randint(1, next_run + 3)))
         else:
             sc.ops.append(("estimate", rng.random(), rng.choice([0.0, 0.5, 1.0])))
     sc.ops.append(("estimate", 0.3, 1.0))
@@ -250,6 +254,12 @@ def state(s) -> tuple:
             {k: (v.run_id, v.state, v.environment) for k, v in s.subfields.items()})
 
 
+def fleet_answers(s) -> tuple:
+    robots = [s.field_robot(k) for k in range(6)]
+    kinds = [s.can_ever_run(m, f) for m in ("sim", "twb") for f in ("sub", "full")]
+    return [r and r.robot_id for r in robots], kinds
+
+
 def apply(s, op: tuple, expected: dict[int, float], started: dict[int, Pending]):
     """One scripted operation; returns what the scheduler answered."""
     kind = op[0]
@@ -267,6 +277,14 @@ def apply(s, op: tuple, expected: dict[int, float], started: dict[int, Pending])
     if kind == "health":
         if op[1] in s.robots:
             s.robots[op[1]].healthy = op[2]
+        return None
+    if kind == "register":  # a robot (re)registers: a new slot object, the old one's run kept
+        old = s.robots.get(op[1]["robot_id"])
+        s.robots[op[1]["robot_id"]] = RobotSlot(**{**op[1], "run_id": old.run_id if old else None})
+        return None
+    if kind == "hold":
+        slots = [*s.robots.values(), *s.subfields.values()]
+        pick(slots, op[1]).run_id = op[3] if op[2] < 0.7 else None
         return None
     if kind == "environment":
         s.subfields[op[1]].environment = op[2]
@@ -309,6 +327,8 @@ def replay(sc: Scenario, paths: dict[str, int]) -> None:
                 started_new[a.run_id] = started_ref[a.run_id] = queued[a.run_id]
         assert got == want, f"op {i} {op}: {got} != {want}"
         assert state(new) == state(ref), f"after op {i} {op}"
+        if op[0] == "estimate":
+            assert fleet_answers(new) == fleet_answers(ref)
 
 
 def test_same_assignments_and_estimates_as_the_reference_on_random_scenarios():
