@@ -303,7 +303,7 @@ def apply(s, op: tuple, expected: dict[int, float], started: dict[int, Pending])
         return None
     # estimate: some running runs have an expected remaining time, the others count as due now
     u, share = op[1], op[2]
-    remaining = {rid: expected[rid] * u for i, rid in enumerate(running(s)) if (i % 3) / 3 < share}
+    remaining = {rid: expected.get(rid, 30.0) * u for i, rid in enumerate(running(s)) if (i % 3) / 3 < share}
     before = state(s)
     out = s.estimate_starts(remaining)
     assert state(s) == before, "an estimate changed the scheduler"
