@@ -145,21 +145,24 @@ def _fits(r: RobotSlot, need: tuple[float, float]) -> bool:
 
 
 _robot_id = attrgetter("robot_id")
+#: a queued run with its arrival number and its class
+_Entry = tuple[Pending, int, _Class]
+_run_of = itemgetter(0)
 
 
 class QueueView(Sequence[Pending]):
     """The queued runs in arrival order: a live, read-only view (``len`` is O(1), iteration O(n))."""
 
-    __slots__ = ("_runs",)
+    __slots__ = ("_entries",)
 
-    def __init__(self, runs: OrderedDict[int, Pending]) -> None:
-        self._runs = runs
+    def __init__(self, entries: OrderedDict[int, _Entry]) -> None:
+        self._entries = entries
 
     def __len__(self) -> int:
-        return len(self._runs)
+        return len(self._entries)
 
     def __iter__(self) -> Iterator[Pending]:
-        return iter(self._runs.values())
+        return map(_run_of, self._entries.values())
 
     @overload
     def __getitem__(self, i: int) -> Pending: ...
@@ -171,11 +174,11 @@ class QueueView(Sequence[Pending]):
         """O(i): the queue is not stored as a list."""
         if isinstance(i, slice):
             return list(self)[i]
-        n = len(self._runs)
+        n = len(self._entries)
         j = i + n if i < 0 else i
         if not 0 <= j < n:
             raise IndexError("queue index out of range")
-        return next(islice(self._runs.values(), j, None))
+        return next(islice(self, j, None))
 
     def __eq__(self, other: object) -> bool:
         if isinstance(other, (QueueView, list, tuple)):
@@ -186,14 +189,154 @@ class QueueView(Sequence[Pending]):
         return f"QueueView({list(self)!r})"
 
 
-@dataclass
-class _Layout:
-    """The resources as :meth:`Scheduler._estimate_fifo` sees them (see :meth:`Scheduler._fifo_layout`)."""
+_FULL_FIELD = -1  # the mask of a full-field run in _Field.queued: it needs every unit at once
+_EVERY_SUBFIELD = 0b1111
 
-    pool: list[RobotSlot]  # the simulation robots every queued sim run may use
-    sub: frozenset[int]  # the sub-fields every queued sub-field twb run may use
-    full: dict[frozenset[str], bool]  # per exclude set: can full-field runs ever start (on sub-field 1's robot)
-    field_robots: dict[int, RobotSlot]
+
+@dataclass
+class _Units:
+    """One resource kind as the estimate sees it: units numbered by bit, and the runs queued for them.
+
+    A subclass says which units a class of runs may use (:meth:`mask`) and
+    which free ones a run takes (:meth:`take`).
+    """
+
+    robots: list[Optional[RobotSlot]]  # the robot of each unit, by bit
+    idle: int = 0  # units free now
+    frees: list[tuple[float, int]] = field(default_factory=list)  # (time, units) when held units free up
+    queued: list[tuple[int, Pending]] = field(default_factory=list)  # (mask, run) in arrival order
+    masks: set[int] = field(default_factory=set)  # the masks in ``queued``
+
+    def mask(self, key: _Class) -> int:
+        """The units runs of this class may use (0: none, ever)."""
+        raise NotImplementedError
+
+    def take(self, p: Pending, mask: int, idle: int) -> int:
+        """The free units ``p`` takes now (0: it waits, holding back the rest of its kind)."""
+        raise NotImplementedError
+
+    def starts(self) -> dict[int, float]:
+        """Start time of each queued run that ever starts."""
+        if len(self.masks - {_FULL_FIELD}) <= 1:
+            return self._starts_interchangeable()
+        return self._starts_by_events()
+
+    def _free_times(self) -> list[float]:
+        """When each unit is first free: 0 (now), the end of what holds it, or inf (never)."""
+        times = [0.0 if self.idle >> i & 1 else math.inf for i in range(len(self.robots))]
+        for t, bit in self.frees:  # one unit each before the replay
+            times[bit.bit_length() - 1] = t
+        return times
+
+    def _starts_interchangeable(self) -> dict[int, float]:
+        """All runs but the full-field ones may use the same units, so which of them a run takes does
+        not matter: it starts when the first of them frees (a heap of free times); a full-field run when
+        all four are free, and everything queued after it later still.  O(n log u) for u units.
+        """
+        out: dict[int, float] = {}
+        (mask,) = self.masks - {_FULL_FIELD} or {0}
+        times = self._free_times()
+        usable = [t for i, t in enumerate(times) if mask >> i & 1]  # a heap
+        rest = [t for i, t in enumerate(times) if not mask >> i & 1]
+        heapq.heapify(usable)
+        for m, p in self.queued:
+            if m == _FULL_FIELD:
+                t = max(*usable, *rest)
+                if t == math.inf:
+                    break  # it waits for ever, and so does every later run of this kind
+                usable, rest = [t + p.expected_s] * len(usable), [t + p.expected_s] * len(rest)
+            else:
+                t = usable[0]
+                if t == math.inf:
+                    continue
+                heapq.heapreplace(usable, t + p.expected_s)
+            out[p.run_id] = t
+        return out
+
+    def _starts_by_events(self) -> dict[int, float]:
+        """The policy replayed moment by moment, for runs that may use different units.
+
+        At each moment something frees up, the earliest-queued run that has a
+        free unit it may use (or a full-field run, which waits holding back
+        the rest) takes what :meth:`take` gives it; the next moment is popped
+        from a heap of finish times.  O(n (g + log n)) for g different masks.
+        """
+        by_mask: dict[int, list[tuple[int, Pending]]] = {}
+        for seq, (m, p) in enumerate(self.queued):
+            by_mask.setdefault(m, []).append((seq, p))
+        groups = [[runs, 0, m] for m, runs in by_mask.items()]  # runs, index of the first waiting, mask
+        out: dict[int, float] = {}
+        waiting, idle, frees, now = len(self.queued), self.idle, list(self.frees), 0.0
+        heapq.heapify(frees)
+        while True:
+            while waiting:
+                best = None
+                for g in groups:
+                    runs, i, m = g
+                    if i < len(runs) and (m == _FULL_FIELD or idle & m) and \
+                            (best is None or runs[i][0] < best[0][best[1]][0]):
+                        best = g
+                if best is None:
+                    break
+                p = best[0][best[1]][1]
+                got = self.take(p, best[2], idle)
+                if not got:
+                    break  # a full-field run waits and reserves the field
+                idle &= ~got
+                best[1] += 1
+                waiting -= 1
+                out[p.run_id] = now
+                heapq.heappush(frees, (now + p.expected_s, got))
+            if not waiting or not frees:
+                return out
+            now = frees[0][0]
+            while frees and frees[0][0] <= now:
+                idle |= heapq.heappop(frees)[1]
+
+
+@dataclass
+class _Pool(_Units):
+    """The healthy simulation robots, bit i for the i-th by robot id."""
+
+    def mask(self, key: _Class) -> int:
+        need, exclude = _need(key[1]), key[2]
+        return sum(1 << i for i, r in enumerate(self.robots)
+                   if r is not None and r.robot_id not in exclude and _fits(r, need))
+
+    def take(self, p: Pending, mask: int, idle: int) -> int:
+        """The free robot with the lowest id."""
+        free = idle & mask
+        return free & -free
+
+
+@dataclass
+class _Field(_Units):
+    """Sub-field k with its robot as bit k-1."""
+
+    environments: list[Optional[str]] = field(default_factory=list)  # built on each sub-field, by bit
+
+    def mask(self, key: _Class) -> int:
+        exclude = key[2]
+        if key[1] == "full":
+            first = self.robots[0]
+            able = first is not None and first.full_field and first.healthy and first.robot_id not in exclude
+            return _FULL_FIELD if able else 0
+        return sum(1 << i for i, r in enumerate(self.robots)
+                   if r is not None and r.healthy and r.robot_id not in exclude)
+
+    def take(self, p: Pending, mask: int, idle: int) -> int:
+        """All four for a full-field run (none while any is busy), else the lowest-numbered free
+        sub-field, one with the run's environment built first."""
+        if mask == _FULL_FIELD:
+            return _EVERY_SUBFIELD if idle & _EVERY_SUBFIELD == _EVERY_SUBFIELD else 0
+        free, best = idle & mask, 0
+        for i, env in enumerate(self.environments):
+            bit = 1 << i
+            if free & bit:
+                if env == p.environment:
+                    return bit
+                best = best or bit
+        return best
 
 
 # ---------------------------------------------------------------------- the scheduler
@@ -214,8 +357,7 @@ class Scheduler:
         self.robots: dict[str, RobotSlot] = {} if robots is None else robots
         self.subfields: dict[int, SubfieldSlot] = \
             {k: SubfieldSlot(k) for k in range(1, 5)} if subfields is None else subfields
-        self._runs: OrderedDict[int, Pending] = OrderedDict()  # run id -> run, in arrival order
-        self._where: dict[int, tuple[int, _Class]] = {}  # run id -> (arrival number, class)
+        self._entries: OrderedDict[int, _Entry] = OrderedDict()  # run id -> (run, arrival number, class)
         self._classes: dict[_Class, OrderedDict[int, Pending]] = {}  # class -> arrival number -> run
         self._arrivals = count()
         self.queue = queue
@@ -226,14 +368,13 @@ class Scheduler:
     @property
     def queue(self) -> QueueView:
         """The queued runs in arrival order (read-only; change it with :meth:`add` and :meth:`drop`)."""
-        return QueueView(self._runs)
+        return QueueView(self._entries)
 
     @queue.setter
     def queue(self, runs: Iterable[Pending]) -> None:
         """Replace the whole queue (O(n))."""
         runs = list(runs)  # the new queue may be a view of this one
-        self._runs.clear()
-        self._where.clear()
+        self._entries.clear()
         self._classes.clear()
         for p in runs:
             self.add(p)
@@ -242,21 +383,19 @@ class Scheduler:
 
     def add(self, pending: Pending) -> bool:
         """Queue a run at the tail, O(1); False (and nothing changes) if its id is already queued."""
-        if pending.run_id in self._where:
+        if pending.run_id in self._entries:
             return False
         seq, key = next(self._arrivals), _class_of(pending)
-        self._runs[pending.run_id] = pending
-        self._where[pending.run_id] = (seq, key)
+        self._entries[pending.run_id] = (pending, seq, key)
         self._classes.setdefault(key, OrderedDict())[seq] = pending
         return True
 
     def drop(self, run_id: int) -> bool:
         """Remove a queued run (cancel), O(1); True if it was queued."""
-        where = self._where.pop(run_id, None)
-        if where is None:
+        entry = self._entries.pop(run_id, None)
+        if entry is None:
             return False
-        seq, key = where
-        del self._runs[run_id]
+        _, seq, key = entry
         runs = self._classes[key]
         del runs[seq]
         if not runs:
@@ -424,106 +563,63 @@ class Scheduler:
         """
         finish = {r.run_id: max(remaining_s.get(r.run_id, 0.0), 0.0)
                   for r in self.robots.values() if r.run_id is not None}
-        layout = self._fifo_layout()
-        if layout is not None:
-            return self._estimate_fifo(layout, finish)
-        return self._estimate_events(finish)
+        if not self._kinds_apart():
+            return self._estimate_events(finish)
+        pool, field_ = self._pool_units(finish), self._field_units(finish)
+        masks: dict[_Class, int] = {}
+        for p, _, key in self._entries.values():
+            units = pool if key[0] == "sim" else field_
+            mask = masks.get(key)
+            if mask is None:
+                mask = masks[key] = units.mask(key)
+                if mask:
+                    units.masks.add(mask)
+            if mask:
+                units.queued.append((mask, p))
+        return {**pool.starts(), **field_.starts()}
 
-    def _fifo_layout(self) -> Optional[_Layout]:
-        """The resources, when every queued run of a kind competes for the same ones; else None.
+    def _kinds_apart(self) -> bool:
+        """Whether each kind can be simulated on its own, on numbered units (:func:`_replay`).
 
-        Then each kind is a first-come first-served queue in front of
-        interchangeable servers (pool robots; sub-fields, all four taken at
-        once by a full-field run), and start times follow from the servers'
-        free times alone (:meth:`_estimate_fifo`).  Anything unusual — two
-        runs of a kind with different usable robots, a second full-field
-        robot, a queued run id that also holds a resource — is left to the
-        step-by-step simulation (:meth:`_estimate_events`).
+        True for every state the testbed makes; False for a second healthy
+        full-field robot, a queued run id that also holds a resource, and
+        dict keys that are not the robot ids or the sub-fields 1..4.
         """
         if set(self.subfields) != set(_ALL_SUBFIELDS) or any(k != r.robot_id for k, r in self.robots.items()):
-            return None
+            return False
         held = {r.run_id for r in self.robots.values()} | {s.run_id for s in self.subfields.values()}
-        if any(rid in self._where for rid in held if rid is not None):
-            return None
+        if any(rid in self._entries for rid in held if rid is not None):
+            return False
+        first = self._field_robots().get(1)
+        return all(r is first for r in self.robots.values() if r.full_field and r.healthy)
+
+    def _pool_units(self, finish: dict[int, float]) -> _Pool:
+        """The healthy simulation robots, bit i for the i-th by robot id (the order :meth:`_sim_chooser` tries)."""
+        robots: list[Optional[RobotSlot]] = \
+            [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == "sim" and r.healthy]
+        units = _Pool(robots)
+        for i, r in enumerate(robots):
+            assert r is not None
+            if r.run_id is None:
+                units.idle |= 1 << i
+            else:
+                units.frees.append((finish[r.run_id], 1 << i))
+        return units
+
+    def _field_units(self, finish: dict[int, float]) -> _Field:
+        """Sub-field k with its robot as bit k-1: free when both are (never with an offline robot)."""
         robots = self._field_robots()
-        pools, subs, full = set(), set(), {}
-        for kind, field_kind, exclude in self._classes:
-            if kind == "sim":
-                pools.add(tuple(r.robot_id for r in self._pool_for(field_kind, exclude)))
-            elif field_kind == "sub":
-                subs.add(frozenset(k for k, r in robots.items()
-                                   if k in self.subfields and r.healthy and r.robot_id not in exclude))
-            else:
-                able = [r for r in self.robots.values() if r.full_field and r.healthy and r.robot_id not in exclude]
-                if able and (len(able) > 1 or able[0] is not robots.get(1)):
-                    return None
-                full[exclude] = bool(able)
-        if len(pools) > 1 or len(subs) > 1:
-            return None
-        pool = [self.robots[rid] for rid in next(iter(pools), ())]
-        return _Layout(pool, next(iter(subs), frozenset()), full, robots)
-
-    def _pool_for(self, field_kind: str, exclude: frozenset[str]) -> list[RobotSlot]:
-        """The healthy simulation robots a sim run of this class may ever use, by robot id."""
-        need = _need(field_kind)
-        return [r for r in sorted(self.robots.values(), key=_robot_id)
-                if r.pool == "sim" and r.healthy and r.robot_id not in exclude and _fits(r, need)]
-
-    def _estimate_fifo(self, layout: _Layout, finish: dict[int, float]) -> dict[int, float]:
-        """Start times per kind from a heap of the servers' free times (the regular case)."""
-        out: dict[int, float] = {}
-        self._estimate_pool(layout, finish, out)
-        self._estimate_field(layout, finish, out)
-        return out
-
-    def _estimate_pool(self, layout: _Layout, finish: dict[int, float], out: dict[int, float]) -> None:
-        """Sim runs in arrival order, each on the pool robot that frees first."""
-        free = [0.0 if r.run_id is None else finish[r.run_id] for r in layout.pool]
-        if not free:
-            return
-        heapq.heapify(free)
-        for p in self._runs.values():
-            if p.mode == "sim":
-                t = free[0]
-                out[p.run_id] = t
-                heapq.heapreplace(free, t + p.expected_s)
-
-    def _estimate_field(self, layout: _Layout, finish: dict[int, float], out: dict[int, float]) -> None:
-        """Twb runs in arrival order: a sub-field run on the usable sub-field that frees first; a
-        full-field run when all four are free (nothing after it starts earlier)."""
-        free_at = self._subfield_free_times(layout, finish)
-        sub = [free_at[k] for k in _ALL_SUBFIELDS if k in layout.sub]  # a heap
-        rest = [free_at[k] for k in _ALL_SUBFIELDS if k not in layout.sub]
-        heapq.heapify(sub)
-        for p in self._runs.values():
-            if p.mode == "sim":
+        units = _Field([robots.get(k) for k in _ALL_SUBFIELDS],
+                       environments=[self.subfields[k].environment for k in _ALL_SUBFIELDS])
+        for k, robot in zip(_ALL_SUBFIELDS, units.robots):
+            held = [rid for rid in (self.subfields[k].run_id, robot and robot.run_id) if rid is not None]
+            if robot is not None and not robot.healthy:
                 continue
-            if p.field == "full":
-                if not layout.full[frozenset(p.exclude)]:
-                    continue  # no robot for it: it waits for ever without holding anyone back
-                t = max(*sub, *rest)
-                if t == math.inf:
-                    return  # it waits for ever and holds back every later twb run
-                sub, rest = [t + p.expected_s] * len(sub), [t + p.expected_s] * len(rest)
-            else:
-                if not sub or sub[0] == math.inf:
-                    continue
-                t = sub[0]
-                heapq.heapreplace(sub, t + p.expected_s)
-            out[p.run_id] = t
-
-    def _subfield_free_times(self, layout: _Layout, finish: dict[int, float]) -> dict[int, float]:
-        """When each sub-field and its robot are both free (inf: never — an offline robot, or a
-        sub-field held by a run no robot carries)."""
-        def free(run_id: Optional[int]) -> float:
-            return 0.0 if run_id is None else finish.get(run_id, math.inf)
-
-        out = {}
-        for k in _ALL_SUBFIELDS:
-            robot = layout.field_robots.get(k)
-            robot_free = 0.0 if robot is None else free(robot.run_id) if robot.healthy else math.inf
-            out[k] = max(free(self.subfields[k].run_id), robot_free)
-        return out
+            if not held:
+                units.idle |= 1 << (k - 1)
+            elif (t := max(finish.get(rid, math.inf) for rid in held)) < math.inf:
+                units.frees.append((t, 1 << (k - 1)))  # a sub-field no robot's run holds never frees
+        return units
 
     def _estimate_events(self, finish: dict[int, float]) -> dict[int, float]:
         """The general case: replay the policy event by event on a copy (heap of finish times).
@@ -532,7 +628,7 @@ class Scheduler:
         release only wakes the kinds whose resources it freed.
         """
         twin = self._copy()
-        durations = {p.run_id: p.expected_s for p in twin._runs.values()}
+        durations = {p.run_id: p.expected_s for p in twin.queue}
         events = [(t, rid) for rid, t in finish.items()]
         heapq.heapify(events)
         now, out, kinds = 0.0, {}, {"sim", "twb"}
@@ -541,7 +637,7 @@ class Scheduler:
                 out[a.run_id] = now
                 finish[a.run_id] = t = now + durations[a.run_id]
                 heapq.heappush(events, (t, a.run_id))
-            if not twin._runs or not finish:
+            if not twin._entries or not finish:
                 return out
             while finish.get(events[0][1]) != events[0][0]:
                 heapq.heappop(events)  # superseded: that run id started again in the simulation
@@ -556,7 +652,6 @@ class Scheduler:
         """An independent copy of the robots, sub-fields and queue (O(n))."""
         twin = Scheduler({k: replace(r) for k, r in self.robots.items()},
                          {k: replace(s) for k, s in self.subfields.items()})
-        twin._runs = OrderedDict(self._runs)
-        twin._where = dict(self._where)
+        twin._entries = OrderedDict(self._entries)
         twin._classes = {key: OrderedDict(runs) for key, runs in self._classes.items()}
         return twin

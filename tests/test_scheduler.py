@@ -319,7 +319,7 @@ def replay(sc: Scenario, paths: dict[str, int]) -> None:
         if op[0] == "add" and any(p.run_id == op[1].run_id for p in ref.queue):
             continue  # the reference would queue it twice; the scheduler refuses
         if op[0] == "estimate":
-            paths["fifo" if new._fifo_layout() is not None else "events"] += 1
+            paths["by kind" if new._kinds_apart() else "events"] += 1
         queued = {p.run_id: p for p in new.queue}
         got, want = apply(new, op, expected, started_new), apply(ref, op, expected, started_ref)
         if op[0] == "assign":
@@ -332,11 +332,11 @@ def replay(sc: Scenario, paths: dict[str, int]) -> None:
 
 
 def test_same_assignments_and_estimates_as_the_reference_on_random_scenarios():
-    paths = {"fifo": 0, "events": 0}
+    paths = {"by kind": 0, "events": 0}
     for seed in range(400):
         replay(random_scenario(seed), paths)
     # both ways of estimating were exercised often
-    assert paths["fifo"] > 300 and paths["events"] > 300, paths
+    assert paths["by kind"] > 1000 and paths["events"] > 150, paths
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -347,16 +347,16 @@ def test_long_queues_on_the_twb_up_fleet_estimate_like_the_reference(seed):
         sc.ops.append(("add", Pending(i, i, rng.choice(["sim", "twb"]), "full" if rng.random() < 0.03 else "sub",
                                       rng.choice(["room", "blocks"]), rng.uniform(20.0, 120.0))))
     sc.ops += [("assign",), ("release", 0.5), ("estimate", 0.5, 1.0), ("assign",), ("estimate", 0.2, 0.5)]
-    paths = {"fifo": 0, "events": 0}
+    paths = {"by kind": 0, "events": 0}
     replay(sc, paths)
-    assert paths["fifo"] == 2
+    assert paths["by kind"] == 2
     new = sc.build(Scheduler)
     for p in (op[1] for op in sc.ops if op[0] == "add"):
         new.add(p)
     new.assign()
     remaining = {rid: 7.0 for rid in running(new)}
-    fifo = new._estimate_fifo(new._fifo_layout(), {rid: 7.0 for rid in remaining})
-    assert fifo == new._estimate_events(dict(remaining)) and len(fifo) > 150
+    by_kind = new.estimate_starts(remaining)
+    assert by_kind == new._estimate_events(dict(remaining)) and len(by_kind) > 150
 
 
 # ---------------------------------------------------------------------- the reference
