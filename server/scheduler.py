@@ -38,7 +38,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from itertools import count, islice
+from itertools import count, islice, repeat
 from operator import attrgetter, itemgetter
 from typing import Callable, Optional, Union, overload
 
@@ -204,8 +204,15 @@ class _Units:
     robots: list[Optional[RobotSlot]]  # the robot of each unit, by bit
     idle: int = 0  # units free now
     frees: list[tuple[float, int]] = field(default_factory=list)  # (time, units) when held units free up
-    queued: list[tuple[int, Pending]] = field(default_factory=list)  # (mask, run) in arrival order
+    queued: list[tuple[int, int, Pending]] = field(default_factory=list)  # (arrival number, mask, run)
     masks: set[int] = field(default_factory=set)  # the masks in ``queued``
+
+    def enqueue(self, runs: OrderedDict[int, Pending], mask: int) -> None:
+        """Add a class of runs (arrival number -> run) that may use the units of ``mask`` (if any);
+        :meth:`starts` wants them sorted by arrival afterwards."""
+        if mask:
+            self.queued += zip(runs.keys(), repeat(mask), runs.values())
+            self.masks.add(mask)
 
     def mask(self, key: _Class) -> int:
         """The units runs of this class may use (0: none, ever)."""
@@ -215,11 +222,13 @@ class _Units:
         """The free units ``p`` takes now (0: it waits, holding back the rest of its kind)."""
         raise NotImplementedError
 
-    def starts(self) -> dict[int, float]:
-        """Start time of each queued run that ever starts."""
+    def starts(self, out: dict[int, float]) -> None:
+        """Put the start time of each queued run that ever starts into ``out``."""
+        self.queued.sort(key=itemgetter(0))  # a merge of the classes' runs: each is in arrival order
         if len(self.masks - {_FULL_FIELD}) <= 1:
-            return self._starts_interchangeable()
-        return self._starts_by_events()
+            self._starts_interchangeable(out)
+        else:
+            self._starts_by_events(out)
 
     def _free_times(self) -> list[float]:
         """When each unit is first free: 0 (now), the end of what holds it, or inf (never)."""
@@ -228,18 +237,17 @@ class _Units:
             times[bit.bit_length() - 1] = t
         return times
 
-    def _starts_interchangeable(self) -> dict[int, float]:
+    def _starts_interchangeable(self, out: dict[int, float]) -> None:
         """All runs but the full-field ones may use the same units, so which of them a run takes does
         not matter: it starts when the first of them frees (a heap of free times); a full-field run when
         all four are free, and everything queued after it later still.  O(n log u) for u units.
         """
-        out: dict[int, float] = {}
         (mask,) = self.masks - {_FULL_FIELD} or {0}
         times = self._free_times()
         usable = [t for i, t in enumerate(times) if mask >> i & 1]  # a heap
         rest = [t for i, t in enumerate(times) if not mask >> i & 1]
         heapq.heapify(usable)
-        for m, p in self.queued:
+        for _, m, p in self.queued:
             if m == _FULL_FIELD:
                 t = max(*usable, *rest)
                 if t == math.inf:
@@ -251,9 +259,8 @@ class _Units:
                     continue
                 heapq.heapreplace(usable, t + p.expected_s)
             out[p.run_id] = t
-        return out
 
-    def _starts_by_events(self) -> dict[int, float]:
+    def _starts_by_events(self, out: dict[int, float]) -> None:
         """The policy replayed moment by moment, for runs that may use different units.
 
         At each moment something frees up, the earliest-queued run that has a
@@ -262,10 +269,9 @@ class _Units:
         from a heap of finish times.  O(n (g + log n)) for g different masks.
         """
         by_mask: dict[int, list[tuple[int, Pending]]] = {}
-        for seq, (m, p) in enumerate(self.queued):
+        for seq, m, p in self.queued:
             by_mask.setdefault(m, []).append((seq, p))
         groups = [[runs, 0, m] for m, runs in by_mask.items()]  # runs, index of the first waiting, mask
-        out: dict[int, float] = {}
         waiting, idle, frees, now = len(self.queued), self.idle, list(self.frees), 0.0
         heapq.heapify(frees)
         while True:
@@ -288,7 +294,7 @@ class _Units:
                 out[p.run_id] = now
                 heapq.heappush(frees, (now + p.expected_s, got))
             if not waiting or not frees:
-                return out
+                return
             now = frees[0][0]
             while frees and frees[0][0] <= now:
                 idle |= heapq.heappop(frees)[1]
@@ -566,17 +572,13 @@ class Scheduler:
         if not self._kinds_apart():
             return self._estimate_events(finish)
         pool, field_ = self._pool_units(finish), self._field_units(finish)
-        masks: dict[_Class, int] = {}
-        for p, _, key in self._entries.values():
+        for key, runs in self._classes.items():
             units = pool if key[0] == "sim" else field_
-            mask = masks.get(key)
-            if mask is None:
-                mask = masks[key] = units.mask(key)
-                if mask:
-                    units.masks.add(mask)
-            if mask:
-                units.queued.append((mask, p))
-        return {**pool.starts(), **field_.starts()}
+            units.enqueue(runs, units.mask(key))
+        out: dict[int, float] = {}
+        pool.starts(out)
+        field_.starts(out)
+        return out
 
     def _kinds_apart(self) -> bool:
         """Whether each kind can be simulated on its own, on numbered units (:func:`_replay`).
