@@ -121,13 +121,15 @@ def measure(n: int, rounds: int, reference: type, reference_max: int) -> tuple[l
     retry = loaded(Scheduler, queue(n, retry_every=500))
     rem, rem_retry = remaining(new), remaining(retry)
     with_reference = n <= reference_max
+    expected = old.estimate_starts(rem) if with_reference else new._estimate_events(dict(rem))
     checks = {
-        f"estimate same as the reference, {n} runs":
-            new.estimate_starts(rem) == (old.estimate_starts(rem) if with_reference else new._estimate_events(dict(rem))),
+        f"estimate same as the {'reference' if with_reference else 'step-by-step replay'}, {n} runs":
+            new.estimate_starts(rem) == expected,
         f"estimate_retry same as the step-by-step replay, {n} runs":
             retry.estimate_starts(rem_retry) == retry._estimate_events(dict(rem_retry)),
     }
-    estimates = {"estimate": lambda: new.estimate_starts(rem), "estimate_retry": lambda: retry.estimate_starts(rem_retry)}
+    estimates = {"estimate": lambda: new.estimate_starts(rem),
+                 "estimate_retry": lambda: retry.estimate_starts(rem_retry)}
     if with_reference:
         estimates["old estimate"] = lambda: old.estimate_starts(rem)
     timed = interleaved(estimates, "old estimate" if with_reference else "estimate",

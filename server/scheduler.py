@@ -25,7 +25,11 @@ start is skipped as a whole, and :meth:`~Scheduler.assign` merges the class
 heads in arrival order and stops a kind when its classes are exhausted.
 ``add`` and ``drop`` are O(1); ``assign`` costs O((s + c) log c) for s started
 runs and c classes (a handful: the excludes of retried runs make new ones),
-plus O(robots) to read the fleet; ``estimate_starts`` is O(n log n).
+plus O(robots) to read the fleet.  ``estimate_starts`` replays the policy for
+each resource kind on its own — the pool's robots, the four sub-fields with
+their robots — as bit-numbered units and a heap of finish times, O(n log n);
+when all runs of a kind may use the same units, which unit a run takes changes
+no start time, and the replay reduces to a heap of the units' free times.
 
 No I/O here: the runtime (:mod:`server.testbed`) feeds robots and runs in and
 carries out the assignments.
@@ -201,7 +205,7 @@ class _Units:
     which free ones a run takes (:meth:`take`).
     """
 
-    robots: list[Optional[RobotSlot]]  # the robot of each unit, by bit
+    robots: Sequence[Optional[RobotSlot]]  # the robot of each unit, by bit
     idle: int = 0  # units free now
     frees: list[tuple[float, int]] = field(default_factory=list)  # (time, units) when held units free up
     queued: list[tuple[int, int, Pending]] = field(default_factory=list)  # (arrival number, mask, run)
@@ -472,10 +476,9 @@ class Scheduler:
             a = choose(p)
             if a is _BLOCKED:
                 break
-            if a is None:  # nothing of this class can start before resources free up
+            if not isinstance(a, Assignment):  # None: nothing of this class starts before something frees
                 heapq.heappop(heads)
                 continue
-            assert isinstance(a, Assignment)
             self._start(p, a)
             started.append((seq, a))
             if runs:
@@ -510,7 +513,8 @@ class Scheduler:
         return choose
 
     def _twb_chooser(self) -> Optional[Callable[[Pending], _Choice]]:
-        """For twb runs: sub-field or full field; a full run that waits blocks the rest. None if no sub-field is free."""
+        """For twb runs: a sub-field, or the full field (a full-field run that waits blocks the rest);
+        None if no sub-field is free."""
         if all(s.run_id is not None for s in self.subfields.values()):
             return None
         robots = self._field_robots()
@@ -581,7 +585,7 @@ class Scheduler:
         return out
 
     def _kinds_apart(self) -> bool:
-        """Whether each kind can be simulated on its own, on numbered units (:func:`_replay`).
+        """Whether each kind can be simulated on its own, on numbered units (:class:`_Units`).
 
         True for every state the testbed makes; False for a second healthy
         full-field robot, a queued run id that also holds a resource, and
@@ -597,11 +601,9 @@ class Scheduler:
 
     def _pool_units(self, finish: dict[int, float]) -> _Pool:
         """The healthy simulation robots, bit i for the i-th by robot id (the order :meth:`_sim_chooser` tries)."""
-        robots: list[Optional[RobotSlot]] = \
-            [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == "sim" and r.healthy]
+        robots = [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == "sim" and r.healthy]
         units = _Pool(robots)
         for i, r in enumerate(robots):
-            assert r is not None
             if r.run_id is None:
                 units.idle |= 1 << i
             else:
