@@ -275,25 +275,28 @@ class _Units:
         by_mask: dict[int, list[tuple[int, Pending]]] = {}
         for seq, m, p in self.queued:
             by_mask.setdefault(m, []).append((seq, p))
-        groups = [[runs, 0, m] for m, runs in by_mask.items()]  # runs, index of the first waiting, mask
+        masks = list(by_mask)
+        runs = [by_mask[m] for m in masks]
+        first = [0] * len(masks)  # per group: the first waiting run
+        heads: list[float] = [group[0][0] for group in runs]  # per group: its arrival number (inf: none left)
         waiting, idle, frees, now = len(self.queued), self.idle, list(self.frees), 0.0
         heapq.heapify(frees)
         while True:
-            while waiting:
-                best = None
-                for g in groups:
-                    runs, i, m = g
-                    if i < len(runs) and (m == _FULL_FIELD or idle & m) and \
-                            (best is None or runs[i][0] < best[0][best[1]][0]):
-                        best = g
-                if best is None:
+            while waiting and idle:  # with nothing free, nothing starts (a full-field run would wait)
+                best, best_seq = -1, math.inf
+                for j, m in enumerate(masks):
+                    if heads[j] < best_seq and (m == _FULL_FIELD or idle & m):
+                        best, best_seq = j, heads[j]
+                if best < 0:
                     break
-                p = best[0][best[1]][1]
-                got = self.take(p, best[2], idle)
+                i = first[best]
+                p = runs[best][i][1]
+                got = self.take(p, masks[best], idle)
                 if not got:
                     break  # a full-field run waits and reserves the field
                 idle &= ~got
-                best[1] += 1
+                first[best] = i + 1
+                heads[best] = runs[best][i + 1][0] if i + 1 < len(runs[best]) else math.inf
                 waiting -= 1
                 out[p.run_id] = now
                 heapq.heappush(frees, (now + p.expected_s, got))
@@ -325,6 +328,11 @@ class _Field(_Units):
 
     environments: list[Optional[str]] = field(default_factory=list)  # built on each sub-field, by bit
 
+    def __post_init__(self) -> None:
+        self._built: dict[Optional[str], int] = {}  # environment -> the sub-fields it is built on
+        for i, env in enumerate(self.environments):
+            self._built[env] = self._built.get(env, 0) | 1 << i
+
     def mask(self, key: _Class) -> int:
         exclude = key[2]
         if key[1] == "full":
@@ -339,14 +347,9 @@ class _Field(_Units):
         sub-field, one with the run's environment built first."""
         if mask == _FULL_FIELD:
             return _EVERY_SUBFIELD if idle & _EVERY_SUBFIELD == _EVERY_SUBFIELD else 0
-        free, best = idle & mask, 0
-        for i, env in enumerate(self.environments):
-            bit = 1 << i
-            if free & bit:
-                if env == p.environment:
-                    return bit
-                best = best or bit
-        return best
+        free = idle & mask
+        built = free & self._built.get(p.environment, 0)
+        return built & -built or free & -free
 
 
 # ---------------------------------------------------------------------- the scheduler
