@@ -134,22 +134,23 @@ def measure(n: int, rounds: int, reference: type, reference_max: int) -> tuple[l
         estimates["old estimate"] = lambda: old.estimate_starts(rem)
     timed = interleaved(estimates, "old estimate" if with_reference else "estimate",
                         rounds if n < 5000 or not with_reference else min(rounds, 3))
-    rows = [_row(n, name, timed[name], "old estimate" if with_reference else "estimate")
-            for name in ("estimate", "estimate_retry")]
+    base = "old estimate" if with_reference else "estimate"
+    rows = [_row(n, name, timed, base) for name in ("estimate", "estimate_retry")]
     tail = runs[n // 10:]  # never started by the steps
     cancelled = [p.run_id for p in tail[::max(len(tail) // 100, 1)][:100]]
     for task, make in (("wake", lambda s: s.assign), ("step", step),
                        ("cancel", lambda s: cancel(s, cancelled, by_id))):
         timed = interleaved({task: make(new), "old": make(old)}, "old", rounds)
-        rows.append(_row(n, task, timed[task], "old"))
+        rows.append(_row(n, task, timed, "old"))
     rows[-1]["cancelled"] = len(cancelled)
     checks[f"same queue after the steps, {n} runs"] = [p.run_id for p in new.queue] == [p.run_id for p in old.queue]
     return rows, checks
 
 
-def _row(n: int, task: str, timed: dict[str, float], baseline: str) -> dict[str, Any]:
-    ratio = timed["ratio"]
-    return {"queued": n, "task": task, "median_s": timed["median_s"], "baseline": baseline, "ratio": ratio,
+def _row(n: int, task: str, timed: dict[str, dict[str, float]], baseline: str) -> dict[str, Any]:
+    ratio = timed[task]["ratio"]
+    return {"queued": n, "task": task, "median_s": timed[task]["median_s"], "baseline": baseline,
+            "baseline_median_s": timed[baseline]["median_s"], "ratio": ratio,
             "speedup": 1.0 / ratio if ratio > 0 else None}
 
 
