@@ -111,7 +111,6 @@ def test_estimates_follow_the_policy():
     assert est[2] == 4.0
 
 
-
 def test_the_queue_is_a_read_only_view_in_arrival_order():
     s = make_scheduler()
     for i in (5, 3, 9):
@@ -213,7 +212,9 @@ def random_scenario(seed: int) -> Scenario:
         u = rng.random()
         if u < 0.45:
             for _ in range(rng.choice([1, 1, 1, 3, 8])):
-                exclude = frozenset(rng.sample(ids, min(len(ids), rng.randint(1, 2)))) if rng.random() < exclude_share else frozenset()
+                exclude = frozenset()
+                if rng.random() < exclude_share:
+                    exclude = frozenset(rng.sample(ids, min(len(ids), rng.randint(1, 2))))
                 dur = float(rng.randint(1, 6) * 10) if rng.random() < 0.6 else rng.uniform(0.0, 90.0)
                 sc.ops.append(("add", Pending(next_run, 1 + next_run // 3, rng.choice(["sim", "twb"]),
                                               "full" if rng.random() < full_share else "sub", rng.choice(envs), dur,
