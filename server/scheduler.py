@@ -1,6 +1,6 @@
 """Which run goes where: the queue, the four sub-fields and the simulation pool (pure logic).
 
-Policy (docs/design.md, "REST API", issue "Teleworkbench server"):
+Policy (docs/server.md, "Scheduling"):
 
 - ``sim`` runs go to any idle robot of the simulation pool; ``twb`` runs need
   a free sub-field with its field robot; a full-field ``twb`` run needs all
