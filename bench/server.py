@@ -8,6 +8,9 @@
 2. REST ``GET /api/v1/experiments/{id}`` latency with 32 concurrent clients:
    p50 / p99 (target p99 <= 50 ms).
 3. Experiments per minute end to end (sim + twb run each) at maximum time scale.
+4. A big queue: ``POST /api/v1/experiments`` and ``GET /health`` latency (p50 / p99) with
+   5,000 runs queued, against the same requests on the empty queue of the same testbed
+   (targets: POST p99 <= 100 ms, /health p99 <= 50 ms), and one cancel of all of them.
 
 Each part starts its own ``twb up`` on a free port with a temporary data dir.
 Prints JSON.
@@ -212,23 +215,76 @@ def rest_and_throughput(tmp: Path, requests: int, experiments: int) -> tuple[dic
     return rest, thr
 
 
+def timed(c: httpx.Client, n: int, call) -> dict:  # type: ignore[no-untyped-def]
+    """p50 / p99 (ms) of ``n`` calls ``call(c)`` (after one untimed call)."""
+    call(c).raise_for_status()
+    times = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        call(c).raise_for_status()
+        times.append(time.perf_counter() - t0)
+    q = np.percentile(np.array(times) * 1000, [50, 99])
+    return {"requests": n, "p50_ms": float(q[0]), "p99_ms": float(q[1])}
+
+
+def big_queue(tmp: Path, queued_runs: int, probes: int = 60) -> dict:
+    """Submission and /health latency with ``queued_runs`` waiting, against the empty queue (ratios)."""
+    tb = LocalTestbed(tmp / "queue", "--time-scale", "1", "--sim-robots", "1", token=TOKEN,
+                      env={"TWB_MAX_QUEUED_PER_USER": "100000"})
+    job = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fmm",
+           "modes": ["sim", "twb"], "repetitions": 10}  # 20 runs each
+    try:
+        with httpx.Client(base_url=tb.url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=120) as c:
+            submit = lambda c: c.post("/api/v1/experiments", json=job)  # noqa: E731
+            health = lambda c: c.get("/health")  # noqa: E731
+            empty = {"post": timed(c, probes, submit), "health": timed(c, probes, health)}
+            t0 = time.perf_counter()
+            while c.get("/health").json()["queued_runs"] < queued_runs:
+                submit(c).raise_for_status()
+            fill_s = time.perf_counter() - t0
+            full = {"post": timed(c, probes, submit), "health": timed(c, probes, health)}
+            queued = c.get("/health").json()["queued_runs"]
+            page = c.get("/api/v1/experiments", params={"status": "queued", "limit": 500}).json()["data"]
+            ids = [e["id"] for e in page]
+            t1 = time.perf_counter()
+            cancelled = c.post("/api/v1/experiments/cancel", json={"ids": ids}).json()["cancelled"]
+            cancel_s = time.perf_counter() - t1
+    finally:
+        tb.stop()
+    return {"queued_runs": queued, "fill_s": fill_s, "empty_queue": empty, "full_queue": full,
+            "post_p99_ratio": full["post"]["p99_ms"] / empty["post"]["p99_ms"],
+            "health_p99_ratio": full["health"]["p99_ms"] / empty["health"]["p99_ms"],
+            "cancel_one_request": {"experiments": len(cancelled), "seconds": cancel_s}}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--batches", type=int, default=200, help="tracker batches of 1000 poses")
     ap.add_argument("--requests", type=int, default=50, help="GET requests per client (32 clients)")
     ap.add_argument("--experiments", type=int, default=20)
+    ap.add_argument("--queued-runs", type=int, default=5000)
+    ap.add_argument("--only", choices=["ingestion", "rest", "queue"], help="run one part only")
     args = ap.parse_args()
+    parts: list[dict] = []
+    targets: dict[str, bool] = {}
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        ing = ingestion(tmp, args.batches)
-        rest, thr = rest_and_throughput(tmp, args.requests, args.experiments)
-    targets = {
-        "ingestion >= 50000 poses/s": ing["server_poses_per_s"] >= 50_000,
-        "ingestion >= 0.3x raw sqlite executemany": ing["ratio"] >= 0.3,
-        "GET p99 <= 50 ms with 32 clients": rest["p99_ms"] <= 50,
-    }
-    report("server", [{"tracker_ingestion": ing}, {"rest_latency": rest}, {"throughput": thr}],
-           targets_met=targets)
+        if args.only in (None, "ingestion"):
+            ing = ingestion(tmp, args.batches)
+            parts.append({"tracker_ingestion": ing})
+            targets["ingestion >= 50000 poses/s"] = ing["server_poses_per_s"] >= 50_000
+            targets["ingestion >= 0.3x raw sqlite executemany"] = ing["ratio"] >= 0.3
+        if args.only in (None, "rest"):
+            rest, thr = rest_and_throughput(tmp, args.requests, args.experiments)
+            parts += [{"rest_latency": rest}, {"throughput": thr}]
+            targets["GET p99 <= 50 ms with 32 clients"] = rest["p99_ms"] <= 50
+        if args.only in (None, "queue"):
+            q = big_queue(tmp, args.queued_runs)
+            parts.append({"big_queue": q})
+            targets[f"POST p99 <= 100 ms with {args.queued_runs} runs queued"] = q["full_queue"]["post"]["p99_ms"] <= 100
+            targets[f"/health p99 <= 50 ms with {args.queued_runs} runs queued"] = \
+                q["full_queue"]["health"]["p99_ms"] <= 50
+    report("server", parts, targets_met=targets)
 
 
 if __name__ == "__main__":

@@ -62,14 +62,18 @@ def test_worker_processes_die_with_a_killed_server(tmp_path):
 
 def test_ctrl_c_mid_run_ends_it_interrupted_and_retries_nothing(tmp_path):
     p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path)
-    with p.client() as c:
-        assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
-        exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["twb"], "repetitions": 2}).json()
-        deadline = time.monotonic() + 60
-        while c.get(f"/api/v1/experiments/{exp['id']}").json()["runs"][0]["status"] != "running":
-            assert time.monotonic() < deadline
-            time.sleep(0.1)
-        time.sleep(1.0)  # it drives
+    try:
+        with p.client() as c:
+            assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
+            exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["twb"], "repetitions": 2}).json()
+            deadline = time.monotonic() + 60
+            while c.get(f"/api/v1/experiments/{exp['id']}").json()["runs"][0]["status"] != "running":
+                assert time.monotonic() < deadline
+                time.sleep(0.1)
+            time.sleep(1.0)  # it drives
+    except BaseException:
+        p.stop(signal.SIGKILL)
+        raise
     assert p.stop(signal.SIGINT) == 0, p.output()
     assert "Traceback" not in p.output(), p.output()
     again = Process(["server"], tmp_path)
@@ -94,4 +98,26 @@ def test_a_stopped_testbed_leaves_no_process_behind(tmp_path):
     deadline = time.monotonic() + 20
     while left := [k for k in kids if alive(k) and k != os.getpid()]:
         assert time.monotonic() < deadline, f"processes outlived their server: {left}"
+        time.sleep(0.2)
+
+
+def test_a_testbed_started_by_a_program_ends_when_the_program_is_killed(tmp_path):
+    """`twb study --embedded` (or a test) starts a testbed through LocalTestbed: kill -9 of the program
+    must not leave the testbed, its robots or its workers behind."""
+    import subprocess
+    import sys
+
+    code = ("import sys, time; from twb.launch import LocalTestbed; "
+            "tb = LocalTestbed(sys.argv[1], '--time-scale', 'max', '--sim-robots', '1'); "
+            "print(tb.proc.pid, flush=True); time.sleep(600)")
+    program = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        testbed = int(program.stdout.readline())
+        kids = descendants(testbed) | {testbed}
+    finally:
+        program.kill()
+        program.wait()
+    deadline = time.monotonic() + 30
+    while left := [k for k in kids if alive(k)]:
+        assert time.monotonic() < deadline, f"processes outlived the program that started them: {left}"
         time.sleep(0.2)

@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+import weakref
 from pathlib import Path
 from typing import Optional
 
@@ -42,8 +43,12 @@ class LocalTestbed:
         self._out = open(self.log, "w")
         cmd = [sys.executable, "-m", "twb", command, "--port", "0", "--data-dir", str(self.data_dir),
                "--token", self.token, *args]
+        # the testbed ends with this process, however this one ends (TWB_EXIT_WITH_PARENT), and at the
+        # latest when this object is collected or the interpreter exits
         self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=subprocess.STDOUT,
-                                     env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
+                                     env={**os.environ, "PYTHONUNBUFFERED": "1", "TWB_EXIT_WITH_PARENT": "1",
+                                          **(env or {})})
+        weakref.finalize(self, _kill, self.proc)
         self.url = ""
         deadline = time.monotonic() + timeout
         while not self.url:
@@ -83,6 +88,12 @@ class LocalTestbed:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def _kill(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 def _last_line(text: str) -> str:

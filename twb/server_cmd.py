@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import gc
 import math
+import os
 import signal
 import sys
 from pathlib import Path
@@ -34,6 +35,10 @@ async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ig
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
+    if os.environ.get("TWB_EXIT_WITH_PARENT") == "1":  # started by a program (twb study --embedded, tests)
+        from server.core.lifeline import exit_with_parent
+
+        exit_with_parent(action=lambda: os.kill(os.getpid(), signal.SIGTERM))
     serving = asyncio.create_task(server.serve())
     while not server.started:
         if serving.done():
