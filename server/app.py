@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from contextlib import asynccontextmanager
 from typing import AsyncIterator, Optional
 
@@ -10,7 +11,6 @@ from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
-from starlette.routing import compile_path
 
 from .api.deps import authenticate, bearer_token
 from .api.middleware import BodyLimit
@@ -106,13 +106,23 @@ async def _token_first(request: Request) -> Optional[JSONResponse]:
 
 
 def _allowed_methods(app: FastAPI, path: str) -> list[str]:
-    """Every method the API serves on ``path`` (from its OpenAPI paths), for a 405's ``Allow``."""
+    """Every method the API serves on ``path`` (from its OpenAPI paths, integer parameters matching
+    digits only), for a 405's ``Allow``."""
     methods: set[str] = set()
     for template, operations in app.openapi().get("paths", {}).items():
-        regex, _, _ = compile_path(template)
-        if regex.match(path):
-            methods.update(m.upper() for m in operations)
+        for method, op in operations.items():
+            if _template_regex(template, op.get("parameters", [])).fullmatch(path):
+                methods.add(method.upper())
     return sorted(methods)
+
+
+def _template_regex(template: str, parameters: list[dict]) -> re.Pattern[str]:
+    """A regular expression for an OpenAPI path template (``/runs/{run_id}``) and its path parameters."""
+    integer = {p["name"] for p in parameters if p.get("in") == "path" and p.get("schema", {}).get("type") == "integer"}
+    parts = re.split(r"\{(\w+)\}", template)
+    out = "".join(re.escape(part) if i % 2 == 0 else ("[0-9]+" if part in integer else "[^/]+")
+                  for i, part in enumerate(parts))
+    return re.compile(out)
 
 
 def _where(loc: tuple) -> str:

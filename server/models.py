@@ -14,6 +14,8 @@ from sqlalchemy import (JSON, BigInteger, Boolean, DateTime, Float, ForeignKey, 
                         Text)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
+from .status import RobotStatus, RunStatus, SubfieldState
+
 __all__ = [
     "Base",
     "Environment",
@@ -108,7 +110,7 @@ class Experiment(Base):
 
     id: Mapped[int] = mapped_column(primary_key=True)
     owner_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
-    status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    status: Mapped[str] = mapped_column(String(16), default=RunStatus.QUEUED, index=True)
     environment: Mapped[str] = mapped_column(String(100))
     environment_data: Mapped[dict[str, Any]] = mapped_column(JSON)
     start: Mapped[list[Any]] = mapped_column(JSON)
@@ -153,7 +155,7 @@ class Run(Base):
     experiment_id: Mapped[int] = mapped_column(ForeignKey("experiments.id", ondelete="CASCADE"), index=True)
     mode: Mapped[str] = mapped_column(String(8))
     repetition: Mapped[int] = mapped_column(Integer)
-    status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    status: Mapped[str] = mapped_column(String(16), default=RunStatus.QUEUED, index=True)
     seed: Mapped[int] = mapped_column(BigInteger, default=0)
     attempt: Mapped[int] = mapped_column(Integer, default=1)
     subfield: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
@@ -217,7 +219,7 @@ class Robot(Base):
     #: the robot's control key derives from it (robot_agent.auth); none for robots in the server's process
     token_id: Mapped[Optional[int]] = mapped_column(ForeignKey("tokens.id", ondelete="SET NULL", name="fk_robots_token_id"),
                                                     nullable=True)
-    status: Mapped[str] = mapped_column(String(16), default="idle")
+    status: Mapped[str] = mapped_column(String(16), default=RobotStatus.IDLE)
     registered_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     last_seen: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
@@ -228,7 +230,7 @@ class Subfield(Base):
     __tablename__ = "subfields"
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    state: Mapped[str] = mapped_column(String(16), default="idle")
+    state: Mapped[str] = mapped_column(String(16), default=SubfieldState.IDLE)
     environment: Mapped[Optional[str]] = mapped_column(String(100), nullable=True)
     robot_id: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)
     run_id: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)

@@ -49,6 +49,8 @@ from typing import Callable, Optional, Union, overload
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 from robot_agent.frames import SUBFIELD_ORIGINS as _ORIGINS
 
+from .status import SubfieldState
+
 __all__ = ["Assignment", "Pending", "QueueView", "RobotSlot", "Scheduler", "SubfieldSlot", "SUBFIELD_ORIGINS"]
 
 #: origin of each sub-field 1..4 in the field frame (m)
@@ -101,7 +103,7 @@ class RobotSlot:
 @dataclass
 class SubfieldSlot:
     id: int
-    state: str = "idle"
+    state: str = SubfieldState.IDLE
     environment: Optional[str] = None
     run_id: Optional[int] = None
 
@@ -429,7 +431,7 @@ class Scheduler:
         for s in self.subfields.values():
             if s.run_id == run_id:
                 s.run_id = None
-                s.state = "idle"
+                s.state = SubfieldState.IDLE
                 kinds.add("twb")
         return kinds
 
@@ -495,7 +497,7 @@ class Scheduler:
         self.robots[a.robot_id].run_id = p.run_id
         for k in a.subfields:
             self.subfields[k].run_id = p.run_id
-            self.subfields[k].state = "reserved"
+            self.subfields[k].state = SubfieldState.RESERVED
 
     def _sim_chooser(self) -> Optional[Callable[[Pending], _Choice]]:
         """For sim runs: the lowest-id idle pool robot big enough and not excluded; None if none is idle."""

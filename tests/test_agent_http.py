@@ -62,6 +62,7 @@ async def test_registration_and_tracker_batches_reach_the_server():
         async with running_agents(backend="field", robots=2, tracker_sink=None, server_url=server.url + "/",
                                   token=TOKEN) as agents:
             c = await LineClient.connect(agents.ports[1])
+            assert await c.ask("T,T,A," + agents.robots[1].control_key) == "OK,A"  # as the server does
             await c.ask(encode_place((0.3, 0.3, 0.0)))
             await c.ask(encode_path(np.array([[0.3, 0.3, 0.0], [0.7, 0.3, 0.0]])))
             await c.until("EV,DONE")
@@ -101,6 +102,7 @@ async def test_unreachable_server_never_crashes_the_agent(caplog):
         dead = f"http://127.0.0.1:{s.getsockname()[1]}"
     async with running_agents(backend="ideal", tracker_sink=None, server_url=dead, token=TOKEN) as agents:
         c = await LineClient.connect(agents.ports[0])
+        assert await c.ask("T,T,A," + agents.robots[0].control_key) == "OK,A"
         await c.ask(encode_path(np.array([[0.1, 0.1, 0.0], [0.3, 0.1, 0.0]])))
         await c.until("EV,DONE")
         assert (await c.ask("T,T,Q")).startswith("ST,DONE")

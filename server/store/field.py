@@ -9,6 +9,7 @@ from sqlalchemy.orm import Session
 
 from ..models import Robot, Subfield, Token, utcnow
 from ..schemas import RobotRegister
+from ..status import RobotStatus, SubfieldState
 
 __all__ = ["load_robots", "reset_subfields", "save_robot", "save_subfield"]
 
@@ -22,7 +23,7 @@ def save_robot(session: Session, body: RobotRegister, *, token_id: Optional[int]
     for k in ("host", "port", "platform", "backend", "profile", "origin", "area"):
         setattr(row, k, getattr(body, k))
     row.token_id = token_id
-    row.status = "idle"
+    row.status = RobotStatus.IDLE
     row.last_seen = utcnow()
 
 
@@ -45,4 +46,4 @@ def reset_subfields(session: Session) -> None:
     for i in range(1, 5):
         if session.get(Subfield, i) is None:
             session.add(Subfield(id=i))
-    session.execute(update(Subfield).values(state="idle", run_id=None, robot_id=None, environment=None))
+    session.execute(update(Subfield).values(state=SubfieldState.IDLE, run_id=None, robot_id=None, environment=None))

@@ -83,7 +83,7 @@ def list_experiments(
     return Page(data=data, count=count)
 
 
-@router.get("/{experiment_id}", response_model=ExperimentPublic, responses=errors(404))
+@router.get("/{experiment_id:int}", response_model=ExperimentPublic, responses=errors(404))
 async def get_experiment(experiment_id: IdPath, user: CurrentUser, testbed: TestbedDep) -> Response:
     """Status, planned path and runs (mode, repetition, status, sub-field, metrics) of one experiment."""
     views = testbed.views
@@ -105,7 +105,7 @@ async def get_experiment(experiment_id: IdPath, user: CurrentUser, testbed: Test
     return Response(await anyio.to_thread.run_sync(load), media_type="application/json")
 
 
-@router.post("/{experiment_id}/cancel", response_model=ExperimentPublic, responses=errors(404, 409))
+@router.post("/{experiment_id:int}/cancel", response_model=ExperimentPublic, responses=errors(404, 409))
 async def cancel_experiment(experiment_id: IdPath, user: CurrentUser, testbed: TestbedDep) -> ExperimentPublic:
     """Cancel queued runs and stop running ones; 409 if the experiment has already finished."""
 
@@ -125,7 +125,7 @@ async def cancel_experiment(experiment_id: IdPath, user: CurrentUser, testbed: T
     return await anyio.to_thread.run_sync(load)
 
 
-@router.get("/{experiment_id}/metrics", responses=errors(404))
+@router.get("/{experiment_id:int}/metrics", responses=errors(404))
 def get_experiment_metrics(experiment_id: IdPath, session: SessionDep, user: CurrentUser) -> dict:
     """Metrics per run, mean/std/95% CI per mode, and the direct sim-vs-twb comparison per repetition.
 

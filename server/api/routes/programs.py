@@ -82,13 +82,13 @@ def list_programs(
     return Page(data=[ProgramPublic.model_validate(p) for p in rows], count=count)
 
 
-@router.get("/{program_id}", response_model=ProgramPublic, responses=errors(404))
+@router.get("/{program_id:int}", response_model=ProgramPublic, responses=errors(404))
 def get_program(program_id: IdPath, session: SessionDep, user: CurrentUser) -> ProgramPublic:
     """One of your programs."""
     return ProgramPublic.model_validate(owned(session, user, Program, program_id, "Program"))
 
 
-@router.get("/{program_id}/content", response_class=Response, responses=errors(404))
+@router.get("/{program_id:int}/content", response_class=Response, responses=errors(404))
 def get_program_content(program_id: IdPath, session: SessionDep, user: CurrentUser) -> Response:
     """The uploaded file itself."""
     prog = owned(session, user, Program, program_id, "Program")

@@ -19,7 +19,7 @@ from ..responses import AUTHENTICATED, errors
 router = APIRouter(prefix="/runs", tags=["runs"], responses=AUTHENTICATED)
 
 
-@router.get("/{run_id}", response_model=RunPublic, responses=errors(404))
+@router.get("/{run_id:int}", response_model=RunPublic, responses=errors(404))
 def get_run(run_id: IdPath, session: SessionDep, user: CurrentUser) -> RunPublic:
     """One run with its metrics."""
     return RunPublic.model_validate(owned(session, user, Run, run_id, "Run"))
@@ -31,7 +31,7 @@ _POSES_CONTENT = {"application/json": {"schema": {"type": "object", "properties"
     "text/csv": {"schema": {"type": "string"}}}
 
 
-@router.get("/{run_id}/poses", response_model=None,
+@router.get("/{run_id:int}/poses", response_model=None,
             responses={200: {"description": "The poses, as JSON or CSV.", "content": _POSES_CONTENT}, **errors(404)})
 def get_poses(
     run_id: IdPath,
@@ -58,7 +58,7 @@ def get_poses(
     return {"run_id": run_id, "count": len(rows), "columns": ["t", "x", "y", "theta"], "poses": rows}
 
 
-@router.get("/{run_id}/messages", responses=errors(404))
+@router.get("/{run_id:int}/messages", responses=errors(404))
 def get_messages(
     run_id: IdPath,
     session: SessionDep,
