@@ -10,7 +10,6 @@ published for the dashboard, at most a few per second per robot.
 from __future__ import annotations
 
 import asyncio
-import itertools
 import json
 import threading
 import time
@@ -183,10 +182,30 @@ def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:
         raise Invalid("poses: must be a list of [t, x, y, theta] rows")
     if len(poses) > 100_000:
         raise Invalid("poses: at most 100000 rows per batch")
-    if all(type(r) is list and len(r) == 4 for r in poses) and \
-            set(map(type, itertools.chain.from_iterable(poses))) <= {int, float}:
-        arr = np.array(poses, dtype=float).reshape(-1, 4)
-    else:  # the slow path: keep the rows of four numbers (booleans, strings and null are not numbers)
+    arr = None
+    if _only_numbers_after_poses(raw):  # the common case, decided on the bytes: no booleans, strings or null
+        try:
+            arr = np.array(poses, dtype=float)
+        except (ValueError, TypeError):  # ragged rows
+            arr = None
+        if arr is not None and (arr.ndim != 2 or arr.shape[1] != 4):
+            arr = None
+    if arr is None:  # the slow path: keep the rows of four numbers (true, "1" and null are not numbers)
         arr = np.array([r for r in poses if type(r) is list and len(r) == 4 and all(type(v) in (int, float) for v in r)],
-                       dtype=float).reshape(-1, 4)
+                       dtype=float)
+    arr = arr.reshape(-1, 4)
     return robot_id, arr[np.isfinite(arr).all(axis=1)], len(poses)
+
+
+#: every byte a JSON array of numbers may hold (with Python's NaN, Infinity), and whitespace
+_NUMERIC_JSON = bytes(b"0123456789+-.eE,[] \t\r\nNaInfity")
+
+
+def _only_numbers_after_poses(raw: bytes) -> bool:
+    """Whether everything from ``"poses"``'s array to the end of the body is numbers, brackets and commas
+    (then a conversion cannot have turned ``true`` or ``"1"`` into a number).  An object whose
+    ``robot_id`` comes after its poses just takes the exact, slower path."""
+    at = raw.find(b'"poses"')
+    start = raw.find(b"[", at) if at >= 0 else -1
+    end = raw.rfind(b"]")
+    return 0 <= start < end and not raw[start:end + 1].translate(None, _NUMERIC_JSON)

@@ -8,6 +8,7 @@ import socket
 import stat
 import threading
 
+import numpy as np
 import pytest
 
 from server.access import event_for
@@ -197,3 +198,20 @@ ADMIN = Principal(id=1, name="admin", is_admin=True, kind="admin")
 def test_the_live_stream_shows_a_user_only_what_is_theirs(event, shown):
     assert event_for(USER, event) == shown
     assert event_for(ADMIN, event) == event
+
+
+@pytest.mark.parametrize("body, accepted, received", [
+    (b'{"robot_id": "r", "poses": [[0, 1, 2, 3], [0.5, 1e-3, -2, 3.25]]}', 2, 2),
+    (b'{"robot_id": "r", "poses": [[0, 1, 2, 3], [true, 1, 2, 3], [0, 1, 2, false]]}', 1, 3),
+    (b'{"robot_id": "r", "poses": [[0, 1, 2, 3], ["1.0", 1, 2, 3], [0, 1, null, 3]]}', 1, 3),  # numpy takes "1.0"
+    (b'{"poses": [[0, 1, 2, 3], [1, "2", 3, 4]], "robot_id": "r"}', 1, 2),  # the key order does not matter
+    (b'{"robot_id": "r", "poses": [[0, 1, 2, 3], [1, 2, 3], [1, 2, 3, 4, 5], {}]}', 1, 4),
+    (b'{"robot_id": "r", "poses": [[0, NaN, 2, 3], [0, 1, 2, Infinity], [1, 1, 1, 1]]}', 1, 3),
+    (b'{"robot_id": "poses", "poses": [[true, 1, 2, 3]]}', 0, 1),
+])
+def test_tracker_rows_are_four_numbers_and_nothing_else(body, accepted, received):
+    from server.tracking import parse_batch
+
+    robot_id, rows, n = parse_batch(body)
+    assert robot_id in ("r", "poses") and rows.shape == (accepted, 4) and n == received
+    assert np.isfinite(rows).all()
