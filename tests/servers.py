@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -35,3 +37,36 @@ def wait_for(client: httpx.Client, experiment_id: int, timeout: float = 60.0, te
             return exp
         time.sleep(0.1)
     raise AssertionError(f"experiment {experiment_id} still {exp['status']} after {timeout} s: {exp}")
+
+
+class EventListener:
+    """``GET /api/v1/events`` read in a thread: every event in ``seen`` (``{"event": kind, **data}``) until
+    ``until(event)`` says so or :meth:`stop` is called (it returns at the next event)."""
+
+    def __init__(self, url: str, token: str, until=lambda event: False) -> None:  # type: ignore[no-untyped-def]
+        self.seen: list[dict] = []
+        self.ready, self._done = threading.Event(), threading.Event()
+        self._thread = threading.Thread(target=self._listen, args=(url, token, until), daemon=True)
+        self._thread.start()
+        assert self.ready.wait(10), "the event stream did not start"
+
+    def _listen(self, url: str, token: str, until) -> None:  # type: ignore[no-untyped-def]
+        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=60) as c:
+            with c.stream("GET", "/api/v1/events") as resp:
+                kind = None
+                for line in resp.iter_lines():
+                    self.ready.set()
+                    if line.startswith("event: "):
+                        kind = line[7:]
+                    elif line.startswith("data: "):
+                        self.seen.append({"event": kind, **json.loads(line[6:])})
+                        if until(self.seen[-1]):
+                            return
+                    if self._done.is_set():
+                        return
+
+    def join(self, timeout: float) -> None:
+        self._thread.join(timeout)
+
+    def stop(self) -> None:
+        self._done.set()

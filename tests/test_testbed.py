@@ -1,15 +1,12 @@
 """The whole testbed (`twb up`) as users run it: jobs through the REST API to robots and back."""
 
-import json
 import signal
-import threading
 import time
 
-import httpx
 import numpy as np
 import pytest
 
-from servers import Process, wait_for
+from servers import EventListener, Process, wait_for
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 1}
@@ -160,28 +157,11 @@ def test_planning_failure_fails_the_job_with_the_reason(client):
 
 
 def test_live_event_stream(testbed, client):
-    seen: list[dict] = []
-    ready = threading.Event()
-
-    def listen() -> None:
-        with httpx.Client(base_url=testbed.url, headers={"Authorization": f"Bearer {testbed.token}"},
-                          timeout=60) as c:
-            with c.stream("GET", "/api/v1/events") as resp:
-                event = None
-                for line in resp.iter_lines():
-                    ready.set()
-                    if line.startswith("event: "):
-                        event = line[7:]
-                    elif line.startswith("data: "):
-                        seen.append({"event": event, **json.loads(line[6:])})
-                        if event == "experiment" and seen[-1]["experiment"]["status"] == "completed":
-                            return
-
-    t = threading.Thread(target=listen, daemon=True)
-    t.start()
-    assert ready.wait(10)
+    listener = EventListener(testbed.url, testbed.token,
+                             until=lambda e: e["event"] == "experiment" and e["experiment"]["status"] == "completed")
     exp = client.post("/api/v1/experiments", json={**JOB, "modes": ["sim"], "repetitions": 1}).json()
-    t.join(60)
+    listener.join(60)
+    seen = listener.seen
     kinds = {e["event"] for e in seen}
     assert {"run", "experiment", "pose"} <= kinds
     states = [e["run"]["status"] for e in seen if e["event"] == "run" and e["run"]["experiment_id"] == exp["id"]]
@@ -327,31 +307,12 @@ def test_the_robots_ports_refuse_strangers(client):
 
 def test_a_user_follows_only_their_own_runs_live(testbed, client):
     user = client.post("/api/v1/users", json={"name": "watcher"}).json()["token"]
-    seen: list[dict] = []
-    ready, done = threading.Event(), threading.Event()
-
-    def listen() -> None:
-        with httpx.Client(base_url=testbed.url, headers={"Authorization": f"Bearer {user}"}, timeout=60) as c:
-            with c.stream("GET", "/api/v1/events") as resp:
-                event = None
-                for line in resp.iter_lines():
-                    ready.set()
-                    if line.startswith("event: "):
-                        event = line[7:]
-                    elif line.startswith("data: "):
-                        seen.append({"event": event, **json.loads(line[6:])})
-                    if done.is_set():
-                        return
-
-    t = threading.Thread(target=listen, daemon=True)
-    t.start()
-    assert ready.wait(10)
+    listener = EventListener(testbed.url, user)
     exp = client.post("/api/v1/experiments", json={**JOB, "repetitions": 1}).json()  # the admin's
     wait_for(client, exp["id"], timeout=60)
-    done.set()
-    with httpx.Client(base_url=testbed.url, headers={"Authorization": f"Bearer {user}"}, timeout=10) as c:
-        c.get("/health")  # wakes the stream once more
-    t.join(20)
+    listener.stop()
+    listener.join(20)  # it returns at the next line: an event or the 15 s heartbeat
+    seen = listener.seen
     assert any(e["event"] == "subfield" for e in seen)  # the field's own events do arrive
     assert not [e for e in seen if e["event"] in ("run", "experiment")]
     assert not [e for e in seen if e["event"] == "pose" and e["run_id"] is not None]
