@@ -195,7 +195,7 @@ class Dispatcher:
         self._estimates = per_exp
 
     def estimate_start(self, experiment_id: int) -> Optional[float]:
-        """Estimated wall seconds until the experiment's next run starts (queued ones only)."""
+        """Estimated wall seconds until the experiment's next run starts (queued ones only; any thread: a snapshot)."""
         v = self._estimates.get(experiment_id)
         return None if v is None or math.isinf(v) else round(v, 1)
 
