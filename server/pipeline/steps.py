@@ -63,17 +63,22 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
 
 
 async def _park(ctx: RunContext, svc: RunServices, robot_id: str, k: int) -> None:
-    """Clear sub-field ``k`` and park its robot in its outer corner."""
+    """Clear sub-field ``k`` and park its robot in its outer corner (a refusal is the testbed's fault)."""
     field = svc.field
     async with await connect(ctx, svc, robot_id) as other:
+        # always cleared, whatever we believe was built: removing nothing costs the gripper nothing
+        await other.request("T,T,B", ctx.wall(60 * 10))
         if field.built.get(robot_id) is not None:
-            await other.request("T,T,B", ctx.wall(60 * 10))
-            field.built[robot_id] = None
             await field.set_subfield(k, environment=None)
+        field.built[robot_id] = None
         try:
             await other.request(encode_place(PARK[k]), ctx.wall(30))
-        except AgentRefused:
-            pass  # it may already stand there
+        except AgentRefused as exc:
+            here = (await other.request("T,T,Q", ctx.wall(0))).fields
+            if not (len(here) >= 3 and abs(float(here[1]) - PARK[k][0] * 1000) < 1 and
+                    abs(float(here[2]) - PARK[k][1] * 1000) < 1):  # not already standing there
+                raise TestbedFault(f"robot {robot_id} could not be parked for a full-field run: {exc.message}") \
+                    from None
 
 
 async def place(ctx: RunContext, link: AgentLink, job: RunJob) -> None:

@@ -53,6 +53,7 @@ def main() -> int:
     if job.get("probe"):
         _emit(probe(job))
         return 0
+    _warm_codec()
     try:
         _check_single_threaded()
     except OSError as exc:
@@ -64,6 +65,23 @@ def main() -> int:
     finally:
         if cgroup is not None:
             cgroup.remove()
+
+
+def _warm_codec() -> None:
+    """Run the codec once on every kind of line the robot port answers, before any namespace.
+
+    numpy imports some of its modules only when first used (``np.unique``
+    imports ``numpy.ma``); once the mount namespace covers ``/tmp``, where a
+    checkout and its virtualenv may live, such an import would fail.
+    """
+    for line in (b"T,T,P,300,300,0;1500,300,90", b"T,T,Q", b"T,T,S", b"T,T,I,300,300,0", b"T,T,B,900,900,100,100,0",
+                 b"T,T,A,0123456789abcdef", b"T,T,L", b"T,T,P,1x,2,3", b"T,T,P," + b"1" * 40 + b",1,1", b"T,T,X",
+                 b"\x01", "T,T,Q,\u00e9".encode()):
+        try:
+            robot_agent.protocol.parse_command(line, field_size=(1.8, 1.8))
+        except robot_agent.protocol.ProtocolError as exc:
+            exc.line()
+    robot_agent.protocol.format_status("IDLE", (0.3, 0.3, 0.0), 0.0)
 
 
 def _run(job: dict[str, Any], cgroup: Optional[cgroups.ProgramCgroup], memory: dict[str, Any],
