@@ -28,7 +28,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 from scipy import stats as _st
 
-__all__ = ["aggregate", "summarize", "table_rows"]
+__all__ = ["aggregate", "proportion", "summarize", "table_rows"]
 
 
 def _confidence_iv(confidence: Any) -> float:
@@ -78,6 +78,26 @@ def summarize(values: Iterable[Any], confidence: float = 0.95) -> dict[str, Any]
         std = float(xs.std(ddof=1))
         half = float(_st.t.ppf(0.5 + c / 2, xs.size - 1)) * std / math.sqrt(xs.size)
         out.update(std=std, ci_low=mean - half, ci_high=mean + half)
+    return out
+
+
+def proportion(successes: int, n: int, confidence: float = 0.95) -> dict[str, Any]:
+    """A rate ``successes / n`` with its Wilson score interval (SciPy's ``binomtest``).
+
+    Returns ``n``, ``k`` (successes), ``rate`` and ``ci_low``, ``ci_high`` in
+    [0, 1], and ``confidence``; with ``n = 0`` the rate and interval are None.
+    Wilson's interval keeps its coverage for small ``n`` and rates near 0 or 1,
+    where the normal approximation fails (0/5 has the interval [0, 0.43]).
+    """
+    c = _confidence_iv(confidence)
+    if n < 0 or not 0 <= successes <= n:
+        raise ValueError(f"`successes` must be in 0..n and `n` >= 0, got {successes} of {n}")
+    out: dict[str, Any] = {"n": int(n), "k": int(successes), "rate": None, "ci_low": None, "ci_high": None,
+                           "confidence": c}
+    if n == 0:
+        return out
+    ci = _st.binomtest(int(successes), int(n)).proportion_ci(confidence_level=c, method="wilson")
+    out.update(rate=successes / n, ci_low=float(ci.low), ci_high=float(ci.high))
     return out
 
 

@@ -105,10 +105,10 @@ class Dispatcher:
             await asyncio.wait(running, timeout=10)
         self._refresh_estimates()
 
-    async def _fail_experiment(self, experiment_id: int, reason: str) -> None:
+    async def _fail_experiment(self, experiment_id: int, reason: str, kind: Optional[str]) -> None:
         """The experiment's path cannot be had: its queued runs fail with the reason."""
         await self._svc.recorder.fail_experiment(experiment_id, reason)
-        await self._svc.recorder.end(self._drop({experiment_id}), RunStatus.FAILED, reason)
+        await self._svc.recorder.end(self._drop({experiment_id}), RunStatus.FAILED, reason, failure=kind)
 
     def _drop(self, experiment_ids: set[int]) -> list[int]:
         """Take the experiments' queued runs off the queue; their ids."""
@@ -166,9 +166,12 @@ class Dispatcher:
                 retried = True
         if not retried:
             # a completed second attempt keeps the note about the first one
-            await rec.update(a.run_id, status=status, finished_at=utcnow(), **({"error": error} if error else {}))
+            extra = {"error": error} if error else {}
+            if end.failure is not None and status is RunStatus.FAILED:
+                extra["failure"] = str(end.failure)
+            await rec.update(a.run_id, status=status, finished_at=utcnow(), **extra)
         if status is RunStatus.FAILED and end.whole_experiment:
-            await self._fail_experiment(experiment_id, error)
+            await self._fail_experiment(experiment_id, error, str(end.failure) if end.failure else None)
         self.scheduler.release(a.run_id)
         for k in a.subfields:  # tell the dashboards the sub-field is free again
             await self._field.set_subfield(k, state=SubfieldState.IDLE, run_id=None)

@@ -134,16 +134,26 @@ def test_a_path_grazing_a_block_collides_on_the_field_for_some_seeds(client):
     for seed in range(8):
         e = client.post("/api/v1/experiments", json={"environment": "graze", "path": path, "modes": ["twb"],
                                                      "seed": seed}).json()
-        run = wait_for(client, e["id"], timeout=60)["runs"][0]
+        done = wait_for(client, e["id"], timeout=60)
+        run = done["runs"][0]
         outcomes.append(run["status"])
         m = run["metrics"]
         assert m["length_m"] > 0.2  # measured either way: a failed run's driving is data too
         if run["status"] == "failed":
-            assert run["error"] == "collision: the robot hit an obstacle"
+            assert run["error"] == "collision: the robot hit an obstacle" and run["failure"] == "collision"
             assert m["collided"] is True and m["clearance_min_m"] < 0.045
             assert m["goal_reached"] is False
+            x, y = run["stopped_at"]  # where it touched: at the block (0.75..1.05 x 0.75..1.05)
+            gap = ((max(0.75 - x, 0, x - 1.05)) ** 2 + (max(0.75 - y, 0, y - 1.05)) ** 2) ** 0.5
+            assert gap < 0.06, run["stopped_at"]
+            assert done["error"] == f"1 of 1 runs failed: collision at ({x:.2f}, {y:.2f})"
+            summary = client.get(f"/api/v1/experiments/{e['id']}/metrics").json()
+            assert summary["outcomes"]["twb"]["counts"] == {"collision": 1}
+            assert summary["outcomes"]["twb"]["success"]["rate"] == 0.0
+            assert summary["runs"][0]["outcome"] == "collision" and summary["runs"][0]["metrics"]["collided"]
         else:
             assert run["status"] == "completed" and m["collided"] is False and m["goal_reached"] is True
+            assert run["failure"] is None and run["stopped_at"] is None and done["error"] == ""
     assert "failed" in outcomes and "completed" in outcomes, outcomes
 
 

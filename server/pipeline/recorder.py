@@ -54,15 +54,15 @@ class RunRecorder:
 
         self._publish(await asyncio.to_thread(write))
 
-    async def end(self, run_ids: Iterable[int], status: RunStatus, error: str) -> None:
-        """End several runs at once (queued runs cancelled, or failed with their experiment)."""
+    async def end(self, run_ids: Iterable[int], status: RunStatus, error: str, *, failure: Optional[str] = None) -> None:
+        """End several runs at once (queued runs cancelled, or failed with their experiment: ``failure`` why)."""
         ids = list(run_ids)
         if not ids:
             return
 
         def write() -> list[dict[str, Any]]:
             with self._sessions.begin() as s:
-                runs = run_store.end_runs(s, ids, status, error)
+                runs = run_store.end_runs(s, ids, status, error, failure=failure)
                 return self._events(runs, {r.experiment_id: True for r in runs})
 
         self._publish(await asyncio.to_thread(write))

@@ -45,13 +45,14 @@ class RunEnd:
 
     ``robot_fault``: the robot to avoid when retrying (``error`` only);
     ``whole_experiment``: the experiment's path could not be had, so its
-    queued runs fail too (``failed`` only).
+    queued runs fail too, and ``failure`` why (``failed`` only).
     """
 
     status: RunStatus
     error: str = ""
     robot_fault: Optional[str] = None
     whole_experiment: bool = False
+    failure: Optional[FailureKind] = None
 
 
 async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Callable[[], bool]) -> RunEnd:
@@ -67,7 +68,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         await _steps(ctx, svc)
         end = RunEnd(RunStatus.COMPLETED)
     except RunFailed as exc:
-        end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment)
+        end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment, failure=exc.kind)
     except AgentRefused as exc:
         end = RunEnd(RunStatus.ERROR, f"robot {robot} refused a command: {exc}", robot_fault=robot)
     except AgentUnavailable as exc:
@@ -121,7 +122,8 @@ async def _steps(ctx: RunContext, svc: RunServices) -> None:
     # a run that failed on the field (collision, stall, timeout) is measured too: what it drove until
     # then is data; its `collided` is the robot's own verdict, as for completed runs
     try:
-        await steps.analyze(ctx, svc, job, plan, collided=failure is not None and failure.kind is FailureKind.COLLISION)
+        await steps.analyze(ctx, svc, job, plan, collided=failure is not None and failure.kind is FailureKind.COLLISION,
+                            failed=failure is not None)
     except TestbedFault:
         if failure is None:
             raise

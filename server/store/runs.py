@@ -31,6 +31,7 @@ class RunJob:
     goal: list[float]
     field: str
     robot_radius: float
+    jitter: Optional[dict[str, float]] = None
 
 
 def load_job(session: Session, run_id: int) -> RunJob:
@@ -38,7 +39,7 @@ def load_job(session: Session, run_id: int) -> RunJob:
     run = session.get(Run, run_id)
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
-                  list(e.goal), e.field, e.robot_radius)
+                  list(e.goal), e.field, e.robot_radius, e.jitter)
 
 
 def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
@@ -61,12 +62,14 @@ def requeue_run(session: Session, run_id: int, error: str) -> Optional[Run]:
     run.robot_id = None
     run.subfield = None
     run.t_start = run.t_end = None
+    run.failure = run.stopped_at = None
     session.execute(delete(Pose).where(Pose.run_id == run_id))
     finish_if_done(run.experiment)
     return run
 
 
-def end_runs(session: Session, run_ids: Iterable[int], status: RunStatus, error: str) -> list[Run]:
+def end_runs(session: Session, run_ids: Iterable[int], status: RunStatus, error: str, *,
+             failure: Optional[str] = None) -> list[Run]:
     """End the given runs (queued ones: cancelled, failed with their experiment) in one go; returns them."""
     ids = list(run_ids)
     if not ids:
@@ -74,7 +77,7 @@ def end_runs(session: Session, run_ids: Iterable[int], status: RunStatus, error:
     runs = list(session.scalars(select(Run).where(Run.id.in_(ids))))
     now = utcnow()
     for run in runs:
-        run.status, run.error, run.finished_at = status, error, now
+        run.status, run.error, run.finished_at, run.failure = status, error, now, failure
     for exp in {run.experiment for run in runs}:
         finish_if_done(exp)
     return runs
