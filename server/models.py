@@ -11,7 +11,7 @@ from datetime import datetime, timezone
 from typing import Any, Optional
 
 from sqlalchemy import (JSON, BigInteger, Boolean, DateTime, Float, ForeignKey, Index, Integer, LargeBinary, String,
-                        Text)
+                        Text, UniqueConstraint)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 from .status import RobotStatus, RunStatus, SubfieldState
@@ -70,9 +70,11 @@ class Environment(Base):
     """An environment file (docs/design.md, "Environment file") stored as JSON; built-ins have no owner."""
 
     __tablename__ = "environments"
+    #: names are unique per owner; built-in names (owner none) are reserved for everyone
+    __table_args__ = (UniqueConstraint("owner_id", "name", name="uq_environments_owner_name"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    name: Mapped[str] = mapped_column(String(100), unique=True)
+    name: Mapped[str] = mapped_column(String(100))
     owner_id: Mapped[Optional[int]] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"), nullable=True)
     builtin: Mapped[bool] = mapped_column(Boolean, default=False)
     data: Mapped[dict[str, Any]] = mapped_column(JSON)

@@ -74,8 +74,26 @@ def test_environments(alice, bob):
     r = alice.post("/api/v1/environments", json=mine)
     assert r.status_code == 201, r.text
     assert r.json()["owner"] == "alice"
-    assert alice.post("/api/v1/environments", json=mine).status_code == 409
+    r = alice.post("/api/v1/environments", json=mine)
+    assert r.status_code == 409 and r.json()["detail"] == "you already have an environment named 'alice-corridor'"
     assert bob.get("/api/v1/environments/alice-corridor").status_code == 404  # not his
+    # bob may use the same name: nothing tells him that alice's exists, and each gets their own
+    bobs = {**mine, "blocks": [{"x": 0.9, "y": 1.2, "w": 1.2, "h": 0.05, "angle": 0.0}]}
+    assert bob.post("/api/v1/environments", json=bobs).status_code == 201
+    assert bob.get("/api/v1/environments/alice-corridor").json()["blocks"][0]["y"] == 1.2
+    assert alice.get("/api/v1/environments/alice-corridor").json()["blocks"][0]["y"] == 0.6
+    r = bob.post("/api/v1/experiments", json={**JOB, "environment": "alice-corridor", "start": [0.3, 0.3],
+                                              "goal": [1.5, 0.3], "modes": ["sim"], "repetitions": 1})
+    assert r.status_code == 202 and r.json()["environment"] == "alice-corridor"
+    assert r.json()["owner"] == "bob"
+    bob.post(f"/api/v1/experiments/{r.json()['id']}/cancel")
+    r = alice.post("/api/v1/environments", json={**mine, "name": "room"})
+    assert r.status_code == 409 and "built-in" in r.json()["detail"]
+    big = {"name": "too-big", "size": [5.0, 5.0], "blocks": []}
+    r = alice.post("/api/v1/environments", json=big)
+    assert r.status_code == 422 and r.json()["detail"].startswith("size: the environment is 5 x 5 m; the field is 3.6")
+    for name in ("..", ".hidden", "-dash"):
+        assert alice.post("/api/v1/environments", json={**mine, "name": name}).status_code == 422, name
     bad = {**mine, "name": "bad-env", "blocks": [{"x": 0.9, "y": 0.6, "w": -1, "h": 0.05}]}
     r = alice.post("/api/v1/environments", json=bad)
     assert r.status_code == 422 and r.json()["detail"] == "blocks[0].w: Input should be greater than 0"

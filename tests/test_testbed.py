@@ -202,31 +202,53 @@ def test_cancel_a_running_job(tmp_path):
         p.stop()
 
 
-def test_server_killed_mid_run_marks_it_interrupted_and_keeps_the_queue(tmp_path):
+def test_a_server_killed_mid_run_resumes_the_run_and_keeps_the_queue(tmp_path):
     p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path)
     with p.client() as c:
         assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
         exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["sim"], "repetitions": 3}).json()
-        wait_for(c, exp["id"], timeout=60, terminal={"running"})
+        first = wait_for(c, exp["id"], timeout=60, terminal={"running"})["runs"][0]["id"]
+        deadline = time.monotonic() + 30
+        while not c.get(f"/api/v1/runs/{first}/messages").json()["count"]:  # the path went out, logged
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
     p.stop(signal.SIGKILL)
-    again = Process(["server"], tmp_path)
+    again = Process(["server"], tmp_path)  # no robots: everything waits, nothing is lost
     try:
         with again.client() as c:
             e = c.get(f"/api/v1/experiments/{exp['id']}").json()
-            states = [r["status"] for r in e["runs"]]
-            assert states[0] == "interrupted" and "server stopped" in e["runs"][0]["error"]
-            assert states[1:] == ["queued", "queued"]  # nothing lost: they wait for robots
-            assert e["status"] == "queued"
+            assert [r["status"] for r in e["runs"]] == ["queued", "queued", "queued"]
+            assert e["runs"][0]["error"] == "resumed: the testbed stopped during an earlier try"
+            assert e["runs"][0]["attempt"] == 1  # not a retry: the robot was not at fault
+            lines = [m["line"] for m in c.get(f"/api/v1/runs/{e['runs'][0]['id']}/messages").json()["data"]]
+            assert any(line.startswith("T,T,P,") for line in lines)  # the interrupted try's log stays
     finally:
         again.stop()
     back = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
     try:
         with back.client() as c:
             e = wait_for(c, exp["id"], timeout=60)
-            assert [r["status"] for r in e["runs"]] == ["interrupted", "completed", "completed"]
-            assert e["status"] == "interrupted"
+            assert [r["status"] for r in e["runs"]] == ["completed", "completed", "completed"]
+            assert e["status"] == "completed"
     finally:
         back.stop()
+
+
+def test_without_resuming_interrupted_runs_stay_interrupted(tmp_path):
+    p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path, env={"TWB_RESUME_INTERRUPTED": "0"})
+    with p.client() as c:
+        assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
+        exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["sim"], "repetitions": 2}).json()
+        wait_for(c, exp["id"], timeout=60, terminal={"running"})
+    p.stop(signal.SIGKILL)
+    again = Process(["server"], tmp_path, env={"TWB_RESUME_INTERRUPTED": "0"})
+    try:
+        with again.client() as c:
+            e = c.get(f"/api/v1/experiments/{exp['id']}").json()
+            assert [r["status"] for r in e["runs"]] == ["interrupted", "queued"]
+            assert "server stopped" in e["runs"][0]["error"] and e["status"] == "queued"
+    finally:
+        again.stop()
 
 
 def test_a_robot_dying_mid_run_is_an_error_retried_once_on_another_robot(tmp_path):

@@ -44,6 +44,17 @@ class RunRecorder:
 
         return await asyncio.to_thread(load)
 
+    async def begin(self, run_id: int, **fields: Any) -> None:
+        """A try of the run starts (what an interrupted earlier try left goes); then as :meth:`update`."""
+
+        def write() -> list[dict[str, Any]]:
+            with self._sessions.begin() as s:
+                run_store.clear_try(s, run_id)
+                run, exp, changed = run_store.update_run(s, run_id, fields)
+                return self._events([run], {exp.id: changed})
+
+        self._publish(await asyncio.to_thread(write))
+
     async def update(self, run_id: int, **fields: Any) -> None:
         """Write run fields (``status``, ``t_start``, ``metrics`` …), roll the experiment up, publish."""
 

@@ -98,8 +98,8 @@ async def _steps(ctx: RunContext, svc: RunServices) -> None:
     rec = svc.recorder
     job = await rec.job(ctx.run_id)
     svc.field.claim(ctx.subfields, job.owner_id)
-    await rec.update(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
-                     subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
+    await rec.begin(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
+                    subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
     link = await steps.connect(ctx, svc)
     try:
         await link.request("T,T,Q", ctx.wall(0))  # anchors the agent's clock

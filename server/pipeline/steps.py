@@ -118,6 +118,7 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
     t_sent = (await link.request("T,T,Q", ctx.wall(0))).time or 0.0  # the robot's clock, not ours
     await link.request(encode_path(path), ctx.wall(0))
+    await rec.add_messages(ctx.take_messages())  # the log up to the path, kept even if the server dies now
     t_start: Optional[float] = None
     loop = asyncio.get_running_loop()
     deadline = loop.time() + ctx.wall(timeout_exp)
@@ -135,6 +136,8 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
                 await rec.update(ctx.run_id, t_start=t_start, t_end=link.now())
             raise RunFailed(f"timeout: the robot did not finish within {timeout_exp:.0f} s of experiment time",
                             FailureKind.TIMEOUT)
+        if ctx.messages_due():
+            await rec.add_messages(ctx.take_messages())
         kind = ev.fields[0] if ev.fields else ""
         if kind == "START":
             t_start = ev.time

@@ -12,8 +12,8 @@ from ..models import Experiment, Message, Pose, Run, utcnow
 from ..status import ACTIVE, RunStatus
 from .experiments import finish_if_done
 
-__all__ = ["RunJob", "add_messages", "end_runs", "interrupt_active", "load_job", "queued_runs", "requeue_run",
-           "update_run"]
+__all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "interrupt_active", "load_job", "queued_runs", "requeue_interrupted",
+           "requeue_run", "update_run"]
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,14 @@ def load_job(session: Session, run_id: int) -> RunJob:
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
                   list(e.goal), e.field, e.robot_radius, e.jitter)
+
+
+def clear_try(session: Session, run_id: int) -> None:
+    """Forget what an earlier, interrupted try of a run left: its poses, metrics and end."""
+    run = session.get(Run, run_id)
+    run.t_start = run.t_end = None
+    run.metrics, run.failure, run.stopped_at = {}, None, None
+    session.execute(delete(Pose).where(Pose.run_id == run_id))
 
 
 def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
@@ -113,3 +121,19 @@ def interrupt_active(session: Session, reason: str) -> int:
         else:
             finish_if_done(exp)
     return len(cut)
+
+
+def requeue_interrupted(session: Session) -> int:
+    """Queue again every run a testbed stop interrupted; returns how many.  Its poses stay until it
+    starts again and its messages for good (a record of the try); not counted as a retry: the robot
+    was not at fault."""
+    runs = list(session.scalars(select(Run).where(Run.status == RunStatus.INTERRUPTED)))
+    for run in runs:
+        run.status = RunStatus.QUEUED
+        run.error = "resumed: the testbed stopped during an earlier try"
+        run.finished_at = None
+    for exp in {run.experiment for run in runs}:
+        exp.finished_at = None
+        exp.error = ""
+        finish_if_done(exp)
+    return len(runs)
