@@ -33,7 +33,7 @@ ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y":
 async def running(tmp_path: Path, *, time_scale: float = math.inf, robots_time_scale: float | None = None,
                   **settings) -> AsyncIterator[Testbed]:
     """A testbed in this process; ``robots_time_scale``: its robots run at another speed than it believes."""
-    tb = Testbed(Settings(data_dir=tmp_path, time_scale=time_scale, planning_workers=1, **settings),
+    tb = Testbed(Settings(data_dir=tmp_path / "data", time_scale=time_scale, planning_workers=1, **settings),
                  embedded=EmbeddedField(sim_robots=1, time_scale=robots_time_scale or time_scale))
     await asyncio.to_thread(tb.prepare)
     await tb.start()
@@ -71,8 +71,8 @@ def run_row(tb: Testbed, run_id: int) -> tuple[Run, int, int]:
         return run, poses, messages
 
 
-async def test_a_run_goes_through_every_step_to_completed(tmp_path):
-    async with running(tmp_path) as tb:
+async def test_a_run_goes_through_every_step_to_completed(tmp_path, database_url):
+    async with running(tmp_path, database_url=database_url) as tb:
         exp_id, run_id = add_experiment(tb)
         end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)
         assert end.status is RunStatus.COMPLETED and end.error == "", end
@@ -87,8 +87,8 @@ async def test_a_run_goes_through_every_step_to_completed(tmp_path):
             assert s.get(Experiment, exp_id).planned_path[0][:2] == [0.3, 0.3]
 
 
-async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path):
-    async with running(tmp_path) as tb:
+async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path, database_url):
+    async with running(tmp_path, database_url=database_url) as tb:
         through = [[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]  # straight through the block
         _, run_id = add_experiment(tb, start=(0.3, 0.9, 0.0), goal=(1.5, 0.9, 0.0), planned_path=through)
         end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)

@@ -3,6 +3,7 @@
 import json
 
 import pytest
+from sqlalchemy import create_engine, text
 
 from servers import Process
 
@@ -10,11 +11,16 @@ JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.570
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 3}
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    p = Process(["server"], tmp_path_factory.mktemp("server"))
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def server(request, tmp_path_factory):
+    """`twb server` on each store: its SQLite default, and PostgreSQL (the session's, a fresh database)."""
+    data = tmp_path_factory.mktemp("server")
+    url = f"sqlite:///{data / 'twb.db'}" if request.param == "sqlite" else request.getfixturevalue("postgres").database()
+    p = Process(["server", "--database-url", url], data)
+    p.store = create_engine(url)  # the tests look into the store itself
     yield p
     p.stop()
+    p.store.dispose()
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +43,8 @@ def test_health_is_open_and_the_token_file_is_written(server):
     with server.client(token=None) as c:
         assert c.get("/health").json()["status"] == "ok"
     assert (server.data_dir / "token").read_text().strip() == server.token
-    assert (server.data_dir / "twb.db").exists()
+    with server.store.connect() as con:
+        assert con.execute(text("select count(*) from users")).scalar() >= 1
 
 
 def test_auth_errors(server):
@@ -49,10 +56,8 @@ def test_auth_errors(server):
 
 
 def test_tokens_are_stored_hashed(server, alice):
-    import sqlite3
-
-    con = sqlite3.connect(server.data_dir / "twb.db")
-    hashes = [h for (h,) in con.execute("select token_hash from tokens")]
+    with server.store.connect() as con:
+        hashes = [h for (h,) in con.execute(text("select token_hash from tokens"))]
     assert server.token not in hashes and all(len(h) == 64 for h in hashes)
 
 
@@ -174,13 +179,13 @@ def test_invalid_json_nan_and_huge_bodies(alice):
     nan = json.dumps({**JOB, "start": [0.3, 0.3, 0.0]}).replace("0.3, 0.3, 0.0", "NaN, 0.3, 0.0")
     r = alice.post("/api/v1/experiments", content=nan.encode(), headers={"content-type": "application/json"})
     assert r.status_code == 422 and "start" in r.json()["detail"]
-    huge = b'{"environment": "' + b"x" * (5 << 20) + b'"}'
+    huge = b'{"environment": "' + b"x" * (13 << 20) + b'"}'
     r = alice.post("/api/v1/experiments", content=huge, headers={"content-type": "application/json"})
     assert r.status_code == 413 and "larger than" in r.json()["detail"]
 
     def chunks():
         yield b'{"environment": "'
-        for _ in range(6):
+        for _ in range(13):  # the body limit is 12 MiB
             yield b"x" * (1 << 20)
         yield b'"}'
 

@@ -92,6 +92,18 @@ class RunRecorder:
         self._publish(events)
         return rows
 
+    async def resume(self, run_id: int, why: str) -> tuple[Run, Experiment]:
+        """Queue a run again that ended through nobody's fault (not counted as a retry)."""
+
+        def write() -> tuple[tuple[Run, Experiment], list[dict[str, Any]]]:
+            with self._sessions.begin() as s:
+                run = run_store.resume_run(s, run_id, why)
+                return (run, run.experiment), self._events([run], {run.experiment_id: True})
+
+        rows, events = await asyncio.to_thread(write)
+        self._publish(events)
+        return rows
+
     async def fail_experiment(self, experiment_id: int, error: str) -> None:
         """The experiment's error text (its path could not be had)."""
 

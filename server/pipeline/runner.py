@@ -27,6 +27,8 @@ import logging
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+from sqlalchemy.exc import DBAPIError
+
 from ..errors import AgentRefused, AgentUnavailable, FailureKind, RunEnded, RunFailed, TestbedFault
 from ..models import utcnow
 from ..scheduler import Assignment
@@ -45,7 +47,8 @@ class RunEnd:
 
     ``robot_fault``: the robot to avoid when retrying (``error`` only);
     ``whole_experiment``: the experiment's path could not be had, so its
-    queued runs fail too, and ``failure`` why (``failed`` only).
+    queued runs fail too, and ``failure`` why (``failed`` only); ``resume``:
+    nobody's fault (the database went away), queue the run again.
     """
 
     status: RunStatus
@@ -53,6 +56,7 @@ class RunEnd:
     robot_fault: Optional[str] = None
     whole_experiment: bool = False
     failure: Optional[FailureKind] = None
+    resume: bool = False
 
 
 async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Callable[[], bool]) -> RunEnd:
@@ -79,6 +83,9 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         end = RunEnd(exc.status, str(exc))
     except OSError as exc:
         end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot)
+    except DBAPIError as exc:
+        log.warning("run %d: the database went away: %s", ctx.run_id, exc.orig)
+        end = RunEnd(RunStatus.INTERRUPTED, "the database was unreachable during this run", resume=True)
     except asyncio.CancelledError:
         end = (RunEnd(RunStatus.INTERRUPTED, "the server stopped during this run") if stopping()
                else RunEnd(RunStatus.CANCELLED, "cancelled by its owner"))
@@ -91,6 +98,8 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         await asyncio.shield(svc.recorder.add_messages(ctx.take_messages()))
     except asyncio.CancelledError:
         pass
+    except DBAPIError as exc:
+        log.warning("run %d: the end of its protocol log is lost: %s", ctx.run_id, exc.orig)
     return end
 
 

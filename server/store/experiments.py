@@ -14,7 +14,7 @@ from ..schemas import ExperimentCreate
 from ..status import ACTIVE, TERMINAL, RunStatus, roll_up
 from ..validation import Preflight
 
-__all__ = ["count_queued", "create_experiment", "finish_if_done", "outcome_text", "run_seed", "set_error",
+__all__ = ["count_queued", "create_experiment", "finish_if_done", "lock_experiments", "outcome_text", "run_seed", "set_error",
            "store_plan", "store_planning_info"]
 
 
@@ -67,6 +67,19 @@ def create_experiment(
     return exp
 
 
+def lock_experiments(session: Session, *, experiment_ids: Sequence[int] = (),
+                     run_ids: Sequence[int] = ()) -> None:
+    """Lock the experiments (given, or of the given runs) until the transaction ends, before reading their
+    runs: two runs of one experiment ending at once then roll it up one after the other, each seeing the
+    other's end (PostgreSQL's ``FOR UPDATE``; SQLite serialises writers anyway)."""
+    ids = set(experiment_ids)
+    if run_ids:
+        ids |= set(session.scalars(select(Run.experiment_id).where(Run.id.in_(list(run_ids)))))
+    if ids:
+        session.execute(select(Experiment.id).where(Experiment.id.in_(sorted(ids))).order_by(Experiment.id)
+                        .with_for_update())
+
+
 def finish_if_done(exp: Experiment) -> bool:
     """Update ``exp.status`` from its runs; stamp ``started_at`` / ``finished_at``; a finished experiment
     whose runs did not all complete says why in ``error`` (unless it already does). True if the status changed."""
@@ -108,6 +121,7 @@ def _why(run: Run) -> str:
 def store_plan(session: Session, *, experiment_id: int, path: list[list[float]], planning_time_s: Optional[float],
                info: dict[str, Any]) -> None:
     """Keep the experiment's planned path (m, m, rad), its planning time (s) and planner info."""
+    lock_experiments(session, experiment_ids=[experiment_id])
     exp = session.get(Experiment, experiment_id)
     exp.planned_path = path
     exp.planning_time_s = planning_time_s

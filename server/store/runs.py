@@ -10,9 +10,9 @@ from sqlalchemy.orm import Session
 
 from ..models import Experiment, Message, Pose, Run, utcnow
 from ..status import ACTIVE, RunStatus
-from .experiments import finish_if_done
+from .experiments import finish_if_done, lock_experiments
 
-__all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "interrupt_active", "load_job", "queued_runs", "requeue_interrupted",
+__all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "resume_run", "interrupt_active", "load_job", "queued_runs", "requeue_interrupted",
            "requeue_run", "update_run"]
 
 
@@ -42,8 +42,18 @@ def load_job(session: Session, run_id: int) -> RunJob:
                   list(e.goal), e.field, e.robot_radius, e.jitter)
 
 
+def resume_run(session: Session, run_id: int, why: str) -> Run:
+    """Queue again a run that ended through nobody's fault (not a retry); its poses stay until it runs."""
+    lock_experiments(session, run_ids=[run_id])
+    run = session.get(Run, run_id)
+    run.status, run.error, run.finished_at = RunStatus.QUEUED, f"resumed: {why}", None
+    finish_if_done(run.experiment)
+    return run
+
+
 def clear_try(session: Session, run_id: int) -> None:
     """Forget what an earlier, interrupted try of a run left: its poses, metrics and end."""
+    lock_experiments(session, run_ids=[run_id])
     run = session.get(Run, run_id)
     run.t_start = run.t_end = None
     run.metrics, run.failure, run.stopped_at = {}, None, None
@@ -52,6 +62,7 @@ def clear_try(session: Session, run_id: int) -> None:
 
 def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
     """Write ``fields`` on the run and roll the experiment's status up; (run, experiment, status changed)."""
+    lock_experiments(session, run_ids=[run_id])
     run = session.get(Run, run_id)
     for k, v in fields.items():
         setattr(run, k, v)
@@ -60,8 +71,12 @@ def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[R
 
 
 def requeue_run(session: Session, run_id: int, error: str) -> Optional[Run]:
-    """Queue a run that hit a testbed fault again, once; its poses go. None if it was retried already."""
+    """Queue a run that hit a testbed fault again, once; its poses go. None if it was retried already.
+    (Asking again for a run already queued changes nothing.)"""
+    lock_experiments(session, run_ids=[run_id])
     run = session.get(Run, run_id)
+    if run.status == RunStatus.QUEUED:
+        return run
     if run.attempt >= 2:
         return None
     run.attempt += 1
@@ -82,6 +97,7 @@ def end_runs(session: Session, run_ids: Iterable[int], status: RunStatus, error:
     ids = list(run_ids)
     if not ids:
         return []
+    lock_experiments(session, run_ids=ids)
     runs = list(session.scalars(select(Run).where(Run.id.in_(ids))))
     now = utcnow()
     for run in runs:
