@@ -28,14 +28,15 @@ return result objects after SciPy's: ``statistic``, ``pvalue`` and a
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, NamedTuple, Optional, Sequence
 
 import numpy as np
 from scipy import stats as _st
 
-__all__ = ["ConfidenceInterval", "MeanComparison", "RateComparison", "aggregate", "compare_means", "compare_rates",
-           "holm", "proportion", "summarize", "table_rows"]
+__all__ = ["MIN_BOOTSTRAP", "ConfidenceInterval", "MeanComparison", "RateComparison", "aggregate", "compare_means",
+           "compare_rates", "holm", "proportion", "summarize", "table_rows"]
 
 
 def _confidence_iv(confidence: Any) -> float:
@@ -216,29 +217,62 @@ def _rng(seed: Any) -> np.random.Generator:
     return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
 
 
-def _mean_difference(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
-    return np.mean(a, axis=axis) - np.mean(b, axis=axis)
+#: fewer values a side (or pairs) than this: no bootstrap interval (the studentized bootstrap needs spread in
+#: nearly every resample; with 4 values there are only 35 distinct resamples)
+MIN_BOOTSTRAP = 5
 
 
-def _bootstrap_ci(samples: tuple[np.ndarray, ...], paired: bool, confidence: float, alternative: str,
-                  n_resamples: int, seed: Any) -> ConfidenceInterval:
-    """BCa bootstrap interval of mean(a) - mean(b) (of mean(d) for one sample of paired differences d)."""
+def _studentized(samples: tuple[np.ndarray, ...]) -> tuple[float, float, Any]:
+    """The estimate (difference of means, or mean of paired differences), its standard error and the statistic
+    ``t* = (estimate* - estimate) / se*`` of a resample, vectorised along ``axis``."""
+    if len(samples) == 1:
+        (d,) = samples
+        est, se = float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size))
+
+        def t_one(x: np.ndarray, axis: int = -1) -> np.ndarray:
+            return (x.mean(axis) - est) / (x.std(axis=axis, ddof=1) / math.sqrt(x.shape[axis]))
+        return est, se, t_one
+    a, b = samples
+    est = float(a.mean() - b.mean())
+    se = math.sqrt(a.var(ddof=1) / a.size + b.var(ddof=1) / b.size)
+
+    def t_two(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+        v = x.var(axis=axis, ddof=1) / x.shape[axis] + y.var(axis=axis, ddof=1) / y.shape[axis]
+        return (x.mean(axis) - y.mean(axis) - est) / np.sqrt(v)
+    return est, se, t_two
+
+
+def _bootstrap_ci(samples: tuple[np.ndarray, ...], confidence: float, alternative: str, n_resamples: int,
+                  seed: Any) -> ConfidenceInterval:
+    """Studentized ("bootstrap-t") interval of mean(a) - mean(b), or of mean(d) for paired differences ``d``.
+
+    ``scipy.stats.bootstrap`` resamples (each sample on its own; the paired
+    differences as one sample) and returns the distribution of ``t*``; the
+    interval is ``estimate - q * se`` at the quantiles ``q`` of ``t*``
+    (Efron & Tibshirani 1993, ch. 12.5).  A resample without spread (``se* =
+    0``) counts as an infinite ``t*`` of its sign (0 when its mean is the
+    estimate), so tiny samples get wide — possibly unbounded — intervals, not
+    narrow ones.
+    """
     import inspect
-    import warnings
 
-    statistic = _mean_difference if len(samples) == 2 else (lambda d, axis=-1: np.mean(d, axis=axis))
+    est, se, statistic = _studentized(samples)
     kw = {"rng" if "rng" in inspect.signature(_st.bootstrap).parameters else "random_state": _rng(seed)}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # degenerate resamples of tiny samples: checked below
-        res = _st.bootstrap(samples, statistic, vectorized=True, paired=paired and len(samples) == 2,
-                            n_resamples=n_resamples, confidence_level=confidence, alternative=alternative,
-                            method="BCa", **kw)
-    low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
-    if alternative == "two-sided" and not (math.isfinite(low) and math.isfinite(high)):
-        # BCa is undefined when every jackknife value is equal; the percentile interval is not
-        dist = res.bootstrap_distribution
-        low, high = (float(v) for v in np.percentile(dist, [50 * (1 - confidence), 50 * (1 + confidence)]))
-    return ConfidenceInterval(low, high)
+    with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # scipy's own percentile interval of t* is not used (infinite t*)
+        res = _st.bootstrap(samples, statistic, vectorized=True, paired=False, n_resamples=n_resamples,
+                            method="percentile", **kw)
+    t = np.asarray(res.bootstrap_distribution, dtype=float)
+    t = np.where(np.isnan(t), 0.0, t)  # 0/0: a resample without spread whose mean is the estimate
+
+    def q(level: float) -> float:  # an order statistic: no interpolation between infinite values
+        return float(np.quantile(t, level, method="inverted_cdf"))
+
+    if alternative == "two-sided":
+        return ConfidenceInterval(est - q((1 + confidence) / 2) * se, est - q((1 - confidence) / 2) * se)
+    if alternative == "greater":  # a lower bound for the difference
+        return ConfidenceInterval(est - q(confidence) * se, math.inf)
+    return ConfidenceInterval(-math.inf, est - q(1 - confidence) * se)
 
 
 @dataclass(frozen=True)
@@ -274,13 +308,13 @@ class MeanComparison:
     _n_resamples: int = field(default=9999, repr=False, compare=False)
 
     def confidence_interval(self, confidence_level: Optional[float] = None) -> ConfidenceInterval:
-        """BCa bootstrap interval of the difference (``scipy.stats.bootstrap``; pairs resampled together when
-        ``paired``); NaN where the comparison has no spread (see ``note``).  Another ``confidence_level``
-        resamples again with the same seed."""
+        """Studentized bootstrap interval of the difference (resampled by ``scipy.stats.bootstrap``: the pairs'
+        differences when ``paired``, else each sample on its own); NaN where the comparison has too few values
+        or no spread (see ``note``).  Another ``confidence_level`` resamples again with the same seed."""
         if confidence_level is None or confidence_level == self.confidence_level or not self._samples:
             return self._ci
         c = _confidence_iv(confidence_level)
-        return _bootstrap_ci(self._samples, self.paired, c, self.alternative, self._n_resamples, self._seed)
+        return _bootstrap_ci(self._samples, c, self.alternative, self._n_resamples, self._seed)
 
 
 def compare_means(
@@ -294,7 +328,7 @@ def compare_means(
     n_resamples: int = 9999,
     seed: Any = 0,
 ) -> MeanComparison:
-    """Compare the means of two samples: difference, BCa bootstrap interval, test, effect size.
+    """Compare the means of two samples: difference, studentized bootstrap interval, test, effect size.
 
     Parameters
     ----------
@@ -328,12 +362,20 @@ def compare_means(
         differing by the same amount, or fewer than two values a side) the
         difference is still given, but ``pvalue``, ``statistic`` and the interval
         are NaN and ``note`` says why: a zero-width interval would claim a
-        certainty the data do not have.
+        certainty the data do not have.  With 2 to 4 values a side (pairs) the
+        test is given but no interval (:data:`MIN_BOOTSTRAP`).
+
+    Notes
+    -----
+    The interval is the studentized bootstrap ("bootstrap-t"), not BCa or
+    the percentile interval: with the 4-10 repetitions of a testbed study
+    those cover a 95% target only 82-89% of the time (normal and skewed
+    data, see tests/test_stats.py), the studentized one 93-97%.
 
     References
     ----------
     Welch (1947); Efron & Tibshirani, *An Introduction to the Bootstrap* (1993),
-    ch. 14 (BCa); Hedges & Olkin (1985) for g.
+    ch. 12.5 (bootstrap-t); Hedges & Olkin (1985) for g.
     """
     c = _confidence_iv(confidence)
     alt = _alternative_iv(alternative)
@@ -356,6 +398,15 @@ def compare_means(
                 effect="cohen-dz" if paired else "hedges-g")
     base["difference"] = base["mean_a"] - base["mean_b"]
     undefined = dict(statistic=nan, pvalue=nan, test="", effect_size=nan)
+    with warnings.catch_warnings():
+        # SciPy warns of precision loss when one sample is (nearly) constant; Welch's t is still right then
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _compare_means(xa, xb, base, undefined, paired, test, alt, c, n_resamples, seed)
+
+
+def _compare_means(xa: np.ndarray, xb: np.ndarray, base: dict[str, Any], undefined: dict[str, Any], paired: bool,
+                   test: str, alt: str, c: float, n_resamples: int, seed: Any) -> MeanComparison:
+    nan = math.nan
     if paired:
         d = xa - xb
         if d.size < 2:
@@ -371,6 +422,7 @@ def compare_means(
             name = "wilcoxon"
         samples: tuple = (d,)
         effect = float(d.mean() / d.std(ddof=1))
+        few = d.size < MIN_BOOTSTRAP
     else:
         if xa.size < 2 or xb.size < 2:
             return MeanComparison(**base, **undefined,
@@ -389,9 +441,13 @@ def compare_means(
         pooled = math.sqrt(((na - 1) * xa.var(ddof=1) + (nb - 1) * xb.var(ddof=1)) / (na + nb - 2))
         j = 1 - 3 / (4 * (na + nb) - 9)  # Hedges' small-sample correction
         effect = j * base["difference"] / pooled if pooled > 0 else nan
-    ci = _bootstrap_ci(samples, bool(paired), c, alt, n_resamples, seed)
-    return MeanComparison(**base, statistic=float(r.statistic), pvalue=float(r.pvalue), test=name,
-                          effect_size=effect, _ci=ci, _samples=samples, _seed=seed, _n_resamples=n_resamples)
+        few = min(na, nb) < MIN_BOOTSTRAP
+    tested = dict(statistic=float(r.statistic), pvalue=float(r.pvalue), test=name, effect_size=effect)
+    if few:
+        return MeanComparison(**base, **tested, note=f"fewer than {MIN_BOOTSTRAP} values a side: too few to "
+                                                     "bootstrap an interval")
+    ci = _bootstrap_ci(samples, c, alt, n_resamples, seed)
+    return MeanComparison(**base, **tested, _ci=ci, _samples=samples, _seed=seed, _n_resamples=n_resamples)
 
 
 @dataclass(frozen=True)

@@ -172,12 +172,14 @@ def _mean_comparison(metric: str, mode: str, ra: list[dict[str, Any]], rb: list[
         note = "no completed run of " + " and ".join(
             n for n, d in ((ra[0]["configuration"] if ra else "a", done_a),
                            (rb[0]["configuration"] if rb else "b", done_b)) if not d)
-    elif note and not math.isfinite(res.pvalue):
-        note = f"{note}: counted once per problem, nothing left to vary — no interval or test"
-    elif note:
-        note = f"{note}: counted once per problem"
-    elif res.note:
-        note = res.note
+    else:
+        parts = []
+        if note:
+            parts.append(f"{note}: counted once per problem" + (
+                "" if math.isfinite(res.pvalue) else ", nothing left to vary — no interval or test"))
+        if res.note and (math.isfinite(res.pvalue) or not note):
+            parts.append(res.note)
+        note = "; ".join(parts)
     return res, runs_a, runs_b, note
 
 

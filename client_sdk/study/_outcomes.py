@@ -42,14 +42,21 @@ def counted(row: dict[str, Any]) -> bool:
     return row.get("outcome") not in NOT_COUNTED
 
 
-def _signature(row: dict[str, Any]) -> tuple:
-    return (row.get("outcome"), *(row.get(k) for k in IDENTITY_METRICS))
+def _same(values: list[Any]) -> bool:
+    """All None, or all numbers equal up to rounding (1e-9 relative: times are differences of clock readings)."""
+    if all(v is None for v in values):
+        return True
+    if any(not isinstance(v, (int, float)) or isinstance(v, bool) for v in values):
+        return len(set(values)) == 1
+    hi = max(abs(v) for v in values)
+    return max(values) - min(values) <= 1e-9 * max(1.0, hi)
 
 
 def identical_repetitions(rows: list[dict[str, Any]]) -> bool:
-    """At least two counted runs, all with the same outcome and bit-identical metrics."""
+    """At least two counted runs, all with the same outcome and the same metrics (up to rounding)."""
     mine = [r for r in rows if counted(r)]
-    return len(mine) >= 2 and len({_signature(r) for r in mine}) == 1
+    return (len(mine) >= 2 and len({r.get("outcome") for r in mine}) == 1
+            and all(_same([r.get(k) for r in mine]) for k in IDENTITY_METRICS))
 
 
 def distinct_runs(rows: Iterable[dict[str, Any]]) -> tuple[list[dict[str, Any]], bool]:

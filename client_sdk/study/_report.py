@@ -181,7 +181,7 @@ def _failures(data: StudyData) -> list[str]:
 METHOD = ("How to read this: success rates are over the counted runs (completed or failed) with Wilson 95% "
           "intervals and Fisher's exact test; metrics are over completed runs only (a planner that fails often "
           "is judged on its successes there, so read them with its success rate), as the difference of means "
-          "a − b with a BCa bootstrap 95% interval and Welch's t (paired t when every configuration ran every "
+          "a − b with a studentized bootstrap 95% interval and Welch's t (paired t when every configuration ran every "
           "problem and repetition); p-values are Holm-adjusted per metric; effect sizes are Hedges' g (d_z "
           "paired) and the risk difference. Identical repetitions (the deterministic simulation without jitter) "
           "count once. Details: docs/study.md.")

@@ -168,8 +168,13 @@ def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float) -> tuple[
         w = winners.pop()
         l_ = b if w == a else a
         on = ", ".join(METRIC_WORDS.get(c.metric, (c.metric,))[0] for c in judged)
-        return (f"{display_name(w)} is better than {display_name(l_)} {where} on {on}; the success rates do not "
-                "differ significantly."), facts
+        if rate is None or not rate.tested:
+            rates = ""
+        elif rate.result.k_a * rate.result.n_b == rate.result.k_b * rate.result.n_a:
+            rates = "; both reached the goal equally often"
+        else:
+            rates = "; the success rates do not differ significantly"
+        return f"{display_name(w)} is better than {display_name(l_)} {where} on {on}{rates}.", facts
     if len(winners) > 1:
         parts = [f"{display_name(w)} on " + ", ".join(METRIC_WORDS.get(c.metric, (c.metric,))[0]
                                                       for c in judged if c.better() == w) for w in (a, b)]
