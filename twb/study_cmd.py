@@ -101,10 +101,12 @@ def _collect(spec, url, token, progress, timeout):  # type: ignore[no-untyped-de
         try:
             return run_study(client, spec, progress=progress, timeout=timeout)
         except StudyRefused as exc:
+            where = f"study {spec.name!r} refused by the testbed at {client.url}"
+            if len(exc.reasons) == 1:
+                fail(f"{where}: {exc.reasons[0]}")
             for reason in exc.reasons:
                 typer.echo(f"twb: refused: {reason}", err=True)
-            fail(f"study {spec.name!r} refused by the testbed at {client.url}: nothing was run "
-                 f"({len(exc.reasons)} reason(s) above)")
+            fail(f"{where}: nothing was run ({len(exc.reasons)} reasons above)")
 
 
 def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # type: ignore[no-untyped-def]
