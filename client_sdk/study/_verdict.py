@@ -121,6 +121,9 @@ def _metric_sentence(c: Comparison) -> str:
     n = f"{r.n_a} pairs" if r.paired else f"n = {r.n_a} and {r.n_b}"
     favour = c.better()
     tail = f" — in favour of {display_name(favour)}" if favour else ""
+    level = 1 - r.confidence_level
+    if math.isfinite(ci.low) and math.isfinite(ci.high) and (r.pvalue < level) == (ci.low <= 0 <= ci.high):
+        tail += " (marginal: the interval and the test disagree)"
     effect = f"{_EFFECTS.get(r.effect, r.effect)} = {r.effect_size:.2g}" if math.isfinite(r.effect_size) else ""
     return (f"{words.capitalize()}: {a} {_num(r.mean_a, dec)} vs {b} {_num(r.mean_b, dec)} {unit}, difference "
             f"{r.difference:+.{dec}f} {unit} (95% CI {ci.low:+.{dec}f} to {ci.high:+.{dec}f}; {n}; "
