@@ -182,7 +182,8 @@ class Client(BaseClient):
                planner: Optional[str] = None, *, path: Optional[Sequence[Pose] | np.ndarray] = None,
                planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                repetitions: Optional[int] = None, seed: Optional[int] = None,
-               field: Optional[str] = None, program: Optional[int] = None) -> Experiment:
+               field: Optional[str] = None, program: Optional[int] = None,
+               jitter: Optional[Mapping[str, float]] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
@@ -191,13 +192,15 @@ class Client(BaseClient):
         ``fmm`` on the server), an explicit ``path`` or an uploaded
         ``program``'s id (:meth:`upload_program`).  Omitted fields take
         the server's defaults (modes sim and twb, 1 repetition, seed 0,
-        ``field="sub"``).  :class:`ValidationError` carries the server's
-        reason when the job cannot run.
+        ``field="sub"``).  ``jitter`` (``{"xy_m", "theta_rad"}``, standard
+        deviations) starts every run a seeded little way off the start.
+        :class:`ValidationError` carries the server's reason when the job
+        cannot run.
         """
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program)
+                      program=program, jitter=jitter)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -348,12 +351,13 @@ class AsyncClient(BaseClient):
                      path: Optional[Sequence[Pose] | np.ndarray] = None,
                      planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                      repetitions: Optional[int] = None, seed: Optional[int] = None,
-                     field: Optional[str] = None, program: Optional[int] = None) -> Experiment:
+                     field: Optional[str] = None, program: Optional[int] = None,
+                     jitter: Optional[Mapping[str, float]] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program)
+                      program=program, jitter=jitter)
         return await self._send(self._submit(job, fields))
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,

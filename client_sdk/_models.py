@@ -173,6 +173,8 @@ class Run(_FromJson):
     t_end: Optional[float] = None
     metrics: dict[str, Any] = _field(default_factory=dict)
     error: str = ""
+    failure: Optional[str] = None
+    stopped_at: Optional[list[float]] = None
     created_at: Optional[datetime] = None
     started_at: Optional[datetime] = None
     finished_at: Optional[datetime] = None
@@ -183,6 +185,16 @@ class Run(_FromJson):
     def finished(self) -> bool:
         """True once the run reached a terminal state."""
         return self.status in TERMINAL_STATES
+
+    @property
+    def outcome(self) -> str:
+        """``success``, why it failed (``collision``, ``timeout``, ...), or its status (``error``,
+        ``cancelled``, ``interrupted``; ``pending`` while it runs)."""
+        if self.status == "completed":
+            return "success"
+        if self.status == "failed":
+            return self.failure or "failed"
+        return self.status if self.finished else "pending"
 
 
 @dataclass
@@ -224,6 +236,7 @@ class Experiment(ExperimentSummary):
     planned_path: Optional[np.ndarray] = None
     planning_time_s: Optional[float] = None
     planning_info: dict[str, Any] = _field(default_factory=dict)
+    jitter: Optional[dict[str, float]] = None
     started_at: Optional[datetime] = None
     runs: list[Run] = _field(default_factory=list)
 
@@ -271,13 +284,30 @@ class ModeAggregate:
 
 @dataclass
 class RunMetrics(_FromJson):
-    """Metrics of one run as listed by the experiment's metrics."""
+    """Metrics of one run as listed by the experiment's metrics (a failed run's too, flagged by ``outcome``)."""
 
     run_id: int
     mode: str
     repetition: int
     status: str
     metrics: dict[str, Any]
+    outcome: str = ""
+    stopped_at: Optional[list[float]] = None
+
+
+@dataclass
+class Outcomes:
+    """How the runs of one mode ended: ``counts`` per outcome (``success``, ``collision``, ``timeout``,
+    ``error`` ...) and the success rate over the runs that ended in the job's own outcomes (``success``:
+    ``n``, ``k``, ``rate``, ``ci_low``, ``ci_high`` — a Wilson 95% interval)."""
+
+    runs: int
+    counts: dict[str, int]
+    success: dict[str, Any]
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "Outcomes":
+        return cls(runs=data.get("runs", 0), counts=dict(data.get("counts", {})), success=dict(data.get("success", {})))
 
 
 @dataclass
@@ -309,6 +339,7 @@ class ExperimentMetrics:
     runs: list[RunMetrics]
     aggregates: dict[str, ModeAggregate]
     direct: list[DirectComparison]
+    outcomes: dict[str, Outcomes] = _field(default_factory=dict)
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> "ExperimentMetrics":
@@ -317,6 +348,7 @@ class ExperimentMetrics:
             runs=[RunMetrics.from_json(r) for r in data.get("runs", [])],
             aggregates={m: ModeAggregate.from_json(a) for m, a in data.get("aggregates", {}).items()},
             direct=[DirectComparison.from_json(d) for d in data.get("direct", [])],
+            outcomes={m: Outcomes.from_json(o) for m, o in data.get("outcomes", {}).items()},
         )
 
 

@@ -15,7 +15,7 @@ from .core.security import Principal
 from .errors import NotFound
 from .models import Environment, Experiment, Program, Run
 
-__all__ = ["event_for", "owned", "visible_environments"]
+__all__ = ["environment_named", "event_for", "owned", "visible_environments"]
 
 Row = TypeVar("Row", Experiment, Program, Run)
 
@@ -36,6 +36,16 @@ def owned(session: Session, user: Principal, model: type[Row], row_id: int, what
     if row is None:
         raise NotFound(f"{what} not found")
     return row
+
+
+def environment_named(session: Session, user: Principal, name: str) -> Optional[Environment]:
+    """The environment ``name`` means for ``user``: their own, else the built-in one (names of built-ins
+    are reserved, so at most one of these exists); an admin may also name another user's (the oldest)."""
+    rows = session.scalars(select(Environment).where(Environment.name == name, visible_environments(user))
+                           .order_by(Environment.id)).all()
+    mine = [r for r in rows if r.owner_id == user.id]
+    builtin = [r for r in rows if r.builtin]
+    return (mine or builtin or rows or [None])[0]
 
 
 def visible_environments(user: Principal) -> ColumnElement[bool]:

@@ -18,7 +18,7 @@ from .core.security import hash_token, new_token
 from .core.settings import Settings
 from .models import Environment, Token, User
 from .store.field import reset_subfields
-from .store.runs import interrupt_active
+from .store.runs import interrupt_active, requeue_interrupted
 
 __all__ = ["bootstrap_store"]
 
@@ -49,7 +49,7 @@ def bootstrap_store(settings: Settings, sessions: sessionmaker[Session]) -> str:
     with sessions.begin() as s:
         for name in builtin_names():
             data = load_environment(name).to_dict()
-            row = s.scalar(select(Environment).where(Environment.name == name))
+            row = s.scalar(select(Environment).where(Environment.name == name, Environment.builtin.is_(True)))
             if row is None:
                 s.add(Environment(name=name, builtin=True, data=data))
             elif row.builtin:
@@ -66,5 +66,9 @@ def bootstrap_store(settings: Settings, sessions: sessionmaker[Session]) -> str:
         cut = interrupt_active(s, "the server stopped while this run was in progress")
         if cut:
             log.warning("marked %d run(s) interrupted by the last server stop", cut)
+        if settings.resume_interrupted:
+            resumed = requeue_interrupted(s)
+            if resumed:
+                log.warning("queued %d interrupted run(s) again", resumed)
     _write_token(settings.token_file, token)
     return token

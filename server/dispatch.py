@@ -21,6 +21,8 @@ import logging
 import math
 from typing import Any, Iterable, Optional
 
+from sqlalchemy.exc import DBAPIError
+
 from .field import FieldState
 from .models import Experiment, Run, utcnow
 from .pipeline import compute
@@ -59,6 +61,7 @@ class Dispatcher:
         self._expected: dict[int, float] = {}  # queued or running run -> expected duration (s), for estimates
         self._estimates: dict[int, float] = {}  # experiment -> wall seconds until its next run starts
         self._background: list[asyncio.Task] = []
+        self._unsaved: list[tuple[int, int, RunEnd]] = []  # run ends that wait for the database
 
     # ------------------------------------------------------------------ life cycle
 
@@ -105,10 +108,10 @@ class Dispatcher:
             await asyncio.wait(running, timeout=10)
         self._refresh_estimates()
 
-    async def _fail_experiment(self, experiment_id: int, reason: str) -> None:
+    async def _fail_experiment(self, experiment_id: int, reason: str, kind: Optional[str]) -> None:
         """The experiment's path cannot be had: its queued runs fail with the reason."""
         await self._svc.recorder.fail_experiment(experiment_id, reason)
-        await self._svc.recorder.end(self._drop({experiment_id}), RunStatus.FAILED, reason)
+        await self._svc.recorder.end(self._drop({experiment_id}), RunStatus.FAILED, reason, failure=kind)
 
     def _drop(self, experiment_ids: set[int]) -> list[int]:
         """Take the experiments' queued runs off the queue; their ids."""
@@ -148,38 +151,70 @@ class Dispatcher:
             pass
 
     async def _finish(self, a: Assignment, end: RunEnd) -> None:
-        """Store how the run ended, free its robot and sub-fields, queue a retry, look at the queue."""
-        rec = self._svc.recorder
+        """Store how the run ended, free its robot and sub-fields, look at the queue.
+
+        The robot and sub-fields are freed whatever happens; when the database
+        is unreachable the end is kept and stored once it answers again
+        (:meth:`_store_ends`), so nothing a run produced is lost.
+        """
         experiment_id = self._experiment.get(a.run_id, -1)
         self._forget(a.run_id)
-        status, error = end.status, end.error
-        if status is RunStatus.ERROR and self.stopping:
-            status = RunStatus.INTERRUPTED  # the testbed stopping under the run is not the robot's fault
-        retried = False
-        if status is RunStatus.ERROR:
-            if end.robot_fault is not None:
-                self._field.set_offline(end.robot_fault, error)
-            rows = await rec.requeue(a.run_id, error)
+        if end.status is RunStatus.ERROR and self.stopping:
+            # the testbed stopping under the run is not the robot's fault
+            end = RunEnd(RunStatus.INTERRUPTED, end.error)
+        if end.status is RunStatus.ERROR and end.robot_fault is not None:
+            self._field.set_offline(end.robot_fault, end.error)
+        try:
+            await self._store_end(a.run_id, experiment_id, end)
+        except DBAPIError as exc:
+            log.warning("run %d: its end waits for the database (%s)", a.run_id, exc.orig)
+            self._unsaved.append((a.run_id, experiment_id, end))
+        finally:
+            self.scheduler.release(a.run_id)
+            for k in a.subfields:  # tell the dashboards the sub-field is free again
+                await self._field.set_subfield(k, state=SubfieldState.IDLE, run_id=None)
+            self.wake()
+
+    async def _store_end(self, run_id: int, experiment_id: int, end: RunEnd) -> None:
+        """The database work of a run's end (repeatable: each step is idempotent), then what it queues."""
+        rec = self._svc.recorder
+        if end.resume:
+            rows = await rec.resume(run_id, end.error)
+            self.add([pending_of(*rows)])
+            return
+        if end.status is RunStatus.ERROR:
+            rows = await rec.requeue(run_id, end.error)
             if rows is not None:
-                log.warning("run %d: %s; retrying on another robot", a.run_id, error)
+                log.warning("run %d: %s; retrying on another robot", run_id, end.error)
                 self.add([pending_of(*rows, frozenset({end.robot_fault} if end.robot_fault else ()))])
-                retried = True
-        if not retried:
-            # a completed second attempt keeps the note about the first one
-            await rec.update(a.run_id, status=status, finished_at=utcnow(), **({"error": error} if error else {}))
-        if status is RunStatus.FAILED and end.whole_experiment:
-            await self._fail_experiment(experiment_id, error)
-        self.scheduler.release(a.run_id)
-        for k in a.subfields:  # tell the dashboards the sub-field is free again
-            await self._field.set_subfield(k, state=SubfieldState.IDLE, run_id=None)
-        self.wake()
+                return
+        # a completed second attempt keeps the note about the first one
+        extra = {"error": end.error} if end.error else {}
+        if end.failure is not None and end.status is RunStatus.FAILED:
+            extra["failure"] = str(end.failure)
+        await rec.update(run_id, status=end.status, finished_at=utcnow(), **extra)
+        if end.status is RunStatus.FAILED and end.whole_experiment:
+            await self._fail_experiment(experiment_id, end.error, str(end.failure) if end.failure else None)
+
+    async def _store_ends(self) -> None:
+        """Store the run ends that waited for the database, in order; stop at the first that still waits."""
+        while self._unsaved:
+            run_id, experiment_id, end = self._unsaved[0]
+            try:
+                await self._store_end(run_id, experiment_id, end)
+            except DBAPIError:
+                return
+            self._unsaved.pop(0)
+            log.info("run %d: its end is stored", run_id)
 
     async def _probe_loop(self) -> None:
-        """Robots marked offline (a failed run, or known from an earlier start) are tried again."""
+        """Every few seconds: robots marked offline (a failed run, or known from an earlier start) are tried
+        again, and run ends that waited for the database are stored."""
         while True:
             await asyncio.sleep(self._probe_interval_s)
             if await self._field.probe_offline():
                 self.wake()
+            await self._store_ends()
 
     # ------------------------------------------------------------------ estimates and summary
 

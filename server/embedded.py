@@ -12,10 +12,12 @@ pipeline seeds their next path and flushes their tracker through
 from __future__ import annotations
 
 import asyncio
+import logging
 import secrets
 from typing import TYPE_CHECKING, Optional
 
 import numpy as np
+from sqlalchemy.exc import DBAPIError
 
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_ORIGINS, SUBFIELD_SIZE
 
@@ -28,15 +30,29 @@ if TYPE_CHECKING:
 
 __all__ = ["EmbeddedField"]
 
+log = logging.getLogger("twb.server")
+
 
 class _RouterSink:
-    """A tracker sink storing pose batches through the server's pose router (in a thread)."""
+    """A tracker sink storing pose batches through the server's pose router (in a thread).
+
+    While the database is unreachable the batches are dropped (a run in progress then ends and is queued
+    again: its poses would be incomplete anyway), with one log line per outage.
+    """
 
     def __init__(self, router: PoseRouter) -> None:
         self._router = router
+        self._failing = False
 
     async def send(self, robot_id: str, poses: np.ndarray) -> None:
-        await asyncio.to_thread(self._router.ingest, robot_id, np.asarray(poses, dtype=float))
+        try:
+            await asyncio.to_thread(self._router.ingest, robot_id, np.asarray(poses, dtype=float))
+        except DBAPIError as exc:
+            if not self._failing:
+                log.warning("tracker poses are dropped while the database is unreachable: %s", exc.orig)
+            self._failing = True
+        else:
+            self._failing = False
 
     async def aclose(self) -> None:
         return None

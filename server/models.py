@@ -11,7 +11,7 @@ from datetime import datetime, timezone
 from typing import Any, Optional
 
 from sqlalchemy import (JSON, BigInteger, Boolean, DateTime, Float, ForeignKey, Index, Integer, LargeBinary, String,
-                        Text)
+                        Text, UniqueConstraint)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 from .status import RobotStatus, RunStatus, SubfieldState
@@ -70,9 +70,11 @@ class Environment(Base):
     """An environment file (docs/design.md, "Environment file") stored as JSON; built-ins have no owner."""
 
     __tablename__ = "environments"
+    #: names are unique per owner; built-in names (owner none) are reserved for everyone
+    __table_args__ = (UniqueConstraint("owner_id", "name", name="uq_environments_owner_name"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    name: Mapped[str] = mapped_column(String(100), unique=True)
+    name: Mapped[str] = mapped_column(String(100))
     owner_id: Mapped[Optional[int]] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"), nullable=True)
     builtin: Mapped[bool] = mapped_column(Boolean, default=False)
     data: Mapped[dict[str, Any]] = mapped_column(JSON)
@@ -131,6 +133,8 @@ class Experiment(Base):
     planned_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
     planning_time_s: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
     planning_info: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    #: start-pose jitter of every run, ``{"xy_m", "theta_rad"}`` (standard deviations), or None
+    jitter: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, nullable=True)
     error: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)
@@ -164,6 +168,10 @@ class Run(Base):
     t_end: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     error: Mapped[str] = mapped_column(Text, default="")
+    #: why a ``failed`` run failed (a :class:`server.errors.FailureKind` value)
+    failure: Mapped[Optional[str]] = mapped_column(String(24), nullable=True)
+    #: where a run that failed on a robot stopped, ``[x, y]`` (m, the experiment's frame)
+    stopped_at: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)
     finished_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)

@@ -2,31 +2,34 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 from sqlalchemy.orm import Session
 
-from planners.stats import aggregate
+from planners.stats import aggregate, proportion
 
 from .models import Experiment, Run
 from .pipeline.compute import compare_runs
-from .status import RunStatus
+from .status import TERMINAL, RunStatus
 from .store.poses import run_poses
 
-__all__ = ["experiment_metrics"]
+__all__ = ["experiment_metrics", "outcome_of", "outcomes"]
 
 
 def experiment_metrics(session: Session, exp: Experiment) -> dict[str, Any]:
-    """``{experiment_id, status, planned, runs, aggregates, direct}`` (docs/metrics.md; SI units).
+    """``{experiment_id, status, planned, runs, outcomes, aggregates, direct}`` (docs/metrics.md; SI units).
 
-    ``aggregates``: mean, std and 95% CI per mode over the completed runs.
+    ``outcomes``: per mode, how the runs ended and the success rate with its
+    Wilson interval (:func:`outcomes`).  ``aggregates``: mean, std and 95% CI
+    per mode over the completed runs (``runs`` says how many of them there
+    were); failed runs keep their metrics in ``runs``, flagged by ``outcome``.
     ``direct`` is the paper's "ST": for each repetition with both a completed
     ``sim`` and ``twb`` run, the deviation (and Hausdorff / Fréchet distances)
     of the field path from the simulated one.
     """
     runs = list(exp.runs)
     per_run = [{"run_id": r.id, "mode": r.mode, "repetition": r.repetition, "status": r.status,
-                "metrics": r.metrics or {}} for r in runs]
+                "outcome": outcome_of(r), "stopped_at": r.stopped_at, "metrics": r.metrics or {}} for r in runs]
     done = [r for r in runs if r.status == RunStatus.COMPLETED and r.metrics]
     records = [{"mode": r.mode, **{k: v for k, v in r.metrics.items() if not isinstance(v, dict) and k != "poses"}}
                for r in done]
@@ -43,7 +46,35 @@ def experiment_metrics(session: Session, exp: Experiment) -> dict[str, Any]:
                            **compare_runs(_driven(session, sim), _driven(session, twb))})
     planned = next((r.metrics.get("planned") for r in done if r.metrics.get("planned")), None)
     return {"experiment_id": exp.id, "status": exp.status, "planned": planned, "runs": per_run,
-            "aggregates": aggregates, "direct": direct}
+            "outcomes": outcomes(runs), "aggregates": aggregates, "direct": direct}
+
+
+#: the outcomes that are the job's own: the success rate is over runs that ended in one of these
+JOB_OUTCOMES = ("success", "planning", "program", "collision", "timeout", "controller_timeout", "stalled", "other",
+                "failed")
+
+
+def outcome_of(run: Run) -> str:
+    """How a run ended: ``success``, why it failed (``collision``, ``timeout`` ...), or its status
+    (``error``, ``cancelled``, ``interrupted``; ``pending`` while it has not ended)."""
+    if run.status == RunStatus.COMPLETED:
+        return "success"
+    if run.status == RunStatus.FAILED:
+        return run.failure or "failed"
+    return str(run.status) if run.status in TERMINAL else "pending"
+
+
+def outcomes(runs: Sequence[Run]) -> dict[str, Any]:
+    """Per mode: ``counts`` of each outcome, and ``success``: the rate over the runs that ended in one of the
+    job's own outcomes (completed or failed; testbed errors, cancels and interruptions are counted apart)
+    with its Wilson 95% interval."""
+    out: dict[str, Any] = {}
+    for mode in dict.fromkeys(r.mode for r in runs):
+        mine = [outcome_of(r) for r in runs if r.mode == mode]
+        counts = {k: mine.count(k) for k in dict.fromkeys(mine)}
+        judged = sum(counts.get(k, 0) for k in JOB_OUTCOMES)
+        out[mode] = {"runs": len(mine), "counts": counts, "success": proportion(counts.get("success", 0), judged)}
+    return out
 
 
 def _driven(session: Session, run: Run) -> list[list[float]]:

@@ -141,6 +141,13 @@ class EnvironmentPublic(BaseModel):
 Pose = list[float]
 
 
+class Jitter(Strict):
+    """Standard deviations of a run's start pose around the job's start: ``xy_m`` per axis (m), ``theta_rad``."""
+
+    xy_m: float = Field(default=0.0, ge=0, le=0.05)
+    theta_rad: float = Field(default=0.0, ge=0, le=0.5)
+
+
 class ExperimentCreate(Strict):
     """A job: plan with ``planner`` (or send the explicit ``path``, or run the uploaded ``program``), run it in ``modes``.
 
@@ -173,6 +180,9 @@ class ExperimentCreate(Strict):
     repetitions: int = Field(default=1, ge=1)
     seed: int = Field(default=0, ge=0, lt=2**63)
     field: Literal["sub", "full"] = "sub"
+    jitter: Optional[Jitter] = Field(default=None, description=(
+        "Seeded start-pose jitter for every run, both modes: repetitions then start a little apart, as on a "
+        "real field (the ideal simulation is otherwise deterministic)."))
 
     @field_validator("start", "goal")
     @classmethod
@@ -239,6 +249,10 @@ class RunPublic(FromRow):
     t_end: Optional[float]
     metrics: dict[str, Any] = Field(default_factory=dict)
     error: str
+    failure: Optional[str] = Field(default=None, description=(
+        "Why a `failed` run failed: planning, program, collision, timeout, controller_timeout, stalled or other."))
+    stopped_at: Optional[list[float]] = Field(default=None, description=(
+        "Where a run that failed on its robot stopped, [x, y] (m, the experiment's frame)."))
 
     @field_validator("metrics", mode="before")
     @classmethod
@@ -278,6 +292,7 @@ class ExperimentPublic(ExperimentSummary):
     planned_path: Optional[list[list[float]]]
     planning_time_s: Optional[float]
     planning_info: dict[str, Any]
+    jitter: Optional[dict[str, float]] = None
     started_at: Optional[UTCDateTime]
     runs: list[RunPublic]
 

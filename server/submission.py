@@ -7,11 +7,11 @@ import threading
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from .access import visible_environments
+from .access import environment_named
 from .core.security import Principal
 from .core.settings import Settings
 from .errors import Forbidden, Invalid, QuotaExceeded
-from .models import Environment, Experiment, Program, User
+from .models import Experiment, Program, User
 from .schemas import ExperimentCreate
 from .store.experiments import count_queued, create_experiment
 from .validation import preflight
@@ -49,8 +49,7 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
         raise Invalid(f"repetitions must be at most {settings.max_repetitions}")
     if body.program is not None:
         _check_program(session, user, body.program, settings)
-    env_row = session.scalar(select(Environment).where(Environment.name == body.environment,
-                                                       visible_environments(user)))
+    env_row = environment_named(session, user, body.environment)
     if env_row is None:
         raise Invalid(f"unknown environment {body.environment!r}")
     session.execute(select(User.id).where(User.id == user.id).with_for_update())

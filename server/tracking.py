@@ -21,6 +21,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from .broker import EventBroker
 from .errors import Invalid
+from .store.poses import insert_poses
 
 __all__ = ["PoseRouter", "parse_batch"]
 
@@ -40,6 +41,7 @@ class PoseRouter:
     def __init__(self, sessions: sessionmaker[Session], broker: EventBroker,
                  origin_of: Callable[[str], tuple[float, float]]) -> None:
         self._sessions = sessions
+        self._engine = sessions.kw["bind"]
         self._broker = broker
         self._origin_of = origin_of
         self._lock = threading.Lock()
@@ -100,30 +102,7 @@ class PoseRouter:
             w = self._windows.get(robot_id)
         stored = 0
         if w is not None:
-            run = w.run_id
-            values = [(run, t, x, y, a) for t, x, y, a in rows.tolist()]
-            # the driver's own executemany on a pooled connection: no ORM or Core layer per row;
-            # one writer at a time, queued on a mutex rather than on SQLite's sleeping busy handler
-            engine = self._sessions.kw["bind"]
-            with self._write_lock:
-                conn = engine.raw_connection()
-                sqlite = engine.dialect.name == "sqlite"
-                cur = conn.cursor()
-                try:
-                    if sqlite:  # the run id comes from our own window: skip the per-row key lookup
-                        cur.execute("PRAGMA foreign_keys=OFF")
-                    try:
-                        cur.executemany(_insert_sql(engine.dialect.paramstyle), values)
-                        conn.commit()
-                    except Exception:
-                        conn.rollback()
-                        raise
-                    finally:
-                        if sqlite:  # the pooled connection goes back as it came
-                            cur.execute("PRAGMA foreign_keys=ON")
-                finally:
-                    cur.close()
-                    conn.close()
+            insert_poses(self._engine, w.run_id, rows, lock=self._write_lock)
             stored = len(rows)
             with self._lock:
                 w.stored += stored
@@ -150,16 +129,6 @@ class PoseRouter:
                 "theta": a_last,
             })
         return stored, (w.run_id if w else None)
-
-
-def _insert_sql(paramstyle: str) -> str:
-    """The poses INSERT for the driver's parameter style (a raw executemany is ~5x faster than the ORM's)."""
-    marks = {"qmark": "?", "format": "%s", "pyformat": "%s", "numeric": None, "named": None}.get(paramstyle, "?")
-    if marks is None:
-        params = ", ".join(f":{i}" if paramstyle == "numeric" else f":p{i}" for i in range(1, 6))
-    else:
-        params = ", ".join([marks] * 5)
-    return f"INSERT INTO poses (run_id, t, x, y, theta) VALUES ({params})"
 
 
 def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:

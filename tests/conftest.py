@@ -32,3 +32,29 @@ def twb():
         )
 
     return run
+
+
+@pytest.fixture(scope="session")
+def postgres():
+    """A PostgreSQL server for the session (tests/pg_support.py); skipped with the reason where PostgreSQL is
+    not installed, except in CI (TWB_REQUIRE_POSTGRES=1), where that fails."""
+    import tempfile
+
+    from pg_support import PostgresServer, postgres_bin
+
+    if postgres_bin() is None:
+        reason = "PostgreSQL is not installed (Debian: apt-get install -y --no-install-recommends postgresql)"
+        if os.environ.get("TWB_REQUIRE_POSTGRES"):
+            pytest.fail(reason)
+        pytest.skip(reason)
+    server = PostgresServer(Path(tempfile.mkdtemp(prefix="twb-pg-")))
+    yield server
+    server.stop()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database_url(request, tmp_path):
+    """A fresh, empty store of each kind: a SQLite file, or a database on the session's PostgreSQL server."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'store.db'}"
+    return request.getfixturevalue("postgres").database()

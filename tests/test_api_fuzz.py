@@ -14,6 +14,7 @@ no schema can express.
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -45,11 +46,20 @@ def schemathesis(server, tmp_path, *args: str) -> subprocess.CompletedProcess:
         cwd=tmp_path, capture_output=True, text=True, timeout=600)
 
 
+def assert_no_failures(stdout: str) -> None:
+    """Every generated case passed.  Schemathesis's warnings (an operation that mostly got 404s or
+    422s, e.g. a job naming an environment that does not exist) are advice on coverage, not failures."""
+    counts = re.search(r"(\d+) generated, (\d+) passed", stdout)
+    assert counts, stdout[-6000:]
+    assert counts[1] == counts[2] and int(counts[1]) > 0, stdout[-6000:]
+    assert "FAILURES" not in stdout, stdout[-6000:]
+
+
 def test_every_operation_with_an_admin_token(server, tmp_path):
     out = schemathesis(server, tmp_path, "-H", f"Authorization: Bearer {server.token}", "--max-examples", "25",
                        "--seed", "7")
     assert out.returncode == 0, out.stdout[-6000:]
-    assert "No issues found" in out.stdout
+    assert_no_failures(out.stdout)
 
 
 def test_every_operation_with_a_user_token_and_an_agent_token(server, tmp_path):

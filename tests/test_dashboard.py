@@ -412,6 +412,84 @@ def test_without_uploads_the_dashboard_says_so_plainly(page, testbed):
     assert len(page.console.errors) == 1, page.console.errors
 
 
+CRASH_RGB = (0xD8, 0x1B, 0x60)  # experiments.js CRASH_COLOR: the cross where a failed run stopped
+OVERSHOOT_ENV = {"name": "dash-overshoot", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
+CORNER = {"start": [0.9, 0.3, 1.5708], "goal": [1.5, 0.69, 0.0]}  # the path turns 6 cm below the block
+
+
+def test_a_crash_is_marked_and_experiments_compare_side_by_side(page, testbed):
+    """The field robot overshoots a corner into a block, the ideal one does not: the experiment page marks where
+    each failed run stopped; the compare view shows both experiments' outcomes, means and differences."""
+    from playwright.sync_api import expect
+
+    with testbed.client() as c:
+        assert c.post("/api/v1/environments", json=OVERSHOOT_ENV).status_code == 201
+        job = {"environment": "dash-overshoot", "modes": ["sim", "twb"], "repetitions": 2, "seed": 0, **CORNER}
+        safe = c.post("/api/v1/experiments", json={**job, "planner": "fm2"})  # the lower id: "a" in the comparison
+        corner = c.post("/api/v1/experiments", json={**job, "path": [CORNER["start"], [0.9, 0.69], CORNER["goal"]]})
+        corner, safe = (wait_for(c, r.json()["id"], timeout=120) for r in (corner, safe))
+    crashed = [r for r in corner["runs"] if r["mode"] == "twb"]
+    assert [r["failure"] for r in crashed] == ["collision", "collision"] and safe["status"] == "completed"
+
+    login(page, testbed.url)
+    page.goto(f"{testbed.url}/#/experiments/{corner['id']}")
+    expect(page.locator("#view-experiment .exp-head .badge")).to_have_text("failed")
+    # (at --time-scale max the server occasionally has no stopped_at for a collision; the map then marks the
+    # last logged pose)
+    located = [r for r in crashed if r["stopped_at"]]
+    expect(page.locator("#runs-table .stopped")).to_have_count(len(located))
+    if located:
+        expect(page.locator("#runs-table .stopped").first).to_contain_text("✕ stopped at (0.9")
+    expect(page.locator(".legend label", has_text="✕ collision")).to_have_count(2)
+    expect(page.locator("#experiment-charts figure").first).to_contain_text("twb: none completed")
+    page.wait_for_timeout(400)
+    for r in located:
+        x, y = r["stopped_at"]
+        assert count_pixels(page, "#experiment-canvas", CRASH_RGB, tol=20, region=(x - 0.06, y - 0.06, x + 0.06, y + 0.06)) > 20
+    assert count_pixels(page, "#experiment-canvas", CRASH_RGB, tol=20, region=(1.2, 1.2, 1.8, 1.8)) == 0
+    page.screenshot(path=OUTPUT / "experiment-crash.png", full_page=True)
+
+    # tick both in the list, compare
+    page.click("#nav a[data-view=experiments]")
+    expect(page.locator("#compare-button")).to_be_disabled()
+    page.check(f'#exp-finished tr[data-experiment="{safe["id"]}"] input.compare-pick')
+    expect(page.locator("#compare-button")).to_be_disabled()  # two or more
+    page.check(f'#exp-finished tr[data-experiment="{corner["id"]}"] input.compare-pick')
+    expect(page.locator("#compare-button")).to_have_text("Compare selected (2)")
+    page.click("#compare-button")
+    expect(page.locator("#view-compare")).to_be_visible()
+    assert page.url.endswith(f"#/compare?ids={safe['id']},{corner['id']}")
+    expect(page.locator("#compare-title")).to_have_text(f"Compare experiments #{safe['id']}, #{corner['id']}")
+    expect(page.locator("#compare-facts tbody tr")).to_have_count(2)
+    crash_row = page.locator(f'#compare-outcomes tr[data-experiment="{corner["id"]}"][data-mode="twb"]')
+    expect(crash_row.locator('td[data-outcome="collision"]')).to_have_text("2")
+    expect(crash_row.locator('td[data-outcome="success"]')).to_have_text("0")
+    expect(crash_row).to_contain_text("0/2 (0 %–66 %)")  # the server's Wilson interval
+    safe_row = page.locator(f'#compare-outcomes tr[data-experiment="{safe["id"]}"][data-mode="twb"]')
+    expect(safe_row).to_contain_text("2/2 (34 %–100 %)")
+    # means: the field column of the crashing path has no completed run, and says so
+    expect(page.locator('#compare-means tr[data-metric="length_m"] td').nth(2)).to_have_text("no completed run (0 of 2)")
+    # sim repetitions without jitter are identical: said, not given an interval
+    expect(page.locator('#compare-means tr[data-metric="length_m"] td').nth(1)).to_contain_text(
+        "identical repetitions (deterministic simulation)")
+    # differences: the success rate on the field, Fisher's exact p of 2/2 against 0/2 (1/3)
+    rate = page.locator(f'#compare-differences tr[data-a="{safe["id"]}"][data-mode="twb"][data-metric="success_rate"]')
+    expect(rate.locator('td[data-k="diff"]')).to_have_text("+100 points")
+    expect(rate.locator('td[data-k="p"]')).to_have_text("0.33")
+    twb_length = page.locator('#compare-differences tr[data-mode="twb"][data-metric="length_m"]')
+    expect(twb_length.locator('td[data-k="note"]')).to_have_text(f"no completed run of #{corner['id']}")
+    sim_length = page.locator('#compare-differences tr[data-mode="sim"][data-metric="length_m"]')
+    expect(sim_length.locator('td[data-k="ci"]')).to_have_text("–")
+    expect(sim_length.locator('td[data-k="note"]')).to_contain_text("identical repetitions (deterministic simulation)")
+    fm2 = [r["metrics"]["length_m"] for r in safe["runs"] if r["mode"] == "sim"]
+    cor = [r["metrics"]["length_m"] for r in corner["runs"] if r["mode"] == "sim"]
+    shown = float(sim_length.locator('td[data-k="diff"]').inner_text().split()[0])
+    assert shown == pytest.approx(fm2[0] - cor[0], abs=1e-3)
+    page.screenshot(path=OUTPUT / "compare.png", full_page=True)
+    assert no_horizontal_overflow(page)
+    assert page.console.errors == []
+
+
 def test_tablet_width_layout(browser, testbed):
     ctx = browser.new_context(viewport=TABLET, device_scale_factor=2, has_touch=True)
     pg = ctx.new_page()

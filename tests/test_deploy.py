@@ -20,9 +20,13 @@ def test_compose_file_is_valid():
     out = subprocess.run(["docker-compose", "-f", "docker-compose.yml", "config"], cwd=ROOT, capture_output=True,
                          text=True, env={**os.environ, "TWB_TOKEN": "compose-test-token"}, timeout=60)
     assert out.returncode == 0, out.stderr
-    for service in ("server", "field-1", "field-2", "field-3", "field-4", "sim"):
+    for service in ("postgres", "server", "field-1", "field-2", "field-3", "field-4", "sim"):
         assert re.search(rf"^  {re.escape(service)}:$", out.stdout, re.M), service
     assert "compose-test-token" in out.stdout
+    # the server stores on PostgreSQL and waits until it is healthy
+    assert "TWB_DATABASE_URL: postgresql+psycopg://twb:" in out.stdout and "@postgres:5432/twb" in out.stdout
+    assert re.search(r"depends_on:\s+postgres:\s+condition: service_healthy", out.stdout)
+    assert "pg_isready" in out.stdout
     missing = subprocess.run(["docker-compose", "-f", "docker-compose.yml", "config"], cwd=ROOT,
                              capture_output=True, text=True, env={k: v for k, v in os.environ.items()
                                                                    if k != "TWB_TOKEN"}, timeout=60)

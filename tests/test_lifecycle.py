@@ -76,7 +76,7 @@ def test_ctrl_c_mid_run_ends_it_interrupted_and_retries_nothing(tmp_path):
         raise
     assert p.stop(signal.SIGINT) == 0, p.output()
     assert "Traceback" not in p.output(), p.output()
-    again = Process(["server"], tmp_path)
+    again = Process(["server"], tmp_path, env={"TWB_RESUME_INTERRUPTED": "0"})
     try:
         with again.client() as c:
             e = c.get(f"/api/v1/experiments/{exp['id']}").json()
@@ -89,6 +89,14 @@ def test_ctrl_c_mid_run_ends_it_interrupted_and_retries_nothing(tmp_path):
             assert poses["count"] > 0 and messages["count"] > 3  # what it did until the stop is kept
     finally:
         again.stop()
+    resumed = Process(["server"], tmp_path)  # by default the next start queues them again
+    try:
+        with resumed.client() as c:
+            e = c.get(f"/api/v1/experiments/{exp['id']}").json()
+            assert [r["status"] for r in e["runs"]] == ["queued", "queued"]
+            assert c.get(f"/api/v1/runs/{e['runs'][0]['id']}/poses").json()["count"] > 0  # until it runs again
+    finally:
+        resumed.stop()
 
 
 def test_a_stopped_testbed_leaves_no_process_behind(tmp_path):

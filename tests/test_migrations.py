@@ -18,8 +18,8 @@ def config(url: str) -> Config:
     return cfg
 
 
-def test_migrations_match_the_models(tmp_path):
-    engine = make_engine(f"sqlite:///{tmp_path / 'db.sqlite'}")
+def test_migrations_match_the_models(database_url):
+    engine = make_engine(database_url)
     migrate(engine)
     with engine.connect() as conn:
         diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
@@ -41,4 +41,4 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0004",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0006",)]

@@ -14,7 +14,7 @@ from sqlalchemy import select
 
 from server.core.settings import Settings
 from server.embedded import EmbeddedField
-from server.errors import RunFailed
+from server.errors import FailureKind, RunFailed
 from server.models import Experiment, Message, Pose, Run, User
 from server.pipeline.runner import execute_run
 from server.scheduler import Assignment
@@ -33,7 +33,7 @@ ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y":
 async def running(tmp_path: Path, *, time_scale: float = math.inf, robots_time_scale: float | None = None,
                   **settings) -> AsyncIterator[Testbed]:
     """A testbed in this process; ``robots_time_scale``: its robots run at another speed than it believes."""
-    tb = Testbed(Settings(data_dir=tmp_path, time_scale=time_scale, planning_workers=1, **settings),
+    tb = Testbed(Settings(data_dir=tmp_path / "data", time_scale=time_scale, planning_workers=1, **settings),
                  embedded=EmbeddedField(sim_robots=1, time_scale=robots_time_scale or time_scale))
     await asyncio.to_thread(tb.prepare)
     await tb.start()
@@ -45,12 +45,12 @@ async def running(tmp_path: Path, *, time_scale: float = math.inf, robots_time_s
 
 def add_experiment(tb: Testbed, *, env: dict = ONE_BLOCK, start=(0.3, 0.3, 0.0), goal=(1.5, 1.5, 0.0),
                    planner: str | None = "fmm", params: dict | None = None, mode: str = "twb",
-                   planned_path: list | None = None) -> tuple[int, int]:
+                   planned_path: list | None = None, jitter: dict | None = None, seed: int = 3) -> tuple[int, int]:
     """An experiment with one run of ``mode`` straight into the store (no pre-flight: tests choose the fault)."""
     with tb.sessions.begin() as s:
         admin = s.scalar(select(User).where(User.name == "admin"))
         body = ExperimentCreate(environment=env["name"], start=list(start), goal=list(goal), planner=planner,
-                                planner_params=params or {}, modes=[mode], repetitions=1, seed=3)
+                                planner_params=params or {}, modes=[mode], repetitions=1, seed=seed, jitter=jitter)
         checked = Preflight(parse_environment(env), list(start), list(goal), params or {}, None)
         exp = create_experiment(s, owner=admin, body=body, checked=checked, robot_radius=0.045,
                                 planning_margin=0.02)
@@ -71,8 +71,8 @@ def run_row(tb: Testbed, run_id: int) -> tuple[Run, int, int]:
         return run, poses, messages
 
 
-async def test_a_run_goes_through_every_step_to_completed(tmp_path):
-    async with running(tmp_path) as tb:
+async def test_a_run_goes_through_every_step_to_completed(tmp_path, database_url):
+    async with running(tmp_path, database_url=database_url) as tb:
         exp_id, run_id = add_experiment(tb)
         end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)
         assert end.status is RunStatus.COMPLETED and end.error == "", end
@@ -87,15 +87,17 @@ async def test_a_run_goes_through_every_step_to_completed(tmp_path):
             assert s.get(Experiment, exp_id).planned_path[0][:2] == [0.3, 0.3]
 
 
-async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path):
-    async with running(tmp_path) as tb:
+async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path, database_url):
+    async with running(tmp_path, database_url=database_url) as tb:
         through = [[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]  # straight through the block
         _, run_id = add_experiment(tb, start=(0.3, 0.9, 0.0), goal=(1.5, 0.9, 0.0), planned_path=through)
         end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)
         assert end.status is RunStatus.FAILED and end.error.startswith("collision"), end
-        assert not end.whole_experiment and end.robot_fault is None
+        assert end.failure is FailureKind.COLLISION and not end.whole_experiment and end.robot_fault is None
         run, poses, _ = run_row(tb, run_id)
         assert run.metrics["collided"] is True and poses > 2  # what it drove until the contact is data
+        x, y = run.stopped_at  # just before the block (0.75..1.05 x 0.75..1.05)
+        assert 0.6 < x < 0.76 and 0.8 < y < 1.0, run.stopped_at
 
 
 async def test_no_path_fails_the_whole_experiment_and_is_not_planned_twice(tmp_path):
@@ -172,3 +174,23 @@ async def test_a_robot_whose_own_time_runs_out_is_stopped_and_the_run_fails(tmp_
         with tb.sessions() as s:
             lines = s.scalars(select(Message.line).where(Message.run_id == run_id)).all()
         assert "T,T,S" in lines
+
+
+async def test_start_pose_jitter_is_seeded_and_small(tmp_path):
+    from server.pipeline.compute import jittered
+    from server.store.poses import run_poses
+
+    jitter = {"xy_m": 0.01, "theta_rad": 0.05}
+    async with running(tmp_path) as tb:
+        firsts = []
+        for seed in (1, 1, 2):
+            _, run_id = add_experiment(tb, mode="sim", jitter=jitter, seed=seed)
+            end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+            assert end.status is RunStatus.COMPLETED, end
+            with tb.sessions() as s:
+                first, run_seed = run_poses(s, run_id)[0], s.get(Run, run_id).seed
+            assert first[1:3] == pytest.approx(jittered([0.3, 0.3, 0.0], jitter, run_seed)[:2], abs=1e-5)  # 0.01 mm
+            firsts.append(first[1:3])
+        assert firsts[0] == firsts[1] and firsts[0] != firsts[2]  # the run's seed decides
+        for x, y in firsts:
+            assert 1e-4 < math.hypot(x - 0.3, y - 0.3) < 0.05

@@ -102,7 +102,7 @@ def test_testbed_views(testbed):
             room.plan("Z")
         mine = {"name": "sdk-one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
         assert c.create_environment(mine).owner == "admin"
-        with pytest.raises(Conflict, match="already exists"):
+        with pytest.raises(Conflict, match="already have an environment named"):
             c.create_environment(mine)
 
 

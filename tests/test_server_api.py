@@ -3,6 +3,7 @@
 import json
 
 import pytest
+from sqlalchemy import create_engine, text
 
 from servers import Process
 
@@ -10,11 +11,16 @@ JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.570
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 3}
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    p = Process(["server"], tmp_path_factory.mktemp("server"))
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def server(request, tmp_path_factory):
+    """`twb server` on each store: its SQLite default, and PostgreSQL (the session's, a fresh database)."""
+    data = tmp_path_factory.mktemp("server")
+    url = f"sqlite:///{data / 'twb.db'}" if request.param == "sqlite" else request.getfixturevalue("postgres").database()
+    p = Process(["server", "--database-url", url], data)
+    p.store = create_engine(url)  # the tests look into the store itself
     yield p
     p.stop()
+    p.store.dispose()
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +43,8 @@ def test_health_is_open_and_the_token_file_is_written(server):
     with server.client(token=None) as c:
         assert c.get("/health").json()["status"] == "ok"
     assert (server.data_dir / "token").read_text().strip() == server.token
-    assert (server.data_dir / "twb.db").exists()
+    with server.store.connect() as con:
+        assert con.execute(text("select count(*) from users")).scalar() >= 1
 
 
 def test_auth_errors(server):
@@ -49,10 +56,8 @@ def test_auth_errors(server):
 
 
 def test_tokens_are_stored_hashed(server, alice):
-    import sqlite3
-
-    con = sqlite3.connect(server.data_dir / "twb.db")
-    hashes = [h for (h,) in con.execute("select token_hash from tokens")]
+    with server.store.connect() as con:
+        hashes = [h for (h,) in con.execute(text("select token_hash from tokens"))]
     assert server.token not in hashes and all(len(h) == 64 for h in hashes)
 
 
@@ -74,8 +79,26 @@ def test_environments(alice, bob):
     r = alice.post("/api/v1/environments", json=mine)
     assert r.status_code == 201, r.text
     assert r.json()["owner"] == "alice"
-    assert alice.post("/api/v1/environments", json=mine).status_code == 409
+    r = alice.post("/api/v1/environments", json=mine)
+    assert r.status_code == 409 and r.json()["detail"] == "you already have an environment named 'alice-corridor'"
     assert bob.get("/api/v1/environments/alice-corridor").status_code == 404  # not his
+    # bob may use the same name: nothing tells him that alice's exists, and each gets their own
+    bobs = {**mine, "blocks": [{"x": 0.9, "y": 1.2, "w": 1.2, "h": 0.05, "angle": 0.0}]}
+    assert bob.post("/api/v1/environments", json=bobs).status_code == 201
+    assert bob.get("/api/v1/environments/alice-corridor").json()["blocks"][0]["y"] == 1.2
+    assert alice.get("/api/v1/environments/alice-corridor").json()["blocks"][0]["y"] == 0.6
+    r = bob.post("/api/v1/experiments", json={**JOB, "environment": "alice-corridor", "start": [0.3, 0.3],
+                                              "goal": [1.5, 0.3], "modes": ["sim"], "repetitions": 1})
+    assert r.status_code == 202 and r.json()["environment"] == "alice-corridor"
+    assert r.json()["owner"] == "bob"
+    bob.post(f"/api/v1/experiments/{r.json()['id']}/cancel")
+    r = alice.post("/api/v1/environments", json={**mine, "name": "room"})
+    assert r.status_code == 409 and "built-in" in r.json()["detail"]
+    big = {"name": "too-big", "size": [5.0, 5.0], "blocks": []}
+    r = alice.post("/api/v1/environments", json=big)
+    assert r.status_code == 422 and r.json()["detail"].startswith("size: the environment is 5 x 5 m; the field is 3.6")
+    for name in ("..", ".hidden", "-dash"):
+        assert alice.post("/api/v1/environments", json={**mine, "name": name}).status_code == 422, name
     bad = {**mine, "name": "bad-env", "blocks": [{"x": 0.9, "y": 0.6, "w": -1, "h": 0.05}]}
     r = alice.post("/api/v1/environments", json=bad)
     assert r.status_code == 422 and r.json()["detail"] == "blocks[0].w: Input should be greater than 0"
@@ -156,13 +179,13 @@ def test_invalid_json_nan_and_huge_bodies(alice):
     nan = json.dumps({**JOB, "start": [0.3, 0.3, 0.0]}).replace("0.3, 0.3, 0.0", "NaN, 0.3, 0.0")
     r = alice.post("/api/v1/experiments", content=nan.encode(), headers={"content-type": "application/json"})
     assert r.status_code == 422 and "start" in r.json()["detail"]
-    huge = b'{"environment": "' + b"x" * (5 << 20) + b'"}'
+    huge = b'{"environment": "' + b"x" * (13 << 20) + b'"}'
     r = alice.post("/api/v1/experiments", content=huge, headers={"content-type": "application/json"})
     assert r.status_code == 413 and "larger than" in r.json()["detail"]
 
     def chunks():
         yield b'{"environment": "'
-        for _ in range(6):
+        for _ in range(13):  # the body limit is 12 MiB
             yield b"x" * (1 << 20)
         yield b'"}'
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 
 import pytest
@@ -55,8 +56,10 @@ def study_dir(testbed, tmp_path_factory):
 
 
 def test_study_writes_every_file(study_dir):
-    for name in ("runs.csv", "direct.csv", "study.json", "summary.md", "report.html", "study.db",
-                 *(f"{f}.{e}" for f in ("fig6_metrics", "fig7_ratios", "fig8_paths") for e in ("png", "svg"))):
+    for name in ("runs.csv", "direct.csv", "study.json", "summary.md", "report.html", "study.db", "outcomes.csv",
+                 "comparisons.csv",
+                 *(f"{f}.{e}" for f in ("fig5_outcomes", "fig6_metrics", "fig7_ratios", "fig8_paths")
+                   for e in ("png", "svg"))):
         assert (study_dir / name).stat().st_size > 0, name
     data = load_study(study_dir)
     assert len(data.rows) == 4 and all(r["status"] == "completed" for r in data.rows)
@@ -72,13 +75,29 @@ def test_study_writes_every_file(study_dir):
     assert len(list((study_dir / "poses").glob("run-*.csv"))) == 4
     assert data.poses(row["run_id"]).shape[1] == 4
     summary = (study_dir / "summary.md").read_text()
-    assert "| fmm | sim | 1/1 |" in summary and "| fm2 | twb | 1/1 |" in summary and "Direct comparison ST" in summary
+    assert "| fmm | sim | 1 of 1 |" in summary and "| fm2 | twb | 1 of 1 |" in summary and "Direct comparison ST" in summary
+    assert "| fm2 | twb | 1 | 1 | 0 | 0 | 0 | 0 | 1/1 (95% CI 21–100 %) |" in summary  # outcomes, Wilson interval
+    assert summary.index("## Which planner is better?") < summary.index("## Outcomes per configuration")
+    assert row["outcome"] == "success" and row["configuration"] == row["planner"] and row["stopped_at_x"] is None
     html = (study_dir / "report.html").read_text()
-    assert all(f"src='{f}.png'" in html for f in ("fig6_metrics", "fig7_ratios", "fig8_paths"))
+    assert all(f"src='{f}.png'" in html for f in ("fig5_outcomes", "fig6_metrics", "fig7_ratios", "fig8_paths"))
+    # nothing failed: no crashed path in Fig. 8
+    assert orange_pixels(study_dir / "fig8_paths.png") == 0
+
+
+CRASH_RGB = (0xFF, 0x7F, 0x0E)  # Fig. 8's failed runs and their cross (client_sdk.study._figures.COLORS["failed"])
+
+
+def orange_pixels(png, tol: int = 30) -> int:
+    import numpy as np
+
+    with Image.open(png) as im:
+        a = np.asarray(im.convert("RGB")).astype(int)
+    return int((np.abs(a - CRASH_RGB).max(axis=2) <= tol).sum())
 
 
 def test_figures_are_real_images_with_the_expected_panels(study_dir):
-    for name in ("fig6_metrics", "fig7_ratios", "fig8_paths"):
+    for name in ("fig5_outcomes", "fig6_metrics", "fig7_ratios", "fig8_paths"):
         with Image.open(study_dir / f"{name}.png") as im:
             assert im.format == "PNG" and im.size[0] > 400 and im.size[1] > 300
         assert (study_dir / f"{name}.svg").read_text().lstrip().startswith("<?xml")
@@ -183,3 +202,157 @@ def test_embedded_study(twb, tmp_path):
     assert (tmp_path / "out" / "fig8_paths.png").exists()
     log = (tmp_path / "out" / "testbed" / "stdout.log").read_text()
     assert "Teleworkbench is up" in log and "Traceback" not in log
+
+
+# ----------------------------------------------------------------------------- failures are results
+
+#: a block in the middle; the explicit path turns 6 cm below it: the ideal robot follows it, the field robot
+#: overshoots the corner into the block (docs/study.md, the worked example)
+OVERSHOOT = {
+    "name": "overshoot",
+    "description": "A planner that only fails on the field",
+    "environments": [{"name": "overshoot", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}],
+                      "plans": [{"name": "A", "start": [0.9, 0.3, 1.5708], "goal": [1.5, 0.69, 0.0]}]}],
+    "planners": ["fm2", {"name": "corner", "waypoints": [[0.9, 0.69]]}],
+    "repetitions": 5, "modes": ["sim", "twb"], "seed": 0, "jitter": {"xy_m": 0.005, "theta_rad": 0.02},
+}
+
+
+@pytest.fixture(scope="module")
+def overshoot_dir(testbed, tmp_path_factory):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    d = tmp_path_factory.mktemp("overshoot")
+    (d / "overshoot.json").write_text(json.dumps(OVERSHOOT))
+    twb = Path(sys.executable).with_name("twb")
+    r = subprocess.run([str(twb), "study", str(d / "overshoot.json"), "--out", str(d / "out"), "--url", testbed.url,
+                        "--token", testbed.token, "--no-progress"], capture_output=True, text=True, timeout=300,
+                       env={k: v for k, v in os.environ.items() if k != "TWB_DEBUG"})
+    assert r.returncode == 0, r.stderr  # failed runs are results, not errors
+    assert "study overshoot: 15/20 runs completed, 5 failed (collision 5)" in r.stdout, r.stdout
+    return d / "out"
+
+
+def test_failed_field_runs_are_in_runs_csv_with_outcome_and_where_they_stopped(overshoot_dir):
+    data = load_study(overshoot_dir)
+    crashed = [r for r in data.rows if r["configuration"] == "corner" and r["mode"] == "twb"]
+    assert len(crashed) == 5
+    for r in crashed:
+        assert r["status"] == "failed" and r["outcome"] == "collision" and r["failure"] == "collision"
+        if r["stopped_at_x"] is not None:  # (at --time-scale max the server occasionally misses it)
+            assert 0.85 < r["stopped_at_x"] < 0.95 and 0.68 < r["stopped_at_y"] < 0.75  # at the block's lower face
+        assert r["length_m"] > 0.3 and r["collided"] is True  # its metrics are kept, flagged by the outcome
+        assert data.poses(r["run_id"]).shape[0] > 10  # and its poses, up to where it stopped
+    assert any(r["stopped_at_x"] is not None for r in crashed)
+    assert all(r["outcome"] == "success" for r in data.rows if r not in crashed)
+    header = (overshoot_dir / "runs.csv").read_text().splitlines()[0].split(",")
+    assert header[:16] == ["study", "experiment_id", "run_id", "environment", "plan", "planner", "configuration",
+                           "mode", "repetition", "seed", "status", "outcome", "failure", "error", "stopped_at_x",
+                           "stopped_at_y"]
+
+
+def test_summary_says_which_planner_is_better_and_keeps_the_failures(overshoot_dir):
+    summary = (overshoot_dir / "summary.md").read_text()
+    answer = summary[summary.index("## Which planner is better?"):summary.index("## Outcomes per configuration")]
+    assert "**On the field (Teleworkbench):** FM² is better than corner on the field: it reached the goal " \
+           "significantly more often." in answer
+    assert "corner reached the goal in 0 of 5 runs (95% CI 0–43 %); collided 5 times." in answer
+    assert "5/5 vs 0/5" in answer and "Fisher's exact p = 0.0079, Holm-adjusted p = 0.016" in answer
+    assert "| corner | twb | 5 | 0 | 5 | 0 | 0 | 0 | 0/5 (95% CI 0–43 %) |" in summary
+    assert "| corner | twb | 0 of 5 | no completed run |" in summary  # still in the table, not dropped
+    assert "| overshoot | A | corner | 5/5 |" in summary and "0/5, collision 5" in summary
+    html = (overshoot_dir / "report.html").read_text()
+    assert html.index("id='which-is-better'") < html.index("<figure>")
+    assert "it reached the goal significantly more often" in html and "collided 5 times" in html
+
+
+def test_comparisons_csv_has_the_fisher_row(overshoot_dir):
+    import csv
+
+    with open(overshoot_dir / "comparisons.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0])[:14] == ["metric", "mode", "a", "b", "n_a", "n_b", "mean_a", "mean_b", "diff", "ci_low",
+                                  "ci_high", "test", "p", "p_holm"]
+    rate = next(r for r in rows if r["metric"] == "success_rate" and r["mode"] == "twb")
+    assert (rate["a"], rate["b"], rate["n_a"], rate["n_b"], rate["test"]) == ("fm2", "corner", "5", "5", "fisher-exact")
+    assert round(float(rate["p"]), 4) == 0.0079 and float(rate["diff"]) == 1.0 and float(rate["ci_low"]) > 0
+    length = next(r for r in rows if r["metric"] == "length_m" and r["mode"] == "twb")
+    assert length["p"] == "" and length["note"] == "no completed run of corner"
+    sim = next(r for r in rows if r["metric"] == "length_m" and r["mode"] == "sim")
+    assert sim["test"] == "paired-t" and sim["paired"] == "true" and float(sim["ci_low"]) < float(sim["diff"]) < 0
+
+
+def test_the_sdk_gives_the_same_numbers(overshoot_dir):
+    import csv
+
+    data = load_study(overshoot_dir)
+    comps = data.compare()
+    c = comps.get("success_rate", "twb", "fm2", "corner")
+    assert c.pvalue == pytest.approx(2 / 252) and c.statistic == math.inf  # odds ratio of 5/5 against 0/5
+    with open(overshoot_dir / "comparisons.csv", newline="") as f:
+        for row, comp in zip(csv.DictReader(f), comps):
+            assert (row["metric"], row["mode"]) == (comp.metric, comp.mode)
+            if row["ci_low"]:
+                assert float(row["ci_low"]) == pytest.approx(comp.confidence_interval().low)
+                assert float(row["p_holm"]) == pytest.approx(comp.pvalue_holm)
+
+
+def test_figures_show_the_crashed_path_and_no_completed_run(overshoot_dir):
+    assert orange_pixels(overshoot_dir / "fig8_paths.png") > 300  # five crashed paths and their crosses
+    figs = make_figures(load_study(overshoot_dir))
+    fig8 = figs["fig8_paths"]
+    crashed = [ln for ax in fig8.axes for ln in ax.get_lines() if ln.get_color() == "#ff7f0e"]
+    crosses = [ln for ln in crashed if ln.get_marker() == "x"]
+    assert len(crosses) == 5 and all(0.85 < ln.get_xdata()[0] < 0.95 for ln in crosses)  # stopped_at, or the last pose
+    assert all("failed" not in t.get_text() for ax in fig8.axes for t in ax.texts if t.get_text() == "failed")
+    assert any("T: collision 5/5" in t.get_text() for ax in fig8.axes for t in ax.texts)
+    fig6_texts = [t.get_text() for ax in figs["fig6_metrics"].axes for t in ax.texts]
+    assert fig6_texts.count("no completed run") == 6  # one per metric panel: corner on the field
+    ticks = [t.get_text() for t in figs["fig6_metrics"].axes[0].get_xticklabels()]
+    assert ticks == ["FM²\nS 5/5 · T 5/5", "corner\nS 5/5 · T 0/5"]
+    outcome_labels = [t.get_text() for t in figs["fig5_outcomes"].axes[0].texts]
+    assert outcome_labels.count("0/5 succeeded") == 1 and outcome_labels.count("5/5 succeeded") == 3
+
+
+def test_a_study_above_the_limits_is_refused_with_the_reason(capsys, monkeypatch, testbed, tmp_path):
+    f = tmp_path / "big.json"
+    f.write_text(json.dumps({**SMALL, "repetitions": 1000, "planners": ["fmm", "rrt"]}))
+    with testbed.client() as c:
+        before = c.get("/api/v1/experiments?limit=1").json()["count"]
+    r = invoke(capsys, monkeypatch, "study", str(f), "--url", testbed.url, "--token", testbed.token, "--out",
+               str(tmp_path / "o"), "--no-progress")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r
+    assert r.stderr.startswith(f"twb: error: study 'small' refused by the testbed at {testbed.url}: planner 'rrt' "
+                               "is not offered by this testbed (it offers "), r.stderr
+    f.write_text(json.dumps({**SMALL, "repetitions": 1000, "planners": ["fmm", "rrt", {"name": "fm2",
+                                                                                        "params": {"speed": 2}}]}))
+    r = invoke(capsys, monkeypatch, "study", str(f), "--url", testbed.url, "--token", testbed.token, "--out",
+               str(tmp_path / "o"), "--no-progress")
+    assert r.returncode == 2, r  # every reason at once, one a line
+    assert "twb: refused: planner 'rrt' is not offered" in r.stderr and "twb: refused: planner 'fm2' has no " \
+        "parameter(s) speed" in r.stderr and r.stderr.splitlines()[-1].endswith("nothing was run (2 reasons above)")
+    f.write_text(json.dumps({**SMALL, "repetitions": 1000}))
+    r = invoke(capsys, monkeypatch, "study", str(f), "--url", testbed.url, "--token", testbed.token, "--out",
+               str(tmp_path / "o"), "--no-progress")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r
+    assert "repetitions 1000: the testbed allows at most 20 per experiment (repetitions must be at most 20)" \
+        in r.stderr
+    with testbed.client() as c:
+        assert c.get("/api/v1/experiments?limit=1").json()["count"] == before  # nothing was submitted
+
+
+def test_a_study_where_nothing_ran_exits_non_zero(capsys, monkeypatch, testbed, tmp_path):
+    f = tmp_path / "walls.json"
+    f.write_text(json.dumps({**SMALL, "plans": [{"name": "in-wall", "start": [0.9, 0.9], "goal": [1.5, 1.5]}],
+                             "environments": [OVERSHOOT["environments"][0]], "modes": ["sim"]}))
+    r = invoke(capsys, monkeypatch, "study", str(f), "--url", testbed.url, "--token", testbed.token, "--out",
+               str(tmp_path / "o"), "--no-progress")
+    assert r.returncode == 1, r
+    refusals = [ln for ln in r.stderr.splitlines() if ln.startswith("twb: refused: overshoot in-wall")]
+    assert len(refusals) == 2 and "inside an obstacle" in refusals[0]
+    assert "2 job(s) refused (2 runs not submitted)" in r.stdout and "nothing ran" in r.stderr
+    summary = (tmp_path / "o" / "summary.md").read_text()
+    assert "| fmm | sim | 1 | 0 | 0 | 0 | 0 | 1 | no counted run |" in summary  # refused, still listed

@@ -134,16 +134,26 @@ def test_a_path_grazing_a_block_collides_on_the_field_for_some_seeds(client):
     for seed in range(8):
         e = client.post("/api/v1/experiments", json={"environment": "graze", "path": path, "modes": ["twb"],
                                                      "seed": seed}).json()
-        run = wait_for(client, e["id"], timeout=60)["runs"][0]
+        done = wait_for(client, e["id"], timeout=60)
+        run = done["runs"][0]
         outcomes.append(run["status"])
         m = run["metrics"]
         assert m["length_m"] > 0.2  # measured either way: a failed run's driving is data too
         if run["status"] == "failed":
-            assert run["error"] == "collision: the robot hit an obstacle"
+            assert run["error"] == "collision: the robot hit an obstacle" and run["failure"] == "collision"
             assert m["collided"] is True and m["clearance_min_m"] < 0.045
             assert m["goal_reached"] is False
+            x, y = run["stopped_at"]  # where it touched: at the block (0.75..1.05 x 0.75..1.05)
+            gap = ((max(0.75 - x, 0, x - 1.05)) ** 2 + (max(0.75 - y, 0, y - 1.05)) ** 2) ** 0.5
+            assert gap < 0.06, run["stopped_at"]
+            assert done["error"] == f"1 of 1 runs failed: collision at ({x:.2f}, {y:.2f})"
+            summary = client.get(f"/api/v1/experiments/{e['id']}/metrics").json()
+            assert summary["outcomes"]["twb"]["counts"] == {"collision": 1}
+            assert summary["outcomes"]["twb"]["success"]["rate"] == 0.0
+            assert summary["runs"][0]["outcome"] == "collision" and summary["runs"][0]["metrics"]["collided"]
         else:
             assert run["status"] == "completed" and m["collided"] is False and m["goal_reached"] is True
+            assert run["failure"] is None and run["stopped_at"] is None and done["error"] == ""
     assert "failed" in outcomes and "completed" in outcomes, outcomes
 
 
@@ -192,31 +202,53 @@ def test_cancel_a_running_job(tmp_path):
         p.stop()
 
 
-def test_server_killed_mid_run_marks_it_interrupted_and_keeps_the_queue(tmp_path):
+def test_a_server_killed_mid_run_resumes_the_run_and_keeps_the_queue(tmp_path):
     p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path)
     with p.client() as c:
         assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
         exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["sim"], "repetitions": 3}).json()
-        wait_for(c, exp["id"], timeout=60, terminal={"running"})
+        first = wait_for(c, exp["id"], timeout=60, terminal={"running"})["runs"][0]["id"]
+        deadline = time.monotonic() + 30
+        while not c.get(f"/api/v1/runs/{first}/messages").json()["count"]:  # the path went out, logged
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
     p.stop(signal.SIGKILL)
-    again = Process(["server"], tmp_path)
+    again = Process(["server"], tmp_path)  # no robots: everything waits, nothing is lost
     try:
         with again.client() as c:
             e = c.get(f"/api/v1/experiments/{exp['id']}").json()
-            states = [r["status"] for r in e["runs"]]
-            assert states[0] == "interrupted" and "server stopped" in e["runs"][0]["error"]
-            assert states[1:] == ["queued", "queued"]  # nothing lost: they wait for robots
-            assert e["status"] == "queued"
+            assert [r["status"] for r in e["runs"]] == ["queued", "queued", "queued"]
+            assert e["runs"][0]["error"] == "resumed: the testbed stopped during an earlier try"
+            assert e["runs"][0]["attempt"] == 1  # not a retry: the robot was not at fault
+            lines = [m["line"] for m in c.get(f"/api/v1/runs/{e['runs'][0]['id']}/messages").json()["data"]]
+            assert any(line.startswith("T,T,P,") for line in lines)  # the interrupted try's log stays
     finally:
         again.stop()
     back = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
     try:
         with back.client() as c:
             e = wait_for(c, exp["id"], timeout=60)
-            assert [r["status"] for r in e["runs"]] == ["interrupted", "completed", "completed"]
-            assert e["status"] == "interrupted"
+            assert [r["status"] for r in e["runs"]] == ["completed", "completed", "completed"]
+            assert e["status"] == "completed"
     finally:
         back.stop()
+
+
+def test_without_resuming_interrupted_runs_stay_interrupted(tmp_path):
+    p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path, env={"TWB_RESUME_INTERRUPTED": "0"})
+    with p.client() as c:
+        assert c.post("/api/v1/environments", json=ONE_BLOCK).status_code == 201
+        exp = c.post("/api/v1/experiments", json={**SLOW_JOB, "modes": ["sim"], "repetitions": 2}).json()
+        wait_for(c, exp["id"], timeout=60, terminal={"running"})
+    p.stop(signal.SIGKILL)
+    again = Process(["server"], tmp_path, env={"TWB_RESUME_INTERRUPTED": "0"})
+    try:
+        with again.client() as c:
+            e = c.get(f"/api/v1/experiments/{exp['id']}").json()
+            assert [r["status"] for r in e["runs"]] == ["interrupted", "queued"]
+            assert "server stopped" in e["runs"][0]["error"] and e["status"] == "queued"
+    finally:
+        again.stop()
 
 
 def test_a_robot_dying_mid_run_is_an_error_retried_once_on_another_robot(tmp_path):

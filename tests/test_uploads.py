@@ -391,3 +391,22 @@ def test_sdk_and_cli_upload_and_submit(testbed, client, tmp_path, twb):
     assert f"experiment {exp_id}: completed (detour, program #{prog_id})" in r.stdout, r.stdout
     r = twb("upload", str(tmp_path / "missing.py"), "--url", testbed.url, "--token", testbed.token)
     assert r.returncode != 0 and r.stderr.strip().endswith("missing.py") and "Traceback" not in r.stderr
+
+
+def test_a_static_binary_of_a_megabyte_or_two_fits_the_default_limit(tmp_path):
+    """The docs recommend static binaries; a stripped static C planner is about 1.1 MB."""
+    import base64
+
+    from server.core.settings import Settings
+
+    assert Settings(max_program_bytes=8 << 20).max_body_bytes >= (8 << 20) * 4 // 3  # the body fits the upload
+    p = Process(["server", "--enable-uploads"], tmp_path)
+    try:
+        with p.client() as c:
+            body = {"name": "static-planner", "kind": "executable", "content_base64": ""}
+            for size, status in ((1_200_000, 201), ((8 << 20) + 1, 413)):
+                body["content_base64"] = base64.b64encode(b"\x7fELF" + bytes(size - 4)).decode()
+                r = c.post("/api/v1/programs", json=body)
+                assert r.status_code == status, (size, r.status_code, r.text[:200])
+    finally:
+        p.stop()

@@ -84,6 +84,39 @@ UPLOADS_HELP = ("Accept uploaded planner programs and run them sandboxed (docs/u
                 "also TWB_UPLOADS_ENABLED=1.")
 
 
+DATABASE_HELP = ("SQLAlchemy URL of the store, e.g. postgresql+psycopg://user:pass@host/db "
+                 "(default: SQLite in --data-dir; also TWB_DATABASE_URL).")
+
+
+def _database(url: Optional[str]) -> dict:
+    """Settings for --database-url; without it TWB_DATABASE_URL (or SQLite in the data dir) decides."""
+    return {"database_url": url} if url else {}
+
+
+def _open(settings, **kwargs):  # type: ignore[no-untyped-def]
+    """The testbed, its store migrated: (testbed, admin token); one clear line when the store is unusable."""
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
+    from sqlalchemy.engine import make_url
+
+    from server.testbed import Testbed
+
+    try:
+        url = make_url(settings.database_url)
+    except ArgumentError:
+        fail(f"--database-url: not a database URL: {settings.database_url!r}")
+    shown = url.render_as_string(hide_password=True)
+    if url.get_backend_name() not in ("sqlite", "postgresql"):
+        fail(f"--database-url {shown}: the testbed's store is SQLite or PostgreSQL (postgresql+psycopg://...)")
+    try:
+        testbed = Testbed(settings, **kwargs)
+        return testbed, testbed.prepare()
+    except NoSuchModuleError as exc:
+        fail(f"--database-url {shown}: {exc}")
+    except OperationalError as exc:
+        reason = " ".join(str(exc.orig).split()) if exc.orig is not None else str(exc)
+        fail(f"cannot use the database at {shown}: {reason}")
+
+
 def _uploads(enable: bool) -> dict:
     """Settings for --enable-uploads; without the flag TWB_UPLOADS_ENABLED decides."""
     return {"uploads_enabled": True} if enable else {}
@@ -109,15 +142,14 @@ def up(
     sim_robots: Annotated[int, typer.Option(help="Size of the simulation pool (ideal robots).", min=1, max=1000)] = 4,
     seed: Annotated[int, typer.Option(help="Agent seed (runs are seeded from their job's seed).", min=0)] = 0,
     enable_uploads: Annotated[bool, typer.Option("--enable-uploads", help=UPLOADS_HELP)] = False,
+    database_url: Annotated[Optional[str], typer.Option(help=DATABASE_HELP)] = None,
 ) -> None:
-    """The whole testbed on this machine: server on SQLite, four field robots, a simulation pool."""
+    """The whole testbed on this machine: server (on SQLite unless told), four field robots, a simulation pool."""
     from server.embedded import EmbeddedField
-    from server.testbed import Testbed
 
     scale = parse_time_scale(time_scale)
-    settings = _settings(data_dir, token, scale, **_uploads(enable_uploads))
-    testbed = Testbed(settings, embedded=EmbeddedField(sim_robots=sim_robots, seed=seed, time_scale=scale))
-    admin = testbed.prepare()
+    settings = _settings(data_dir, token, scale, **_uploads(enable_uploads), **_database(database_url))
+    testbed, admin = _open(settings, embedded=EmbeddedField(sim_robots=sim_robots, seed=seed, time_scale=scale))
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
         shown = "max" if math.isinf(scale) else f"{scale:g}x"
@@ -138,13 +170,12 @@ def server(
     time_scale: Annotated[str, typer.Option(help="Time scale the agents run at (for timeouts).")] = "1",
     token: Annotated[Optional[str], typer.Option(help="Fix the admin token instead of generating one.")] = None,
     enable_uploads: Annotated[bool, typer.Option("--enable-uploads", help=UPLOADS_HELP)] = False,
+    database_url: Annotated[Optional[str], typer.Option(help=DATABASE_HELP)] = None,
 ) -> None:
     """The server alone; robots join with `twb agent --server URL --token T`."""
-    from server.testbed import Testbed
-
-    settings = _settings(data_dir, token, parse_time_scale(time_scale), **_uploads(enable_uploads))
-    testbed = Testbed(settings)
-    admin = testbed.prepare()
+    settings = _settings(data_dir, token, parse_time_scale(time_scale), **_uploads(enable_uploads),
+                         **_database(database_url))
+    testbed, admin = _open(settings)
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
         print(f"Teleworkbench server: {url}  (API docs {url}/docs)", flush=True)

@@ -41,7 +41,10 @@ def study(
 ) -> None:
     """Run a study (environments x plans x planners x repetitions x modes) and write its report.
 
-    OUT gets runs.csv, direct.csv, study.json, poses/, summary.md, fig6/7/8 (PNG, SVG) and report.html.
+    OUT gets runs.csv, outcomes.csv, comparisons.csv, direct.csv, study.json, poses/, summary.md (which planner
+    is better, in words), fig5-8 (PNG, SVG) and report.html.  Exit status: 0 every run was submitted and ended
+    completed or failed (a failure is a result); 1 the study ran but jobs were refused, runs ended in a testbed
+    error, or nothing ran; 2 the study was refused before it ran (with the reasons).
     """
     from client_sdk.study import load_spec
 
@@ -58,17 +61,52 @@ def study(
     else:
         data = _collect(study_spec, url, token, progress, timeout)
     _write(data, out, ompl, progress)
-    done = sum(r.get("status") == "completed" for r in data.rows)
-    typer.echo(f"study {study_spec.name}: {done}/{len(data.rows)} runs completed in {time.monotonic() - t0:.1f} s; "
-               f"report {out / 'report.html'}")
+    code = _outcome_line(data, study_spec, time.monotonic() - t0, out)
+    if code:
+        raise typer.Exit(code)
+
+
+def _outcome_line(data, spec, wall: float, out: Path) -> int:  # type: ignore[no-untyped-def]
+    """Print how the study went (each refused job on stderr); the exit status: 0 complete, 1 incomplete."""
+    rows = data.rows
+    done = sum(r.get("status") == "completed" for r in rows)
+    failed: dict[str, int] = {}
+    for r in rows:
+        if r.get("status") == "failed":
+            failed[r.get("outcome") or "failed"] = failed.get(r.get("outcome") or "failed", 0) + 1
+    lost = sum(r.get("status") not in ("completed", "failed") for r in rows)
+    refused = [e for e in data.experiments if e["status"] == "rejected"]
+    for e in refused:
+        typer.echo(f"twb: refused: {e['environment']} {e['plan']} {e['configuration']}: {e['error']}", err=True)
+    expected = len(data.experiments) * spec.runs_per_experiment
+    parts = [f"{done}/{expected} runs completed"]
+    if failed:
+        parts.append(f"{sum(failed.values())} failed ({', '.join(f'{o} {n}' for o, n in sorted(failed.items()))})")
+    if lost:
+        parts.append(f"{lost} not counted (testbed error, cancelled or interrupted)")
+    if refused:
+        parts.append(f"{len(refused)} job(s) refused ({len(refused) * spec.runs_per_experiment} runs not submitted)")
+    typer.echo(f"study {spec.name}: {', '.join(parts)} in {wall:.1f} s; report {out / 'report.html'}")
+    ran = sum(r.get("status") in ("completed", "failed") for r in rows)
+    if not ran:
+        typer.echo("twb: error: nothing ran: no run completed or failed", err=True)
+    return 1 if refused or lost or not ran else 0
 
 
 def _collect(spec, url, token, progress, timeout):  # type: ignore[no-untyped-def]
-    from client_sdk.study import run_study
+    from client_sdk.study import StudyRefused, run_study
 
     with sdk_client(url, token) as client:
         client.health()
-        return run_study(client, spec, progress=progress, timeout=timeout)
+        try:
+            return run_study(client, spec, progress=progress, timeout=timeout)
+        except StudyRefused as exc:
+            where = f"study {spec.name!r} refused by the testbed at {client.url}"
+            if len(exc.reasons) == 1:
+                fail(f"{where}: {exc.reasons[0]}")
+            for reason in exc.reasons:
+                typer.echo(f"twb: refused: {reason}", err=True)
+            fail(f"{where}: nothing was run ({len(exc.reasons)} reasons above)")
 
 
 def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # type: ignore[no-untyped-def]

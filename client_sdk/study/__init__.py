@@ -8,41 +8,59 @@
 >>> export_ompl(data, "study-out/study.db")                 # doctest: +SKIP
 
 Collecting talks to the server (:func:`run_study`); everything after works
-offline from the study directory (:func:`load_study`).  The command line is
+offline from the study directory (:func:`load_study`): outcomes
+(:meth:`StudyData.outcomes`), comparisons between configurations
+(:meth:`StudyData.compare`, after SciPy's result objects), the answer in words
+(:func:`which_is_better`), figures and the report.  The command line is
 ``twb study``; see ``docs/study.md``.  Needs matplotlib for the figures.
 """
 
 from ._collect import StudyJob, flat_metrics, plan_jobs, run_study
+from ._compare import COMPARED_METRICS, Comparison, Comparisons, compare
 from ._replay import replay_animation
 from ._data import StudyData, load_study
-from ._figures import figure_metrics, figure_paths, figure_ratios, make_figures, save_figures
+from ._figures import figure_metrics, figure_outcomes, figure_paths, figure_ratios, make_figures, save_figures
+from ._limits import StudyRefused, check_study
 from ._ompl import export_ompl
+from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
 from ._spec import PAPER, PlannerSpec, PlanSpec, StudySpec, StudySpecError, load_spec, paper_spec
+from ._verdict import Answer, which_is_better
 
 __all__ = sorted(
     [
+        "Answer",
+        "COMPARED_METRICS",
+        "Comparison",
+        "Comparisons",
+        "OutcomeSummary",
         "PAPER",
         "PlanSpec",
         "PlannerSpec",
         "StudyData",
         "StudyJob",
         "StudySpec",
+        "StudyRefused",
         "StudySpecError",
+        "check_study",
+        "compare",
         "export_ompl",
         "figure_metrics",
+        "figure_outcomes",
         "flat_metrics",
         "figure_paths",
         "figure_ratios",
         "load_spec",
         "load_study",
         "make_figures",
+        "outcome_table",
         "paper_spec",
         "plan_jobs",
         "replay_animation",
         "run_study",
         "save_figures",
         "summary_markdown",
+        "which_is_better",
         "write_report",
     ]
 )

@@ -9,16 +9,30 @@ from datetime import datetime, timezone
 from typing import Any, Optional
 
 from .._client import Client
-from .._exceptions import Conflict, NotFound, TwbError, ValidationError
+from .._exceptions import Conflict, NotFound, RateLimited, TwbError, ValidationError
 from .._models import Environment, Experiment, ExperimentMetrics
 from ._data import StudyData
-from ._spec import PlanSpec, StudySpec, StudySpecError
+from ._limits import StudyRefused, check_study, refusal
+from ._spec import PlannerSpec, PlanSpec, StudySpec, StudySpecError
 
-__all__ = ["StudyJob", "flat_metrics", "plan_jobs", "run_study"]
+__all__ = ["StudyJob", "StudyRefused", "flat_metrics", "plan_jobs", "run_study"]
 
 
 class StudyJob(dict):
-    """One experiment of a study: environment, plan, planner and the job body sent to the server."""
+    """One experiment of a study: environment, plan, planner, configuration and the job body sent to the server."""
+
+
+def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, spec: StudySpec) -> dict[str, Any]:
+    """The job sent to the server for one problem and configuration (an explicit path: start, waypoints, goal)."""
+    body: dict[str, Any] = {"environment": name, "start": list(start), "goal": list(goal)}
+    if planner.waypoints is not None:
+        body["path"] = [list(start), *[list(w) for w in planner.waypoints], list(goal)]
+    else:
+        body.update(planner=planner.name, planner_params=dict(planner.params))
+    body.update(modes=list(spec.modes), repetitions=spec.repetitions, seed=spec.seed, field=spec.field)
+    if spec.jitter is not None:
+        body["jitter"] = dict(spec.jitter)
+    return body
 
 
 def _environments(client: Client, spec: StudySpec) -> dict[str, Environment]:
@@ -54,10 +68,10 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
             else:
                 start, goal = plan.start, plan.goal
             for planner in spec.planners:
-                body = {"environment": name, "start": list(start), "goal": list(goal), "planner": planner.name,
-                        "planner_params": dict(planner.params), "modes": list(spec.modes),
-                        "repetitions": spec.repetitions, "seed": spec.seed, "field": spec.field}
-                jobs.append(StudyJob(environment=name, plan=plan.name, planner=planner.name, body=body))
+                jobs.append(StudyJob(environment=name, plan=plan.name,
+                                     planner=planner.name if planner.waypoints is None else "path",
+                                     configuration=planner.configuration,
+                                     body=_body(name, start, goal, planner, spec)))
     return jobs
 
 
@@ -87,14 +101,23 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
               interval: float = 0.5) -> StudyData:
     """Submit every experiment of ``spec``, wait for all of them and collect runs, metrics and poses.
 
-    A job the server refuses (422, e.g. a start inside an obstacle) is kept as
-    an experiment with status ``rejected`` and the server's reason; the
-    others go on.  ``progress`` (default: when stderr is a terminal) shows
-    runs done / total and the run states.  On Ctrl-C or a timeout the
-    unfinished experiments are cancelled.
+    Before submitting, the study is checked against the testbed
+    (:func:`~client_sdk.study._limits.check_study`: planners, environments,
+    the limits the server states); :class:`StudyRefused` lists every problem
+    and nothing is submitted.  A refusal that dooms the whole study (too many
+    repetitions, the queue quota) also raises :class:`StudyRefused`, after
+    cancelling what was submitted.  A job the server refuses for its own
+    reason (422, e.g. a start inside an obstacle) is kept as an experiment
+    with status ``rejected`` and the server's reason; the others go on.
+    ``progress`` (default: when stderr is a terminal) shows runs done / total
+    and the run states.  On Ctrl-C or a timeout the unfinished experiments are
+    cancelled.
     """
     t0 = time.monotonic()
     started = datetime.now(timezone.utc)
+    reasons = check_study(client, spec)
+    if reasons:
+        raise StudyRefused(reasons)
     envs = _environments(client, spec)
     jobs = plan_jobs(spec, envs)
     total = len(jobs) * spec.runs_per_experiment
@@ -102,12 +125,17 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
     submitted: dict[int, StudyJob] = {}
     final: dict[int, Experiment] = {}
     try:
-        for job in jobs:
+        for i, job in enumerate(jobs):
             try:
                 exp = client.submit(job["body"])
                 job["experiment_id"] = exp.id
                 submitted[exp.id] = job
-            except ValidationError as exc:
+            except (ValidationError, RateLimited) as exc:
+                doom = refusal(exc, spec, i, len(jobs))
+                if doom is not None:
+                    _cancel(client, submitted, final)
+                    raise StudyRefused([doom + (f"; the {len(submitted)} experiment(s) already submitted were "
+                                                "cancelled" if submitted else "")]) from None
                 job["experiment_id"], job["rejected"] = None, exc.detail if isinstance(exc.detail, str) else str(exc)
         while True:
             states: Counter[str] = Counter()
@@ -128,14 +156,7 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
                                    f"({done}/{total} runs done); its unfinished experiments were cancelled")
             time.sleep(interval)
     except (KeyboardInterrupt, TimeoutError):
-        for eid in submitted:
-            if eid not in final:
-                try:
-                    client.cancel(eid)
-                except (Conflict, NotFound):
-                    pass
-                except TwbError:
-                    break
+        _cancel(client, submitted, final)
         raise
     finally:
         bar.close()
@@ -143,11 +164,27 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
     data = _assemble(spec, envs, jobs, final, metrics)
     for exp in final.values():
         for run in exp.runs:
-            if run.status == "completed":
-                data.add_poses(run.id, client.get_poses(run.id))
+            # a failed run's driving is data too: Fig. 8 draws it up to where it stopped
+            if run.status in ("completed", "failed") and run.t_start is not None:
+                try:
+                    data.add_poses(run.id, client.get_poses(run.id))
+                except NotFound:
+                    pass
     data.meta.update(server=client.url, started_at=started.isoformat(timespec="seconds"),
                      wall_s=round(time.monotonic() - t0, 3), runs=total)
     return data
+
+
+def _cancel(client: Client, submitted: dict[int, StudyJob], final: dict[int, Experiment]) -> None:
+    """Cancel the study's unfinished experiments (best effort: a testbed gone away ends the attempt)."""
+    for eid in submitted:
+        if eid not in final:
+            try:
+                client.cancel(eid)
+            except (Conflict, NotFound):
+                pass
+            except TwbError:
+                break
 
 
 def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
@@ -170,7 +207,9 @@ def _assemble(spec: StudySpec, envs: dict[str, Environment], jobs: list[StudyJob
         body = job["body"]
         experiments.append({
             "experiment_id": eid, "environment": job["environment"], "plan": job["plan"], "planner": job["planner"],
-            "planner_params": body["planner_params"], "start": body["start"], "goal": body["goal"],
+            "configuration": job["configuration"], "planner_params": body.get("planner_params", {}),
+            "path": body.get("path"), "start": body["start"], "goal": body["goal"],
+            "repetitions": body["repetitions"], "modes": body["modes"],
             "status": exp.status if exp else "rejected", "error": exp.error if exp else job.get("rejected", ""),
             "planned_path": exp.planned_path.tolist() if exp is not None and exp.planned_path is not None else None,
             "planning_time_s": exp.planning_time_s if exp else None,
@@ -180,11 +219,13 @@ def _assemble(spec: StudySpec, envs: dict[str, Environment], jobs: list[StudyJob
             continue
         st = {d.repetition: d for d in metrics[exp.id].direct}
         ident = {"study": spec.name, "experiment_id": exp.id, "environment": job["environment"], "plan": job["plan"],
-                 "planner": job["planner"]}
+                 "planner": job["planner"], "configuration": job["configuration"]}
         for run in exp.runs:
+            stop = run.stopped_at or [None, None]
             row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,
-                   "status": run.status, "error": run.error, "subfield": run.subfield, "robot_id": run.robot_id,
-                   "t_start": run.t_start, "t_end": run.t_end, **flat_metrics(run.metrics)}
+                   "status": run.status, "outcome": run.outcome, "failure": run.failure, "error": run.error,
+                   "stopped_at_x": stop[0], "stopped_at_y": stop[1], "subfield": run.subfield,
+                   "robot_id": run.robot_id, "t_start": run.t_start, "t_end": run.t_end, **flat_metrics(run.metrics)}
             d = st.get(run.repetition)
             if d is not None:
                 row.update({f"st_{k}": v for k, v in d.metrics.items()})

@@ -4,9 +4,12 @@ The collector writes, in the output directory:
 
 - ``study.json``: the study file, the server, timings, the environments and
   every experiment (job, status, planned path, run ids);
-- ``runs.csv``: one row per run with every metric (docs/design.md, "Metrics"; ``planned_*``
-  are the planned path's, ``st_*`` the direct sim-vs-twb comparison of the
-  run's repetition);
+- ``runs.csv``: one row per run: how it ended (``status``, ``outcome``:
+  ``success``, ``collision``, ``timeout``, ...; ``failure``; ``stopped_at_x``,
+  ``stopped_at_y`` where a failed run stopped) and every metric (docs/design.md,
+  "Metrics"; a failed run's too, flagged by its outcome; ``planned_*`` are the
+  planned path's, ``st_*`` the direct sim-vs-twb comparison of the run's
+  repetition);
 - ``direct.csv``: one row per experiment and repetition with both modes;
 - ``poses/run-<id>.csv``: the logged poses ``t,x,y,theta`` of each run.
 
@@ -29,14 +32,16 @@ import numpy as np
 
 from ._spec import StudySpec
 
-__all__ = ["ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "write_csv_rows"]
+__all__ = ["ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "run_outcome", "write_csv_rows"]
 
 #: leading columns of runs.csv (the metrics follow)
-ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "mode", "repetition", "seed",
-              "status", "error", "subfield", "robot_id", "t_start", "t_end")
-DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "repetition", "sim_run_id",
-                  "twb_run_id")
-_STRINGS = {"study", "environment", "plan", "planner", "mode", "status", "error", "robot_id"}
+ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "configuration", "mode",
+              "repetition", "seed", "status", "outcome", "failure", "error", "stopped_at_x", "stopped_at_y", "subfield",
+              "robot_id", "t_start", "t_end")
+DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "configuration", "repetition",
+                  "sim_run_id", "twb_run_id")
+_STRINGS = {"study", "environment", "plan", "planner", "configuration", "mode", "status", "outcome", "failure", "error",
+            "robot_id"}
 
 
 @dataclass
@@ -66,9 +71,49 @@ class StudyData:
     def add_poses(self, run_id: int, poses: np.ndarray) -> None:
         self._poses[run_id] = np.asarray(poses, dtype=float).reshape(-1, 4)
 
+    def __post_init__(self) -> None:
+        # study directories written before configurations and outcomes existed
+        for e in self.experiments:
+            e.setdefault("configuration", e["planner"])
+        for r in self.rows:
+            if not r.get("configuration"):
+                r["configuration"] = r.get("planner")
+            if not r.get("outcome"):
+                r["outcome"] = run_outcome(r.get("status"), r.get("failure"))
+        for d in self.direct:
+            if not d.get("configuration"):
+                d["configuration"] = d.get("planner")
+
     @property
     def planners(self) -> list[str]:
-        return list(dict.fromkeys(e["planner"] for e in self.experiments))
+        """The configurations' names in study order (see :attr:`configurations`)."""
+        return self.configurations
+
+    @property
+    def configurations(self) -> list[str]:
+        """The compared configurations (a planner with its parameters, an explicit path), in study order."""
+        return list(dict.fromkeys(e["configuration"] for e in self.experiments))
+
+    @property
+    def modes(self) -> list[str]:
+        return list(self.spec.modes)
+
+    def outcomes(self) -> list[Any]:
+        """How the runs of each configuration x mode ended, with the success rate's Wilson interval
+        (:class:`~client_sdk.study.OutcomeSummary`)."""
+        from ._outcomes import outcome_table
+
+        return outcome_table(self)
+
+    def compare(self, metrics: Optional[Iterable[str]] = None, *, modes: Optional[Iterable[str]] = None,
+                confidence: float = 0.95, family: str = "metric", test: str = "t", n_resamples: int = 9999,
+                seed: int = 0) -> Any:
+        """Every pair of configurations, per mode and metric (and the success rate): the difference with its
+        bootstrap interval, the test, Holm's correction and an effect size (:func:`~client_sdk.study.compare`)."""
+        from ._compare import compare
+
+        return compare(self, metrics, modes=modes, confidence=confidence, family=family, test=test,
+                       n_resamples=n_resamples, seed=seed)
 
     @property
     def problems(self) -> list[tuple[str, str]]:
@@ -91,6 +136,15 @@ class StudyData:
             np.savetxt(buf, arr, delimiter=",", fmt="%.5f")
             (pdir / f"run-{run_id}.csv").write_text(buf.getvalue())
         self.directory = directory
+
+
+def run_outcome(status: Optional[str], failure: Optional[str] = None) -> str:
+    """``success`` for a completed run, why a failed one failed (``collision``, ...), else its status."""
+    if status == "completed":
+        return "success"
+    if status == "failed":
+        return failure or "failed"
+    return status or "pending"
 
 
 def load_study(directory: str | Path) -> StudyData:

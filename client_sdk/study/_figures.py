@@ -1,4 +1,9 @@
-"""The study's figures, after the paper's Fig. 6, 7 and 8, as matplotlib ``Figure`` objects.
+"""The study's figures, after the paper's Fig. 6, 7 and 8, and the outcomes, as matplotlib ``Figure`` objects.
+
+Failures are results here too: the outcomes figure shows how every
+configuration's runs ended; Fig. 6 and 7 say under each group over how many
+runs a bar is and write "no completed run" where a mode has none (instead of
+dropping the bar); Fig. 8 draws failed runs up to where they stopped, with a ✕.
 
 Built with ``matplotlib.figure.Figure`` (no pyplot, no global state, any
 backend), from a :class:`~client_sdk.study.StudyData` only, so they can be
@@ -16,8 +21,8 @@ import numpy as np
 
 from ._data import StudyData
 
-__all__ = ["FIG6_METRICS", "FIG7_RATIOS", "figure_metrics", "figure_paths", "figure_ratios", "make_figures",
-           "mean_std", "save_figures"]
+__all__ = ["FIG6_METRICS", "FIG7_RATIOS", "OUTCOME_COLORS", "figure_metrics", "figure_outcomes", "figure_paths",
+           "figure_ratios", "make_figures", "mean_std", "save_figures"]
 
 #: Fig. 6 panels: (metric, label); the planned path's value is shown where it has one
 FIG6_METRICS = (
@@ -34,9 +39,12 @@ FIG7_RATIOS = (
     ("smoothness_ratio", "smoothness ratio"),
     ("clearance_ratio", "clearance ratio"),
 )
-COLORS = {"computed": "#7f7f7f", "sim": "#1f77b4", "twb": "#d62728", "direct": "#9467bd"}
+COLORS = {"computed": "#7f7f7f", "sim": "#1f77b4", "twb": "#d62728", "direct": "#9467bd", "failed": "#ff7f0e"}
 LABELS = {"computed": "computed (planned)", "sim": "simulation (S)", "twb": "Teleworkbench (T)",
-          "direct": "direct comparison (ST)"}
+          "direct": "direct comparison (ST)", "failed": "failed run (✕ where it stopped)"}
+SHORT = {"sim": "S", "twb": "T"}
+#: segments of the outcomes figure
+OUTCOME_COLORS = {"success": "#2ca02c", "collision": "#ff7f0e", "timeout": "#9467bd", "other": "#8c564b"}
 
 
 def mean_std(values: Iterable[Any]) -> tuple[Optional[float], Optional[float], int]:
@@ -52,46 +60,79 @@ def _completed(data: StudyData) -> list[dict[str, Any]]:
     return [r for r in data.rows if r.get("status") == "completed"]
 
 
-def _grouped_bars(ax, planners: list[str], series: dict[str, list[tuple[Optional[float], Optional[float]]]]) -> None:  # type: ignore[no-untyped-def]
-    kinds = [k for k, vals in series.items() if any(m is not None for m, _ in vals)]
+def _tick_label(data: StudyData, config: str, modes: Iterable[str]) -> str:
+    """``FM²`` and, per mode, completed of runs: ``S 2/2 · T 0/2``."""
+    from ._verdict import display_name
+
+    counts = []
+    for m in modes:
+        mine = [r for r in data.rows if r["configuration"] == config and r["mode"] == m]
+        counts.append(f"{SHORT.get(m, m)} {sum(r.get('status') == 'completed' for r in mine)}/{len(mine)}")
+    return display_name(config) + "\n" + " · ".join(counts)
+
+
+def _grouped_bars(ax, labels: list[str], series: dict[str, list[tuple[Optional[float], Optional[float]]]],  # type: ignore[no-untyped-def]
+                  missing: Optional[dict[str, list[bool]]] = None) -> None:
+    """Bars per kind and group; where ``missing`` flags a group without completed runs, say so instead of a bar."""
+    missing = missing or {}
+    kinds = [k for k, vals in series.items() if any(m is not None for m, _ in vals) or any(missing.get(k, []))]
     width = 0.8 / max(len(kinds), 1)
-    x = np.arange(len(planners))
+    x = np.arange(len(labels))
     for i, kind in enumerate(kinds):
         means = [m if m is not None else np.nan for m, _ in series[kind]]
         errs = [s if s is not None else 0.0 for _, s in series[kind]]
-        ax.bar(x + (i - (len(kinds) - 1) / 2) * width, means, width, yerr=errs, capsize=2,
-               color=COLORS[kind], label=LABELS[kind])
-    ax.set_xticks(x, [p.upper() if p in ("fmm", "prm") else ("FM²" if p == "fm2" else p) for p in planners])
+        pos = x + (i - (len(kinds) - 1) / 2) * width
+        ax.bar(pos, means, width, yerr=errs, capsize=2, color=COLORS[kind], label=LABELS[kind])
+        for xp, gone in zip(pos, missing.get(kind, [])):
+            if gone:
+                ax.text(xp, 0.02, "no completed run", transform=ax.get_xaxis_transform(), rotation=90, ha="center",
+                        va="bottom", fontsize=7, color=COLORS[kind])
+    ax.set_xticks(x, labels, fontsize=8)
     ax.grid(axis="y", color="0.9")
     ax.set_axisbelow(True)
+
+
+def _missing(data: StudyData, configs: list[str], modes: Iterable[str]) -> dict[str, list[bool]]:
+    """Per mode and configuration: runs exist but none completed."""
+    out = {}
+    for m in modes:
+        out[m] = [bool([r for r in data.rows if r["configuration"] == c and r["mode"] == m])
+                  and not [r for r in data.rows if r["configuration"] == c and r["mode"] == m
+                           and r.get("status") == "completed"] for c in configs]
+    return out
 
 
 def figure_metrics(data: StudyData):  # type: ignore[no-untyped-def]
     """Fig. 6: each metric per planner: computed path, simulation, Teleworkbench, and the direct comparison.
 
     One panel per :data:`FIG6_METRICS`; bars are means over the completed runs
-    of all environments and plans, error bars one standard deviation.
+    of all environments and plans, error bars one standard deviation; under
+    each group the completed runs of all runs per mode, and "no completed run"
+    where a mode has none.
     """
     from matplotlib.figure import Figure
 
-    rows, planners = _completed(data), data.planners
+    rows, planners = _completed(data), data.configurations
+    labels = [_tick_label(data, p, data.modes) for p in planners]
+    missing = _missing(data, planners, data.modes)
     fig = Figure(figsize=(12, 6.5), layout="constrained")
     axes = fig.subplots(2, 3).ravel()
     for ax, (key, label) in zip(axes, FIG6_METRICS):
         series: dict[str, list] = {k: [] for k in ("computed", "sim", "twb", "direct")}
         for p in planners:
-            mine = [r for r in rows if r["planner"] == p]
+            mine = [r for r in rows if r["configuration"] == p]
             planned = {(r["experiment_id"]): r.get(f"planned_{key}") for r in mine}
             series["computed"].append(mean_std(planned.values())[:2] if f"planned_{key}" in _keys(mine) else (None, None))
             for mode in ("sim", "twb"):
                 series[mode].append(mean_std(r.get(key) for r in mine if r["mode"] == mode)[:2])
-            series["direct"].append(mean_std(d.get(key) for d in data.direct if d["planner"] == p)[:2]
+            series["direct"].append(mean_std(d.get(key) for d in data.direct if d["configuration"] == p)[:2]
                                     if key == "deviation_mean_m" else (None, None))
-        _grouped_bars(ax, planners, series)
+        _grouped_bars(ax, labels, series, missing)
         ax.set_title(label)
     handles = {lab: h for ax in axes for h, lab in zip(*ax.get_legend_handles_labels())}
     fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=len(handles), frameon=False)
-    fig.suptitle(f"Study {data.spec.name}: metrics per planner (mean ± std over {len(rows)} completed runs)")
+    fig.suptitle(f"Study {data.spec.name}: metrics per configuration (mean ± std over the completed runs: "
+                 f"{len(rows)} of {len(data.rows)})")
     return fig
 
 
@@ -103,18 +144,20 @@ def figure_ratios(data: StudyData):  # type: ignore[no-untyped-def]
     """Fig. 7: performed / planned ratios (length, smoothness, clearance) per planner, sim and twb."""
     from matplotlib.figure import Figure
 
-    rows, planners = _completed(data), data.planners
-    fig = Figure(figsize=(12, 3.8), layout="constrained")
+    rows, planners = _completed(data), data.configurations
+    labels = [_tick_label(data, p, data.modes) for p in planners]
+    missing = _missing(data, planners, data.modes)
+    fig = Figure(figsize=(12, 4.0), layout="constrained")
     axes = fig.subplots(1, len(FIG7_RATIOS))
     for ax, (key, label) in zip(axes, FIG7_RATIOS):
-        series = {mode: [mean_std(r.get(key) for r in rows if r["planner"] == p and r["mode"] == mode)[:2]
+        series = {mode: [mean_std(r.get(key) for r in rows if r["configuration"] == p and r["mode"] == mode)[:2]
                          for p in planners] for mode in ("sim", "twb")}
-        _grouped_bars(ax, planners, series)
+        _grouped_bars(ax, labels, series, missing)
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
         ax.set_title(f"{label} (performed / planned)")
     handles = {lab: h for ax in axes for h, lab in zip(*ax.get_legend_handles_labels())}
     fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=len(handles), frameon=False)
-    fig.suptitle(f"Study {data.spec.name}: performed / planned ratios (1 = as planned)")
+    fig.suptitle(f"Study {data.spec.name}: performed / planned ratios over the completed runs (1 = as planned)")
     return fig
 
 
@@ -147,10 +190,10 @@ def figure_paths(data: StudyData):  # type: ignore[no-untyped-def]
     """Fig. 8: computed, simulated and field paths over each environment; rows: problems, columns: planners."""
     from matplotlib.figure import Figure
 
-    problems, planners = data.problems, data.planners
+    problems, planners = data.problems, data.configurations
     fig = Figure(figsize=(3.1 * len(planners), 3.2 * len(problems) + 0.6), layout="constrained")
     axes = np.asarray(fig.subplots(len(problems), len(planners), squeeze=False))
-    by_key = {(e["environment"], e["plan"], e["planner"]): e for e in data.experiments}
+    by_key = {(e["environment"], e["plan"], e["configuration"]): e for e in data.experiments}
     runs = {r["run_id"]: r for r in data.rows}
     for i, (env_name, plan) in enumerate(problems):
         for j, planner in enumerate(planners):
@@ -162,27 +205,105 @@ def figure_paths(data: StudyData):  # type: ignore[no-untyped-def]
                 continue
             for rid in exp["runs"]:
                 r = runs.get(rid)
-                if r is None or r.get("status") != "completed":
+                if r is None or r.get("status") not in ("completed", "failed"):
                     continue
-                p = data.poses(rid)
-                if len(p):
-                    ax.plot(p[:, 1], p[:, 2], color=COLORS[r["mode"]], lw=1.0, alpha=0.8, label=LABELS[r["mode"]])
+                _draw_run(ax, data, r)
             if exp.get("planned_path"):
                 pp = np.asarray(exp["planned_path"])
                 ax.plot(pp[:, 0], pp[:, 1], color="k", ls="--", lw=1.0, label=LABELS["computed"])
             ax.plot(*exp["start"][:2], "o", color="g", ms=5, label="start")
             ax.plot(*exp["goal"][:2], "*", color="g", ms=9, label="goal")
-            if exp["status"] not in ("completed",):
-                ax.text(0.5, 0.5, exp["status"], transform=ax.transAxes, ha="center", color="r")
+            _outcome_note(ax, exp, runs)
     handles = {lab: h for ax in axes.ravel() for h, lab in zip(*ax.get_legend_handles_labels())}
     fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=len(handles), frameon=False)
     fig.suptitle(f"Study {data.spec.name}: computed (dashed), simulated and field paths")
     return fig
 
 
+def _draw_run(ax, data: StudyData, r: dict[str, Any]) -> None:  # type: ignore[no-untyped-def]
+    """A run's driven path: completed in its mode's colour; failed in orange, up to where it stopped, with a ✕."""
+    p = data.poses(r["run_id"])
+    if r.get("status") == "completed":
+        if len(p):
+            ax.plot(p[:, 1], p[:, 2], color=COLORS[r["mode"]], lw=1.0, alpha=0.8, label=LABELS[r["mode"]])
+        return
+    if len(p):
+        ax.plot(p[:, 1], p[:, 2], color=COLORS["failed"], lw=1.4, label=LABELS["failed"])
+    x, y = r.get("stopped_at_x"), r.get("stopped_at_y")
+    if not (isinstance(x, (int, float)) and isinstance(y, (int, float))) and len(p):
+        x, y = p[-1, 1], p[-1, 2]
+    if isinstance(x, (int, float)) and isinstance(y, (int, float)):
+        ax.plot([x], [y], marker="x", ms=9, mew=2.4, color=COLORS["failed"], ls="none", label=LABELS["failed"])
+
+
+def _outcome_note(ax, exp: dict[str, Any], runs: dict[int, dict[str, Any]]) -> None:  # type: ignore[no-untyped-def]
+    """What did not succeed, per mode, in the panel's corner (``T: collision 5/5``); a refused job in the middle."""
+    if exp["status"] == "rejected":
+        ax.text(0.5, 0.5, "refused by the testbed", transform=ax.transAxes, ha="center", color=COLORS["failed"],
+                fontsize=8)
+        return
+    lines = []
+    for mode in dict.fromkeys(runs[rid]["mode"] for rid in exp["runs"] if rid in runs):
+        mine = [runs[rid] for rid in exp["runs"] if rid in runs and runs[rid]["mode"] == mode]
+        bad: dict[str, int] = {}
+        for r in mine:
+            if r.get("outcome") != "success":
+                bad[r.get("outcome") or r.get("status")] = bad.get(r.get("outcome") or r.get("status"), 0) + 1
+        if bad:
+            lines.append(f"{SHORT.get(mode, mode)}: " + ", ".join(f"{o} {n}/{len(mine)}" for o, n in bad.items()))
+    if lines:
+        ax.text(0.02, 0.98, "\n".join(lines), transform=ax.transAxes, ha="left", va="top", fontsize=7,
+                color="0.15", bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1.5})
+
+
+def figure_outcomes(data: StudyData):  # type: ignore[no-untyped-def]
+    """How the runs ended: one bar per configuration and mode, split into success, collision, timeout and other
+    failures as fractions of the counted runs, with the success rate's Wilson 95% interval as a whisker."""
+    from matplotlib.figure import Figure
+
+    from ._verdict import MODE_WORDS, display_name
+
+    outcomes = data.outcomes()
+    fig = Figure(figsize=(9, 0.55 * len(outcomes) + 1.6), layout="constrained")
+    ax = fig.subplots()
+    labels = []
+    for i, o in enumerate(outcomes):
+        y = len(outcomes) - 1 - i
+        labels.append(f"{display_name(o.configuration)} · {MODE_WORDS.get(o.mode, o.mode).split(' (')[0].lower()}")
+        left = 0.0
+        n = o.counted
+        for col, color in OUTCOME_COLORS.items():
+            k = o.count(col)
+            if n and k:
+                ax.barh(y, k / n, left=left, color=color, height=0.6, label=col)
+                left += k / n
+        s = o.success
+        if s.get("rate") is not None:
+            ax.errorbar(s["rate"], y, xerr=[[s["rate"] - s["ci_low"]], [s["ci_high"] - s["rate"]]], fmt="none",
+                        ecolor="k", capsize=3, lw=1)
+        text = f"{o.successes}/{n} succeeded" if n else "no counted run"
+        if o.not_counted:
+            text += f"; {o.not_counted} not counted"
+        if o.identical:
+            text += " (identical repetitions)"
+        ax.text(1.02, y, text, va="center", fontsize=8)
+    ax.set_yticks(range(len(outcomes)), labels[::-1], fontsize=8)
+    ax.set_xlim(0, 1.45)
+    ax.set_xticks([0, 0.25, 0.5, 0.75, 1.0])
+    ax.set_xlabel("fraction of the counted runs (completed or failed); whisker: success rate, Wilson 95% interval")
+    handles = {lab: h for h, lab in zip(*ax.get_legend_handles_labels())}
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=max(len(handles), 1), fontsize=8,
+               frameon=False)
+    ax.grid(axis="x", color="0.9")
+    ax.set_axisbelow(True)
+    fig.suptitle(f"Study {data.spec.name}: outcomes per configuration and mode")
+    return fig
+
+
 def make_figures(data: StudyData) -> dict[str, Any]:
-    """``{"fig6_metrics": Figure, "fig7_ratios": Figure, "fig8_paths": Figure}``."""
-    return {"fig6_metrics": figure_metrics(data), "fig7_ratios": figure_ratios(data), "fig8_paths": figure_paths(data)}
+    """``{"fig5_outcomes": Figure, "fig6_metrics": Figure, "fig7_ratios": Figure, "fig8_paths": Figure}``."""
+    return {"fig5_outcomes": figure_outcomes(data), "fig6_metrics": figure_metrics(data),
+            "fig7_ratios": figure_ratios(data), "fig8_paths": figure_paths(data)}
 
 
 def save_figures(figures: dict[str, Any], directory: Path, dpi: int = 110) -> list[Path]:

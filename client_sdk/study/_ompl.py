@@ -6,7 +6,7 @@ run attribute, ``progress`` with one column per progress attribute).  The
 mapping:
 
 - one OMPL *experiment* per problem (environment and plan, e.g. ``room-A``);
-- one *planner configuration* per planner and mode (``fmm_sim``,
+- one *planner configuration* per configuration and mode (``fmm_sim``,
   ``fmm_twb``), its ``settings`` the planner parameters as JSON;
 - one *run* per testbed run, with OMPL's usual attributes — ``time`` (planning
   time, s), ``solved`` (completed and goal reached), ``status`` (an ENUM),
@@ -147,10 +147,12 @@ def export_ompl(data: StudyData, db_path: str | Path, *, progress: bool = True) 
             counts["experiments"] += 1
         for e in data.experiments:
             for mode in data.spec.modes:
-                key = (e["planner"], mode)
+                key = (e["configuration"], mode)
                 if key not in planner_ids:
-                    settings = json.dumps({"planner": e["planner"], "mode": mode, "params": e["planner_params"]})
-                    c.execute("INSERT INTO plannerConfigs VALUES (NULL, ?, ?)", (f"{e['planner']}_{mode}", settings))
+                    settings = json.dumps({"planner": e["planner"], "configuration": e["configuration"], "mode": mode,
+                                           "params": e["planner_params"]})
+                    c.execute("INSERT INTO plannerConfigs VALUES (NULL, ?, ?)",
+                              (f"{e['configuration']}_{mode}", settings))
                     planner_ids[key] = c.lastrowid
                     counts["plannerConfigs"] += 1
         cols = list(attrs)
@@ -171,7 +173,7 @@ def export_ompl(data: StudyData, db_path: str | Path, *, progress: bool = True) 
                 else:
                     v = r.get(col)
                 vals.append(_num(v))
-            c.execute(sql, (exp_ids[(r["environment"], r["plan"])], planner_ids[(r["planner"], r["mode"])], *vals))
+            c.execute(sql, (exp_ids[(r["environment"], r["plan"])], planner_ids[(r["configuration"], r["mode"])], *vals))
             run_rowid = c.lastrowid
             counts["runs"] += 1
             if progress and r.get("status") == "completed":

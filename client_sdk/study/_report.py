@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import html
+import math
 from pathlib import Path
 from typing import Any, Optional
 
-from ._data import StudyData
+from ._compare import COMPARISON_COLUMNS, Comparisons
+from ._data import StudyData, write_csv_rows
 from ._figures import make_figures, mean_std, save_figures
+from ._outcomes import OutcomeSummary
+from ._verdict import METRIC_WORDS, Answer, which_is_better
 
-__all__ = ["SUMMARY_METRICS", "summary_markdown", "summary_tables", "write_report"]
+__all__ = ["SUMMARY_METRICS", "comparison_rows", "outcome_rows", "summary_markdown", "summary_tables",
+           "which_is_better_markdown", "write_report"]
 
 #: columns of the summary tables: (metric, header)
 SUMMARY_METRICS = (
@@ -23,8 +28,6 @@ SUMMARY_METRICS = (
     ("length_ratio", "length ratio"),
     ("smoothness_ratio", "κ' ratio"),
     ("clearance_ratio", "clearance ratio"),
-    ("goal_reached", "goal reached"),
-    ("collided", "collided"),
 )
 PLANNED_METRICS = (("length_m", "length (m)"), ("smoothness_rad", "κ' (rad)"), ("clearance_min_m", "min clearance (m)"),
                    ("aol_rad_per_m", "AOL (rad/m)"), ("planning_time_s", "planning time (s)"))
@@ -32,83 +35,199 @@ DIRECT_METRICS = (("deviation_mean_m", "mean dev. (m)"), ("deviation_max_m", "ma
                   ("hausdorff_m", "Hausdorff (m)"), ("frechet_m", "Fréchet (m)"))
 
 
-def _fmt(values: list[Any], rate: bool = False) -> str:
-    if rate:
-        vals = [v for v in values if isinstance(v, bool)]
-        return f"{sum(vals)}/{len(vals)}" if vals else "–"
+def _fmt(values: list[Any]) -> str:
     mean, std, n = mean_std(values)
     if mean is None:
         return "–"
     digits = 3 if abs(mean) < 100 else 1
+    if n >= 2 and std is not None and std == 0:
+        return f"{mean:.{digits}f} (identical ×{n})"
     return f"{mean:.{digits}f}" + (f" ± {std:.{digits}f}" if std is not None else "")
 
 
-def summary_tables(data: StudyData) -> list[tuple[str, list[str], list[list[str]]]]:
-    """The summary as (title, header, rows) tables of "mean ± std" strings."""
+def _pct(v: Optional[float]) -> str:
+    return "–" if v is None else f"{100 * v:.0f} %"
+
+
+def outcome_rows(outcomes: list[OutcomeSummary]) -> tuple[list[str], list[list[str]]]:
+    """The outcomes table: runs, success, collision, timeout, other failures, not counted, success rate (Wilson)."""
+    header = ["configuration", "mode", "runs", "success", "collision", "timeout", "other failure", "not counted",
+              "success rate (95% CI)"]
+    body = []
+    for o in outcomes:
+        other = str(o.count("other")) + (f" ({o.other_detail})" if o.count("other") else "")
+        body.append([o.configuration, o.mode, str(o.runs + o.not_submitted), str(o.successes), str(o.count("collision")),
+                     str(o.count("timeout")), other, str(o.not_counted), o.rate_text()])
+    return header, body
+
+
+def comparison_rows(comparisons: Comparisons) -> tuple[list[str], list[list[str]]]:
+    """The comparisons table (a − b), as strings."""
+    header = ["metric", "mode", "a", "b", "n a", "n b", "mean a", "mean b", "diff (a − b)", "95% CI", "test", "p",
+              "p (Holm)", "effect size", "note"]
+    body = []
+    for c in comparisons:
+        r, ci = c.result, c.confidence_interval()
+        dec = 3 if c.metric == "success_rate" else METRIC_WORDS.get(c.metric, ("", "", 3))[2]
+        num = (lambda v: "–" if not math.isfinite(v) else f"{v:.{dec}f}")  # noqa: E731
+        body.append([c.metric, c.mode, c.a, c.b, str(r.n_a), str(r.n_b), num(r.mean_a), num(r.mean_b),
+                     num(r.difference), "–" if not math.isfinite(ci.low) else f"[{num(ci.low)}, {num(ci.high)}]",
+                     _TEST_NAMES.get(r.test, r.test or "–"), _p(r.pvalue), _p(c.pvalue_holm),
+                     "–" if not math.isfinite(r.effect_size) else f"{_EFFECT_NAMES.get(r.effect, r.effect)} "
+                                                                  f"{r.effect_size:.2f}", c.note])
+    return header, body
+
+
+_TEST_NAMES = {"welch-t": "Welch t", "paired-t": "paired t", "mann-whitney-u": "Mann-Whitney U",
+               "wilcoxon": "Wilcoxon", "fisher-exact": "Fisher exact"}
+_EFFECT_NAMES = {"hedges-g": "g", "cohen-dz": "d_z", "risk-difference": "RD"}
+
+
+def _p(p: float) -> str:
+    if not math.isfinite(p):
+        return "–"
+    return "< 0.001" if p < 0.001 else f"{p:.3g}"
+
+
+def _cell_runs(mine: list[dict[str, Any]], total: int) -> str:
+    return f"{len(mine)} of {total}"
+
+
+def summary_tables(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = None,
+                   comparisons: Optional[Comparisons] = None) -> list[tuple[str, list[str], list[list[str]]]]:
+    """The summary as (title, header, rows) tables of strings: outcomes, comparisons, means, planned paths,
+    direct comparison, per problem."""
+    outcomes = outcomes if outcomes is not None else data.outcomes()
     done = [r for r in data.rows if r.get("status") == "completed"]
-    modes = list(dict.fromkeys(r["mode"] for r in data.rows)) or list(data.spec.modes)
-    tables = []
-    header = ["planner", "mode", "runs"] + [h for _, h in SUMMARY_METRICS]
+    modes = data.modes
+    configs = data.configurations
+    tables = [("Outcomes per configuration and mode (success rate with its Wilson 95% interval over the counted "
+               "runs: completed or failed; a testbed error is not the planner's)", *outcome_rows(outcomes))]
+    if comparisons is not None and len(comparisons):
+        tables.append(("Comparisons: every pair, per mode and metric (difference a − b; bootstrap 95% CI; "
+                       "Holm-adjusted p per metric)", *comparison_rows(comparisons)))
+    header = ["configuration", "mode", "completed"] + [h for _, h in SUMMARY_METRICS]
     body = []
-    for p in data.planners:
+    for p in configs:
         for m in modes:
-            mine = [r for r in done if r["planner"] == p and r["mode"] == m]
-            total = sum(1 for r in data.rows if r["planner"] == p and r["mode"] == m)
-            body.append([p, m, f"{len(mine)}/{total}"] +
-                        [_fmt([r.get(k) for r in mine], rate=k in ("goal_reached", "collided")) for k, _ in SUMMARY_METRICS])
-    tables.append(("Performed paths per planner and mode (mean ± std over completed runs)", header, body))
+            mine = [r for r in done if r["configuration"] == p and r["mode"] == m]
+            total = sum(1 for r in data.rows if r["configuration"] == p and r["mode"] == m)
+            if not mine:
+                body.append([p, m, _cell_runs(mine, total)] + ["no completed run"] + [""] * (len(SUMMARY_METRICS) - 1))
+                continue
+            body.append([p, m, _cell_runs(mine, total)] + [_fmt([r.get(k) for r in mine]) for k, _ in SUMMARY_METRICS])
+    tables.append(("Performed paths per configuration and mode: mean ± std over the completed runs (column "
+                   "'completed': over how many of the runs); failed runs' metrics are in runs.csv, flagged by "
+                   "their outcome", header, body))
     body = []
-    for p in data.planners:
-        exps = [e for e in data.experiments if e["planner"] == p]
-        planned = {r["experiment_id"]: r for r in done if r["planner"] == p}.values()
+    for p in configs:
+        exps = [e for e in data.experiments if e["configuration"] == p]
+        planned = {r["experiment_id"]: r for r in data.rows if r["configuration"] == p
+                   and r.get("planned_length_m") is not None}.values()
         row = [p, str(len(exps))]
         for k, _ in PLANNED_METRICS:
             row.append(_fmt([e.get("planning_time_s") for e in exps]) if k == "planning_time_s"
                        else _fmt([r.get(f"planned_{k}") for r in planned]))
         body.append(row)
-    tables.append(("Computed (planned) paths per planner", ["planner", "experiments"] + [h for _, h in PLANNED_METRICS],
-                   body))
+    tables.append(("Computed (planned) paths per configuration", ["configuration", "experiments"] +
+                   [h for _, h in PLANNED_METRICS], body))
     if data.direct:
-        body = [[p, str(sum(d["planner"] == p for d in data.direct))] +
-                [_fmt([d.get(k) for d in data.direct if d["planner"] == p]) for k, _ in DIRECT_METRICS]
-                for p in data.planners]
-        tables.append(("Direct comparison ST: field path against the simulated one, per repetition",
-                        ["planner", "pairs"] + [h for _, h in DIRECT_METRICS], body))
-    header = ["environment", "plan", "planner"] + [f"{k} {m}" for m in modes for k in ("length (m)", "mean dev. (m)")]
+        body = [[p, str(sum(d["configuration"] == p for d in data.direct))] +
+                [_fmt([d.get(k) for d in data.direct if d["configuration"] == p]) for k, _ in DIRECT_METRICS]
+                for p in configs]
+        tables.append(("Direct comparison ST: field path against the simulated one, per repetition (pairs of "
+                       "completed runs)", ["configuration", "pairs"] + [h for _, h in DIRECT_METRICS], body))
+    header = ["environment", "plan", "configuration"] + [f"{k} {m}" for m in modes
+                                                         for k in ("outcomes", "length (m)", "mean dev. (m)")]
     body = []
     for e in data.experiments:
-        mine = [r for r in done if r["experiment_id"] == e["experiment_id"]] if e["experiment_id"] else []
-        body.append([e["environment"], e["plan"], e["planner"]] +
-                    [_fmt([r.get(k) for r in mine if r["mode"] == m]) for m in modes
-                     for k in ("length_m", "deviation_mean_m")])
-    tables.append(("Per problem", header, body))
+        rows = [r for r in data.rows if r["experiment_id"] == e["experiment_id"]] if e["experiment_id"] else []
+        cells = []
+        for m in modes:
+            mine = [r for r in rows if r["mode"] == m]
+            ok = [r for r in mine if r.get("status") == "completed"]
+            cells += [_outcome_cell(mine, e), _fmt([r.get("length_m") for r in ok]),
+                      _fmt([r.get("deviation_mean_m") for r in ok])]
+        body.append([e["environment"], e["plan"], e["configuration"]] + cells)
+    tables.append(("Per problem (outcomes: successes of runs, then the failures; means over completed runs)",
+                   header, body))
     return tables
 
 
+def _outcome_cell(rows: list[dict[str, Any]], exp: dict[str, Any]) -> str:
+    if exp["status"] == "rejected":
+        return "rejected"
+    ok = sum(r["outcome"] == "success" for r in rows)
+    fails: dict[str, int] = {}
+    for r in rows:
+        if r["outcome"] != "success":
+            fails[r["outcome"]] = fails.get(r["outcome"], 0) + 1
+    return f"{ok}/{len(rows)}" + ("".join(f", {o} {n}" for o, n in fails.items()))
+
+
 def _failures(data: StudyData) -> list[str]:
-    out = [f"experiment {e['experiment_id'] or '-'} ({e['environment']} {e['plan']} {e['planner']}): "
+    out = [f"experiment {e['experiment_id'] or '-'} ({e['environment']} {e['plan']} {e['configuration']}): "
            f"{e['status']}: {e['error']}" for e in data.experiments if e["status"] != "completed"]
-    out += [f"run {r['run_id']} ({r['mode']} #{r['repetition']}): {r['status']}: {r.get('error') or ''}"
-            for r in data.rows if r.get("status") != "completed"]
+    for r in data.rows:
+        if r.get("status") == "completed":
+            continue
+        where = (f" at ({r['stopped_at_x']:.2f}, {r['stopped_at_y']:.2f})"
+                 if isinstance(r.get("stopped_at_x"), float) and isinstance(r.get("stopped_at_y"), float) else "")
+        out.append(f"run {r['run_id']} ({r['configuration']} {r['mode']} #{r['repetition']}): {r['outcome']}{where}: "
+                   f"{r.get('error') or ''}")
     return out
 
 
-def summary_markdown(data: StudyData) -> str:
-    """``summary.md``: the study, mean ± std per planner x mode, planned paths, direct comparison, failures."""
+METHOD = ("How to read this: success rates are over the counted runs (completed or failed) with Wilson 95% "
+          "intervals and Fisher's exact test; metrics are over completed runs only (a planner that fails often "
+          "is judged on its successes there, so read them with its success rate), as the difference of means "
+          "a − b with a studentized bootstrap 95% interval and Welch's t (paired t when every configuration ran every "
+          "problem and repetition); p-values are Holm-adjusted per metric; effect sizes are Hedges' g (d_z "
+          "paired) and the risk difference. Identical repetitions (the deterministic simulation without jitter) "
+          "count once. Details: docs/study.md.")
+
+
+def which_is_better_markdown(answers: list[Answer]) -> list[str]:
+    """The "Which planner is better?" section as Markdown lines."""
+    lines = ["## Which planner is better?", ""]
+    for a in answers:
+        lines += [f"**{a.title}:** " + " ".join(a.verdicts), ""]
+    for a in answers:
+        lines += [f"### {a.title}", ""] + [f"- {f}" for f in a.facts] + [""]
+    lines += [f"_{METHOD}_", ""]
+    return lines
+
+
+def summary_markdown(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = None,
+                     comparisons: Optional[Comparisons] = None) -> str:
+    """``summary.md``: the study, which planner is better (in words), outcomes, comparisons, means per
+    configuration x mode, planned paths, direct comparison, per problem, what did not complete."""
     spec = data.spec
+    outcomes = outcomes if outcomes is not None else data.outcomes()
+    comparisons = comparisons if comparisons is not None else data.compare()
     n_runs = len(data.rows)
     done = sum(r.get("status") == "completed" for r in data.rows)
     lines = [f"# Study `{spec.name}`", ""]
     if spec.description:
         lines += [spec.description, ""]
+    jitter = (f"start-pose jitter {spec.jitter['xy_m']:g} m, {spec.jitter['theta_rad']:g} rad (std)"
+              if spec.jitter else "no start-pose jitter: repetitions in simulation are identical (deterministic "
+                                  "simulation)")
     lines += [f"- environments: {', '.join(spec.environment_names())}; plans: "
-              f"{', '.join(dict.fromkeys(e['plan'] for e in data.experiments))}; planners: {', '.join(data.planners)}",
-              f"- {spec.repetitions} repetition(s) x modes {', '.join(spec.modes)}; seed {spec.seed}; field {spec.field}",
-              f"- {len(data.experiments)} experiments, {done}/{n_runs} runs completed"
+              f"{', '.join(dict.fromkeys(e['plan'] for e in data.experiments))}; configurations: "
+              f"{', '.join(data.configurations)}",
+              f"- {spec.repetitions} repetition(s) x modes {', '.join(spec.modes)}; seed {spec.seed}; field "
+              f"{spec.field}; {jitter}",
+              f"- {len(data.experiments)} experiments, {n_runs} runs: {done} completed, "
+              f"{sum(r.get('status') == 'failed' for r in data.rows)} failed, "
+              f"{sum(r.get('status') not in ('completed', 'failed') for r in data.rows)} not counted"
+              + (f"; {sum(e['status'] == 'rejected' for e in data.experiments)} job(s) refused"
+                 if any(e["status"] == "rejected" for e in data.experiments) else "")
               + (f"; wall time {data.meta['wall_s']:.1f} s" if data.meta.get("wall_s") is not None else ""),
               "- S = simulation (ideal robot), T = Teleworkbench (emulated field robot, tracker poses), "
               "ST = direct comparison of T against S; units m, rad, s", ""]
-    for title, header, body in summary_tables(data):
+    lines += which_is_better_markdown(which_is_better(data, comparisons, outcomes))
+    for title, header, body in summary_tables(data, outcomes, comparisons):
         lines += [f"## {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(row) + " |" for row in body]
         lines.append("")
@@ -127,33 +246,59 @@ def _html_table(header: list[str], body: list[list[str]]) -> str:
 _CSS = """body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:1em 0;font-size:13px}td,th{border:1px solid #ccc;padding:3px 7px;text-align:right}
 th{background:#f3f3f3}td:first-child,td:nth-child(2){text-align:left}img{max-width:100%;border:1px solid #eee}
-figure{margin:1.5em 0}figcaption{color:#555;font-size:14px}"""
+figure{margin:1.5em 0}figcaption{color:#555;font-size:14px}
+section.answer{background:#f6f8fb;border:1px solid #d6dde6;padding:.3em 1.2em 1em;margin:1em 0}
+p.verdict{font-size:16px}p.method{color:#555;font-size:13px}"""
 
 _CAPTIONS = {
-    "fig6_metrics": "Fig. 6 — each metric per planner: computed path, simulation (S), Teleworkbench (T) and the "
-                    "direct comparison (ST); mean ± std.",
-    "fig7_ratios": "Fig. 7 — performed / planned ratios of length, smoothness and clearance (1 = as planned).",
-    "fig8_paths": "Fig. 8 — computed (dashed), simulated (blue) and field (red) paths over each environment.",
+    "fig5_outcomes": "Outcomes — how the runs of each configuration ended, per mode: success, collision, timeout, "
+                     "other failure, not counted; the success rate with its Wilson 95% interval.",
+    "fig6_metrics": "Fig. 6 — each metric per configuration: computed path, simulation (S), Teleworkbench (T) and "
+                    "the direct comparison (ST); mean ± std over the completed runs (under each group: completed of "
+                    "runs per mode); a mode without a completed run says so instead of a bar.",
+    "fig7_ratios": "Fig. 7 — performed / planned ratios of length, smoothness and clearance (1 = as planned), over "
+                   "the completed runs.",
+    "fig8_paths": "Fig. 8 — computed (dashed), simulated (blue) and field (red) paths over each environment; failed "
+                  "runs in orange up to where they stopped, ✕ marking the spot.",
 }
 
 
-def report_html(data: StudyData, figure_names: list[str]) -> str:
-    """``report.html``: the summary tables and the figures (linked PNG, with the SVG beside)."""
+def which_is_better_html(answers: list[Answer]) -> str:
+    """The "Which planner is better?" section as HTML."""
+    parts = ["<section class='answer' id='which-is-better'><h2>Which planner is better?</h2>"]
+    for a in answers:
+        parts.append(f"<p class='verdict'><strong>{html.escape(a.title)}:</strong> "
+                     f"{html.escape(' '.join(a.verdicts))}</p>")
+    for a in answers:
+        parts.append(f"<h3>{html.escape(a.title)}</h3><ul>" +
+                     "".join(f"<li>{html.escape(f)}</li>" for f in a.facts) + "</ul>")
+    parts.append(f"<p class='method'>{html.escape(METHOD)}</p></section>")
+    return "".join(parts)
+
+
+def report_html(data: StudyData, figure_names: list[str], outcomes: Optional[list[OutcomeSummary]] = None,
+                comparisons: Optional[Comparisons] = None) -> str:
+    """``report.html``: which planner is better, the figures (linked PNG, with the SVG beside) and the tables."""
     spec = data.spec
+    outcomes = outcomes if outcomes is not None else data.outcomes()
+    comparisons = comparisons if comparisons is not None else data.compare()
     parts = [f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>Study {html.escape(spec.name)}</title>"
              f"<style>{_CSS}</style></head><body><h1>Teleworkbench study <code>{html.escape(spec.name)}</code></h1>"]
     if spec.description:
         parts.append(f"<p>{html.escape(spec.description)}</p>")
     done = sum(r.get("status") == "completed" for r in data.rows)
-    parts.append(f"<p>{len(data.experiments)} experiments, {done}/{len(data.rows)} runs completed. "
-                 "Data: <a href='runs.csv'>runs.csv</a> (one row per run, every metric), "
+    failed = sum(r.get("status") == "failed" for r in data.rows)
+    parts.append(f"<p>{len(data.experiments)} experiments, {len(data.rows)} runs: {done} completed, {failed} failed. "
+                 "Data: <a href='runs.csv'>runs.csv</a> (one row per run: outcome, every metric), "
+                 "<a href='outcomes.csv'>outcomes.csv</a>, <a href='comparisons.csv'>comparisons.csv</a>, "
                  "<a href='direct.csv'>direct.csv</a>, <a href='summary.md'>summary.md</a>, "
                  "<a href='study.json'>study.json</a>, poses in <code>poses/</code>.</p>")
+    parts.append(which_is_better_html(which_is_better(data, comparisons, outcomes)))
     for name in figure_names:
         parts.append(f"<figure><a href='{name}.svg'><img src='{name}.png' alt='{name}'></a>"
                      f"<figcaption>{html.escape(_CAPTIONS.get(name, name))} (<a href='{name}.svg'>SVG</a>)"
                      "</figcaption></figure>")
-    for title, header, body in summary_tables(data):
+    for title, header, body in summary_tables(data, outcomes, comparisons):
         parts.append(f"<h2>{html.escape(title)}</h2>{_html_table(header, body)}")
     fails = _failures(data)
     if fails:
@@ -163,12 +308,16 @@ def report_html(data: StudyData, figure_names: list[str]) -> str:
 
 
 def write_report(data: StudyData, directory: Optional[Path] = None, dpi: int = 110) -> list[Path]:
-    """Write summary.md, the figures (PNG and SVG) and report.html into ``directory`` (default: the study's)."""
+    """Write summary.md, outcomes.csv, comparisons.csv, the figures (PNG and SVG) and report.html into
+    ``directory`` (default: the study's)."""
     d = Path(directory or data.directory or ".")
     d.mkdir(parents=True, exist_ok=True)
-    (d / "summary.md").write_text(summary_markdown(data))
+    outcomes, comparisons = data.outcomes(), data.compare()
+    write_csv_rows(d / "outcomes.csv", [o.row() for o in outcomes])
+    write_csv_rows(d / "comparisons.csv", comparisons.rows(), COMPARISON_COLUMNS)
+    (d / "summary.md").write_text(summary_markdown(data, outcomes, comparisons))
     figures = make_figures(data)
-    paths = [d / "summary.md", *save_figures(figures, d, dpi=dpi)]
-    (d / "report.html").write_text(report_html(data, list(figures)))
+    paths = [d / "outcomes.csv", d / "comparisons.csv", d / "summary.md", *save_figures(figures, d, dpi=dpi)]
+    (d / "report.html").write_text(report_html(data, list(figures), outcomes, comparisons))
     paths.append(d / "report.html")
     return paths

@@ -7,24 +7,33 @@ dependency)::
      "environments": ["room", "blocks"],          # names, or environment files (objects) to create
      "plans": ["A", "B"],                          # plan names of each environment; omit for all of them
      "planners": ["fmm", "fm2", {"name": "prm", "params": {"samples": 800}}],
-     "repetitions": 2, "modes": ["sim", "twb"], "seed": 0, "field": "sub"}
+     "repetitions": 2, "modes": ["sim", "twb"], "seed": 0, "field": "sub",
+     "jitter": {"xy_m": 0.005, "theta_rad": 0.02}}  # optional: start-pose noise, so repetitions differ
 
 ``plans`` may also hold explicit start/goal pairs, ``{"name": "C", "start":
 [x, y, theta], "goal": [x, y, theta]}`` (m, rad), used in every environment.
-Every combination environment x plan x planner is one experiment with
-``repetitions`` runs per mode.
+A planner entry may carry a ``"label"`` (the configuration's name in tables;
+default: the name, with the parameters if any) or, instead of a planner,
+``"waypoints"``: ``{"name": "corner", "waypoints": [[x, y], ...]}`` sends the
+explicit path start -> waypoints -> goal of each problem.  Every combination
+environment x plan x planner is one experiment with ``repetitions`` runs per mode.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
-__all__ = ["PAPER", "PlannerSpec", "PlanSpec", "StudySpec", "StudySpecError", "load_spec", "paper_spec"]
+__all__ = ["JITTER_LIMITS", "PAPER", "PlannerSpec", "PlanSpec", "StudySpec", "StudySpecError", "load_spec", "paper_spec"]
 
-_KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field"}
+_KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter"}
+_PLANNER_KEYS = {"name", "params", "label", "waypoints"}
+#: the server's bounds of a job's start-pose jitter (standard deviations: m, rad)
+JITTER_LIMITS = {"xy_m": 0.05, "theta_rad": 0.5}
+_MAX_WAYPOINTS = 1000
 
 
 class StudySpecError(ValueError):
@@ -33,10 +42,34 @@ class StudySpecError(ValueError):
 
 @dataclass(frozen=True)
 class PlannerSpec:
-    """A planner by name with its parameters (empty: the planner's defaults)."""
+    """A configuration: a planner by name with its parameters (empty: the planner's defaults), or an explicit
+    path through ``waypoints`` (m) from each problem's start to its goal; ``label`` names it in tables."""
 
     name: str
     params: dict[str, Any] = field(default_factory=dict)
+    label: Optional[str] = None
+    waypoints: Optional[list[list[float]]] = None
+
+    @property
+    def configuration(self) -> str:
+        """The configuration's name: ``label``, else the name with its parameters (``fm2(saturation=0.1)``)."""
+        if self.label:
+            return self.label
+        if not self.params:
+            return self.name
+        return f"{self.name}({','.join(f'{k}={v}' for k, v in sorted(self.params.items()))})"
+
+    def to_json(self) -> Any:
+        if not self.params and self.label is None and self.waypoints is None:
+            return self.name
+        out: dict[str, Any] = {"name": self.name}
+        if self.params:
+            out["params"] = dict(self.params)
+        if self.label is not None:
+            out["label"] = self.label
+        if self.waypoints is not None:
+            out["waypoints"] = [list(p) for p in self.waypoints]
+        return out
 
 
 @dataclass(frozen=True)
@@ -61,13 +94,16 @@ class StudySpec:
     seed: int = 0
     field: str = "sub"
     description: str = ""
+    jitter: Optional[dict[str, float]] = None
 
     def environment_names(self) -> list[str]:
         return [e if isinstance(e, str) else e["name"] for e in self.environments]
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
-        d["planners"] = [p if p["params"] else p["name"] for p in d["planners"]]
+        d["planners"] = [p.to_json() for p in self.planners]
+        if self.jitter is None:
+            del d["jitter"]
         if self.plans is not None:
             d["plans"] = [p["name"] if p["start"] is None else p for p in d["plans"]]
         return d
@@ -92,14 +128,13 @@ class StudySpec:
         planners = data.get("planners")
         if not isinstance(planners, list) or not planners:
             raise bad("`planners` must be a non-empty list of names or {\"name\", \"params\"} objects")
-        pspecs = []
-        for i, p in enumerate(planners):
-            if isinstance(p, str) and p:
-                pspecs.append(PlannerSpec(p))
-            elif isinstance(p, Mapping) and isinstance(p.get("name"), str) and isinstance(p.get("params", {}), Mapping):
-                pspecs.append(PlannerSpec(p["name"], dict(p.get("params", {}))))
-            else:
-                raise bad(f"planners[{i}] must be a name or {{\"name\": ..., \"params\": {{...}}}}")
+        pspecs = [_planner(p, f"planners[{i}]", bad) for i, p in enumerate(planners)]
+        seen: dict[str, int] = {}
+        for i, p in enumerate(pspecs):
+            if p.configuration in seen:
+                raise bad(f"planners[{i}] repeats planners[{seen[p.configuration]}] ({p.configuration}): give each "
+                          "configuration once, or a distinct \"label\"")
+            seen[p.configuration] = i
         plans = data.get("plans")
         plan_specs = None
         if plans is not None:
@@ -130,15 +165,66 @@ class StudySpec:
         fld = data.get("field", "sub")
         if fld not in ("sub", "full"):
             raise bad(f"`field` must be \"sub\" or \"full\", got {fld!r}")
+        jitter = _jitter(data.get("jitter"), bad)
         name = data.get("name", Path(source).stem if source != "study" else "study")
         if not isinstance(name, str) or not name:
             raise bad("`name` must be a non-empty string")
         return cls(name=name, environments=list(envs), planners=pspecs, plans=plan_specs, repetitions=reps,
-                   modes=list(modes), seed=seed, field=fld, description=str(data.get("description", "")))
+                   modes=list(modes), seed=seed, field=fld, description=str(data.get("description", "")),
+                   jitter=jitter)
 
     @property
     def runs_per_experiment(self) -> int:
         return self.repetitions * len(self.modes)
+
+
+def _finite(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _planner(p: Any, where: str, bad: Any) -> PlannerSpec:
+    """One entry of ``planners``: a name, or an object with name and params, label or waypoints."""
+    if isinstance(p, str) and p:
+        return PlannerSpec(p)
+    if not (isinstance(p, Mapping) and isinstance(p.get("name"), str) and p["name"]):
+        raise bad(f"{where} must be a name or {{\"name\": ..., \"params\": {{...}}}}")
+    unknown = sorted(set(p) - _PLANNER_KEYS)
+    if unknown:
+        raise bad(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(_PLANNER_KEYS))})")
+    params = p.get("params", {})
+    if not isinstance(params, Mapping):
+        raise bad(f"{where}.params must be an object of planner parameters")
+    label = p.get("label")
+    if label is not None and not (isinstance(label, str) and label.strip()):
+        raise bad(f"{where}.label must be a non-empty string")
+    waypoints = p.get("waypoints")
+    if waypoints is not None:
+        if params:
+            raise bad(f"{where}: give either `params` (a planner) or `waypoints` (an explicit path), not both")
+        if not isinstance(waypoints, list) or len(waypoints) > _MAX_WAYPOINTS or not all(
+                isinstance(w, list) and len(w) == 2 and all(_finite(x) for x in w) for w in waypoints):
+            raise bad(f"{where}.waypoints must be a list of at most {_MAX_WAYPOINTS} [x, y] points (m)")
+        waypoints = [[float(x) for x in w] for w in waypoints]
+    return PlannerSpec(p["name"], dict(params), label, waypoints)
+
+
+def _jitter(j: Any, bad: Any) -> Optional[dict[str, float]]:
+    """``{"xy_m", "theta_rad"}``: standard deviations of the start pose (m, rad), within the server's bounds."""
+    if j is None:
+        return None
+    if not isinstance(j, Mapping) or not j:
+        raise bad("`jitter` must be an object such as {\"xy_m\": 0.005, \"theta_rad\": 0.02}")
+    unknown = sorted(set(j) - set(JITTER_LIMITS))
+    if unknown:
+        raise bad(f"jitter: unknown key(s) {', '.join(unknown)} (allowed: xy_m, theta_rad)")
+    out = {}
+    for k, hi in JITTER_LIMITS.items():
+        v = j.get(k, 0.0)
+        if not _finite(v) or not 0 <= v <= hi:
+            unit = "m" if k == "xy_m" else "rad"
+            raise bad(f"jitter.{k} must be a number in [0, {hi:g}] ({unit}, a standard deviation), got {v!r}")
+        out[k] = float(v)
+    return out
 
 
 #: The paper's study: both environments x plans A and B x FMM, FM², PRM x 2 repetitions x {sim, twb}.

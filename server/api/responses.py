@@ -36,6 +36,7 @@ _WHY = {
     413: "The request body (or an uploaded program) is larger than allowed.",
     422: "Invalid input: the reason first, then every problem found.",
     429: "Too many: over a quota, or too many failed tokens from this client (see Retry-After).",
+    503: "The database is unreachable for the moment (see Retry-After).",
 }
 
 
@@ -45,4 +46,4 @@ def errors(*codes: int) -> dict[Union[int, str], dict[str, Any]]:
 
 
 #: what any operation that needs a token can answer
-AUTHENTICATED = errors(401, 403, 422, 429)
+AUTHENTICATED = errors(401, 403, 422, 429, 503)

@@ -26,13 +26,16 @@ class Settings(BaseSettings):
     database_url: str = Field(default="", description="SQLAlchemy URL; default: SQLite in data_dir.")
     admin_token: str = Field(default="", description="Fixed admin token; generated when empty.")
     time_scale: float = Field(default=1.0, gt=0, description="Experiment seconds per wall second.")
-    max_body_bytes: int = Field(default=4 << 20, gt=0, description="Largest accepted request body.")
+    max_body_bytes: int = Field(default=12 << 20, gt=0, description=(
+        "Largest accepted request body (at least what an upload of the largest program takes, base64)."))
     max_queued_per_user: int = Field(default=200, gt=0, description="Queued experiments per user (429 beyond).")
     auth_failures_per_minute: int = Field(
         default=30, gt=0, description="Unknown tokens a client may present per minute; then 429 until a minute passed.")
     max_repetitions: int = Field(default=20, gt=0)
     run_timeout_factor: float = Field(default=4.0, gt=1, description="Timeout = factor x expected run time.")
     run_timeout_min_s: float = Field(default=30.0, gt=0, description="Shortest run timeout, experiment seconds.")
+    resume_interrupted: bool = Field(
+        default=True, description="At start, queue again the runs that a stop or a crash of the testbed interrupted.")
     tracker_grace_s: float = Field(default=0.5, ge=0, description="Wall seconds to wait for late tracker poses.")
     run_slack_s: float = Field(
         default=10.0, gt=0, description="Wall seconds a run waits for a robot beyond the time an answer takes at the "
@@ -45,7 +48,8 @@ class Settings(BaseSettings):
                     "track a path only to within a few centimetres, and a path grazing a block at exactly "
                     "the radius would make collisions, not comparisons.")
     uploads_enabled: bool = Field(default=False, description="Accept uploaded planner programs (`--enable-uploads`).")
-    max_program_bytes: int = Field(default=1 << 20, gt=0, description="Largest uploaded program (413 beyond).")
+    max_program_bytes: int = Field(default=8 << 20, gt=0, description=(
+        "Largest uploaded program (413 beyond); static binaries of a C planner are a megabyte or two."))
     # the sandbox of uploaded programs (docs/uploads.md)
     sandbox_wall_s: float = Field(default=30.0, gt=0, description="Wall-clock seconds a program may run.")
     sandbox_cpu_s: int = Field(default=20, gt=0, description="CPU seconds per process (RLIMIT_CPU).")
@@ -64,6 +68,12 @@ class Settings(BaseSettings):
     sandbox_interpreters: dict[str, str] = Field(
         default_factory=lambda: _interpreters(),
         description="Interpreters programs may name: name -> absolute path (JSON in the environment).")
+
+    @model_validator(mode="after")
+    def _room_for_programs(self) -> "Settings":
+        """A request body must fit the largest program, base64-encoded (4/3), with its JSON around it."""
+        self.max_body_bytes = max(self.max_body_bytes, (self.max_program_bytes + 2) // 3 * 4 + (64 << 10))
+        return self
 
     @model_validator(mode="after")
     def _default_database(self) -> "Settings":

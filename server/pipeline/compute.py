@@ -12,8 +12,8 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["TooFewPoses", "compare_runs", "expected_duration_s", "explicit_path", "measure_run", "plan_job",
-           "warm_up"]
+__all__ = ["TooFewPoses", "compare_runs", "expected_duration_s", "explicit_path", "jittered", "measure_run",
+           "plan_job", "warm_up"]
 
 
 class TooFewPoses(Exception):
@@ -49,6 +49,18 @@ def explicit_path(path: list[list[float]], goal: list[float]) -> list[list[float
     p = np.asarray([q[:2] for q in path], dtype=float)
     final = goal[2] if len(goal) > 2 else None
     return np.round(headings(p, final), 6).tolist()
+
+
+def jittered(pose: list[float], jitter: Optional[dict[str, float]], seed: int) -> list[float]:
+    """``pose`` (x, y, theta) moved by seeded Gaussian noise of std ``jitter["xy_m"]`` per axis (m) and
+    ``jitter["theta_rad"]`` (rad), each clipped at 3 std; the same seed gives the same pose."""
+    if not jitter:
+        return list(pose)
+    rng = np.random.default_rng([int(seed), 0x6A177E8])
+    dx, dy, da = np.clip(rng.standard_normal(3), -3, 3) * [jitter.get("xy_m", 0.0), jitter.get("xy_m", 0.0),
+                                                            jitter.get("theta_rad", 0.0)]
+    x, y, a = pose
+    return [float(x + dx), float(y + dy), float(math.remainder(a + da, 2 * math.pi))]
 
 
 def expected_duration_s(path_length_m: float, n_blocks: int, *, speed_m_s: float = 0.2,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any, Optional, Protocol
 
@@ -60,6 +61,7 @@ class RunContext:
         self.time_scale = time_scale
         self.slack_s = slack_s
         self.messages: list[dict[str, Any]] = []
+        self._taken_at = time.monotonic()
 
     @property
     def subfields(self) -> tuple[int, ...]:
@@ -72,7 +74,13 @@ class RunContext:
 
     def take_messages(self) -> list[dict[str, Any]]:
         batch, self.messages = self.messages, []
+        self._taken_at = time.monotonic()
         return batch
+
+    def messages_due(self, every_s: float = 1.0, lines: int = 500) -> bool:
+        """Whether the log should be stored now (a second or many lines since): a killed server loses
+        at most that much of a run's log."""
+        return len(self.messages) >= lines or (bool(self.messages) and time.monotonic() - self._taken_at >= every_s)
 
     def wall(self, experiment_s: float) -> float:
         """Wall seconds for ``experiment_s`` of experiment time at the time scale, plus the slack."""

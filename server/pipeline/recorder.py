@@ -44,6 +44,17 @@ class RunRecorder:
 
         return await asyncio.to_thread(load)
 
+    async def begin(self, run_id: int, **fields: Any) -> None:
+        """A try of the run starts (what an interrupted earlier try left goes); then as :meth:`update`."""
+
+        def write() -> list[dict[str, Any]]:
+            with self._sessions.begin() as s:
+                run_store.clear_try(s, run_id)
+                run, exp, changed = run_store.update_run(s, run_id, fields)
+                return self._events([run], {exp.id: changed})
+
+        self._publish(await asyncio.to_thread(write))
+
     async def update(self, run_id: int, **fields: Any) -> None:
         """Write run fields (``status``, ``t_start``, ``metrics`` …), roll the experiment up, publish."""
 
@@ -54,15 +65,15 @@ class RunRecorder:
 
         self._publish(await asyncio.to_thread(write))
 
-    async def end(self, run_ids: Iterable[int], status: RunStatus, error: str) -> None:
-        """End several runs at once (queued runs cancelled, or failed with their experiment)."""
+    async def end(self, run_ids: Iterable[int], status: RunStatus, error: str, *, failure: Optional[str] = None) -> None:
+        """End several runs at once (queued runs cancelled, or failed with their experiment: ``failure`` why)."""
         ids = list(run_ids)
         if not ids:
             return
 
         def write() -> list[dict[str, Any]]:
             with self._sessions.begin() as s:
-                runs = run_store.end_runs(s, ids, status, error)
+                runs = run_store.end_runs(s, ids, status, error, failure=failure)
                 return self._events(runs, {r.experiment_id: True for r in runs})
 
         self._publish(await asyncio.to_thread(write))
@@ -76,6 +87,18 @@ class RunRecorder:
                 if run is None:
                     return None, []
                 return (run, run.experiment), self._events([run], {run.experiment_id: False})
+
+        rows, events = await asyncio.to_thread(write)
+        self._publish(events)
+        return rows
+
+    async def resume(self, run_id: int, why: str) -> tuple[Run, Experiment]:
+        """Queue a run again that ended through nobody's fault (not counted as a retry)."""
+
+        def write() -> tuple[tuple[Run, Experiment], list[dict[str, Any]]]:
+            with self._sessions.begin() as s:
+                run = run_store.resume_run(s, run_id, why)
+                return (run, run.experiment), self._events([run], {run.experiment_id: True})
 
         rows, events = await asyncio.to_thread(write)
         self._publish(events)

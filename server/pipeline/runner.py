@@ -27,6 +27,8 @@ import logging
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+from sqlalchemy.exc import DBAPIError
+
 from ..errors import AgentRefused, AgentUnavailable, FailureKind, RunEnded, RunFailed, TestbedFault
 from ..models import utcnow
 from ..scheduler import Assignment
@@ -45,13 +47,16 @@ class RunEnd:
 
     ``robot_fault``: the robot to avoid when retrying (``error`` only);
     ``whole_experiment``: the experiment's path could not be had, so its
-    queued runs fail too (``failed`` only).
+    queued runs fail too, and ``failure`` why (``failed`` only); ``resume``:
+    nobody's fault (the database went away), queue the run again.
     """
 
     status: RunStatus
     error: str = ""
     robot_fault: Optional[str] = None
     whole_experiment: bool = False
+    failure: Optional[FailureKind] = None
+    resume: bool = False
 
 
 async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Callable[[], bool]) -> RunEnd:
@@ -67,7 +72,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         await _steps(ctx, svc)
         end = RunEnd(RunStatus.COMPLETED)
     except RunFailed as exc:
-        end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment)
+        end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment, failure=exc.kind)
     except AgentRefused as exc:
         end = RunEnd(RunStatus.ERROR, f"robot {robot} refused a command: {exc}", robot_fault=robot)
     except AgentUnavailable as exc:
@@ -78,6 +83,9 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         end = RunEnd(exc.status, str(exc))
     except OSError as exc:
         end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot)
+    except DBAPIError as exc:
+        log.warning("run %d: the database went away: %s", ctx.run_id, exc.orig)
+        end = RunEnd(RunStatus.INTERRUPTED, "the database was unreachable during this run", resume=True)
     except asyncio.CancelledError:
         end = (RunEnd(RunStatus.INTERRUPTED, "the server stopped during this run") if stopping()
                else RunEnd(RunStatus.CANCELLED, "cancelled by its owner"))
@@ -90,6 +98,8 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         await asyncio.shield(svc.recorder.add_messages(ctx.take_messages()))
     except asyncio.CancelledError:
         pass
+    except DBAPIError as exc:
+        log.warning("run %d: the end of its protocol log is lost: %s", ctx.run_id, exc.orig)
     return end
 
 
@@ -97,8 +107,8 @@ async def _steps(ctx: RunContext, svc: RunServices) -> None:
     rec = svc.recorder
     job = await rec.job(ctx.run_id)
     svc.field.claim(ctx.subfields, job.owner_id)
-    await rec.update(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
-                     subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
+    await rec.begin(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
+                    subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
     link = await steps.connect(ctx, svc)
     try:
         await link.request("T,T,Q", ctx.wall(0))  # anchors the agent's clock
@@ -121,7 +131,8 @@ async def _steps(ctx: RunContext, svc: RunServices) -> None:
     # a run that failed on the field (collision, stall, timeout) is measured too: what it drove until
     # then is data; its `collided` is the robot's own verdict, as for completed runs
     try:
-        await steps.analyze(ctx, svc, job, plan, collided=failure is not None and failure.kind is FailureKind.COLLISION)
+        await steps.analyze(ctx, svc, job, plan, collided=failure is not None and failure.kind is FailureKind.COLLISION,
+                            failed=failure is not None)
     except TestbedFault:
         if failure is None:
             raise

@@ -82,10 +82,19 @@ async def _park(ctx: RunContext, svc: RunServices, robot_id: str, k: int) -> Non
 
 
 async def place(ctx: RunContext, link: AgentLink, job: RunJob) -> None:
-    """The gripper puts the robot at the start (facing the goal when the start has no heading)."""
+    """The gripper puts the robot at the start (facing the goal when the start has no heading), moved by the
+    job's seeded jitter if it has one (where the jittered pose is not free, at the start itself)."""
     start = job.start
     if len(start) < 3:
         start = [*start[:2], math.atan2(job.goal[1] - start[1], job.goal[0] - start[0])]
+    pose = compute.jittered(start, job.jitter, job.seed)
+    try:
+        await link.request(encode_place(pose), ctx.wall(30))
+        return
+    except AgentRefused as exc:
+        if pose == start:
+            raise TestbedFault(f"the gripper could not place the robot at the start: {exc.message}") from None
+        ctx.on_line("s", f"the jittered start is not free ({exc.message}); placing at the start itself", None, False)
     try:
         await link.request(encode_place(start), ctx.wall(30))
     except AgentRefused as exc:
@@ -109,6 +118,7 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
     t_sent = (await link.request("T,T,Q", ctx.wall(0))).time or 0.0  # the robot's clock, not ours
     await link.request(encode_path(path), ctx.wall(0))
+    await rec.add_messages(ctx.take_messages())  # the log up to the path, kept even if the server dies now
     t_start: Optional[float] = None
     loop = asyncio.get_running_loop()
     deadline = loop.time() + ctx.wall(timeout_exp)
@@ -126,6 +136,8 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
                 await rec.update(ctx.run_id, t_start=t_start, t_end=link.now())
             raise RunFailed(f"timeout: the robot did not finish within {timeout_exp:.0f} s of experiment time",
                             FailureKind.TIMEOUT)
+        if ctx.messages_due():
+            await rec.add_messages(ctx.take_messages())
         kind = ev.fields[0] if ev.fields else ""
         if kind == "START":
             t_start = ev.time
@@ -152,14 +164,16 @@ async def _collect_poses(svc: RunServices, robot_id: str, t_end: float) -> None:
         await svc.tracker.wait_for_time(robot_id, t_end, svc.settings.tracker_grace_s + 1.0)
 
 
-async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *, collided: bool) -> None:
+async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *, collided: bool,
+                  failed: bool = False) -> None:
     """The run's metrics (docs/metrics.md), in a worker process.
 
     ``collided`` is what the robot itself detected (it stops with
     ``EV,FAIL,COLLISION``); the tracker's view of how close it came is
     ``clearance_min_m``, which can dip below the robot radius by the
     tracker's noise without a contact.  Too few logged poses is the
-    testbed's fault (:class:`TestbedFault`).
+    testbed's fault (:class:`TestbedFault`).  A ``failed`` run also records
+    where it stopped (its last logged pose).
     """
     rec = svc.recorder
     poses, t0, t1 = await rec.driven(ctx.run_id)
@@ -169,5 +183,6 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
     except compute.TooFewPoses as exc:
         raise TestbedFault(f"cannot compute metrics: {exc}") from None
     metrics["collided"] = collided
-    await rec.update(ctx.run_id, metrics=metrics)
+    extra = {"stopped_at": [round(poses[-1][1], 4), round(poses[-1][2], 4)]} if failed and poses else {}
+    await rec.update(ctx.run_id, metrics=metrics, **extra)
 

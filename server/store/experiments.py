@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import hashlib
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -14,8 +14,8 @@ from ..schemas import ExperimentCreate
 from ..status import ACTIVE, TERMINAL, RunStatus, roll_up
 from ..validation import Preflight
 
-__all__ = ["count_queued", "create_experiment", "finish_if_done", "run_seed", "set_error", "store_plan",
-           "store_planning_info"]
+__all__ = ["count_queued", "create_experiment", "finish_if_done", "lock_experiments", "outcome_text", "run_seed", "set_error",
+           "store_plan", "store_planning_info"]
 
 
 def run_seed(experiment_seed: int, mode: str, repetition: int) -> int:
@@ -56,6 +56,7 @@ def create_experiment(
         field=body.field,
         robot_radius=robot_radius,
         planning_margin=planning_margin if body.path is None else 0.0,
+        jitter=body.jitter.model_dump() if body.jitter is not None else None,
     )
     session.add(exp)
     session.flush()
@@ -66,21 +67,61 @@ def create_experiment(
     return exp
 
 
+def lock_experiments(session: Session, *, experiment_ids: Sequence[int] = (),
+                     run_ids: Sequence[int] = ()) -> None:
+    """Lock the experiments (given, or of the given runs) until the transaction ends, before reading their
+    runs: two runs of one experiment ending at once then roll it up one after the other, each seeing the
+    other's end (PostgreSQL's ``FOR UPDATE``; SQLite serialises writers anyway)."""
+    ids = set(experiment_ids)
+    if run_ids:
+        ids |= set(session.scalars(select(Run.experiment_id).where(Run.id.in_(list(run_ids)))))
+    if ids:
+        session.execute(select(Experiment.id).where(Experiment.id.in_(sorted(ids))).order_by(Experiment.id)
+                        .with_for_update())
+
+
 def finish_if_done(exp: Experiment) -> bool:
-    """Update ``exp.status`` from its runs; stamp ``started_at`` / ``finished_at``. True if the status changed."""
+    """Update ``exp.status`` from its runs; stamp ``started_at`` / ``finished_at``; a finished experiment
+    whose runs did not all complete says why in ``error`` (unless it already does). True if the status changed."""
     new = roll_up(r.status for r in exp.runs)
     changed = new != exp.status
     exp.status = new
     if new in TERMINAL and exp.finished_at is None:
         exp.finished_at = utcnow()
+    if new in TERMINAL and new != RunStatus.COMPLETED and not exp.error:
+        exp.error = outcome_text(exp.runs)
     if new in ACTIVE and exp.started_at is None:
         exp.started_at = utcnow()
     return changed
 
 
+def outcome_text(runs: Sequence[Run]) -> str:
+    """What happened to the runs that did not complete, in one line:
+    ``"2 of 4 runs failed: collision at (1.13, 0.67), timeout; 1 error: robot field-2: ..."``."""
+    parts = []
+    for status in (RunStatus.FAILED, RunStatus.ERROR, RunStatus.INTERRUPTED, RunStatus.CANCELLED):
+        these = [r for r in runs if r.status == status]
+        if not these:
+            continue
+        whys = list(dict.fromkeys(_why(r) for r in these))
+        head = (f"{len(these)} of {len(runs)} runs {status}" if status != RunStatus.ERROR
+                else f"{len(these)} of {len(runs)} runs ended in a testbed error")
+        parts.append(f"{head}: {', '.join(whys[:3])}{', ...' if len(whys) > 3 else ''}")
+    return "; ".join(parts)
+
+
+def _why(run: Run) -> str:
+    if run.failure == "collision" and run.stopped_at:
+        return f"collision at ({run.stopped_at[0]:.2f}, {run.stopped_at[1]:.2f})"
+    if run.failure and run.failure not in ("planning", "program"):
+        return run.failure.replace("_", " ")
+    return (run.error or str(run.status)).removeprefix("attempt 1: ")
+
+
 def store_plan(session: Session, *, experiment_id: int, path: list[list[float]], planning_time_s: Optional[float],
                info: dict[str, Any]) -> None:
     """Keep the experiment's planned path (m, m, rad), its planning time (s) and planner info."""
+    lock_experiments(session, experiment_ids=[experiment_id])
     exp = session.get(Experiment, experiment_id)
     exp.planned_path = path
     exp.planning_time_s = planning_time_s

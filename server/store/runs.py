@@ -10,10 +10,10 @@ from sqlalchemy.orm import Session
 
 from ..models import Experiment, Message, Pose, Run, utcnow
 from ..status import ACTIVE, RunStatus
-from .experiments import finish_if_done
+from .experiments import finish_if_done, lock_experiments
 
-__all__ = ["RunJob", "add_messages", "end_runs", "interrupt_active", "load_job", "queued_runs", "requeue_run",
-           "update_run"]
+__all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "resume_run", "interrupt_active", "load_job", "queued_runs", "requeue_interrupted",
+           "requeue_run", "update_run"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,7 @@ class RunJob:
     goal: list[float]
     field: str
     robot_radius: float
+    jitter: Optional[dict[str, float]] = None
 
 
 def load_job(session: Session, run_id: int) -> RunJob:
@@ -38,11 +39,30 @@ def load_job(session: Session, run_id: int) -> RunJob:
     run = session.get(Run, run_id)
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
-                  list(e.goal), e.field, e.robot_radius)
+                  list(e.goal), e.field, e.robot_radius, e.jitter)
+
+
+def resume_run(session: Session, run_id: int, why: str) -> Run:
+    """Queue again a run that ended through nobody's fault (not a retry); its poses stay until it runs."""
+    lock_experiments(session, run_ids=[run_id])
+    run = session.get(Run, run_id)
+    run.status, run.error, run.finished_at = RunStatus.QUEUED, f"resumed: {why}", None
+    finish_if_done(run.experiment)
+    return run
+
+
+def clear_try(session: Session, run_id: int) -> None:
+    """Forget what an earlier, interrupted try of a run left: its poses, metrics and end."""
+    lock_experiments(session, run_ids=[run_id])
+    run = session.get(Run, run_id)
+    run.t_start = run.t_end = None
+    run.metrics, run.failure, run.stopped_at = {}, None, None
+    session.execute(delete(Pose).where(Pose.run_id == run_id))
 
 
 def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
     """Write ``fields`` on the run and roll the experiment's status up; (run, experiment, status changed)."""
+    lock_experiments(session, run_ids=[run_id])
     run = session.get(Run, run_id)
     for k, v in fields.items():
         setattr(run, k, v)
@@ -51,8 +71,12 @@ def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[R
 
 
 def requeue_run(session: Session, run_id: int, error: str) -> Optional[Run]:
-    """Queue a run that hit a testbed fault again, once; its poses go. None if it was retried already."""
+    """Queue a run that hit a testbed fault again, once; its poses go. None if it was retried already.
+    (Asking again for a run already queued changes nothing.)"""
+    lock_experiments(session, run_ids=[run_id])
     run = session.get(Run, run_id)
+    if run.status == RunStatus.QUEUED:
+        return run
     if run.attempt >= 2:
         return None
     run.attempt += 1
@@ -61,20 +85,23 @@ def requeue_run(session: Session, run_id: int, error: str) -> Optional[Run]:
     run.robot_id = None
     run.subfield = None
     run.t_start = run.t_end = None
+    run.failure = run.stopped_at = None
     session.execute(delete(Pose).where(Pose.run_id == run_id))
     finish_if_done(run.experiment)
     return run
 
 
-def end_runs(session: Session, run_ids: Iterable[int], status: RunStatus, error: str) -> list[Run]:
+def end_runs(session: Session, run_ids: Iterable[int], status: RunStatus, error: str, *,
+             failure: Optional[str] = None) -> list[Run]:
     """End the given runs (queued ones: cancelled, failed with their experiment) in one go; returns them."""
     ids = list(run_ids)
     if not ids:
         return []
+    lock_experiments(session, run_ids=ids)
     runs = list(session.scalars(select(Run).where(Run.id.in_(ids))))
     now = utcnow()
     for run in runs:
-        run.status, run.error, run.finished_at = status, error, now
+        run.status, run.error, run.finished_at, run.failure = status, error, now, failure
     for exp in {run.experiment for run in runs}:
         finish_if_done(exp)
     return runs
@@ -110,3 +137,19 @@ def interrupt_active(session: Session, reason: str) -> int:
         else:
             finish_if_done(exp)
     return len(cut)
+
+
+def requeue_interrupted(session: Session) -> int:
+    """Queue again every run a testbed stop interrupted; returns how many.  Its poses stay until it
+    starts again and its messages for good (a record of the try); not counted as a retry: the robot
+    was not at fault."""
+    runs = list(session.scalars(select(Run).where(Run.status == RunStatus.INTERRUPTED)))
+    for run in runs:
+        run.status = RunStatus.QUEUED
+        run.error = "resumed: the testbed stopped during an earlier try"
+        run.finished_at = None
+    for exp in {run.experiment for run in runs}:
+        exp.finished_at = None
+        exp.error = ""
+        finish_if_done(exp)
+    return len(runs)

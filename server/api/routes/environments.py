@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from fastapi import APIRouter, Query
-from sqlalchemy import func, select
+from sqlalchemy import func, or_, select
+
+from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from planners import InvalidEnvironment, parse_environment
 
-from ...access import visible_environments
+from ...access import environment_named, visible_environments
 from ...errors import Conflict, Invalid, NotFound
 from ...models import Environment, User
 from ...schemas import EnvironmentCreate, EnvironmentPublic, Page
@@ -42,25 +44,30 @@ def list_environments(
 
 @router.get("/{name}", response_model=EnvironmentPublic, responses=errors(404))
 def get_environment(name: NamePath, session: SessionDep, user: CurrentUser) -> EnvironmentPublic:
-    """One environment by name."""
-    row = session.execute(
-        select(Environment, User.name).outerjoin(User, Environment.owner_id == User.id)
-        .where(Environment.name == name, visible_environments(user))
-    ).first()
+    """One environment by name: yours, else the built-in one."""
+    row = environment_named(session, user, name)
     if row is None:
         raise NotFound("Environment not found")
-    return _public(*row)
+    return _public(row, session.get(User, row.owner_id).name if row.owner_id is not None else None)
 
 
 @router.post("", response_model=EnvironmentPublic, status_code=201, responses=errors(409, 413))
 def create_environment(body: EnvironmentCreate, session: SessionDep, user: CurrentUser) -> EnvironmentPublic:
-    """Add an environment (validated like an environment file); names are unique."""
+    """Add an environment (validated like an environment file, at most the whole field); your names are
+    unique, and built-in names are taken (409)."""
     try:
         env = parse_environment(body.to_data())
     except InvalidEnvironment as exc:
         raise Invalid(str(exc)) from None
-    if session.scalar(select(Environment).where(Environment.name == env.name)) is not None:
-        raise Conflict(f"Environment {env.name!r} already exists")
+    if env.width > FIELD_SIZE[0] + 1e-9 or env.height > FIELD_SIZE[1] + 1e-9:
+        raise Invalid(f"size: the environment is {env.width:g} x {env.height:g} m; the field is "
+                      f"{FIELD_SIZE[0]:g} x {FIELD_SIZE[1]:g} m (a sub-field {SUBFIELD_SIZE[0]:g} x "
+                      f"{SUBFIELD_SIZE[1]:g} m)")
+    taken = session.scalars(select(Environment).where(
+        Environment.name == env.name, or_(Environment.builtin.is_(True), Environment.owner_id == user.id))).first()
+    if taken is not None:
+        raise Conflict(f"{env.name!r} is the name of a built-in environment" if taken.builtin
+                       else f"you already have an environment named {env.name!r}")
     row = Environment(name=env.name, owner_id=user.id, builtin=False, data=env.to_dict())
     session.add(row)
     session.commit()

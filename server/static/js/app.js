@@ -1,8 +1,9 @@
-// Entry point: token login, hash routing (#/field, #/experiments, #/experiments/ID, #/submit[?program=ID],
-// #/programs),
+// Entry point: token login, hash routing (#/field, #/experiments, #/experiments/ID, #/compare?ids=1,2,
+// #/submit[?program=ID], #/programs),
 // and the shared store that keeps live data.
 
 import { Api, ApiError } from "./api.js";
+import { ComparePage } from "./compare.js";
 import { $, $$, report } from "./dom.js";
 import { ExperimentPage, ExperimentsPage } from "./experiments.js";
 import { FieldPage } from "./live.js";
@@ -11,7 +12,7 @@ import { Store } from "./store.js";
 import { SubmitPage } from "./submit.js";
 
 const TOKEN_KEY = "twb.token";
-const VIEWS = ["login", "field", "experiments", "experiment", "submit", "programs"];
+const VIEWS = ["login", "field", "experiments", "experiment", "compare", "submit", "programs"];
 
 const app = {
   store: null,
@@ -35,7 +36,7 @@ async function whoAmI(token) {
 
 function showView(name) {
   for (const v of VIEWS) $(`#view-${v}`).hidden = v !== name;
-  const navName = name === "experiment" ? "experiments" : name;
+  const navName = name === "experiment" || name === "compare" ? "experiments" : name;
   for (const a of $$("#nav a")) {
     if (a.dataset.view === navName) a.setAttribute("aria-current", "page");
     else a.removeAttribute("aria-current");
@@ -85,6 +86,7 @@ function startSession(token, user) {
     field: new FieldPage(store),
     experiments: new ExperimentsPage(store),
     experiment: new ExperimentPage(store),
+    compare: new ComparePage(store),
     submit: new SubmitPage(store, { onSubmitted: (id) => { location.hash = `#/experiments/${id}`; } }),
     programs: new ProgramsPage(store),
   };
@@ -149,6 +151,13 @@ function route() {
     return;
   }
   pages.experiment.hide();
+  if (parts[0] === "compare") {
+    const ids = (new URLSearchParams(query).get("ids") || "").split(",").filter((x) => /^\d+$/.test(x)).map(Number);
+    showView("compare");
+    document.title = "Compare · Teleworkbench";
+    pages.compare.show(ids);
+    return;
+  }
   if (parts[0] === "experiments") {
     showView("experiments");
     document.title = "Experiments · Teleworkbench";

@@ -1,6 +1,7 @@
-// The experiment list (queued with estimated start, running, finished) and the page of one
-// experiment: facts, the uploaded program's execution and log (programrun.js), planned vs
-// performed paths, sim-vs-twb charts, metrics tables, downloads.
+// The experiment list (queued with estimated start, running, finished; tick finished ones and
+// "Compare selected" opens compare.js) and the page of one experiment: facts, the uploaded program's
+// execution and log (programrun.js), planned vs performed paths (a failed run up to where it stopped,
+// with a ✕), sim-vs-twb charts, metrics tables, downloads.
 
 import { saveBlob } from "./api.js";
 import { barChart, lineChart, speedProfile } from "./charts.js";
@@ -10,6 +11,16 @@ import { ProgramPanel } from "./programrun.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
 const MODE_COLOR = { sim: COLORS.sim, twb: COLORS.twb };
+/** The crash marker: a ✕ where a failed run stopped (its `stopped_at`). */
+export const CRASH_COLOR = "#d81b60";
+const CRASH_SIZE = 0.035; // m, half the ✕'s width
+
+/** Two strokes of a ✕ centred on (x, y), as map paths. */
+function crossPaths(x, y, color = CRASH_COLOR) {
+  const r = CRASH_SIZE;
+  return [[[x - r, y - r], [x + r, y + r]], [[x - r, y + r], [x + r, y - r]]]
+    .map((points) => ({ points, color, width: 3.2 }));
+}
 
 /** What planned the job: a planner, an uploaded program (named when `programs`, id -> program, knows it), or an explicit path. */
 export function plannerName(e, programs = null) {
@@ -32,7 +43,20 @@ async function cancel(store, id) {
 export class ExperimentsPage {
   constructor(store) {
     this.store = store;
+    this.selected = new Set(); // experiment ids ticked for comparison
     store.addEventListener("experiments", () => { if (this.visible) this.render(); });
+    $("#compare-button").addEventListener("click", () => {
+      if (this.selected.size >= 2) location.hash = `#/compare?ids=${[...this.selected].sort((a, b) => a - b).join(",")}`;
+    });
+  }
+
+  updateCompare() {
+    const n = this.selected.size;
+    const button = $("#compare-button");
+    button.disabled = n < 2;
+    button.textContent = n ? `Compare selected (${n})` : "Compare selected";
+    $("#compare-hint").textContent = n >= 2 ? "Outcomes, metric means and their differences side by side."
+      : "Tick two or more experiments to compare them side by side.";
   }
 
   show() {
@@ -51,15 +75,23 @@ export class ExperimentsPage {
     const finished = all.filter((e) => TERMINAL.has(e.status));
     this.table($("#exp-queued"), queued, "Estimated start", (e) => duration(e.estimated_start_s), true);
     this.table($("#exp-running"), running, "Started", (e) => when(e.started_at || e.created_at), true);
-    this.table($("#exp-finished"), finished, "Finished", (e) => when(e.finished_at), false);
+    for (const id of [...this.selected]) if (!finished.some((e) => e.id === id)) this.selected.delete(id);
+    this.table($("#exp-finished"), finished, "Finished", (e) => when(e.finished_at), false, true);
+    this.updateCompare();
     const more = this.store.experimentCount - all.length;
     $("#exp-more").textContent = more > 0 ? `The ${all.length} newest of ${this.store.experimentCount} experiments are listed.` : "";
   }
 
-  table(el, rows, lastTitle, last, cancellable) {
-    const head = h("thead", {}, h("tr", {}, ["ID", "Status", "Environment", "Planner", "Modes", "Reps", "Field", "Owner", "Submitted", lastTitle, ""]
+  table(el, rows, lastTitle, last, cancellable, selectable = false) {
+    const head = h("thead", {}, h("tr", {}, [...(selectable ? ["Compare"] : []), "ID", "Status", "Environment", "Planner", "Modes", "Reps", "Field", "Owner", "Submitted", lastTitle, ""]
       .map((t) => h("th", { scope: "col" }, t))));
+    const pick = (e) => h("td", {}, h("input", { type: "checkbox", class: "compare-pick", checked: this.selected.has(e.id),
+      "aria-label": `Compare experiment ${e.id}`, onchange: (ev) => {
+        if (ev.target.checked) this.selected.add(e.id); else this.selected.delete(e.id);
+        this.updateCompare();
+      } }));
     const body = h("tbody", {}, rows.length ? rows.map((e) => h("tr", { dataset: { experiment: e.id } },
+      selectable ? pick(e) : null,
       h("td", {}, h("a", { href: `#/experiments/${e.id}` }, `#${e.id}`)),
       h("td", {}, badge(e.status)),
       h("td", {}, e.environment),
@@ -72,7 +104,7 @@ export class ExperimentsPage {
       h("td", {}, last(e)),
       h("td", {}, cancellable ? h("button", { type: "button", class: "small", onclick: () => cancel(this.store, e.id),
         "aria-label": `Cancel experiment ${e.id}` }, "Cancel") : (e.error ? h("span", { class: "muted small", title: e.error }, e.error.slice(0, 60)) : "")),
-    )) : h("tr", { class: "empty-row" }, h("td", { colspan: 11 }, "None")));
+    )) : h("tr", { class: "empty-row" }, h("td", { colspan: selectable ? 12 : 11 }, "None")));
     el.replaceChildren(head, body);
   }
 }
@@ -223,7 +255,7 @@ export class ExperimentPage {
     }
     this.drawMap();
     this.renderRuns(d, m);
-    this.renderAggregates(m);
+    this.renderAggregates(m, d);
     this.renderDirect(m);
     this.renderCharts(d, m);
     this.renderDownloads(d);
@@ -235,7 +267,8 @@ export class ExperimentPage {
 
   renderLegend() {
     const items = [{ key: "planned", label: "planned", cls: "planned" },
-      ...this.runs().map((r) => ({ key: `run-${r.id}`, label: `${r.mode} #${r.repetition} (run ${r.id})`, cls: r.mode }))];
+      ...this.runs().map((r) => ({ key: `run-${r.id}`, cls: r.mode,
+        label: `${r.mode} #${r.repetition} (run ${r.id})${r.status === "failed" ? ` ✕ ${r.failure || "failed"}` : ""}` }))];
     this.els.legend.replaceChildren(...items.map((it) => h("label", { class: "check" },
       h("input", { type: "checkbox", checked: !this.hidden.has(it.key), onchange: (ev) => {
         if (ev.target.checked) this.hidden.delete(it.key); else this.hidden.add(it.key);
@@ -256,9 +289,16 @@ export class ExperimentPage {
       const pts = logged ? logged.map((p) => [p[1], p[2]]) : this.live.get(r.id);
       if (pts) paths.push({ points: pts, color: MODE_COLOR[r.mode] || "#555", width: 1.8, alpha: runs.length > 4 ? 0.6 : 0.9 });
     }
+    // failed runs: a ✕ where each stopped, drawn over the paths
+    const crashes = runs.filter((r) => r.status === "failed" && !this.hidden.has(`run-${r.id}`)).flatMap((r) => {
+      const logged = this.poses.get(r.id);
+      const at = r.stopped_at || (logged && logged.length ? [logged[logged.length - 1][1], logged[logged.length - 1][2]] : null);
+      return at ? crossPaths(at[0], at[1]) : [];
+    });
     if (d.planned_path && !this.hidden.has("planned")) {
       paths.push({ points: d.planned_path.map((p) => [p[0], p[1]]), color: COLORS.planned, width: 2.2, dash: [7, 5] });
     }
+    paths.push(...crashes);
     this.map.update({
       blocks: env ? env.blocks : [],
       paths,
@@ -274,7 +314,8 @@ export class ExperimentPage {
       const mt = r.metrics || {};
       return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
         h("td", {}, r.id), h("td", {}, r.mode), h("td", { class: "num" }, r.repetition), h("td", {}, badge(r.status),
-          r.error ? h("div", { class: "muted small" }, r.error) : ""),
+          r.error ? h("div", { class: "muted small" }, r.error) : "",
+          r.stopped_at ? h("div", { class: "muted small stopped" }, `✕ stopped at ${pose(r.stopped_at)}`) : ""),
         h("td", {}, r.robot_id || "–"), h("td", {}, r.subfield ?? "–"),
         ...RUN_COLUMNS.map(([k]) => h("td", { class: "num", dataset: { metric: k } }, num(mt[k]))),
         h("td", {}, r.t_start == null ? "–" : h("span", { class: "downloads" },
@@ -289,7 +330,7 @@ export class ExperimentPage {
     this.els.runs.replaceChildren(head, h("tbody", {}, rows));
   }
 
-  renderAggregates(m) {
+  renderAggregates(m, d) {
     const modes = Object.keys(m.aggregates || {});
     if (!modes.length) {
       this.els.aggregates.replaceChildren(h("tbody", {}, h("tr", { class: "empty-row" }, h("td", {}, "No completed runs yet."))));
@@ -302,8 +343,11 @@ export class ExperimentPage {
     const body = h("tbody", {}, keys.map((k) => h("tr", { dataset: { metric: k } }, h("th", { scope: "row" }, k),
       ...modes.flatMap((md) => {
         const a = m.aggregates[md].metrics[k] || {};
+        // identical repetitions (the deterministic simulation): a zero-width interval would be a fake certainty
+        const same = a.n >= 2 && a.std === 0;
         return [h("td", { class: "num" }, `${num(a.mean)} ± ${num(a.std)}`),
-          h("td", { class: "num" }, a.ci_low == null ? "–" : `[${num(a.ci_low)}, ${num(a.ci_high)}]`),
+          h("td", { class: "num" }, same ? (md === "sim" && !d.jitter ? "identical repetitions (deterministic simulation)" : "all equal: no interval")
+            : a.ci_low == null ? "–" : `[${num(a.ci_low)}, ${num(a.ci_high)}]`),
           h("td", { class: "num" }, a.n ?? "–")];
       }))));
     this.els.aggregates.replaceChildren(head, body);
@@ -324,7 +368,9 @@ export class ExperimentPage {
     const done = (m.runs || []).filter((r) => r.status === "completed");
     const charts = CHARTS.map(([key, title, unit, withRef]) => {
       const groups = modes.map((md) => ({
-        label: md, color: MODE_COLOR[md],
+        // a mode whose runs all failed says so instead of showing an empty slot
+        label: done.some((r) => r.mode === md) || !d.runs.some((r) => r.mode === md) ? md : `${md}: none completed`,
+        color: MODE_COLOR[md],
         values: done.filter((r) => r.mode === md).map((r) => r.metrics[key]).filter((v) => typeof v === "number"),
         agg: m.aggregates?.[md]?.metrics?.[key] || null,
       }));

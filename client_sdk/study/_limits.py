@@ -1,0 +1,118 @@
+"""What a study asks of the testbed, checked before anything is submitted.
+
+:func:`check_study` compares a study with what the server offers and allows:
+
+- planners (``GET /api/v1/planners``: names and parameters);
+- environments (given by name: they must exist; given as files: they are created);
+- the server's limits, where it states them (``GET /api/v1/limits``:
+  ``max_repetitions``, ``max_queued_per_user``; a server without that endpoint
+  states them only when it refuses a job, and :func:`refusal` reads that answer).
+
+It returns every problem at once, so a study is fixed in one go.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any, Optional
+
+from .._base import API_PREFIX, Call
+from .._client import Client
+from .._exceptions import ApiError, NotFound
+from ._spec import StudySpec, StudySpecError
+
+__all__ = ["StudyRefused", "check_study", "refusal", "server_limits"]
+
+
+class StudyRefused(StudySpecError):
+    """The testbed cannot run the study as it is; ``reasons`` lists why, one sentence each."""
+
+    def __init__(self, reasons: list[str]) -> None:
+        super().__init__("study refused: " + "; ".join(reasons))
+        self.reasons = list(reasons)
+
+
+def _json(response: Any) -> Any:
+    return response.json()
+
+
+def server_limits(client: Client) -> dict[str, int]:
+    """The limits the server states (``GET /api/v1/limits``), or ``{}`` when it has no such endpoint."""
+    try:
+        data = client._send(Call("GET", f"{API_PREFIX}/limits", _json))
+    except NotFound:
+        return {}
+    return {k: int(v) for k, v in (data or {}).items() if isinstance(v, int) and not isinstance(v, bool)}
+
+
+def _planners(client: Client) -> dict[str, Optional[dict[str, Any]]]:
+    """Planner name -> its parameter defaults (None: it takes any parameters)."""
+    page = client._send(Call("GET", f"{API_PREFIX}/planners", _json))
+    return {p["name"]: p.get("defaults") for p in page.get("data", [])}
+
+
+def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, int]] = None) -> list[str]:
+    """Every reason the testbed behind ``client`` would refuse ``spec`` (empty: none found).
+
+    Checks planners and their parameter names, environments given by name,
+    and, where the server states them (``limits``, default
+    :func:`server_limits`), the repetitions and the queue quota (the study's
+    experiments plus the user's queued ones).
+    """
+    reasons: list[str] = []
+    offered = _planners(client)
+    for p in spec.planners:
+        if p.waypoints is not None:
+            continue
+        if p.name not in offered:
+            reasons.append(f"planner {p.name!r} is not offered by this testbed (it offers {', '.join(sorted(offered))})")
+            continue
+        defaults = offered[p.name]
+        unknown = sorted(set(p.params) - set(defaults)) if defaults is not None else []
+        if unknown:
+            reasons.append(f"planner {p.name!r} has no parameter(s) {', '.join(unknown)} "
+                           f"(its parameters: {', '.join(sorted(defaults or {})) or 'none'})")
+    experiments = 0
+    for e in spec.environments:
+        plans = len(e.get("plans", [])) if isinstance(e, dict) else 0
+        if isinstance(e, str):
+            try:
+                plans = len(client.get_environment(e).plans)
+            except NotFound:
+                reasons.append(f"unknown environment {e!r}: create it first or give its file in the study's "
+                               "`environments`")
+        experiments += len(spec.planners) * (len(spec.plans) if spec.plans is not None else plans)
+    lim = server_limits(client) if limits is None else limits
+    max_reps = lim.get("max_repetitions")
+    if max_reps is not None and spec.repetitions > max_reps:
+        reasons.append(f"repetitions {spec.repetitions}: the testbed allows at most {max_reps} per experiment")
+    quota = lim.get("max_queued_per_user")
+    if quota is not None:
+        queued = client.list_experiments(status="queued", limit=1).count
+        if queued + experiments > quota:
+            reasons.append(f"the study queues {experiments} experiments and you already have {queued} queued: the "
+                           f"testbed allows {quota} queued per user; split the study")
+    return reasons
+
+
+_REPS = re.compile(r"repetitions must be at most (\d+)")
+
+
+def refusal(exc: ApiError, spec: StudySpec, submitted: int, total: int) -> Optional[str]:
+    """The sentence for a refused submission that dooms the whole study, or None for one job's own problem.
+
+    Study-wide: too many repetitions (422 ``repetitions must be at most N``)
+    and the queue quota (429).  Anything else (a start inside an obstacle,
+    say) concerns one job, which is recorded as rejected while the others go on.
+    """
+    detail = exc.detail if isinstance(exc.detail, str) else str(exc)
+    if exc.status == 422:
+        m = _REPS.search(detail)
+        if m:
+            return (f"repetitions {spec.repetitions}: the testbed allows at most {m.group(1)} per experiment "
+                    f"({detail})")
+        return None
+    if exc.status == 429:
+        return (f"the testbed refused experiment {submitted + 1} of {total}: {detail}; split the study, wait for "
+                "your queued experiments, or ask the operator to raise TWB_MAX_QUEUED_PER_USER")
+    return None

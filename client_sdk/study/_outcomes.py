@@ -1,0 +1,176 @@
+"""How the runs of each configuration x mode ended: outcome counts and the success rate with its Wilson interval.
+
+Outcomes of a run (``runs.csv``'s ``outcome``): ``success`` (completed), why a
+failed run failed (``collision``, ``timeout``, ``controller_timeout``,
+``stalled``, ``planning``, ``program``, ``other``), or the testbed's
+``error``, ``cancelled``, ``interrupted``.  The success rate counts the runs
+that ended in the job's own outcomes (success or a failure); a testbed error is
+not the planner's and is left out, as the server does.
+
+Identical repetitions: the ideal simulation is deterministic, so without
+start-pose jitter every repetition of a problem is the same run again.  A group
+(configuration, mode, problem) whose counted runs all ended the same way with
+bit-identical metrics counts **once** in the rate's interval and in the
+comparisons: five copies of one observation are one observation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Iterable, Optional
+
+from ._data import StudyData
+
+__all__ = ["COUNTED", "IDENTITY_METRICS", "NOT_COUNTED", "OutcomeSummary", "distinct_runs", "outcome_table"]
+
+#: outcomes that are not the job's own (not counted in the success rate)
+NOT_COUNTED = ("error", "cancelled", "interrupted", "pending")
+#: the outcome columns of the tables: success, the two common failures, everything else
+COUNTED = ("success", "collision", "timeout", "other")
+#: metrics compared to decide that repetitions are identical
+IDENTITY_METRICS = ("length_m", "execution_time_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m")
+
+
+def _proportion(k: int, n: int) -> dict[str, Any]:
+    from planners.stats import proportion
+
+    return proportion(k, n)
+
+
+def counted(row: dict[str, Any]) -> bool:
+    """The run ended in the job's own outcome (success or a failure), not a testbed fault."""
+    return row.get("outcome") not in NOT_COUNTED
+
+
+def _same(values: list[Any]) -> bool:
+    """All None, or all numbers equal up to rounding (1e-9 relative: times are differences of clock readings)."""
+    if all(v is None for v in values):
+        return True
+    if any(not isinstance(v, (int, float)) or isinstance(v, bool) for v in values):
+        return len(set(values)) == 1
+    hi = max(abs(v) for v in values)
+    return max(values) - min(values) <= 1e-9 * max(1.0, hi)
+
+
+def identical_repetitions(rows: list[dict[str, Any]]) -> bool:
+    """At least two counted runs, all with the same outcome and the same metrics (up to rounding)."""
+    mine = [r for r in rows if counted(r)]
+    return (len(mine) >= 2 and len({r.get("outcome") for r in mine}) == 1
+            and all(_same([r.get(k) for r in mine]) for k in IDENTITY_METRICS))
+
+
+def distinct_runs(rows: Iterable[dict[str, Any]]) -> tuple[list[dict[str, Any]], bool]:
+    """The counted runs with identical repetitions of one problem kept once; and whether any were merged.
+
+    ``rows`` are one configuration's runs in one mode; problems are
+    (environment, plan).
+    """
+    by_problem: dict[tuple, list[dict[str, Any]]] = {}
+    for r in rows:
+        if counted(r):
+            by_problem.setdefault((r.get("environment"), r.get("plan")), []).append(r)
+    out, merged = [], False
+    for group in by_problem.values():
+        if identical_repetitions(group):
+            out.append(group[0])
+            merged = True
+        else:
+            out.extend(group)
+    return out, merged
+
+
+@dataclass(frozen=True)
+class OutcomeSummary:
+    """How the runs of one configuration in one mode ended.
+
+    ``counts``: runs per outcome (every outcome that occurred); ``runs``: runs
+    the testbed created; ``not_submitted``: runs of jobs it refused;
+    ``success``: :func:`planners.stats.proportion` of successes over the
+    counted runs (``n``, ``k``, ``rate``, ``ci_low``, ``ci_high``: a Wilson 95%
+    interval) — over the *distinct* runs when repetitions were identical
+    (``identical``), so the interval is not narrowed by copies.
+    """
+
+    configuration: str
+    mode: str
+    runs: int
+    not_submitted: int
+    counts: dict[str, int]
+    success: dict[str, Any]
+    identical: bool = False
+
+    @property
+    def counted(self) -> int:
+        """Runs that ended in the job's own outcome (success or a failure)."""
+        return sum(n for o, n in self.counts.items() if o not in NOT_COUNTED)
+
+    @property
+    def successes(self) -> int:
+        return self.counts.get("success", 0)
+
+    def count(self, column: str) -> int:
+        """Runs in one of :data:`COUNTED`'s columns (``other``: every failure but collision and timeout)."""
+        if column == "other":
+            return sum(n for o, n in self.counts.items() if o not in NOT_COUNTED + ("success", "collision", "timeout"))
+        return self.counts.get(column, 0)
+
+    @property
+    def other_detail(self) -> str:
+        """The failures in the ``other`` column by name, e.g. ``stalled 1, planning 1``."""
+        return ", ".join(f"{o} {n}" for o, n in sorted(self.counts.items())
+                         if o not in NOT_COUNTED + ("success", "collision", "timeout"))
+
+    @property
+    def not_counted(self) -> int:
+        """Runs not counted in the rate: testbed errors, cancelled, interrupted, and jobs refused."""
+        return sum(n for o, n in self.counts.items() if o in NOT_COUNTED) + self.not_submitted
+
+    def rate_text(self, percent: bool = True) -> str:
+        """``5/5 (95% CI 57–100 %)``, or ``no counted run``."""
+        s = self.success
+        if not self.counted:
+            return "no counted run"
+        k, n = self.successes, self.counted
+        if s.get("rate") is None:
+            return f"{k}/{n}"
+        ci = f"{100 * s['ci_low']:.0f}–{100 * s['ci_high']:.0f} %"
+        extra = f"; identical repetitions counted once: {s['k']}/{s['n']}" if self.identical else ""
+        return f"{k}/{n} (95% CI {ci}{extra})"
+
+    def row(self) -> dict[str, Any]:
+        """One row of ``outcomes.csv``."""
+        s = self.success
+        return {"configuration": self.configuration, "mode": self.mode, "runs": self.runs,
+                "not_submitted": self.not_submitted, "counted": self.counted, "success": self.successes,
+                "collision": self.count("collision"), "timeout": self.count("timeout"),
+                "other": self.count("other"), "other_detail": self.other_detail,
+                "testbed_error": self.counts.get("error", 0), "cancelled": self.counts.get("cancelled", 0),
+                "interrupted": self.counts.get("interrupted", 0), "success_rate": s.get("rate"),
+                "ci_low": s.get("ci_low"), "ci_high": s.get("ci_high"), "identical_repetitions": self.identical,
+                "distinct_runs": s.get("n")}
+
+
+def outcome_table(data: StudyData, modes: Optional[Iterable[str]] = None) -> list[OutcomeSummary]:
+    """One :class:`OutcomeSummary` per configuration x mode, in study order; a configuration whose jobs were all
+    refused still appears (every run ``not_submitted``)."""
+    modes = list(modes) if modes is not None else data.modes
+    out = []
+    for c in data.configurations:
+        for m in modes:
+            rows = [r for r in data.rows if r["configuration"] == c and r["mode"] == m]
+            counts: dict[str, int] = {}
+            for r in rows:
+                counts[r["outcome"]] = counts.get(r["outcome"], 0) + 1
+            refused = sum(e.get("repetitions", data.spec.repetitions) for e in data.experiments
+                          if e["configuration"] == c and e["status"] == "rejected" and m in e.get("modes", [m]))
+            distinct, merged = distinct_runs(rows)
+            k = sum(r["outcome"] == "success" for r in distinct)
+            out.append(OutcomeSummary(c, m, len(rows), refused, dict(sorted(counts.items(), key=_order)),
+                                      _proportion(k, len(distinct)), merged))
+    return out
+
+
+def _order(item: tuple[str, int]) -> tuple[int, str]:
+    o = item[0]
+    rank = {"success": 0, "collision": 1, "timeout": 2}.get(o, 4 if o in NOT_COUNTED else 3)
+    return rank, o

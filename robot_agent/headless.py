@@ -1,0 +1,83 @@
+"""One robot's run as a function call: build, place, follow a path to its end, with no socket and no clock.
+
+The agent's own simulation core (:class:`~robot_agent.sim.SimCore`) stepped as fast as it goes, in a
+world of its own, exactly as an agent's simulation-pool robot would run it: the path, the placement and
+the blocks go through the wire codec's rounding (0.01 mm, 0.01 deg) as they would over TCP, the noise
+key comes from the run's seed, and the tracker log is the core's.  So a run here gives the same poses
+and events as the same run sent to an agent (times counted from the path's start).  The testbed's
+simulation pool on Ray runs this (:mod:`server.pipeline.compute`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .backends import make_backend
+from .frames import FIELD_SIZE, field_layout
+from .noise import path_key
+from .params import robot_params
+from .protocol import BuildCommand, PathCommand, PlaceCommand, encode_build, encode_path, encode_place, parse_command
+from .robot_profile import DEFAULT_PROFILE
+from .sim import SimCore, SimEvent
+from .world import World
+
+__all__ = ["HeadlessRun", "simulate_run"]
+
+_CHUNK = 4096  # control steps per compiled call
+
+
+@dataclass
+class HeadlessRun:
+    """What one run gave: tracker ``poses`` ``(N, 4)`` (t s, x m, y m, theta rad; the robot's frame),
+    its ``events`` in order, and the experiment times (s) of its start and end (None if none)."""
+
+    poses: np.ndarray
+    events: list[SimEvent] = field(default_factory=list)
+    t_start: float | None = None
+    t_end: float | None = None
+
+    @property
+    def outcome(self) -> str:
+        """``DONE``, the ``FAIL`` reason (``COLLISION`` ...), or ``TIMEOUT_SIM`` when ``max_s`` ran out first."""
+        last = self.events[-1] if self.events else None
+        if last is not None and last.kind == "DONE":
+            return "DONE"
+        if last is not None and last.kind == "FAIL":
+            return str(last.reason)
+        return "TIMEOUT_SIM"
+
+
+def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[float], *, seed: int,
+                 blocks: Sequence[Sequence[float]] = (), backend: str = "ideal",
+                 profile: str | dict = DEFAULT_PROFILE, area: tuple[float, float] = FIELD_SIZE,
+                 max_s: float = 3600.0) -> HeadlessRun:
+    """Run ``path`` ``(N, 3)`` (m, m, rad) from ``start`` (x, y, theta) among ``blocks`` (cx, cy, w, h,
+    angle: m, rad) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
+    ``max_s`` of experiment time passed."""
+    params = robot_params(profile)
+    sizes, world_of, origin, areas = field_layout(1, "separate", area)
+    world = World(sizes, world_of, origin, areas, params.collision_radius_m)
+    core = SimCore(params, make_backend(backend, 1, params), world, log_poses=True)
+    size = (float(areas[0][0]), float(areas[0][1]))
+    built = parse_command(encode_build(blocks), field_size=size)
+    placed = parse_command(encode_place(start), field_size=size)
+    sent = parse_command(encode_path(path), field_size=size)
+    assert isinstance(built, BuildCommand) and isinstance(placed, PlaceCommand) and isinstance(sent, PathCommand)
+    world.set_blocks(0, built.blocks)
+    core.place(0, placed.pose)
+    core.poses.drain()
+    core.set_path(0, sent.points, path_key(seed))
+    events: list[SimEvent] = []
+    left = math.ceil(max_s / core.dt)
+    while left > 0 and core.busy():
+        n = min(_CHUNK, left)
+        events += core.advance(n)
+        left -= n
+    poses = core.poses.drain().get(0, np.zeros((0, 4)))
+    t_start = next((e.t for e in events if e.kind == "START"), None)
+    t_end = next((e.t for e in events if e.kind in ("DONE", "FAIL")), None)
+    return HeadlessRun(poses, events, t_start, t_end)

@@ -1,0 +1,283 @@
+"""Outcomes, comparisons and the answer in words on synthetic study data (no server): pairing, identical
+repetitions, Holm's families, the words, the limits a study is checked against."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import httpx
+import numpy as np
+import pytest
+
+from client_sdk import Client
+from client_sdk.study import (
+    COMPARED_METRICS,
+    StudyData,
+    StudyRefused,
+    StudySpec,
+    StudySpecError,
+    check_study,
+    run_study,
+    which_is_better,
+)
+from client_sdk.study._compare import COMPARISON_COLUMNS
+
+
+def study(rows: list[dict], configs=("fm2", "fmm"), modes=("sim", "twb"), reps=5, problems=(("room", "A"),),
+          rejected=()) -> StudyData:
+    """A StudyData with one experiment per problem x configuration, holding the given run rows."""
+    spec = StudySpec.from_json({"name": "synthetic", "environments": sorted({p[0] for p in problems}),
+                                "planners": list(configs), "repetitions": reps, "modes": list(modes)})
+    experiments, eid = [], 0
+    for env, plan in problems:
+        for c in configs:
+            eid += 1
+            mine = [r for r in rows if (r["environment"], r["plan"], r["configuration"]) == (env, plan, c)]
+            for r in mine:
+                r["experiment_id"] = eid
+            status = "rejected" if (env, plan, c) in rejected else "completed"
+            experiments.append({"experiment_id": eid if status != "rejected" else None, "environment": env,
+                                "plan": plan, "planner": c, "configuration": c, "planner_params": {}, "start": [0, 0],
+                                "goal": [1, 1], "status": status, "error": "", "planned_path": None,
+                                "planning_time_s": None, "runs": [r["run_id"] for r in mine],
+                                "repetitions": reps, "modes": list(modes)})
+    return StudyData(spec, {}, experiments, rows, [])
+
+
+def run(config, mode, rep, *, outcome="success", length=None, problem=("room", "A"), run_id=None, **metrics) -> dict:
+    status = {"success": "completed", "error": "error", "cancelled": "cancelled"}.get(outcome, "failed")
+    row = {"run_id": run_id or hash((config, mode, rep, problem)) % 10**6, "environment": problem[0],
+           "plan": problem[1], "planner": config, "configuration": config, "mode": mode, "repetition": rep,
+           "status": status, "outcome": outcome, "failure": None if status != "failed" else outcome,
+           "length_m": length, **metrics}
+    return row
+
+
+def test_a_planner_that_only_fails_on_the_field():
+    rng = np.random.default_rng(1)
+    rows = []
+    for rep in range(1, 6):
+        for c, base in (("fm2", 2.0), ("corner", 1.8)):
+            rows.append(run(c, "sim", rep, length=base + rng.normal(0, 0.01)))
+            rows.append(run(c, "twb", rep, length=base * 1.1 + rng.normal(0, 0.02)) if c == "fm2" else
+                        run(c, "twb", rep, outcome="collision", length=0.4 + rng.normal(0, 0.01)))
+    data = study(rows, configs=("fm2", "corner"))
+    outs = {(o.configuration, o.mode): o for o in data.outcomes()}
+    o = outs["corner", "twb"]
+    assert o.counts == {"collision": 5} and o.successes == 0 and o.counted == 5
+    assert o.success["rate"] == 0 and o.success["ci_high"] == pytest.approx(0.4345, abs=1e-4)  # Wilson, 0/5
+    assert o.rate_text() == "0/5 (95% CI 0–43 %)"
+    comps = data.compare()
+    assert [c.metric for c in comps[:2]] == ["success_rate", "success_rate"]
+    rate = comps.get("success_rate", "twb", "fm2", "corner")
+    assert rate.result.test == "fisher-exact" and round(rate.pvalue, 4) == 0.0079
+    assert rate.family_size == 2 and rate.pvalue_holm == pytest.approx(2 * 2 / 252)  # Holm over sim and twb
+    assert rate.difference == 1.0 and rate.confidence_interval().low > 0 and rate.better() == "fm2"
+    # the failed field runs' metrics are kept (runs.csv) but not compared: no completed run
+    length = comps.get("length_m", "twb", "fm2", "corner")
+    assert length.result.n_b == 0 and not length.tested and length.note == "no completed run of corner"
+    assert comps.get("length_m", "sim", "fm2", "corner").result.paired  # same problems and repetitions
+    rows_out = comps.rows()
+    assert list(rows_out[0])[:14] == ["metric", "mode", "a", "b", "n_a", "n_b", "mean_a", "mean_b", "diff", "ci_low",
+                                      "ci_high", "test", "p", "p_holm"]
+    assert list(COMPARISON_COLUMNS[:14]) == list(rows_out[0])[:14]
+    answers = which_is_better(data, comps)
+    assert [a.mode for a in answers] == ["twb", "sim"]  # the field first
+    field = answers[0]
+    assert field.verdicts == ["FM² is better than corner on the field: it reached the goal significantly more often."]
+    text = " ".join(field.facts)
+    assert "corner reached the goal in 0 of 5 runs (95% CI 0–43 %); collided 5 times." in text
+    assert "5/5 vs 0/5" in text and "Fisher's exact p = 0.0079" in text and "Holm-adjusted p = 0.016" in text
+
+
+def test_identical_repetitions_count_once_and_get_no_fake_interval():
+    rows = []
+    for rep in range(1, 6):  # the deterministic simulation: five copies of one run each
+        rows.append(run("fm2", "sim", rep, length=2.268, execution_time_s=11.96 + rep * 1e-13))
+        rows.append(run("fmm", "sim", rep, length=2.31, execution_time_s=11.2))
+    data = study(rows, modes=("sim",))
+    o = data.outcomes()[0]
+    assert o.identical and o.counts == {"success": 5} and o.success["n"] == 1  # one distinct run
+    assert "identical repetitions counted once: 1/1" in o.rate_text()
+    c = data.compare().get("length_m", "sim", "fm2", "fmm")
+    assert c.difference == pytest.approx(2.268 - 2.31)
+    assert not c.tested and math.isnan(c.pvalue_holm) and all(math.isnan(v) for v in c.confidence_interval())
+    assert c.note.startswith("identical repetitions (deterministic simulation): counted once per problem")
+    assert "no interval or test" in c.note
+    row = c.row()
+    assert row["ci_low"] != row["ci_low"] and row["p"] != row["p"]  # NaN: empty cells in comparisons.csv
+    words = " ".join(which_is_better(data)[0].facts)
+    assert "identical repetitions (deterministic simulation)" in words
+
+
+def test_unpaired_when_a_job_was_refused_and_means_are_over_completed_runs():
+    rng = np.random.default_rng(4)
+    rows = []
+    for prob in (("room", "A"), ("room", "B")):
+        for rep in range(1, 4):
+            rows.append(run("fm2", "twb", rep, problem=prob, length=2 + rng.normal(0, 0.05)))
+            if prob == ("room", "A"):
+                rows.append(run("prm", "twb", rep, problem=prob, length=2.3 + rng.normal(0, 0.05)))
+    data = study(rows, configs=("fm2", "prm"), modes=("twb",), reps=3, problems=(("room", "A"), ("room", "B")),
+                 rejected={("room", "B", "prm")})
+    prm = [o for o in data.outcomes() if o.configuration == "prm"][0]
+    assert prm.not_submitted == 3 and prm.not_counted == 3 and prm.counted == 3
+    c = data.compare().get("length_m", "twb", "fm2", "prm")
+    assert not c.result.paired and (c.result.n_a, c.result.n_b) == (6, 3)
+    assert c.result.test == "welch-t" and c.tested
+
+
+def test_testbed_errors_are_not_the_planners():
+    rows = [run("fm2", "twb", 1, length=2.0), run("fm2", "twb", 2, outcome="error"),
+            run("fmm", "twb", 1, length=2.1), run("fmm", "twb", 2, outcome="stalled", length=0.5)]
+    data = study(rows, modes=("twb",), reps=2)
+    fm2, fmm = data.outcomes()
+    assert fm2.counted == 1 and fm2.not_counted == 1 and fm2.success["n"] == 1
+    assert fmm.count("other") == 1 and fmm.other_detail == "stalled 1"
+    rate = data.compare().get("success_rate", "twb", "fm2", "fmm")
+    assert (rate.result.k_a, rate.result.n_a, rate.result.k_b, rate.result.n_b) == (1, 1, 1, 2)
+
+
+def test_holm_families_per_metric_or_all():
+    rng = np.random.default_rng(9)
+    rows = []
+    for rep in range(1, 9):
+        for c, shift in (("a", 0.0), ("b", 0.05), ("c", 0.3)):
+            rows.append(run(c, "twb", rep, length=2 + shift + rng.normal(0, 0.1),
+                            execution_time_s=10 + 3 * shift + rng.normal(0, 0.5)))
+    data = study(rows, configs=("a", "b", "c"), modes=("twb",), reps=8)
+    per_metric = data.compare(["length_m", "execution_time_s"], n_resamples=999)
+    everything = data.compare(["length_m", "execution_time_s"], family="all", n_resamples=999)
+    lengths = [c for c in per_metric if c.metric == "length_m"]
+    assert {c.family_size for c in lengths} == {3}  # three pairs
+    from planners.stats import holm
+
+    assert [c.pvalue_holm for c in lengths] == pytest.approx(holm([c.pvalue for c in lengths]).tolist())
+    assert {c.family_size for c in everything if c.tested} == {9}  # 3 success rates + 3 x 2 metrics
+    assert all(e.pvalue_holm >= m.pvalue_holm - 1e-15 for e, m in zip(everything, per_metric) if e.tested)
+    with pytest.raises(ValueError, match="`family` must be"):
+        data.compare(family="everything")
+
+
+def test_compare_defaults_and_result_objects():
+    rng = np.random.default_rng(2)
+    rows = [run(c, "twb", rep, length=2 + (c == "b") * 0.2 + rng.normal(0, 0.05))
+            for rep in range(1, 7) for c in ("a", "b")]
+    comps = study(rows, configs=("a", "b"), modes=("twb",), reps=6).compare()
+    assert [c.metric for c in comps] == ["success_rate", *COMPARED_METRICS]
+    c = comps.get("length_m", "twb", "b", "a")  # either order finds it
+    assert c.a == "a" and c.b == "b" and c.difference < 0 and c.better() == "a"  # shorter is better
+    assert c.significant() and c in comps.significant()
+    low, high = c.confidence_interval()
+    assert low < c.difference < high and c.confidence_interval(0.8).low > low
+    assert c.statistic == c.result.statistic and c.result.effect == "cohen-dz"
+
+
+# ----------------------------------------------------------------------------- limits, with a fake server
+
+
+def fake_server(*, limits=None, refuse_at=None, refusal=(429, "you already have 3 queued experiments (limit 3)")):
+    """A MockTransport testbed: planners fmm/fm2, environment room (plan A); submissions numbered from 1."""
+    seen = {"submitted": [], "cancelled": []}
+
+    def handler(request: httpx.Request) -> httpx.Response:
+        path = request.url.path
+        if path == "/api/v1/planners":
+            return httpx.Response(200, json={"data": [{"name": "fmm", "defaults": {"speed": 1}},
+                                                      {"name": "fm2", "defaults": {"saturation": 0.2}}], "count": 2})
+        if path == "/api/v1/limits":
+            return httpx.Response(200, json=limits) if limits is not None else \
+                httpx.Response(404, json={"detail": "Not Found"})
+        if path == "/api/v1/environments/room":
+            return httpx.Response(200, json={"name": "room", "size": [1.8, 1.8], "blocks": [],
+                                             "plans": [{"name": "A", "start": [0.3, 0.3, 0], "goal": [1.5, 1.5, 0]}]})
+        if path.startswith("/api/v1/environments/"):
+            return httpx.Response(404, json={"detail": "Environment not found"})
+        if path == "/api/v1/experiments" and request.method == "GET":
+            return httpx.Response(200, json={"data": [], "count": 2})
+        if path == "/api/v1/experiments" and request.method == "POST":
+            n = len(seen["submitted"]) + 1
+            if refuse_at is not None and n >= refuse_at:
+                return httpx.Response(refusal[0], json={"detail": refusal[1]})
+            seen["submitted"].append(json.loads(request.content))
+            return httpx.Response(202, json={"id": n, "status": "queued", "environment": "room"})
+        if path.endswith("/cancel"):
+            seen["cancelled"].append(int(path.split("/")[-2]))
+            return httpx.Response(200, json={"id": int(path.split("/")[-2]), "status": "cancelled",
+                                             "environment": "room"})
+        return httpx.Response(500, json={"detail": f"unexpected {request.method} {path}"})
+
+    return httpx.MockTransport(handler), seen
+
+
+SPEC = {"name": "s", "environments": ["room"], "planners": ["fmm", "fm2"], "repetitions": 3, "modes": ["sim"]}
+
+
+def test_a_study_is_checked_before_anything_is_submitted():
+    transport, seen = fake_server(limits={"max_repetitions": 2, "max_queued_per_user": 3})
+    spec = StudySpec.from_json({**SPEC, "planners": ["fmm", {"name": "fm2", "params": {"sat": 1}}, "rrt"],
+                                "environments": ["room", "atlantis"]})
+    with Client("http://testbed", "t", transport=transport) as c:
+        reasons = check_study(c, spec)
+        with pytest.raises(StudyRefused) as err:
+            run_study(c, spec, progress=False)
+    assert reasons == [
+        "planner 'fm2' has no parameter(s) sat (its parameters: saturation)",
+        "planner 'rrt' is not offered by this testbed (it offers fm2, fmm)",
+        "unknown environment 'atlantis': create it first or give its file in the study's `environments`",
+        "repetitions 3: the testbed allows at most 2 per experiment",
+        "the study queues 3 experiments and you already have 2 queued: the testbed allows 3 queued per user; "
+        "split the study",
+    ]
+    assert err.value.reasons == reasons and seen["submitted"] == []
+
+
+def test_a_quota_refusal_cancels_what_the_study_submitted():
+    transport, seen = fake_server(refuse_at=2)  # no limits endpoint: the 429 of the second job tells
+    with Client("http://testbed", "t", transport=transport) as c:
+        with pytest.raises(StudyRefused) as err:
+            run_study(c, StudySpec.from_json(SPEC), progress=False)
+    (reason,) = err.value.reasons
+    assert reason.startswith("the testbed refused experiment 2 of 2: you already have 3 queued experiments (limit 3)")
+    assert reason.endswith("the 1 experiment(s) already submitted were cancelled")
+    assert len(seen["submitted"]) == 1 and seen["cancelled"] == [1]
+
+
+def test_a_repetitions_refusal_stops_the_study_at_once():
+    transport, seen = fake_server(refuse_at=1, refusal=(422, "repetitions must be at most 2"))
+    with Client("http://testbed", "t", transport=transport) as c:
+        with pytest.raises(StudyRefused, match=r"repetitions 3: the testbed allows at most 2 per experiment"):
+            run_study(c, StudySpec.from_json(SPEC), progress=False)
+    assert seen["submitted"] == [] and seen["cancelled"] == []
+
+
+@pytest.mark.parametrize("jitter,message", [
+    ({"xy_m": 0.1}, r"jitter.xy_m must be a number in \[0, 0.05\]"),
+    ({"theta": 0.1}, "jitter: unknown key"),
+    ([0.005], "`jitter` must be an object"),
+    ({"xy_m": True}, "jitter.xy_m must be a number"),
+])
+def test_jitter_is_validated(jitter, message):
+    with pytest.raises(StudySpecError, match=message):
+        StudySpec.from_json({**SPEC, "jitter": jitter})
+
+
+def test_jitter_waypoints_and_labels_reach_the_jobs():
+    from client_sdk import Environment, Plan
+    from client_sdk.study import plan_jobs
+
+    spec = StudySpec.from_json({**SPEC, "jitter": {"xy_m": 0.005, "theta_rad": 0.02},
+                                "planners": ["fm2", {"name": "fm2", "params": {"saturation": 0.1}},
+                                             {"name": "corner", "waypoints": [[0.9, 0.69]], "label": "corner path"}]})
+    assert StudySpec.from_json(spec.to_json()) == spec
+    jobs = plan_jobs(spec, {"room": Environment("room", [1.8, 1.8], [], [Plan("A", [0.9, 0.3, 1.57], [1.5, 0.69, 0])])})
+    assert [j["configuration"] for j in jobs] == ["fm2", "fm2(saturation=0.1)", "corner path"]
+    assert all(j["body"]["jitter"] == {"xy_m": 0.005, "theta_rad": 0.02} for j in jobs)
+    corner = jobs[2]["body"]
+    assert corner["path"] == [[0.9, 0.3, 1.57], [0.9, 0.69], [1.5, 0.69, 0]] and "planner" not in corner
+    assert jobs[2]["planner"] == "path"
+    with pytest.raises(StudySpecError, match=r"planners\[1\] repeats planners\[0\] \(fm2\)"):
+        StudySpec.from_json({**SPEC, "planners": ["fm2", {"name": "fm2"}]})
+    with pytest.raises(StudySpecError, match="either `params`"):
+        StudySpec.from_json({**SPEC, "planners": [{"name": "x", "params": {"a": 1}, "waypoints": []}]})
