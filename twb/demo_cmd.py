@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated
 
 import typer
+
+from .plan_cmd import PlanningMarginOpt, RobotRadiusOpt
 
 if TYPE_CHECKING:
     from planners import Environment, PlanResult
@@ -13,13 +15,8 @@ if TYPE_CHECKING:
 def demo(
     seed: Annotated[int, typer.Option(help="Seed for PRM.", min=0)] = 0,
     resolution: Annotated[float, typer.Option(help="Grid resolution, metres per cell.")] = 0.01,
-    robot_radius: Annotated[
-        Optional[float], typer.Option(help="Robot radius in metres (default: the BeBot profile's, 0.045).")
-    ] = None,
-    planning_margin: Annotated[
-        Optional[float], typer.Option(
-            help="Clearance kept beyond the robot radius, metres; 0 for none (default: the testbed's, 0.02).")
-    ] = None,
+    robot_radius: RobotRadiusOpt = None,
+    planning_margin: PlanningMarginOpt = None,
 ) -> None:
     """Plan both built-in environments x both start/goal plans with FMM, FM2, PRM and A*, as the testbed plans."""
     from rich.console import Console

@@ -14,6 +14,13 @@ from .errors import fail
 from .poses import parse_cli_pose
 
 
+#: the configuration space's options of ``twb plan`` and ``twb demo``: as the testbed plans unless told
+RobotRadiusOpt = Annotated[Optional[float], typer.Option(
+    help="Robot radius in metres (default: the BeBot profile's, 0.045).")]
+PlanningMarginOpt = Annotated[Optional[float], typer.Option(
+    help="Clearance kept beyond the robot radius, metres; 0 for none (default: the testbed's, 0.02).")]
+
+
 class PlanFormat(str, Enum):
     json = "json"
     ttp = "ttp"
@@ -42,13 +49,8 @@ def plan(
     ] = None,
     planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar or a plug-in name.")] = "fmm",
     seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM).", min=0)] = 0,
-    robot_radius: Annotated[
-        Optional[float], typer.Option(help="Robot radius in metres (default: the BeBot profile's, 0.045).")
-    ] = None,
-    planning_margin: Annotated[
-        Optional[float], typer.Option(
-            help="Clearance kept beyond the robot radius, metres; 0 for none (default: the testbed's, 0.02).")
-    ] = None,
+    robot_radius: RobotRadiusOpt = None,
+    planning_margin: PlanningMarginOpt = None,
     resolution: Annotated[float, typer.Option(help="Grid resolution in metres per cell.")] = 0.01,
     max_spacing: Annotated[float, typer.Option(help="Largest distance between path points, metres.")] = 0.1,
     param: Annotated[
