@@ -46,6 +46,9 @@ def pending_of(run: Run, exp: Experiment, exclude: frozenset[str] = frozenset())
                    compute.expected_duration_s(length, n_blocks), exclude)
 
 
+CANCELLED = "cancelled by its owner"
+
+
 class Dispatcher:
     """Runs queued runs on the field (see the module docstring)."""
 
@@ -62,6 +65,8 @@ class Dispatcher:
         self._estimates: dict[int, float] = {}  # experiment -> wall seconds until its next run starts
         self._background: list[asyncio.Task] = []
         self._unsaved: list[tuple[int, int, RunEnd]] = []  # run ends that wait for the database
+        # experiments cancelled since the start: a run of one that ends now is not queued again
+        self._cancelled: set[int] = set()
 
     # ------------------------------------------------------------------ life cycle
 
@@ -100,7 +105,8 @@ class Dispatcher:
     async def cancel(self, experiment_ids: Iterable[int]) -> None:
         """Cancel experiments: their queued runs end ``cancelled`` (in one write), running ones are stopped."""
         ids = set(experiment_ids)
-        await self._svc.recorder.end(self._drop(ids), RunStatus.CANCELLED, "cancelled by its owner")
+        self._cancelled |= ids
+        await self._svc.recorder.end(self._drop(ids), RunStatus.CANCELLED, CANCELLED)
         running = [t for rid, t in self._tasks.items() if self._experiment.get(rid) in ids]
         for t in running:
             t.cancel()
@@ -178,15 +184,17 @@ class Dispatcher:
     async def _store_end(self, run_id: int, experiment_id: int, end: RunEnd) -> None:
         """The database work of a run's end (repeatable: each step is idempotent), then what it queues."""
         rec = self._svc.recorder
+        if (end.resume or end.status is RunStatus.ERROR) and experiment_id in self._cancelled:
+            end = RunEnd(RunStatus.CANCELLED, CANCELLED)  # its owner cancelled it while it ended: no retry
         if end.resume:
             rows = await rec.resume(run_id, end.error)
-            self.add([pending_of(*rows)])
+            await self._queue_again(rows, experiment_id)
             return
         if end.status is RunStatus.ERROR:
             rows = await rec.requeue(run_id, end.error)
             if rows is not None:
                 log.warning("run %d: %s; retrying on another robot", run_id, end.error)
-                self.add([pending_of(*rows, frozenset({end.robot_fault} if end.robot_fault else ()))])
+                await self._queue_again(rows, experiment_id, frozenset({end.robot_fault} if end.robot_fault else ()))
                 return
         # a completed second attempt keeps the note about the first one
         extra = {"error": end.error} if end.error else {}
@@ -195,6 +203,14 @@ class Dispatcher:
         await rec.update(run_id, status=end.status, finished_at=utcnow(), **extra)
         if end.status is RunStatus.FAILED and end.whole_experiment:
             await self._fail_experiment(experiment_id, end.error, str(end.failure) if end.failure else None)
+
+    async def _queue_again(self, rows: tuple[Run, Experiment], experiment_id: int,
+                           exclude: frozenset[str] = frozenset()) -> None:
+        """Queue a run the store has queued again; one its owner cancelled meanwhile ends ``cancelled``."""
+        if experiment_id in self._cancelled:
+            await self._svc.recorder.end([rows[0].id], RunStatus.CANCELLED, CANCELLED)
+            return
+        self.add([pending_of(*rows, exclude)])
 
     async def _store_ends(self) -> None:
         """Store the run ends that waited for the database, in order; stop at the first that still waits."""
