@@ -39,21 +39,30 @@ export class FieldPage {
   /**
    * The state a sub-field shows.  The server's sub-field states are coarser than a run's and lag it: a
    * sub-field stays "building" (or "idle" until the gripper starts) while its run is placing or
-   * planning, and the queue and the experiment page show the run's status.  So while a run the
-   * dashboard knows is on the sub-field, its status is shown (building, placing, planning, running,
-   * analyzing); otherwise (another user's run, none) the sub-field's own state.
+   * planning, and "running" until its ended run has been stored.  The queue and the experiment page
+   * show the run's status.  So while a run the dashboard knows is on the sub-field, its status is
+   * shown (building, placing, planning, running, analyzing), and "idle" once it has ended and the
+   * sub-field is being released; otherwise (another user's run, none) the sub-field's own state.
    */
   shownState(sf) {
-    return this.activeRun(sf)?.status ?? sf.state;
+    const run = this.knownRun(sf);
+    if (!run) return sf.state;
+    if (!TERMINAL.has(run.status)) return run.status;
+    return sf.run_id === run.id ? "idle" : sf.state;
   }
 
   /** The run under way on sub-field `sf` that the dashboard knows (the gripper's or the robot's), if any. */
   activeRun(sf) {
+    const run = this.knownRun(sf);
+    return run && !TERMINAL.has(run.status) ? run : null;
+  }
+
+  /** The latest run the dashboard knows on sub-field `sf` (past its queue), ended or not. */
+  knownRun(sf) {
     if (sf.state === "offline") return null;
     const runId = sf.run_id ?? this.store.subfieldRun.get(sf.id);
     const run = runId != null ? this.store.runs.get(runId) : null;
-    if (!run || run.subfield !== sf.id || run.status === "queued" || TERMINAL.has(run.status)) return null;
-    return run;
+    return run && run.subfield === sf.id && run.status !== "queued" ? run : null;
   }
 
   layers() {
