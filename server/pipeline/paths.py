@@ -33,7 +33,7 @@ from ..models import Experiment, Program
 from ..sandbox import ProgramSpec, Sandbox
 from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_path
 from . import compute
-from .pool import WorkerPool
+from .pool import ComputePool
 from .recorder import RunRecorder
 
 __all__ = ["LineLog", "PathService", "Plan"]
@@ -53,7 +53,7 @@ class Plan:
 class PathService:
     """Gets each experiment's path once (see the module docstring)."""
 
-    def __init__(self, sessions: sessionmaker[Session], recorder: RunRecorder, pool: WorkerPool, sandbox: Sandbox,
+    def __init__(self, sessions: sessionmaker[Session], recorder: RunRecorder, pool: ComputePool, sandbox: Sandbox,
                  settings: Settings) -> None:
         self._sessions = sessions
         self._recorder = recorder
