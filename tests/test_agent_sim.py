@@ -166,3 +166,30 @@ async def test_live_time_scale_runs_in_experiment_time():
         dt = np.diff(poses[:, 0])
         np.testing.assert_allclose(dt, agents.core.dt, atol=1e-9)  # ideal: ground truth at the control rate
         assert math.isclose(poses[0, 0], parse_reply(lines[0]).time)
+
+
+async def test_a_flush_waits_for_the_tracker_shipment_already_under_way():
+    """At time scale max a whole run's poses can sit in the periodic shipment, drained but not yet stored,
+    when the run ends: the run's flush must wait for that shipment, or the run is measured on no poses."""
+    import asyncio
+
+    from robot_agent.sinks import MemoryTrackerSink
+
+    class SlowSink(MemoryTrackerSink):
+        async def send(self, robot_id: str, poses: np.ndarray) -> None:
+            await asyncio.sleep(0.3)  # a database write in a thread, say
+            await super().send(robot_id, poses)
+
+    sink = SlowSink()
+    async with running_agents(backend="ideal", robots=1, tracker_sink=sink) as agents:
+        rid = agents.robots[0].robot_id
+        lines, _ = await _drive(agents, 0, np.array([[0.2, 0.2, 0.0], [0.6, 0.2, 0.0]]), start=(0.2, 0.2, 0.0))
+        assert lines[-1].startswith("EV,DONE")
+        sink.clear()
+        # poses logged after the run, shipped by the "periodic" flush below
+        agents.core.poses.add(np.array([1.0, 1.1]), np.array([0, 0]), np.array([[0.3, 0.3, 0.0], [0.31, 0.3, 0.0]]))
+        under_way = asyncio.create_task(agents.flush_tracker())
+        await asyncio.sleep(0.05)  # its poses are drained, its send is sleeping
+        await agents.flush_tracker()
+        assert len(sink.poses(rid)) > 0
+        await under_way
