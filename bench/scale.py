@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import os
 import sys
 import tempfile
 import time
@@ -59,7 +60,7 @@ def in_process(jobs: list[dict[str, Any]]) -> dict[str, Any]:
     envs = {n: json.loads((ROOT / "planners" / "data" / f"{n}.json").read_text()) for n in ("room", "blocks")}
     compute.simulate_job(envs["room"], [[0.3, 0.3, 0.0], [0.6, 0.3, 0.0]], [[0.3, 0.3, 0.0]], 0, 60,
                          [0.6, 0.3, 0.0], 0.045, 0.0)  # compile the simulation core first
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     n = 0
     for job in jobs:
         env = envs[job["environment"]]
@@ -68,8 +69,35 @@ def in_process(jobs: list[dict[str, Any]]) -> dict[str, Any]:
             compute.simulate_job(env, plan["path"], [job["start"]], job["seed"] + rep, 600, job["goal"], 0.045,
                                  plan["planning_time_s"])
             n += 1
-    wall = time.perf_counter() - t0
-    return {"name": "in-process", "runs": n, "wall_s": round(wall, 2), "runs_per_s": round(n / wall, 1)}
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"name": "in-process", "runs": n, "wall_s": round(wall, 2), "runs_per_s": round(n / wall, 1),
+            "cpu_ms_per_run": {"this_process": round(cpu * 1000 / n, 2)}}
+
+
+def _cpu_s(match) -> float:  # type: ignore[no-untyped-def]
+    """CPU seconds (user + system, threads included) of the processes whose command line ``match`` accepts."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            if not match(int(d.name), cmd):
+                continue
+            fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
+def _cpu_by_part(server_pid: int) -> dict[str, float]:
+    return {
+        "server": _cpu_s(lambda pid, cmd: pid == server_pid),
+        "ray_workers": _cpu_s(lambda pid, cmd: cmd.startswith("ray::")),
+        "postgresql": _cpu_s(lambda pid, cmd: cmd.startswith("postgres: ")),
+    }
 
 
 def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data_dir: Path) -> dict[str, Any]:
@@ -81,6 +109,7 @@ def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data
         import httpx
 
         with httpx.Client(base_url=tb.url, headers={"Authorization": f"Bearer {tb.token}"}, timeout=60) as c:
+            cpu0 = _cpu_by_part(tb.proc.pid)
             t0 = time.perf_counter()
             ids = [c.post("/api/v1/experiments", json=job).raise_for_status().json()["id"] for job in jobs]
             submitted = time.perf_counter() - t0
@@ -92,6 +121,7 @@ def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data
                     break
                 time.sleep(0.25)
             wall = time.perf_counter() - t0
+            cpu1 = _cpu_by_part(tb.proc.pid)
             statuses: dict[str, int] = {}
             for i in ids:
                 for r in c.get(f"/api/v1/experiments/{i}").json()["runs"]:
@@ -102,8 +132,9 @@ def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data
     t10 = next((t for t, left in samples if left <= 0.9 * total), None)
     t90 = next((t for t, left in samples if left <= 0.1 * total), None)
     steady = round(0.8 * total / (t90 - t10), 1) if t10 is not None and t90 is not None and t90 > t10 else None
+    cpu_ms = {k: round((cpu1[k] - cpu0[k]) * 1000 / max(n, 1), 2) for k in cpu0}  # per run
     return {"name": name, "runs": n, "statuses": statuses, "submit_s": round(submitted, 2), "wall_s": round(wall, 2),
-            "runs_per_s": round(n / wall, 1), "steady_runs_per_s": steady}
+            "runs_per_s": round(n / wall, 1), "steady_runs_per_s": steady, "cpu_ms_per_run": cpu_ms}
 
 
 def main() -> None:

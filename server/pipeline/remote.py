@@ -31,11 +31,13 @@ async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
     """Carry out the run as an engine task; raises as :func:`server.pipeline.runner` expects of its steps."""
     rec = svc.recorder
     job = await rec.job(ctx.run_id)
-    await rec.begin(ctx.run_id, status=RunStatus.PLANNING, robot_id=ctx.robot.robot_id, subfield=None,
-                    started_at=utcnow())
-    plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
-                                    platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
-    await rec.update(ctx.run_id, status=RunStatus.RUNNING)
+    plan = svc.paths.known(job.experiment_id)  # most runs of an experiment: planned already, one write less
+    await rec.begin(ctx.run_id, status=RunStatus.PLANNING if plan is None else RunStatus.RUNNING,
+                    robot_id=ctx.robot.robot_id, subfield=None, started_at=utcnow())
+    if plan is None:
+        plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
+                                        platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
+        await rec.update(ctx.run_id, status=RunStatus.RUNNING)
     start = steps.start_pose(job)
     jittered = compute.jittered(start, job.jitter, job.seed)
     starts = [jittered, start] if jittered != start else [start]
