@@ -3,9 +3,12 @@
 Every endpoint is described once by a method returning a :class:`Call`
 (method, path, parameters, body and the function that parses the answer);
 :class:`~client_sdk.Client` sends it with ``httpx.Client`` and
-:class:`~client_sdk.AsyncClient` with ``httpx.AsyncClient``.  HTTP errors
-become the SDK's exceptions in :func:`raise_for_status` and
-:func:`translate_errors`, nowhere else.
+:class:`~client_sdk.AsyncClient` with ``httpx.AsyncClient``.  What needs
+several requests (waiting, making sure an environment exists) is a *flow*: a
+generator that yields :class:`Call` s (and :class:`Sleep` s) and receives
+their results, or their errors thrown in; each client drives it with its own
+I/O.  HTTP errors become the SDK's exceptions in :func:`raise_for_status`
+and :func:`translate_errors`, nowhere else.
 """
 
 from __future__ import annotations
@@ -18,13 +21,15 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Optional, Sequence
+from typing import Any, Callable, Generator, Iterator, Mapping, Optional, Sequence, TypeVar, Union
+from urllib.parse import quote
 
 import httpx
 import numpy as np
 
-from ._config import resolve_token, resolve_url
-from ._exceptions import STATUS_ERRORS, ApiError, TransportError, TwbError, WaitTimeout
+from ._config import missing_token_hint, resolve_token, resolve_url
+from ._exceptions import STATUS_ERRORS, ApiError, Conflict, NotFound, TransportError, TwbError, WaitTimeout
+from ._progress import BuildEstimate, LineReporter, ProgressBar, gripper_seconds_per_block
 from ._models import (
     CancelResult,
     Environment,
@@ -40,7 +45,9 @@ from ._models import (
     User,
 )
 
-__all__ = ["API_PREFIX", "BaseClient", "Call", "Waiter", "raise_for_status", "translate_errors"]
+__all__ = ["API_PREFIX", "BaseClient", "Call", "Flow", "Sleep", "Waiter", "raise_for_status", "translate_errors"]
+
+T = TypeVar("T")
 
 API_PREFIX = "/api/v1"
 USER_AGENT = "teleworkbench-sdk/0.1"
@@ -57,8 +64,20 @@ class Call:
     json: Any = None
 
 
-def raise_for_status(response: httpx.Response) -> None:
-    """Raise the :class:`ApiError` subclass for an error status, carrying the server's ``detail``."""
+@dataclass(frozen=True)
+class Sleep:
+    """A flow's pause of ``seconds`` (wall time) between two requests."""
+
+    seconds: float
+
+
+#: a generator of requests and pauses, sent their results; returns the flow's result
+Flow = Generator[Union[Call, Sleep], Any, T]
+
+
+def raise_for_status(response: httpx.Response, hint_401: str = "") -> None:
+    """Raise the :class:`ApiError` subclass for an error status, carrying the server's ``detail``
+    (and, for a 401, ``hint_401``: what to do about it)."""
     if response.status_code < 400:
         return
     try:
@@ -67,7 +86,8 @@ def raise_for_status(response: httpx.Response) -> None:
     except ValueError:
         detail = response.text.strip() or response.reason_phrase
     cls = STATUS_ERRORS.get(response.status_code, ApiError)
-    raise cls(response.status_code, detail, method=response.request.method, url=str(response.request.url))
+    hint = hint_401 if response.status_code == 401 else ""
+    raise cls(response.status_code, detail, method=response.request.method, url=str(response.request.url), hint=hint)
 
 
 @contextlib.contextmanager
@@ -176,9 +196,8 @@ class BaseClient:
             headers["Authorization"] = f"Bearer {self.token}"
         return headers
 
-    @staticmethod
-    def _finish(call: Call, response: httpx.Response) -> Any:
-        raise_for_status(response)
+    def _finish(self, call: Call, response: httpx.Response) -> Any:
+        raise_for_status(response, "" if self.token else missing_token_hint())
         return call.parse(response)
 
     # ------------------------------------------------------------------ endpoints (no I/O)
@@ -191,7 +210,7 @@ class BaseClient:
                     params={"offset": offset, "limit": limit})
 
     def _get_environment(self, name: str) -> Call:
-        return Call("GET", f"{API_PREFIX}/environments/{name}", _one(Environment.from_json))
+        return Call("GET", f"{API_PREFIX}/environments/{quote(name, safe='')}", _one(Environment.from_json))
 
     def _create_environment(self, environment: Mapping[str, Any] | Environment) -> Call:
         body = environment.to_json() if isinstance(environment, Environment) else _plain(environment)
@@ -265,12 +284,81 @@ class BaseClient:
     def _create_user(self, name: str, is_admin: bool) -> Call:
         return Call("POST", f"{API_PREFIX}/users", _one(User.from_json), json={"name": name, "is_admin": is_admin})
 
+    # ------------------------------------------------------------------ flows (several requests, no I/O)
+
+    def _ensure_environment(self, environment: Mapping[str, Any] | Environment) -> Flow[tuple[Environment, bool]]:
+        """The testbed's environment of this name: created now if absent (``True``), the existing one if it
+        has the same size, blocks and plans (``False``); :class:`Conflict` if a different one has the name."""
+        body = environment.to_json() if isinstance(environment, Environment) else _plain(environment)
+        name = body.get("name") if isinstance(body, Mapping) else None
+        if not isinstance(name, str) or not name.strip():
+            raise ValueError("an environment needs a `name` (a non-empty string)")
+        try:
+            have = yield self._get_environment(name)
+        except NotFound:
+            try:
+                return (yield self._create_environment(body)), True
+            except Conflict as exc:
+                raise Conflict(exc.status, f"{exc.detail}: the name {name!r} is taken by an environment you cannot "
+                                           "see; give yours another name", method=exc.method, url=exc.url) from exc
+        if not have.same_geometry(body):
+            raise Conflict(409, f"the testbed already has a different environment named {name!r} (other size, "
+                                "blocks or plans); give yours another name, or use that one",
+                           method="GET", url=f"{self.url}{API_PREFIX}/environments/{name}")
+        return have, False
+
+    def _quiet(self, call: Call) -> Flow[Any]:
+        """The call's result, or None if it fails (for what is only nice to know)."""
+        try:
+            return (yield call)
+        except TwbError:
+            return None
+
+    def _wait(self, experiment_id: int, timeout: Optional[float], progress: Optional[bool], interval: float,
+              ) -> Flow[Experiment]:
+        """Poll the experiment until it finishes, reporting progress; :class:`WaitTimeout` after ``timeout``."""
+        waiter = Waiter(experiment_id, timeout, progress, interval)
+        try:
+            while True:
+                exp = yield self._get_experiment(experiment_id)
+                for run in waiter.unexplained_builds(exp):
+                    waiter.builds[run.id] = yield from self._build_estimate(exp, run, waiter)
+                if waiter.update(exp):
+                    return exp
+                yield Sleep(waiter.sleep_time())
+        finally:
+            waiter.close()
+
+    def _build_estimate(self, exp: Experiment, run: Run, waiter: "Waiter") -> Flow[BuildEstimate]:
+        """How long the gripper takes to build ``exp``'s environment for ``run``: its blocks, the blocks of
+        the environment it replaces, the robot's gripper and the time scale (each asked once)."""
+        if waiter.health is None:
+            waiter.health = (yield from self._quiet(self._health())) or {}
+            waiter.robots = {r.robot_id: r for r in (yield from self._quiet(self._list_robots())) or []}
+        placed = yield from waiter.block_count(self, exp.environment.removesuffix(" (full)"))
+        subfields = (yield from self._quiet(self._list_subfields())) or []
+        old = next((s.environment for s in subfields if s.id == run.subfield), None)
+        removed = None
+        if old is not None and old.removesuffix(" (full)") != exp.environment:
+            removed = yield from waiter.block_count(self, old.removesuffix(" (full)"))
+        elif run.subfield is not None:
+            removed = 0
+        robot = waiter.robots.get(run.robot_id or "")
+        spb = gripper_seconds_per_block(robot.profile) if robot is not None and robot.profile else None
+        if robot is not None and robot.backend == "ideal":
+            spb = 0.0
+        return BuildEstimate(placed or 0, removed, spb, waiter.health.get("time_scale"),
+                             known_scale="time_scale" in waiter.health)
+
 
 class Waiter:
-    """The logic of ``wait()`` without sleeping: deadline, progress bar, timeout error.
+    """The logic of ``wait()`` without sleeping: deadline, progress, timeout error.
 
-    ``update(experiment)`` returns True once the experiment is finished;
-    the clients poll and sleep ``interval`` between updates.
+    ``update(experiment)`` reports progress and returns True once the
+    experiment is finished; the wait flow polls and sleeps ``interval``
+    between updates.  ``progress``: True shows a rich bar on a terminal and
+    plain status lines elsewhere; None the bar on a terminal and nothing
+    elsewhere; False nothing.
     """
 
     def __init__(self, experiment_id: int, timeout: Optional[float], progress: Optional[bool],
@@ -283,15 +371,30 @@ class Waiter:
         self.timeout = timeout
         self.interval = interval
         self.t0 = time.monotonic()
-        if progress is None:
-            progress = sys.stderr.isatty()
-        self._bar = _ProgressBar(f"experiment {self.experiment_id}") if progress else None
+        self._reporter = _reporter(f"experiment {self.experiment_id}", progress)
         self.last: Optional[Experiment] = None
+        self.builds: dict[int, BuildEstimate] = {}
+        self.health: Optional[dict[str, Any]] = None
+        self.robots: dict[str, Robot] = {}
+        self._blocks: dict[str, Optional[int]] = {}
+
+    def unexplained_builds(self, exp: Experiment) -> list[Run]:
+        """Field runs the gripper builds for, whose build time is not estimated yet (none without progress)."""
+        if self._reporter is None:
+            return []
+        return [r for r in exp.runs if r.status == "building" and r.mode == "twb" and r.id not in self.builds]
+
+    def block_count(self, client: BaseClient, name: str) -> Flow[Optional[int]]:
+        """Blocks of environment ``name`` (None if it cannot be read), asked once per name."""
+        if name not in self._blocks:
+            env = yield from client._quiet(client._get_environment(name))
+            self._blocks[name] = None if env is None else len(env.blocks)
+        return self._blocks[name]
 
     def update(self, exp: Experiment) -> bool:
         self.last = exp
-        if self._bar is not None:
-            self._bar.update(exp.runs_done, exp.runs_total, exp.status)
+        if self._reporter is not None:
+            self._reporter.update(exp, self.builds)
         return exp.finished
 
     def sleep_time(self) -> float:
@@ -307,28 +410,14 @@ class Waiter:
         return min(self.interval, left)
 
     def close(self) -> None:
-        if self._bar is not None:
-            self._bar.close()
+        if self._reporter is not None:
+            self._reporter.close()
 
 
-class _ProgressBar:
-    """A rich progress bar on stderr: runs done / total and the experiment's status."""
-
-    def __init__(self, label: str) -> None:
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-        self._progress = Progress(
-            TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("runs"),
-            TextColumn("[bold]{task.fields[status]}"), TimeElapsedColumn(),
-            console=Console(stderr=True), transient=False,
-        )
-        self._task = self._progress.add_task(label, total=None, status="")
-        self._progress.start()
-
-    def update(self, done: int, total: int, status: str) -> None:
-        self._progress.update(self._task, completed=done, total=total or None, status=status)
-
-    def close(self) -> None:
-        self._progress.stop()
-
+def _reporter(label: str, progress: Optional[bool]) -> Optional[LineReporter | ProgressBar]:
+    """A bar on a terminal, lines elsewhere when ``progress`` is True, nothing when it is False."""
+    if progress is False:
+        return None
+    if sys.stderr.isatty():
+        return ProgressBar(label)
+    return LineReporter() if progress else None

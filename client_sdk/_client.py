@@ -10,12 +10,13 @@ from __future__ import annotations
 import asyncio
 import os
 import time
-from typing import Any, Literal, Mapping, Optional, Sequence, overload
+from typing import Any, Literal, Mapping, Optional, Sequence, TypeVar, overload
 
 import httpx
 import numpy as np
 
-from ._base import BaseClient, Call, Waiter, program_body, translate_errors
+from ._base import BaseClient, Call, Flow, Sleep, program_body, translate_errors
+from ._exceptions import TwbError
 from ._models import (
     CancelResult,
     Environment,
@@ -35,6 +36,7 @@ __all__ = ["AsyncClient", "Client"]
 
 Pose = Sequence[float] | np.ndarray
 PosesFormat = Literal["array", "csv"]
+T = TypeVar("T")
 
 
 class Client(BaseClient):
@@ -75,6 +77,25 @@ class Client(BaseClient):
         with translate_errors(self.url):
             response = self._http.request(call.method, call.path, params=call.params, json=call.json)
         return self._finish(call, response)
+
+    def _run(self, flow: Flow[T]) -> T:
+        """Drive a flow: send its calls, sleep its pauses, throw errors back into it."""
+        step, value = flow.send, None
+        try:
+            while True:
+                try:
+                    item = step(value)
+                except StopIteration as stop:
+                    return stop.value
+                try:
+                    if isinstance(item, Sleep):
+                        step, value = flow.send, time.sleep(item.seconds)
+                    else:
+                        step, value = flow.send, self._send(item)
+                except TwbError as exc:
+                    step, value = flow.throw, exc
+        finally:
+            flow.close()
 
     # ------------------------------------------------------------------ testbed
 
@@ -117,6 +138,15 @@ class Client(BaseClient):
     def create_environment(self, environment: Mapping[str, Any] | Environment) -> Environment:
         """Add an environment file (docs/design.md, "Environment file"); :class:`Conflict` if the name is taken."""
         return self._send(self._create_environment(environment))
+
+    def ensure_environment(self, environment: Mapping[str, Any] | Environment) -> tuple[Environment, bool]:
+        """Make sure the testbed has this environment: ``(environment, created)``.
+
+        Creates it when its name is unknown (``created`` True); uses the
+        testbed's when that has the same size, blocks and plans (False);
+        :class:`Conflict` when a different environment has the name.
+        """
+        return self._run(self._ensure_environment(environment))
 
     # ------------------------------------------------------------------ uploaded programs
 
@@ -198,19 +228,15 @@ class Client(BaseClient):
              interval: float = 0.25) -> Experiment:
         """Poll until the experiment finishes and return it.
 
-        ``progress=True`` shows a rich progress bar on stderr (runs done /
-        total and status); the default (None) shows it when stderr is a
-        terminal.  Raises :class:`WaitTimeout` (a ``TimeoutError``)
+        ``progress=True`` reports on stderr: a rich progress bar on a terminal,
+        plain status lines elsewhere (logs, CI: every 10 s and on every change
+        of status or finished runs; a queued job's estimated start; while the
+        gripper builds, the blocks and an estimate of the build time).  The
+        default (None) shows the bar on a terminal and nothing elsewhere;
+        False nothing.  Raises :class:`WaitTimeout` (a ``TimeoutError``)
         after ``timeout`` seconds; the experiment keeps running.
         """
-        waiter = Waiter(experiment_id, timeout, progress, interval)
-        try:
-            while not waiter.update(self.get_experiment(experiment_id)):
-                time.sleep(waiter.sleep_time())
-        finally:
-            waiter.close()
-        assert waiter.last is not None
-        return waiter.last
+        return self._run(self._wait(experiment_id, timeout, progress, interval))
 
     # ------------------------------------------------------------------ runs
 
@@ -261,6 +287,25 @@ class AsyncClient(BaseClient):
             response = await self._http.request(call.method, call.path, params=call.params, json=call.json)
         return self._finish(call, response)
 
+    async def _run(self, flow: Flow[T]) -> T:
+        """See :meth:`Client._run` (sleeping with asyncio)."""
+        step, value = flow.send, None
+        try:
+            while True:
+                try:
+                    item = step(value)
+                except StopIteration as stop:
+                    return stop.value
+                try:
+                    if isinstance(item, Sleep):
+                        step, value = flow.send, await asyncio.sleep(item.seconds)
+                    else:
+                        step, value = flow.send, await self._send(item)
+                except TwbError as exc:
+                    step, value = flow.throw, exc
+        finally:
+            flow.close()
+
     async def health(self) -> dict[str, Any]:
         """See :meth:`Client.health`."""
         return await self._send(self._health())
@@ -296,6 +341,10 @@ class AsyncClient(BaseClient):
     async def create_environment(self, environment: Mapping[str, Any] | Environment) -> Environment:
         """See :meth:`Client.create_environment`."""
         return await self._send(self._create_environment(environment))
+
+    async def ensure_environment(self, environment: Mapping[str, Any] | Environment) -> tuple[Environment, bool]:
+        """See :meth:`Client.ensure_environment`."""
+        return await self._run(self._ensure_environment(environment))
 
     async def submit(self, environment: str | Mapping[str, Any], start: Optional[Pose] = None,
                      goal: Optional[Pose] = None, planner: Optional[str] = None, *,
@@ -353,14 +402,7 @@ class AsyncClient(BaseClient):
     async def wait(self, experiment_id: int, *, timeout: Optional[float] = None, progress: Optional[bool] = None,
                    interval: float = 0.25) -> Experiment:
         """See :meth:`Client.wait`."""
-        waiter = Waiter(experiment_id, timeout, progress, interval)
-        try:
-            while not waiter.update(await self.get_experiment(experiment_id)):
-                await asyncio.sleep(waiter.sleep_time())
-        finally:
-            waiter.close()
-        assert waiter.last is not None
-        return waiter.last
+        return await self._run(self._wait(experiment_id, timeout, progress, interval))
 
     async def get_run(self, run_id: int) -> Run:
         """See :meth:`Client.get_run`."""

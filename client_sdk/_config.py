@@ -11,7 +11,8 @@ Token, first found wins:
    set, else ``./twb-data/token`` (relative to the current directory).
 
 No token at all is allowed (``/health`` is open); other calls then raise
-:class:`~client_sdk.Unauthorized` with the server's message.
+:class:`~client_sdk.Unauthorized` with the server's message and
+:func:`missing_token_hint`: where the SDK looked and how to pass one.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import os
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["DEFAULT_URL", "resolve_token", "resolve_url", "token_file"]
+__all__ = ["DEFAULT_URL", "missing_token_hint", "resolve_token", "resolve_url", "token_file"]
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 
@@ -48,3 +49,10 @@ def resolve_token(token: Optional[str] = None) -> Optional[str]:
     except OSError:
         return None
     return text or None
+
+
+def missing_token_hint() -> str:
+    """Why a request went without a token, in words: where the SDK looked and how to pass one."""
+    return (f"no token found: looked for the token= argument, $TWB_TOKEN and the file {token_file().resolve()}; "
+            "pass Client(token=...), set TWB_TOKEN, or run where `twb up` wrote twb-data/token "
+            "(or set TWB_DATA_DIR to its data directory)")

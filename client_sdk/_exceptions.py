@@ -47,19 +47,23 @@ class TwbError(Exception):
 class ApiError(TwbError):
     """The server answered ``status`` (>= 400); ``detail`` is its ``{"detail": ...}`` message.
 
-    ``str(err)`` is one line: ``"404 Not Found: Experiment not found"``.
+    ``str(err)`` is one line: ``"404 Not Found: Experiment not found"``, then the
+    ``hint`` (what to do about it) when there is one.
     """
 
-    def __init__(self, status: int, detail: Any, *, method: str = "", url: str = "") -> None:
+    def __init__(self, status: int, detail: Any, *, method: str = "", url: str = "", hint: str = "") -> None:
         self.status = status
         self.detail = detail
         self.method = method
         self.url = url
-        super().__init__(f"{status} {_REASONS.get(status, 'Error')}: {format_detail(detail)}")
+        self.hint = hint
+        text = f"{status} {_REASONS.get(status, 'Error')}: {format_detail(detail)}"
+        super().__init__(f"{text} ({hint})" if hint else text)
 
 
 class Unauthorized(ApiError):
-    """401: the request had no token or an unknown one."""
+    """401: the request had no token or an unknown one; without a token ``hint`` says where the SDK
+    looked for one and how to pass one."""
 
 
 class Forbidden(ApiError):

@@ -124,6 +124,15 @@ class Environment(_FromJson):
                 return p
         raise KeyError(f"environment {self.name!r} has no plan {name!r} (plans: {', '.join(p.name for p in self.plans) or 'none'})")
 
+    def same_geometry(self, other: "Environment | dict[str, Any]") -> bool:
+        """Whether ``other`` (an environment or its file as a dict) has the same name, size, blocks and plans
+        (the description may differ; a missing block angle is 0, a missing plan heading 0, as on the testbed)."""
+        data = other.to_json() if isinstance(other, Environment) else other
+        try:
+            return _geometry(self.to_json()) == _geometry(data)
+        except (KeyError, TypeError, ValueError, IndexError):
+            return False
+
     def to_json(self) -> dict[str, Any]:
         """The environment file (docs/design.md, "Environment file") of this environment."""
         d: dict[str, Any] = {"name": self.name, "size": list(self.size), "blocks": [dict(b) for b in self.blocks]}
@@ -132,6 +141,19 @@ class Environment(_FromJson):
         if self.description:
             d["description"] = self.description
         return d
+
+
+def _geometry(env: dict[str, Any]) -> tuple[Any, ...]:
+    """What makes two environment files the same field: name, size, blocks, plans (floats, defaults filled)."""
+    def pose(p: Any) -> tuple[float, ...]:
+        v = [float(x) for x in p]
+        return tuple(v + [0.0]) if len(v) == 2 else tuple(v)
+
+    blocks = tuple((float(b["x"]), float(b["y"]), float(b["w"]), float(b["h"]), float(b.get("angle", 0.0)))
+                   for b in env.get("blocks", []))
+    plans = tuple((p.get("name", str(i + 1)), pose(p["start"]), pose(p["goal"]))
+                  for i, p in enumerate(env.get("plans", [])))
+    return str(env["name"]).strip(), tuple(float(v) for v in env["size"]), blocks, plans
 
 
 @dataclass

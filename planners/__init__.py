@@ -9,7 +9,7 @@ metres and radians throughout.
 3
 """
 
-from .api import DEFAULT_ROBOT_RADIUS, PlanResult, check_query, parse_pose, plan_path
+from .api import DEFAULT_PLANNING_MARGIN, DEFAULT_ROBOT_RADIUS, PlanResult, check_query, parse_pose, plan_path
 from .base import Planner
 from .environment import Block, Environment, Plan, builtin_names, load_environment, parse_environment
 from .errors import InvalidEnvironment, InvalidPose, NoPathFound, PlanningError, UnknownPlanner
@@ -21,6 +21,7 @@ __all__ = sorted(
     [
         "Block",
         "ConfigSpace",
+        "DEFAULT_PLANNING_MARGIN",
         "DEFAULT_ROBOT_RADIUS",
         "ENTRY_POINT_GROUP",
         "Environment",

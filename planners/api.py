@@ -22,11 +22,19 @@ from .grid import ConfigSpace, config_space
 from .postprocess import postprocess
 from .registry import get_planner
 
-__all__ = ["DEFAULT_ROBOT_RADIUS", "PlanResult", "check_query", "components", "parse_pose", "plan_path"]
+__all__ = ["DEFAULT_PLANNING_MARGIN", "DEFAULT_ROBOT_RADIUS", "PlanResult", "check_query", "clearance_note",
+           "components", "parse_pose", "plan_path"]
 
 #: Radius (m) of the BeBot profile, the default robot; planners import nothing
 #: from robot_agent, so the value is repeated here and checked by a test.
 DEFAULT_ROBOT_RADIUS = 0.045
+
+#: Clearance (m) the testbed's planners keep beyond the robot radius (docs/server.md, "The planning
+#: margin"): field robots track a path only to within a few centimetres.  The configuration space
+#: is the obstacles dilated by ``robot_radius + planning_margin``; the server's setting
+#: ``planning_margin_m`` and ``twb plan``/``twb demo`` default to this value, so offline and
+#: online plans agree.
+DEFAULT_PLANNING_MARGIN = 0.02
 
 
 @dataclass
@@ -47,9 +55,14 @@ class PlanResult:
     seed: int
     params: dict[str, Any]
     info: dict[str, Any] = field(default_factory=dict)
+    robot_radius_m: float = DEFAULT_ROBOT_RADIUS
+    planning_margin_m: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (docs/design.md, "Command line"): ``path``, ``length_m``, ``planning_time_s`` and details."""
+        """JSON-ready form (docs/design.md, "Command line"): ``path``, ``length_m``, ``planning_time_s`` and details.
+
+        ``robot_radius_m`` and ``planning_margin_m`` (m) say which configuration space it was planned in.
+        """
         return {
             "planner": self.planner,
             "path": np.round(self.path, 6).tolist(),
@@ -58,6 +71,8 @@ class PlanResult:
             "seed": self.seed,
             "params": self.params,
             "raw_points": int(len(self.raw_path)),
+            "robot_radius_m": self.robot_radius_m,
+            "planning_margin_m": self.planning_margin_m,
             "info": self.info,
         }
 
@@ -75,7 +90,16 @@ def parse_pose(value: Sequence[float], what: str) -> np.ndarray:
     return np.r_[arr, np.nan] if arr.size == 2 else arr
 
 
-def _check_pose(space: ConfigSpace, pose: np.ndarray, what: str) -> None:
+def clearance_note(robot_radius: float, planning_margin: float) -> str:
+    """How far from obstacles a pose must be, in words: ``"the robot radius 0.045 m"``, or with a
+    margin ``"0.065 m (the robot radius 0.045 m plus the planning margin 0.02 m)"`` (metres)."""
+    if planning_margin <= 0:
+        return f"the robot radius {robot_radius:g} m"
+    total = round(robot_radius + planning_margin, 9)
+    return f"{total:g} m (the robot radius {robot_radius:g} m plus the planning margin {planning_margin:g} m)"
+
+
+def _check_pose(space: ConfigSpace, pose: np.ndarray, what: str, note: str) -> None:
     env = space.env
     x, y = pose[:2]
     if not (0 <= x <= env.width and 0 <= y <= env.height):
@@ -83,10 +107,7 @@ def _check_pose(space: ConfigSpace, pose: np.ndarray, what: str) -> None:
             f"{what} ({x:g}, {y:g}) is outside the field 0..{env.width:g} x 0..{env.height:g} m"
         )
     if not space.is_free(pose[None, :2])[0]:
-        raise InvalidPose(
-            f"{what} ({x:g}, {y:g}) is inside an obstacle or closer than the robot radius "
-            f"{space.radius:g} m to one"
-        )
+        raise InvalidPose(f"{what} ({x:g}, {y:g}) is inside an obstacle or closer than {note} to one")
 
 
 def components(space: ConfigSpace) -> np.ndarray:
@@ -105,32 +126,43 @@ def check_query(
     *,
     robot_radius: float = DEFAULT_ROBOT_RADIUS,
     resolution: float = 0.01,
+    planning_margin: float = 0.0,
 ) -> tuple[ConfigSpace, np.ndarray, np.ndarray]:
     """Check a planning query before any planning: returns ``(space, start, goal)``.
 
-    Poses come back as length-3 arrays (theta NaN when not given).  Raises
-    :class:`InvalidPose` for a start or goal that is not finite, outside the
-    field or not free for a robot of ``robot_radius`` metres, and
-    :class:`NoPathFound` when the two lie in separate free regions.
+    The configuration space dilates the obstacles by ``robot_radius +
+    planning_margin`` (m).  Poses come back as length-3 arrays (theta NaN
+    when not given).  Raises :class:`InvalidPose` for a start or goal that is
+    not finite, outside the field or not free, and :class:`NoPathFound` when
+    the two lie in separate free regions.
     """
     env = load_environment(env)
+    _check_margin(planning_margin)
     try:
-        space = config_space(env, robot_radius, resolution)
+        space = config_space(env, robot_radius + planning_margin, resolution)
     except PlanningError:
         raise
     except ValueError as exc:
         raise PlanningError(str(exc)) from exc
+    note = clearance_note(robot_radius, planning_margin)
     s, g = parse_pose(start, "start"), parse_pose(goal, "goal")
-    _check_pose(space, s, "start")
-    _check_pose(space, g, "goal")
+    _check_pose(space, s, "start", note)
+    _check_pose(space, g, "goal", note)
     labels = components(space)
     (sy, gy), (sx, gx) = space.grid.cell_of(np.array([s[:2], g[:2]]))
     if labels[sy, sx] != labels[gy, gx]:
+        who = (f"a robot of radius {robot_radius:g} m" if planning_margin <= 0 else
+               f"a robot of radius {robot_radius:g} m with a planning margin of {planning_margin:g} m")
         raise NoPathFound(
             f"the goal ({g[0]:g}, {g[1]:g}) cannot be reached from the start ({s[0]:g}, {s[1]:g}): "
-            f"they are in separate free regions for a robot of radius {robot_radius:g} m"
+            f"they are in separate free regions for {who}"
         )
     return space, s, g
+
+
+def _check_margin(planning_margin: float) -> None:
+    if not (isinstance(planning_margin, (int, float)) and math.isfinite(planning_margin) and planning_margin >= 0):
+        raise PlanningError(f"`planning_margin` must be a finite number >= 0 (m), got {planning_margin!r}")
 
 
 def plan_path(
@@ -145,11 +177,14 @@ def plan_path(
     seed: int = 0,
     max_spacing: float = 0.1,
     tolerance: float = 0.005,
+    planning_margin: float = 0.0,
 ) -> PlanResult:
     """Plan a collision-free path from ``start`` to ``goal`` with the planner called ``planner``.
 
     Poses are ``(x, y[, theta])`` in metres/radians; ``robot_radius`` and
-    ``resolution`` in metres; ``max_spacing`` is the largest distance (m)
+    ``resolution`` in metres; the path keeps ``robot_radius +
+    planning_margin`` (m) from every obstacle (the testbed plans with
+    :data:`DEFAULT_PLANNING_MARGIN`); ``max_spacing`` is the largest distance (m)
     between consecutive points of the returned path; ``tolerance`` (m) the
     largest deviation allowed when dropping points of the raw path.
 
@@ -168,7 +203,8 @@ def plan_path(
     except ValueError as exc:
         raise PlanningError(str(exc)) from exc
     t0 = time.perf_counter()
-    space, s, g = check_query(env, start, goal, robot_radius=robot_radius, resolution=resolution)
+    space, s, g = check_query(env, start, goal, robot_radius=robot_radius, resolution=resolution,
+                              planning_margin=planning_margin)
     grid_time = time.perf_counter() - t0
     t0 = time.perf_counter()
     try:
@@ -188,7 +224,7 @@ def plan_path(
     if grid_time > 1e-3:
         info["grid_time_s"] = round(grid_time, 6)
     length = float(np.hypot(*np.diff(path[:, :2], axis=0).T).sum())
-    return PlanResult(impl.name, path, raw, length, elapsed, seed, checked, info)
+    return PlanResult(impl.name, path, raw, length, elapsed, seed, checked, info, robot_radius, planning_margin)
 
 
 def _check_raw(name: str, raw: np.ndarray, s: np.ndarray, g: np.ndarray, space: ConfigSpace) -> np.ndarray:

@@ -12,9 +12,11 @@ Built-in names cannot be taken over by plug-ins.
 
 from __future__ import annotations
 
+import importlib
 import inspect
-from importlib.metadata import entry_points
-from typing import Any, Callable
+from dataclasses import dataclass
+from importlib.metadata import EntryPoint, entry_points
+from typing import Any, Callable, Optional
 
 from .astar import AStarPlanner
 from .base import Planner
@@ -23,9 +25,13 @@ from .fm2 import FM2Planner
 from .fmm import FMMPlanner
 from .prm import PRMPlanner
 
-__all__ = ["ENTRY_POINT_GROUP", "available_planners", "get_planner", "register_planner"]
+__all__ = ["ENTRY_POINT_GROUP", "RESTART_HINT", "PluginStatus", "available_planners", "get_planner", "plugin_report",
+           "register_planner"]
 
 ENTRY_POINT_GROUP = "teleworkbench.planners"
+#: what a plug-in that fails to load needs most often: a process started before it was installed
+RESTART_HINT = ("if you installed it while the testbed was running, restart the testbed (stop `twb up` or "
+                "`twb server` and start it again) so that its processes see the new package")
 _BUILTINS: dict[str, type[Planner]] = {
     "fmm": FMMPlanner,
     "fm2": FM2Planner,
@@ -93,9 +99,53 @@ def get_planner(name: str) -> Planner:
     eps = _plugin_entry_points()
     if name not in eps:
         raise UnknownPlanner(f"unknown planner {name!r} (available: {', '.join(available_planners())})")
-    try:
-        obj = eps[name].load()
-        _instances[name] = _adapt(name, obj)
-    except Exception as exc:  # a broken plug-in must not take the testbed down
-        raise UnknownPlanner(f"plug-in planner {name!r} ({eps[name].value}) failed to load: {exc}") from exc
+    _instances[name] = _load_plugin(name, eps[name])
     return _instances[name]
+
+
+def _load_plugin(name: str, ep: EntryPoint) -> Planner:
+    """Import a plug-in's entry point and adapt it; :class:`UnknownPlanner` saying why it failed."""
+    importlib.invalidate_caches()  # a package installed after this process started is found
+    try:
+        return _adapt(name, ep.load())
+    except Exception as exc:  # a broken plug-in must not take the testbed down
+        raise UnknownPlanner(f"plug-in planner {name!r} ({ep.value}) failed to load: {exc} ({RESTART_HINT})") from exc
+
+
+@dataclass(frozen=True)
+class PluginStatus:
+    """One plug-in entry point: its ``name``, ``target`` (``module:object``), the distribution that
+    declares it (``"name version"``), whether it loads, and why not (``error``)."""
+
+    name: str
+    target: str
+    distribution: str
+    loaded: bool
+    error: str = ""
+
+
+def plugin_report() -> list[PluginStatus]:
+    """Every installed plug-in planner, loaded now (or tried): what ``twb plugins list`` shows.
+
+    Entry points that use a built-in's name are listed as refused.
+    """
+    out = []
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        dist = _distribution(ep)
+        if ep.name in _BUILTINS:
+            out.append(PluginStatus(ep.name, ep.value, dist, False, "a built-in planner has this name"))
+            continue
+        try:
+            _instances[ep.name] = _instances.get(ep.name) or _load_plugin(ep.name, ep)
+            out.append(PluginStatus(ep.name, ep.value, dist, True))
+        except UnknownPlanner as exc:
+            reason = str(exc).split(" failed to load: ", 1)[-1]
+            out.append(PluginStatus(ep.name, ep.value, dist, False, reason))
+    return out
+
+
+def _distribution(ep: EntryPoint) -> str:
+    dist: Optional[Any] = getattr(ep, "dist", None)
+    if dist is None:
+        return ""
+    return f"{dist.metadata['Name']} {dist.version}"

@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
+import re
 
 import pytest
 from PIL import Image
@@ -144,3 +146,118 @@ def test_bad_token_and_no_server(run, tmp_path):
     r = run("envs", "--url", "http://127.0.0.1:9", "--token", "x")
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert "cannot reach the testbed at http://127.0.0.1:9" in r.stderr and "twb up" in r.stderr
+
+
+# --------------------------------------------------------------------------- what a new user hit
+
+
+def _twb_process(testbed, *args: str, cwd=None, timeout: float = 180):
+    """``twb ARGS`` as a real process (stdout and stderr are pipes, not a terminal)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = {**os.environ, "TWB_URL": testbed.url, "TWB_TOKEN": testbed.token}
+    env.pop("TWB_DEBUG", None)
+    return subprocess.run([str(Path(sys.executable).with_name("twb")), *args], capture_output=True, text=True,
+                          env=env, timeout=timeout, cwd=cwd)
+
+
+def test_offline_and_online_plans_agree(run, testbed):
+    """`twb plan` plans in the testbed's configuration space (robot radius + planning margin)."""
+    offline = json.loads(run("plan", "--env", "room", "--plan", "A", "--planner", "fm2").stdout)
+    assert offline["robot_radius_m"] == 0.045 and offline["planning_margin_m"] == 0.02
+    r = run("submit", "--env", "room", "--plan", "A", "--planner", "fm2", "--modes", "sim", "--wait")
+    assert r.returncode == 0, r.stderr
+    online = json.loads(run("status", r.stdout.strip(), "--json").stdout)
+    assert (online["robot_radius"], online["planning_margin"]) == (0.045, 0.02)
+    path = online["planned_path"]
+    length = sum(math.dist(a[:2], b[:2]) for a, b in zip(path, path[1:]))
+    assert length == pytest.approx(offline["length_m"], abs=1e-5)
+    assert offline["length_m"] == pytest.approx(1.995, abs=1e-3)
+    assert len(path) == len(offline["path"])
+    assert max(math.dist(a[:2], b[:2]) for a, b in zip(path, offline["path"])) < 1e-5
+    # without the margin the path is another one: the default is what makes them agree
+    bare = json.loads(run("plan", "--env", "room", "--plan", "A", "--planner", "fm2", "--planning-margin", "0").stdout)
+    assert bare["planning_margin_m"] == 0 and abs(bare["length_m"] - length) > 0.01
+
+
+def test_envs_create_and_submit_with_an_environment_file(run, tmp_path):
+    env = {"name": "newuser-corridor", "size": [1.8, 1.8],
+           "blocks": [{"x": 0.9, "y": 0.6, "w": 0.06, "h": 1.2}],
+           "plans": [{"name": "A", "start": [0.3, 0.3, 0], "goal": [1.5, 0.3, 0]}]}
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**env, "blocks": [{"x": 0.9, "y": 0.6, "w": -0.1, "h": 1.2}]}))
+    r = run("envs", "create", str(bad))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "blocks[0].w must be > 0" in r.stderr
+    r = run("envs", "create", str(tmp_path / "missing.json"))
+    assert r.returncode == 2 and "no such environment file" in r.stderr
+    good = tmp_path / "corridor.json"
+    good.write_text(json.dumps(env))
+    r = run("envs", "create", str(good))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("Created environment 'newuser-corridor': 1.8 x 1.8 m, 1 blocks, plans: A.")
+    r = run("envs", "create", str(good))
+    assert r.returncode == 2 and "the name 'newuser-corridor' is taken on the testbed" in r.stderr
+    assert json.loads(run("envs", "newuser-corridor").stdout)["blocks"][0]["h"] == 1.2  # `twb envs NAME` as before
+    # `twb submit --env FILE`: an identical environment is used ...
+    r = run("submit", "--env", str(good), "--plan", "A", "--planner", "astar", "--modes", "sim", "--wait")
+    assert r.returncode == 0, r.stderr
+    assert "using the testbed's identical environment 'newuser-corridor'" in r.stderr
+    # ... a new one is created first ...
+    fresh = tmp_path / "fresh.json"
+    fresh.write_text(json.dumps({**env, "name": "newuser-fresh"}))
+    r = run("submit", "--env", str(fresh), "--start", "0.3,0.3", "--goal", "1.5,0.3", "--modes", "sim", "--wait")
+    assert r.returncode == 0, r.stderr
+    assert "created environment 'newuser-fresh'" in r.stderr
+    assert json.loads(run("status", r.stdout.strip(), "--json").stdout)["environment"] == "newuser-fresh"
+    # ... and a different one with a taken name is refused, nothing submitted
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({**env, "blocks": []}))
+    r = run("submit", "--env", str(other), "--plan", "A", "--modes", "sim")
+    assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1
+    assert "already has a different environment named 'newuser-corridor'" in r.stderr
+
+
+def test_submit_wait_prints_status_lines_when_not_a_terminal(testbed):
+    r = _twb_process(testbed, "submit", "--env", "blocks", "--plan", "A", "--planner", "fmm", "--wait")
+    assert r.returncode == 0, r.stderr
+    exp_id = int(r.stdout.strip())
+    lines = r.stderr.splitlines()
+    status = [ln for ln in lines if re.match(rf"^\[\d+ s\] experiment {exp_id}: \w+, \d/2 runs done", ln)]
+    assert len(status) >= 2 and status[-1].endswith(f"experiment {exp_id}: completed, 2/2 runs done"), r.stderr
+    assert "\x1b" not in r.stderr and "\r" not in r.stderr
+    assert lines[-1] == f"experiment {exp_id}: completed (2/2 runs completed)"
+    r = _twb_process(testbed, "wait", str(exp_id))
+    assert r.returncode == 0 and f"experiment {exp_id}: completed, 2/2 runs done" in r.stderr
+    assert _twb_process(testbed, "wait", str(exp_id), "-q").stderr == f"experiment {exp_id}: completed (2/2 runs completed)\n"
+
+
+def test_results_fit_the_terminal_and_wide_shows_everything(run, finished):
+    narrow = run("results", str(finished), env={"COLUMNS": "80"})
+    assert narrow.returncode == 0, narrow.stderr
+    assert max(len(line) for line in narrow.stdout.splitlines()) <= 80, narrow.stdout
+    assert "left out to fit 80 characters" in narrow.stdout and "--wide shows every column" in narrow.stdout
+    assert "mean" in narrow.stdout and "length" in narrow.stdout
+    wide = run("results", str(finished), "--wide", env={"COLUMNS": "80"})
+    assert "left out" not in wide.stdout and "κ'" in wide.stdout and "speed" in wide.stdout
+    assert max(len(line) for line in wide.stdout.splitlines()) > 80
+    roomy = run("results", str(finished), env={"COLUMNS": "160"})
+    assert "left out" not in roomy.stdout
+    status = run("status", str(finished), env={"COLUMNS": "80"})
+    assert max(len(line) for line in status.stdout.splitlines()) <= 80 and "field-" in status.stdout
+
+
+def test_the_sdk_says_where_it_looked_for_a_token(testbed, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    code = ("from client_sdk import Client, Unauthorized\n"
+            "try:\n    Client().list_robots()\nexcept Unauthorized as e:\n    print(e)\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("TWB_TOKEN", "TWB_DATA_DIR")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=60,
+                         env={**env, "TWB_URL": testbed.url}).stdout
+    assert out.startswith("401 Unauthorized: Missing bearer token (no token found"), out
+    assert str(tmp_path / "twb-data" / "token") in out and "TWB_TOKEN" in out and "token=" in out

@@ -264,7 +264,7 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     # a download goes through the token-carrying fetch
     twb_run = next(r for r in exp["runs"] if r["mode"] == "twb")
     with page.expect_download() as dl:
-        page.click(f'#runs-table tr[data-run="{twb_run["id"]}"] button:has-text("poses CSV")')
+        page.click(f'#runs-table button[aria-label="Download poses of run {twb_run["id"]} as CSV"]')
     path = dl.value.path()
     assert dl.value.suggested_filename == f"run-{twb_run['id']}-poses.csv"
     assert Path(path).read_text().splitlines()[0] == "t,x,y,theta"

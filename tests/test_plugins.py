@@ -1,8 +1,10 @@
 """Plug-in planners through the real entry-point mechanism (a distribution on sys.path)."""
 
 import json
+import re
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -99,3 +101,76 @@ def test_register_planner_in_process():
             register_planner("fmm", diagonal)
     finally:
         registry._instances.pop("diag", None)
+
+
+# --------------------------------------------------------------------------- twb plugins
+
+
+EXAMPLE_PLUGIN = Path(__file__).resolve().parents[1] / "examples" / "planner_plugin"
+
+
+@pytest.fixture
+def scratch_venv(tmp_path):
+    """A virtualenv without pip that sees this project's environment through a .pth file: `twb plugins install`
+    run with its Python must install there, not into the project's .venv."""
+    import subprocess
+    import sysconfig
+
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    python = venv / "bin" / "python"
+    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    (Path(site) / "_project_env.pth").write_text(f"import site; site.addsitedir({sysconfig.get_path('purelib')!r})\n")
+    return python
+
+
+def _twb_with(python: Path, *args: str, env: dict | None = None):
+    import os
+    import subprocess
+
+    return subprocess.run([str(python), "-m", "twb", *args], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, **(env or {})})
+
+
+def test_plugins_install_goes_into_the_interpreter_running_twb(scratch_venv, twb):
+    import shutil
+
+    if shutil.which("uv") is None:
+        pytest.skip("uv is not on PATH (the scratch virtualenv has no pip either)")
+    r = _twb_with(scratch_venv, "plugins", "list")
+    assert r.returncode == 0 and "none" in r.stdout and str(scratch_venv.parents[1]) in r.stdout
+    r = _twb_with(scratch_venv, "plugins", "install", "-e", str(EXAMPLE_PLUGIN), "--no-deps")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"into {scratch_venv.parents[1]} (Python" in r.stderr and "with uv" in r.stderr
+    assert re.search(r"shortcut +twb_shortcut_planner:ShortcutPlanner +\[twb-shortcut-planner 0\.1\.0\] +ok", r.stdout)
+    assert "restart a running testbed" in r.stdout
+    r = _twb_with(scratch_venv, "plan", "--env", "room", "--plan", "A", "--planner", "shortcut")
+    assert r.returncode == 0 and json.loads(r.stdout)["planner"] == "shortcut", r.stderr
+    # the project's own environment did not change
+    assert "shortcut" not in twb("planners").stdout
+
+
+def test_without_uv_or_pip_install_says_what_to_do(scratch_venv, tmp_path):
+    import os
+
+    no_uv = os.pathsep.join(p for p in os.environ.get("PATH", "").split(os.pathsep)
+                            if not (Path(p) / "uv").exists())
+    r = _twb_with(scratch_venv, "plugins", "install", str(EXAMPLE_PLUGIN), env={"PATH": no_uv})
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "uv is not on PATH and this Python has no pip" in r.stderr and "ensurepip" in r.stderr
+
+
+def test_plugins_list_names_the_ones_that_fail_and_says_to_restart(plugin_dist, twb):
+    r = twb("plugins", "list", env={"PYTHONPATH": str(plugin_dist)})
+    assert r.returncode == 1
+    assert re.search(r"straight +twb_test_plugin:StraightLine +\[twb-test-plugin 0\.1\] +ok", r.stdout), r.stdout
+    broken = next(line for line in r.stdout.splitlines() if line.strip().startswith("broken"))
+    assert "FAILED to load: No module named 'twb_test_plugin_missing'" in broken
+    assert "restart the testbed" in broken
+
+
+def test_a_plugin_that_fails_to_load_says_to_restart_the_testbed(plugin_dist):
+    with pytest.raises(UnknownPlanner, match=r"failed to load: .*installed it while the testbed was running, "
+                                             r"restart the testbed"):
+        get_planner("broken")

@@ -113,6 +113,22 @@ def test_figures_are_real_images_with_the_expected_panels(study_dir):
         "simulation (S)", "Teleworkbench (T)", "direct comparison (ST)"}
 
 
+
+@pytest.mark.parametrize("name", ["small", "two planners compared on my own environment with walls"])
+def test_every_figure_title_and_legend_fits_its_figure(study_dir, name):
+    """Fig. 8 of two planners is 6.2 in wide: its one-row legend and its title ran off both sides."""
+    import dataclasses
+
+    data = load_study(study_dir)
+    data.spec = dataclasses.replace(data.spec, name=name)
+    for key, fig in make_figures(data).items():
+        width = fig.bbox.width
+        legend, title = fig.legends[0], fig.get_suptitle()
+        assert name in title.replace("\n", " ") and legend.get_texts()
+        for artist in (legend, fig._suptitle):
+            box = artist.get_window_extent()
+            assert 0 <= box.x0 and box.x1 <= width, (key, type(artist).__name__, box, width)
+
 def test_ompl_database_is_readable(study_dir, tmp_path):
     con = sqlite3.connect(study_dir / "study.db")
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}

@@ -381,6 +381,14 @@ def test_sdk_and_cli_upload_and_submit(testbed, client, tmp_path, twb):
     r = twb("submit", "--env", "detour", "--start", "0.3,0.3,0", "--goal", "1.5,1.5", "--program", m.group(1),
             "--modes", "sim", "--wait", "--url", testbed.url, "--token", testbed.token)
     assert r.returncode == 0 and "completed (1/1 runs completed)" in r.stderr, r.stderr
+    exp_id, prog_id = r.stdout.strip(), m.group(1)
+    # a program job is labelled as the dashboard does, never "planner explicit path"
+    r = twb("status", exp_id, "--url", testbed.url, "--token", testbed.token)
+    assert f"program #{prog_id}" in r.stdout and "explicit path" not in r.stdout, r.stdout
+    r = twb("status", "--url", testbed.url, "--token", testbed.token, env={"COLUMNS": "200"})
+    assert re.search(rf"\b{exp_id}\b .*detour .*program #{prog_id}", r.stdout), r.stdout
+    r = twb("results", exp_id, "--url", testbed.url, "--token", testbed.token)
+    assert f"experiment {exp_id}: completed (detour, program #{prog_id})" in r.stdout, r.stdout
     r = twb("upload", str(tmp_path / "missing.py"), "--url", testbed.url, "--token", testbed.token)
     assert r.returncode != 0 and r.stderr.strip().endswith("missing.py") and "Traceback" not in r.stderr
 

@@ -12,11 +12,12 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
+from typer.core import TyperGroup
 
 from .errors import fail
 from .sdk_support import TokenOpt, UrlOpt, sdk_client
 
-__all__ = ["cancel", "envs", "results", "status", "submit", "wait"]
+__all__ = ["cancel", "envs_app", "job_label", "results", "status", "submit", "wait"]
 
 EXIT_NOT_COMPLETED = 1
 
@@ -62,7 +63,7 @@ def _read_path_file(path: Path) -> list[list[float]]:
 
 def submit(
     job_file: Annotated[Optional[Path], typer.Argument(help="JSON job file (fields of POST /api/v1/experiments); flags override it.")] = None,
-    env: Annotated[Optional[str], typer.Option("--env", help="Environment name (room, blocks, or one you created).")] = None,
+    env: Annotated[Optional[str], typer.Option("--env", help="Environment name (room, blocks, or one you created), or an environment file (JSON): created on the testbed if needed.")] = None,
     plan: Annotated[Optional[str], typer.Option("--plan", help="The environment's named start/goal pair (e.g. A).")] = None,
     start: Annotated[Optional[str], typer.Option(help="Start X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
     goal: Annotated[Optional[str], typer.Option(help="Goal X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
@@ -74,7 +75,7 @@ def submit(
     repetitions: Annotated[Optional[int], typer.Option(help="Runs per mode (default: 1).", min=1)] = None,
     seed: Annotated[Optional[int], typer.Option(help="Seed of the job (planner sampling, noise) (default: 0).", min=0)] = None,
     field: Annotated[Optional[str], typer.Option(help="sub (a 1.8 m sub-field) or full (3.6 m field) (default: sub).")] = None,
-    wait_: Annotated[bool, typer.Option("--wait", help="Wait for the end with a progress bar; exit 1 unless completed.")] = False,
+    wait_: Annotated[bool, typer.Option("--wait", help="Wait for the end (a progress bar, or status lines when not a terminal); exit 1 unless completed.")] = False,
     timeout: Annotated[Optional[float], typer.Option(help="With --wait: give up after this many seconds (exit 3).")] = None,
     url: UrlOpt = None,
     token: TokenOpt = None,
@@ -108,6 +109,8 @@ def submit(
     if "environment" not in body:
         fail("give --env NAME (or a job file with an \"environment\")")
     with sdk_client(url, token) as client:
+        if env and Path(env).is_file():
+            body["environment"] = _environment_from_file(client, Path(env))
         if plan:
             if "start" in body or "goal" in body:
                 fail("give either --plan or --start/--goal, not both")
@@ -120,8 +123,31 @@ def submit(
         typer.echo(exp.id)
         if wait_:
             sys.stdout.flush()
-            done = client.wait(exp.id, timeout=timeout)
+            done = client.wait(exp.id, timeout=timeout, progress=True)
             _final_line(done)
+
+
+def load_environment_file(path: Path) -> Any:
+    """The environment in ``path``, checked with the planners' model (a clear one-line error otherwise)."""
+    from planners import load_environment
+
+    if not path.is_file():
+        fail(f"no such environment file: {path}")
+    return load_environment(path)
+
+
+def _environment_from_file(client: Any, path: Path) -> str:
+    """Make sure the testbed has the environment of ``path`` (created, or an identical one reused); its name."""
+    from client_sdk import Conflict
+
+    env = load_environment_file(path)
+    try:
+        remote, created = client.ensure_environment(env.to_dict())
+    except Conflict as exc:
+        fail(f"{path}: {exc.detail}")
+    what = "created environment" if created else "using the testbed's identical environment"
+    typer.echo(f"{what} {remote.name!r} from {path}", err=True)
+    return remote.name
 
 
 def _final_line(exp: Any) -> None:
@@ -130,6 +156,13 @@ def _final_line(exp: Any) -> None:
         typer.echo(msg + (f": {exp.error}" if exp.error else ""), err=True)
         raise typer.Exit(EXIT_NOT_COMPLETED)
     typer.echo(msg, err=True)
+
+
+def job_label(exp: Any) -> str:
+    """Where a job's path comes from: ``"fm2"``, ``"program #7"`` or ``"explicit path"``."""
+    if getattr(exp, "program", None) is not None:
+        return f"program #{exp.program}"
+    return exp.planner or "explicit path"
 
 
 def _num(v: Any, digits: int = 3) -> str:
@@ -142,25 +175,17 @@ def _num(v: Any, digits: int = 3) -> str:
     return str(v)
 
 
-def _console():  # type: ignore[no-untyped-def]
-    from rich.console import Console
-
-    con = Console(soft_wrap=False)
-    return con if con.is_terminal else Console(soft_wrap=False, width=180)
-
-
 def status(
     experiment_id: Annotated[Optional[int], typer.Argument(help="Experiment id; without it, list your experiments.")] = None,
     state: Annotated[Optional[str], typer.Option("--status", help="List only experiments in this state.")] = None,
     limit: Annotated[int, typer.Option(help="How many experiments to list.", min=1, max=500)] = 20,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    wide: Annotated[bool, typer.Option("--wide", help="Every column, however wide the terminal.")] = False,
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
     """Show one experiment (status, runs) or list your latest experiments."""
     import dataclasses
-
-    from rich.table import Table
 
     with sdk_client(url, token) as client:
         if experiment_id is None:
@@ -169,37 +194,72 @@ def status(
                 typer.echo(json.dumps({"data": [_jsonable(dataclasses.asdict(e)) for e in page.data],
                                        "count": page.count}))
                 return
-            table = Table("id", "status", "environment", "planner", "modes", "reps", "created", "error",
-                          title=f"{len(page.data)} of {page.count} experiments")
-            for e in page.data:
-                table.add_row(str(e.id), e.status, e.environment, e.planner or "path", ",".join(e.modes),
-                              str(e.repetitions), e.created_at.strftime("%Y-%m-%d %H:%M:%S") if e.created_at else "",
-                              e.error[:60])
-            _console().print(table)
+            _print_experiment_list(page, wide)
             return
         exp = client.get_experiment(experiment_id)
     if as_json:
         typer.echo(json.dumps(_jsonable(dataclasses.asdict(exp))))
         return
-    con = _console()
+    _print_experiment(exp, wide)
+
+
+def _print_experiment_list(page: Any, wide: bool) -> None:
+    from rich.table import Table
+
+    from .tables import console, print_fitted
+
+    rows = [{"id": str(e.id), "status": e.status, "environment": e.environment, "planner": job_label(e),
+             "modes": ",".join(e.modes), "reps": str(e.repetitions),
+             "created": e.created_at.strftime("%Y-%m-%d %H:%M:%S") if e.created_at else "", "error": e.error[:60]}
+            for e in page.data]
+
+    def build(cols: list[str]) -> Table:
+        table = Table(*cols, title=f"{len(page.data)} of {page.count} experiments")
+        for r in rows:
+            table.add_row(*(r[c] for c in cols))
+        return table
+
+    columns = [c for c in _LIST_COLUMNS if c != "error" or any(e.error for e in page.data)]
+    print_fitted(console(wide), build, columns, ("created", "reps", "modes"), wide)
+
+
+_LIST_COLUMNS = ("id", "status", "environment", "planner", "modes", "reps", "created", "error")
+_RUN_COLUMNS = ("run", "mode", "rep", "status", "robot", "sub-field", "length (m)", "time (s)", "mean dev. (m)", "error")
+
+
+def _print_experiment(exp: Any, wide: bool) -> None:
+    from rich.table import Table
+
+    from .tables import console, print_fitted
+
+    con = console(wide)
     length = None
     if exp.planned_path is not None and len(exp.planned_path) > 1:
         import numpy as np
 
         length = float(np.hypot(*np.diff(exp.planned_path[:, :2], axis=0).T).sum())
+    source = job_label(exp) if exp.planner is None else f"planner {exp.planner}"
     con.print(f"experiment {exp.id}: [bold]{exp.status}[/bold]  {exp.environment} "
-              f"{_pose(exp.start)} -> {_pose(exp.goal)}  planner {exp.planner or 'explicit path'}  "
+              f"{_pose(exp.start)} -> {_pose(exp.goal)}  {source}  "
               f"planned {_num(length)} m in {_num(exp.planning_time_s, 4)} s  seed {exp.seed}", highlight=False)
     if exp.error:
         con.print(f"error: {exp.error}", highlight=False)
-    table = Table("run", "mode", "rep", "status", "robot", "sub-field", "length (m)", "time (s)", "mean dev. (m)",
-                  "error")
+    rows = []
     for r in exp.runs:
         m = r.metrics
-        table.add_row(str(r.id), r.mode, str(r.repetition), r.status, r.robot_id or "", _num(r.subfield),
-                      _num(m.get("length_m")), _num(m.get("execution_time_s"), 2), _num(m.get("deviation_mean_m"), 4),
-                      r.error[:50])
-    con.print(table)
+        rows.append(dict(zip(_RUN_COLUMNS, (
+            str(r.id), r.mode, str(r.repetition), r.status, r.robot_id or "", _num(r.subfield),
+            _num(m.get("length_m")), _num(m.get("execution_time_s"), 2), _num(m.get("deviation_mean_m"), 4),
+            r.error[:50]))))
+
+    def build(cols: list[str]) -> Table:
+        table = Table(*cols)
+        for row in rows:
+            table.add_row(*(row[c] for c in cols))
+        return table
+
+    columns = [c for c in _RUN_COLUMNS if c != "error" or any(r.error for r in exp.runs)]
+    print_fitted(con, build, columns, ("mean dev. (m)", "time (s)", "length (m)", "sub-field"), wide)
 
 
 def _pose(p: list[float]) -> str:
@@ -225,13 +285,14 @@ def _jsonable(v: Any) -> Any:
 def wait(
     experiment_id: Annotated[int, typer.Argument(help="Experiment id.")],
     timeout: Annotated[Optional[float], typer.Option(help="Give up after this many seconds (exit 3).")] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or status lines.")] = False,
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
-    """Wait for an experiment to finish (progress bar on stderr); exit 1 unless it completed."""
+    """Wait for an experiment to finish (progress on stderr: a bar, or status lines when not a terminal);
+    exit 1 unless it completed."""
     with sdk_client(url, token) as client:
-        exp = client.wait(experiment_id, timeout=timeout, progress=False if quiet else None)
+        exp = client.wait(experiment_id, timeout=timeout, progress=not quiet)
     _final_line(exp)
 
 
@@ -258,56 +319,125 @@ def results(
     experiment_id: Annotated[int, typer.Argument(help="Experiment id.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print the metrics JSON (server's shape).")] = False,
     as_csv: Annotated[bool, typer.Option("--csv", help="Print CSV: one row per run, every metric.")] = False,
+    wide: Annotated[bool, typer.Option("--wide", help="Every column, however wide the terminal.")] = False,
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
-    """Metrics of an experiment: per run, mean ± std per mode, direct sim-vs-twb comparison."""
+    """Metrics of an experiment: per run, mean ± std per mode, direct sim-vs-twb comparison.
+
+    The table fits the terminal: the less important metrics are left out (and named) when
+    it is narrow; --wide shows every one.
+    """
     if as_json and as_csv:
         fail("give --json or --csv, not both")
     with sdk_client(url, token) as client:
         m = client.get_metrics(experiment_id)
+        exp = None if as_json or as_csv else client.get_experiment(experiment_id)
     if as_json:
         typer.echo(json.dumps(metrics_json(m)))
         return
     if as_csv:
-        import csv
-
-        from client_sdk.study import flat_metrics
-
-        rows = [{"run_id": r.run_id, "mode": r.mode, "repetition": r.repetition, "status": r.status,
-                 **flat_metrics(r.metrics)} for r in m.runs]
-        cols = list(dict.fromkeys(k for r in rows for k in r))
-        w = csv.DictWriter(sys.stdout, cols, lineterminator="\n")
-        w.writeheader()
-        w.writerows(rows)
+        _print_results_csv(m)
         return
+    _print_results(m, exp, wide)
+
+
+def _print_results_csv(m: Any) -> None:
+    import csv
+
+    from client_sdk.study import flat_metrics
+
+    rows = [{"run_id": r.run_id, "mode": r.mode, "repetition": r.repetition, "status": r.status,
+             **flat_metrics(r.metrics)} for r in m.runs]
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+    w = csv.DictWriter(sys.stdout, cols, lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+
+
+#: metrics left out first when the terminal is narrow (the last ones here go first)
+_RESULT_PRIORITY = ("length_m", "execution_time_s", "deviation_mean_m", "goal_reached", "collided", "length_ratio",
+                    "average_speed_m_s", "clearance_min_m", "deviation_max_m", "smoothness_rad")
+
+
+def compact_table(columns: list[str], title: Optional[str] = None, numeric: tuple[str, ...] = ()) -> Any:
+    """A rich table without vertical lines (narrow), numbers right-aligned; headers may hold a line break."""
+    from rich import box
     from rich.table import Table
 
-    con = _console()
-    table = Table("run", "mode", "rep", "status", *[h for _, h in RESULT_COLUMNS],
-                  title=f"experiment {m.experiment_id}: {m.status}")
+    table = Table(title=title, box=box.SIMPLE_HEAD, collapse_padding=True, show_edge=False, pad_edge=False)
+    for c in columns:
+        table.add_column(c, justify="right" if c in numeric else "left")
+    return table
+
+
+def _header(label: str) -> str:
+    """``"length (m)"`` as two lines, ``"length\\n(m)"``: the unit under the name keeps columns narrow."""
+    name, sep, unit = label.rpartition(" (")
+    return f"{name}\n({unit}" if sep else label.replace(" ", "\n", 1)
+
+
+def _result_rows(m: Any) -> list[tuple[dict[str, str], Optional[str]]]:
+    """Rows of the results table: one per run, then mean and std per mode (bold)."""
+    rows: list[tuple[dict[str, str], Optional[str]]] = []
     for r in m.runs:
-        table.add_row(str(r.run_id), r.mode, str(r.repetition), r.status,
-                      *[_num(r.metrics.get(k)) for k, _ in RESULT_COLUMNS])
+        rows.append(({"run": str(r.run_id), "mode": r.mode, "rep": str(r.repetition), "status": r.status,
+                      **{_header(h): _num(r.metrics.get(k)) for k, h in RESULT_COLUMNS}}, None))
     for mode, agg in m.aggregates.items():
-        cells = []
-        for k, _ in RESULT_COLUMNS:
-            s = agg.metrics.get(k)
-            cells.append("–" if s is None or s.mean is None else
-                         f"{s.mean:.3f}" + (f" ± {s.std:.3f}" if s.std is not None else ""))
-        table.add_row("mean", mode, str(agg.runs), "", *cells, style="bold")
-    con.print(table)
+        for label, field in (("mean", "mean"), ("± std", "std")):
+            cells = {}
+            for k, h in RESULT_COLUMNS:
+                s = agg.metrics.get(k)
+                v = None if s is None else getattr(s, field)
+                cells[_header(h)] = "–" if v is None else f"{v:.3f}"
+            rows.append(({"run": label, "mode": mode, "rep": str(agg.runs) if field == "mean" else "", "status": "",
+                          **cells}, "bold"))
+    return rows
+
+
+def _print_results(m: Any, exp: Any, wide: bool) -> None:
+    from .tables import console, print_fitted
+
+    con = console(wide)
+    headers = {k: _header(h) for k, h in RESULT_COLUMNS}
+    rows = _result_rows(m)
+    title = f"experiment {m.experiment_id}: {m.status}" + (f" ({exp.environment}, {job_label(exp)})" if exp else "")
+
+    def build(cols: list[str]) -> Any:
+        table = compact_table(cols, title, numeric=tuple(headers.values()))
+        for row, style in rows:
+            table.add_row(*(row[c] for c in cols), style=style)
+        return table
+
+    columns = ["run", "mode", "rep", "status", *headers.values()]
+    optional = [headers[k] for k in reversed(_RESULT_PRIORITY)]
+    print_fitted(con, build, columns, optional, wide)
     if m.planned:
         con.print("planned path: " + "  ".join(f"{h} {_num(m.planned.get(k))}" for k, h in RESULT_COLUMNS[:3]),
                   highlight=False)
     if m.direct:
-        dt = Table("repetition", "sim run", "twb run", "mean dev. (m)", "max dev. (m)", "Hausdorff (m)", "Fréchet (m)",
-                   title="direct comparison ST (field path against the simulated one)")
-        for d in m.direct:
-            dt.add_row(str(d.repetition), str(d.sim_run_id), str(d.twb_run_id),
-                       *[_num(d.metrics.get(k), 4) for k in ("deviation_mean_m", "deviation_max_m", "hausdorff_m",
-                                                              "frechet_m")])
-        con.print(dt)
+        _print_direct(con, m.direct, wide)
+
+
+_DIRECT_COLUMNS = ("repetition", "sim run", "twb run", "mean dev. (m)", "max dev. (m)", "Hausdorff (m)", "Fréchet (m)")
+
+
+def _print_direct(con: Any, direct: Any, wide: bool) -> None:
+    from .tables import print_fitted
+
+    rows = [dict(zip(_DIRECT_COLUMNS, (str(d.repetition), str(d.sim_run_id), str(d.twb_run_id),
+                                       *[_num(d.metrics.get(k), 4) for k in ("deviation_mean_m", "deviation_max_m",
+                                                                           "hausdorff_m", "frechet_m")])))
+            for d in direct]
+
+    def build(cols: list[str]) -> Any:
+        table = compact_table([_header(c) for c in cols], "direct comparison ST (field path against the simulated one)",
+                              numeric=tuple(_header(c) for c in _DIRECT_COLUMNS[3:]))
+        for row in rows:
+            table.add_row(*(row[c] for c in cols))
+        return table
+
+    print_fitted(con, build, list(_DIRECT_COLUMNS), ("Fréchet (m)", "max dev. (m)"), wide)
 
 
 def cancel(
@@ -330,22 +460,78 @@ def cancel(
         raise typer.Exit(1)
 
 
+class _EnvsGroup(TyperGroup):
+    """``twb envs NAME`` is ``twb envs show NAME``: a first word that is no sub-command names an environment."""
+
+    def resolve_command(self, ctx: Any, args: list[str]) -> Any:
+        if args and args[0] not in self.commands and not args[0].startswith("-"):
+            args = ["show", *args]
+        return super().resolve_command(ctx, args)
+
+
+envs_app = typer.Typer(cls=_EnvsGroup, help="Environments: `twb envs` lists them, `twb envs NAME` prints one as a file, "
+                                              "`twb envs create FILE` adds one.")
+
+
+@envs_app.callback(invoke_without_command=True)
 def envs(
-    name: Annotated[Optional[str], typer.Argument(help="Print this environment as an environment file (JSON).")] = None,
+    ctx: typer.Context,
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
-    """List the environments (built-ins and yours), or print one as JSON."""
+    """List the environments (built-ins and yours); `twb envs NAME` prints one as JSON,
+    `twb envs create FILE` adds one."""
+    ctx.obj = (url, token)
+    if ctx.invoked_subcommand is not None:
+        return
     from rich.table import Table
 
+    from .tables import console
+
     with sdk_client(url, token) as client:
-        if name is not None:
-            typer.echo(json.dumps(client.get_environment(name).to_json(), indent=1))
-            return
         page = client.list_environments(limit=1000)
     table = Table("name", "size (m)", "blocks", "plans", "owner", "description")
     for e in page.data:
         plans = ", ".join(f"{p.name}: {_pose(p.start[:2])}->{_pose(p.goal[:2])}" for p in e.plans)
         table.add_row(e.name, "x".join(f"{v:g}" for v in e.size), str(len(e.blocks)), plans,
                       "built-in" if e.builtin else (e.owner or ""), e.description[:50])
-    _console().print(table)
+    console().print(table)
+
+
+def _connection(ctx: typer.Context, url: Optional[str], token: Optional[str]) -> tuple[Optional[str], Optional[str]]:
+    parent = (ctx.parent.obj if ctx.parent is not None else None) or (None, None)
+    return url or parent[0], token or parent[1]
+
+
+@envs_app.command("show")
+def show_environment(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(help="The environment's name.")],
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Print an environment as an environment file (JSON)."""
+    with sdk_client(*_connection(ctx, url, token)) as client:
+        typer.echo(json.dumps(client.get_environment(name).to_json(), indent=1))
+
+
+@envs_app.command("create")
+def create_environment(
+    ctx: typer.Context,
+    file: Annotated[Path, typer.Argument(help="Environment file (JSON: name, size, blocks, plans; docs/planners.md).")],
+    url: UrlOpt = None,
+    token: TokenOpt = None,
+) -> None:
+    """Add the environment of FILE to the testbed (checked here first; its name must be free)."""
+    from client_sdk import Conflict
+
+    env = load_environment_file(file)
+    with sdk_client(*_connection(ctx, url, token)) as client:
+        try:
+            created = client.create_environment(env.to_dict())
+        except Conflict:
+            fail(f"the name {env.name!r} is taken on the testbed: give the environment in {file} another \"name\" "
+                 f"(`twb submit --env {file}` reuses the testbed's if it is identical)")
+    plans = ", ".join(p.name for p in created.plans) or "none"
+    typer.echo(f"Created environment {created.name!r}: {created.size[0]:g} x {created.size[1]:g} m, "
+               f"{len(created.blocks)} blocks, plans: {plans}. Use it: twb submit --env {created.name} ...")

@@ -19,6 +19,8 @@ import weakref
 from pathlib import Path
 from typing import Optional
 
+from .datadir import make_data_dir
+
 __all__ = ["LaunchError", "LocalTestbed"]
 
 
@@ -36,8 +38,7 @@ class LocalTestbed:
 
     def __init__(self, data_dir: Path, *args: str, command: str = "up", token: Optional[str] = None,
                  timeout: float = 60.0, env: Optional[dict[str, str]] = None) -> None:
-        self.data_dir = Path(data_dir)
-        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.data_dir = make_data_dir(Path(data_dir))
         self.token = token or secrets.token_urlsafe(24)
         self.log = self.data_dir / "stdout.log"
         self._out = open(self.log, "w")

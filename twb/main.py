@@ -10,7 +10,8 @@ import sys
 
 import typer
 
-from . import agent_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, replay_cmd, server_cmd, study_cmd, upload_cmd
+from . import (agent_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, plugins_cmd, replay_cmd, server_cmd, study_cmd,
+               upload_cmd)
 from .errors import report_exception
 
 app = typer.Typer(
@@ -23,6 +24,7 @@ app = typer.Typer(
 )
 app.command("plan")(plan_cmd.plan)
 app.command("planners")(plan_cmd.planners)
+app.add_typer(plugins_cmd.plugins_app, name="plugins")
 app.command("demo")(demo_cmd.demo)
 app.command("metrics")(metrics_cmd.metrics)
 app.command("agent")(agent_cmd.agent)
@@ -34,7 +36,7 @@ app.command("status")(jobs_cmd.status)
 app.command("wait")(jobs_cmd.wait)
 app.command("results")(jobs_cmd.results)
 app.command("cancel")(jobs_cmd.cancel)
-app.command("envs")(jobs_cmd.envs)
+app.add_typer(jobs_cmd.envs_app, name="envs")
 app.command("upload")(upload_cmd.upload)
 app.command("replay")(replay_cmd.replay)
 app.command("study")(study_cmd.study)

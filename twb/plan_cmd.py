@@ -14,6 +14,13 @@ from .errors import fail
 from .poses import parse_cli_pose
 
 
+#: the configuration space's options of ``twb plan`` and ``twb demo``: as the testbed plans unless told
+RobotRadiusOpt = Annotated[Optional[float], typer.Option(
+    help="Robot radius in metres (default: the BeBot profile's, 0.045).")]
+PlanningMarginOpt = Annotated[Optional[float], typer.Option(
+    help="Clearance kept beyond the robot radius, metres; 0 for none (default: the testbed's, 0.02).")]
+
+
 class PlanFormat(str, Enum):
     json = "json"
     ttp = "ttp"
@@ -42,9 +49,8 @@ def plan(
     ] = None,
     planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar or a plug-in name.")] = "fmm",
     seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM).", min=0)] = 0,
-    robot_radius: Annotated[
-        Optional[float], typer.Option(help="Robot radius in metres (default: the BeBot profile's, 0.045).")
-    ] = None,
+    robot_radius: RobotRadiusOpt = None,
+    planning_margin: PlanningMarginOpt = None,
     resolution: Annotated[float, typer.Option(help="Grid resolution in metres per cell.")] = 0.01,
     max_spacing: Annotated[float, typer.Option(help="Largest distance between path points, metres.")] = 0.1,
     param: Annotated[
@@ -52,10 +58,14 @@ def plan(
     ] = None,
     fmt: Annotated[PlanFormat, typer.Option("--format", help="json, ttp (wire line, mm/deg) or csv.")] = PlanFormat.json,
 ) -> None:
-    """Plan a collision-free path and print it (JSON, a T,T,P line, or CSV t,x,y,theta)."""
+    """Plan a collision-free path and print it (JSON, a T,T,P line, or CSV t,x,y,theta).
+
+    It plans as the testbed does: obstacles dilated by the robot radius plus the planning
+    margin.  JSON carries both (robot_radius_m, planning_margin_m); with ttp and csv a comment
+    line on stderr says them.
+    """
     from planners import load_environment, plan_path
     from robot_agent.protocol import encode_path
-    from robot_agent.robot_profile import load_profile
 
     environment = load_environment(env)
     if plan_name is not None:
@@ -70,25 +80,46 @@ def plan(
         if not start or not goal:
             fail("--start and --goal are required (or --plan NAME for a built-in start/goal pair)")
         s, g = parse_cli_pose(start, "start"), parse_cli_pose(goal, "goal")
-    radius = load_profile()["radius_m"] if robot_radius is None else robot_radius
-    if not math.isfinite(radius) or radius < 0:
-        fail(f"--robot-radius must be a finite number >= 0, got {radius}")
+    radius, margin = clearance(robot_radius, planning_margin)
     result = plan_path(
         environment, s, g, planner, robot_radius=radius, resolution=resolution,
-        params=_params(param or []), seed=seed, max_spacing=max_spacing,
+        params=_params(param or []), seed=seed, max_spacing=max_spacing, planning_margin=margin,
     )
     out = sys.stdout
     if fmt is PlanFormat.json:
         doc = result.to_dict()
-        doc.update(environment=environment.name, start=s, goal=g, robot_radius_m=radius, resolution_m=resolution)
+        doc.update(environment=environment.name, start=s, goal=g, resolution_m=resolution)
         json.dump(doc, out)
         out.write("\n")
-    elif fmt is PlanFormat.ttp:
+        return
+    typer.echo(f"# {result.planner} on {environment.name}: {result.length_m:.3f} m, planned for {clearance_words(radius, margin)}",
+               err=True)
+    if fmt is PlanFormat.ttp:
         out.write(encode_path(result.path) + "\n")
     else:
         out.write("t,x,y,theta\n")
         for x, y, a in result.path.tolist():
             out.write(f",{x:.6f},{y:.6f},{a:.6f}\n")
+
+
+def clearance(robot_radius: Optional[float], planning_margin: Optional[float]) -> tuple[float, float]:
+    """The robot radius and planning margin (m) to plan with: the options, else the testbed's defaults
+    (the BeBot profile's radius, :data:`planners.DEFAULT_PLANNING_MARGIN`)."""
+    from planners import DEFAULT_PLANNING_MARGIN
+    from robot_agent.robot_profile import load_profile
+
+    radius = load_profile()["radius_m"] if robot_radius is None else robot_radius
+    margin = DEFAULT_PLANNING_MARGIN if planning_margin is None else planning_margin
+    if not math.isfinite(radius) or radius < 0:
+        fail(f"--robot-radius must be a finite number >= 0, got {radius}")
+    if not math.isfinite(margin) or margin < 0:
+        fail(f"--planning-margin must be a finite number >= 0 (0: none), got {margin}")
+    return radius, margin
+
+
+def clearance_words(radius: float, margin: float) -> str:
+    """``"robot radius 0.045 m + planning margin 0.02 m"`` (metres)."""
+    return f"robot radius {radius:g} m + planning margin {margin:g} m"
 
 
 def planners() -> None:

@@ -13,6 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from .datadir import make_data_dir
 from .errors import fail
 from .poses import parse_time_scale
 from .sdk_support import TokenOpt, UrlOpt, sdk_client
@@ -74,6 +75,10 @@ def _run(main) -> None:  # type: ignore[no-untyped-def]
 def _settings(data_dir: Path, token: Optional[str], time_scale: float, **extra):  # type: ignore[no-untyped-def]
     from server.core.settings import Settings
 
+    try:
+        make_data_dir(data_dir)
+    except OSError as exc:
+        fail(f"--data-dir {data_dir}: cannot create it: {exc.strerror or exc}")
     kwargs = {"data_dir": data_dir, "time_scale": time_scale, **extra}
     if token:
         kwargs["admin_token"] = token

@@ -14,6 +14,7 @@ redrawn offline from a study directory.  Saving is the caller's business
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 from typing import Any, Iterable, Optional
 
@@ -45,6 +46,27 @@ LABELS = {"computed": "computed (planned)", "sim": "simulation (S)", "twb": "Tel
 SHORT = {"sim": "S", "twb": "T"}
 #: segments of the outcomes figure
 OUTCOME_COLORS = {"success": "#2ca02c", "collision": "#ff7f0e", "timeout": "#9467bd", "other": "#8c564b"}
+
+
+def legend_and_title(fig, handles: dict[str, Any], title: str, **legend_kw: Any) -> None:  # type: ignore[no-untyped-def]
+    """The figure's legend below it, in as many columns as fit its width, and its title, wrapped to its width
+    (a legend of one row or a long study name no longer runs off a narrow figure)."""
+    width = 0.98 * fig.get_figwidth() * fig.dpi
+    ncols = max(len(handles), 1)
+    while True:
+        legend = fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncols=ncols,
+                            frameon=False, **legend_kw)
+        if ncols == 1 or legend.get_window_extent().width <= width:
+            break
+        legend.remove()
+        ncols -= 1
+    chars = len(title)
+    while True:
+        text = textwrap.fill(title, chars, break_on_hyphens=False)
+        suptitle = fig.suptitle(text)
+        if chars <= 20 or suptitle.get_window_extent().width <= width:
+            break
+        chars = int(chars * 0.9)
 
 
 def mean_std(values: Iterable[Any]) -> tuple[Optional[float], Optional[float], int]:
@@ -130,9 +152,8 @@ def figure_metrics(data: StudyData):  # type: ignore[no-untyped-def]
         _grouped_bars(ax, labels, series, missing)
         ax.set_title(label)
     handles = {lab: h for ax in axes for h, lab in zip(*ax.get_legend_handles_labels())}
-    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=len(handles), frameon=False)
-    fig.suptitle(f"Study {data.spec.name}: metrics per configuration (mean ± std over the completed runs: "
-                 f"{len(rows)} of {len(data.rows)})")
+    legend_and_title(fig, handles, f"Study {data.spec.name}: metrics per configuration (mean ± std over the completed "
+                     f"runs: {len(rows)} of {len(data.rows)})")
     return fig
 
 
@@ -156,8 +177,8 @@ def figure_ratios(data: StudyData):  # type: ignore[no-untyped-def]
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
         ax.set_title(f"{label} (performed / planned)")
     handles = {lab: h for ax in axes for h, lab in zip(*ax.get_legend_handles_labels())}
-    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=len(handles), frameon=False)
-    fig.suptitle(f"Study {data.spec.name}: performed / planned ratios over the completed runs (1 = as planned)")
+    legend_and_title(fig, handles, f"Study {data.spec.name}: performed / planned ratios over the completed runs "
+                     "(1 = as planned)")
     return fig
 
 
@@ -215,8 +236,7 @@ def figure_paths(data: StudyData):  # type: ignore[no-untyped-def]
             ax.plot(*exp["goal"][:2], "*", color="g", ms=9, label="goal")
             _outcome_note(ax, exp, runs)
     handles = {lab: h for ax in axes.ravel() for h, lab in zip(*ax.get_legend_handles_labels())}
-    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=len(handles), frameon=False)
-    fig.suptitle(f"Study {data.spec.name}: computed (dashed), simulated and field paths")
+    legend_and_title(fig, handles, f"Study {data.spec.name}: computed (dashed), simulated and field paths")
     return fig
 
 
@@ -292,11 +312,9 @@ def figure_outcomes(data: StudyData):  # type: ignore[no-untyped-def]
     ax.set_xticks([0, 0.25, 0.5, 0.75, 1.0])
     ax.set_xlabel("fraction of the counted runs (completed or failed); whisker: success rate, Wilson 95% interval")
     handles = {lab: h for h, lab in zip(*ax.get_legend_handles_labels())}
-    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncols=max(len(handles), 1), fontsize=8,
-               frameon=False)
     ax.grid(axis="x", color="0.9")
     ax.set_axisbelow(True)
-    fig.suptitle(f"Study {data.spec.name}: outcomes per configuration and mode")
+    legend_and_title(fig, handles, f"Study {data.spec.name}: outcomes per configuration and mode", fontsize=8)
     return fig
 
 

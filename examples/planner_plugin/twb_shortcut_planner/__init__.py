@@ -1,6 +1,6 @@
 """An example planner plug-in: the grid A* path, then greedy line-of-sight shortcuts (any-angle).
 
-Install it next to the testbed (``pip install -e examples/planner_plugin``) and
+Install it next to the testbed (``twb plugins install -e examples/planner_plugin``) and
 select it by name: ``twb plan --planner shortcut ...``, ``twb submit
 --planner shortcut ...`` or ``Client.submit(..., planner="shortcut")``.
 """

@@ -48,8 +48,10 @@ export function barChart({ title, unit = "", groups, ref = null }) {
         // a t-interval of a few runs can reach below zero: draw it to the axis
         clo = Math.max(lo, clo);
         chi = Math.min(hi, chi);
+        const note = clo > g.agg.ci_low ? ` (it reaches ${num(g.agg.ci_low)}; shown clipped at 0: the metric cannot be negative)` : "";
         svg.append(s("path", { d: `M${cx},${y(clo)}V${y(chi)}M${cx - 6},${y(clo)}H${cx + 6}M${cx - 6},${y(chi)}H${cx + 6}`,
-          stroke: "#1c2430", "stroke-width": 1.2, fill: "none" }));
+          stroke: "#1c2430", "stroke-width": 1.2, fill: "none" },
+        s("title", {}, `${g.label} 95% interval [${num(clo)}, ${num(chi)}]${note}`)));
       }
       svg.append(s("text", { x: cx, y: Math.max(T + 8, y(Math.max(m, chi ?? m)) - 4), "text-anchor": "middle", "font-size": 9.5, fill: "#1c2430" }, num(m)));
     }
@@ -69,8 +71,8 @@ export function barChart({ title, unit = "", groups, ref = null }) {
   return svg;
 }
 
-/** series: [{label, color, points: [[x, y], ...], dash}] */
-export function lineChart({ title, xLabel, yLabel, series }) {
+/** series: [{label, color, points: [[x, y], ...], dash}]; legend: [{label, color}] drawn top right. */
+export function lineChart({ title, xLabel, yLabel, series, legend = [] }) {
   const W = 640, H = 220, L = 46, R = 10, T = 12, B = 34;
   const xs = series.flatMap((q) => q.points.map((p) => p[0])).filter(Number.isFinite);
   const ys = series.flatMap((q) => q.points.map((p) => p[1])).filter(Number.isFinite);
@@ -98,7 +100,21 @@ export function lineChart({ title, xLabel, yLabel, series }) {
       "stroke-opacity": q.alpha ?? 1 }, s("title", {}, q.label)));
   }
   svg.append(s("path", { d: `M${L},${T}V${H - B}H${W - R}`, stroke: "#8a96a5", fill: "none" }));
+  if (legend.length) svg.append(chartLegend(legend, W - R - 8, T + 4));
   return svg;
+}
+
+/** A legend box of coloured lines and labels whose top right corner is (`right`, `top`). */
+function chartLegend(items, right, top) {
+  const width = 30 + Math.max(...items.map((it) => it.label.length)) * 6.2;
+  const g = s("g", { class: "chart-legend", transform: `translate(${right - width},${top})` });
+  g.append(s("rect", { x: 0, y: 0, width, height: 8 + items.length * 15, fill: "#ffffff", "fill-opacity": 0.9, stroke: "#d7dde5", rx: 3 }));
+  items.forEach((it, i) => {
+    const yy = 12 + i * 15;
+    g.append(s("line", { x1: 6, x2: 22, y1: yy, y2: yy, stroke: it.color, "stroke-width": 2.2 }));
+    g.append(s("text", { x: 27, y: yy + 3.5, "font-size": 10.5, fill: "#1c2430" }, it.label));
+  });
+  return g;
 }
 
 /** Speed over time (s since the run's start, m/s) from logged poses [[t, x, y, theta]], over >= `window` s. */

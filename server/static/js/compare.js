@@ -7,15 +7,11 @@
 
 import { $, badge, h, num, pose, report } from "./dom.js";
 import { plannerName } from "./experiments.js";
+import { METRICS, allEqual, clipNote, intervalText, showIfClipped } from "./metrics.js";
 
-export const COMPARE_METRICS = [
-  ["length_m", "Path length", "m"],
-  ["execution_time_s", "Execution time", "s"],
-  ["average_speed_m_s", "Average speed", "m/s"],
-  ["deviation_mean_m", "Mean deviation", "m"],
-  ["smoothness_rad", "Smoothness κ'", "rad"],
-  ["clearance_min_m", "Minimum clearance", "m"],
-];
+/** The compared metrics: [key, name, unit]. */
+export const COMPARE_METRICS = ["length_m", "execution_time_s", "average_speed_m_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m"]
+  .map((key) => [key, ...METRICS[key].slice(0, 2)]);
 const NOT_COUNTED = new Set(["error", "cancelled", "interrupted", "pending"]);
 const MIN_BOOTSTRAP = 5; // as planners.stats: fewer values a side get no interval
 const IDENTICAL = "identical repetitions (deterministic simulation)";
@@ -186,6 +182,9 @@ export class ComparePage {
   render(data) {
     const modes = [...new Set(data.flatMap(({ d }) => d.modes))].sort((a, b) => (a === "twb" ? -1 : b === "twb" ? 1 : a.localeCompare(b)));
     const label = ({ d }) => `#${d.id} ${plannerName(d, this.store.programs)}`;
+    const means = this.means(data, modes, label);
+    const note = clipNote("compare-means-note");
+    showIfClipped(note, means);
     this.root.replaceChildren(
       h("div", { class: "exp-head" }, h("h1", { id: "compare-title" }, `Compare experiments ${data.map(({ d }) => `#${d.id}`).join(", ")}`),
         h("a", { href: "#/experiments" }, "All experiments")),
@@ -195,7 +194,7 @@ export class ComparePage {
         h("div", { class: "table-scroll" }, this.outcomes(data, modes, label))),
       h("div", { class: "panel" }, h("h2", {}, "Metric means"),
         h("p", { class: "muted small" }, "Mean over the completed runs with its 95% interval (Student's t) and over how many of the runs; failed runs' metrics are on each experiment's page."),
-        h("div", { class: "table-scroll" }, this.means(data, modes, label))),
+        h("div", { class: "table-scroll" }, means), note),
       h("div", { class: "panel" }, h("h2", {}, "Differences"),
         h("p", { class: "muted small" }, "a − b per pair and mode: the success rate's risk difference with Fisher's exact p; each metric's difference of means over completed runs with a studentized bootstrap 95% interval (seeded), paired by repetition when both ran the same problem with the same seed. These p-values are not corrected for multiplicity; for a whole study's tests with Holm's correction use twb study (docs/study.md)."),
         h("div", { class: "table-scroll" }, this.differences(data, modes))),
@@ -252,11 +251,10 @@ export class ComparePage {
         const a = x.m.aggregates?.[md]?.metrics?.[key];
         if (!done.length || !a || a.mean == null) return h("td", { class: "num none" }, `no completed run (0 of ${all.length})`);
         const over = h("div", { class: "muted small" }, `over ${done.length} completed of ${all.length} runs`);
-        if (a.n >= 2 && a.std === 0) {
+        if (allEqual(a)) {
           return h("td", { class: "num" }, num(a.mean), h("div", { class: "muted small" }, md === "sim" ? IDENTICAL : "identical repetitions"), over);
         }
-        const ci = a.ci_low == null ? "" : ` [${num(a.ci_low)}, ${num(a.ci_high)}]`;
-        return h("td", { class: "num" }, `${num(a.mean)}${ci}`, over);
+        return h("td", { class: "num" }, num(a.mean), a.ci_low == null ? "" : [" ", intervalText(key, a.ci_low, a.ci_high)], over);
       }))));
     return h("table", { class: "grid", id: "compare-means" }, head, body);
   }

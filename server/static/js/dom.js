@@ -90,15 +90,30 @@ export function pose(p) {
 }
 
 let toastTimer = 0;
-/** A short message in the corner (role=status), red for problems. */
-export function toast(message, bad = false) {
+let toastKey = null;
+/** A short message in the corner (role=status), red for problems, gone after 3 s (6 s); `key` names it for
+ * `retoast`.  A gone toast leaves no text behind (a stale "queued" is neither seen nor read out). */
+export function toast(message, bad = false, key = null) {
   const el = document.getElementById("toast");
   if (!el) return;
   el.textContent = message;
   el.classList.toggle("bad", bad);
   el.classList.add("show");
+  toastKey = key;
   clearTimeout(toastTimer);
-  toastTimer = setTimeout(() => el.classList.remove("show"), bad ? 6000 : 3000);
+  toastTimer = setTimeout(() => {
+    el.classList.remove("show");
+    toastKey = null;
+    toastTimer = setTimeout(() => { el.textContent = ""; }, 250); // after the fade
+  }, bad ? 6000 : 3000);
+}
+
+/** Change the message of the toast shown under `key`, if it still is (3 s more); false when it has gone. */
+export function retoast(key, message) {
+  const el = document.getElementById("toast");
+  if (!el || key === null || toastKey !== key || !el.classList.contains("show")) return false;
+  toast(message, false, key);
+  return true;
 }
 
 /** Call fn at most once per `ms`, trailing. */

@@ -7,10 +7,12 @@ import { saveBlob } from "./api.js";
 import { barChart, lineChart, speedProfile } from "./charts.js";
 import { $, TERMINAL, badge, debounce, duration, h, num, pose, report, toast, when } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { METRICS, allEqual, clipNote, intervalText, metricLabel, showIfClipped } from "./metrics.js";
 import { ProgramPanel } from "./programrun.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
 const MODE_COLOR = { sim: COLORS.sim, twb: COLORS.twb };
+const MODE_NAME = { sim: "sim (simulation)", twb: "twb (field)" };
 /** The crash marker: a ✕ where a failed run stopped (its `stopped_at`). */
 export const CRASH_COLOR = "#d81b60";
 const CRASH_SIZE = 0.035; // m, half the ✕'s width
@@ -83,8 +85,8 @@ export class ExperimentsPage {
   }
 
   table(el, rows, lastTitle, last, cancellable, selectable = false) {
-    const head = h("thead", {}, h("tr", {}, [...(selectable ? ["Compare"] : []), "ID", "Status", "Environment", "Planner", "Modes", "Reps", "Field", "Owner", "Submitted", lastTitle, ""]
-      .map((t) => h("th", { scope: "col" }, t))));
+    const head = h("thead", {}, h("tr", {}, [...(selectable ? ["Compare"] : []), "ID", "Status", "Environment", "Planner", "Modes", "Reps",
+      "Field", "Owner", "Submitted", lastTitle, cancellable ? "Action" : "Error"].map((t) => h("th", { scope: "col" }, t))));
     const pick = (e) => h("td", {}, h("input", { type: "checkbox", class: "compare-pick", checked: this.selected.has(e.id),
       "aria-label": `Compare experiment ${e.id}`, onchange: (ev) => {
         if (ev.target.checked) this.selected.add(e.id); else this.selected.delete(e.id);
@@ -100,10 +102,10 @@ export class ExperimentsPage {
       h("td", { class: "num" }, e.repetitions),
       h("td", {}, e.field),
       h("td", {}, e.owner),
-      h("td", {}, when(e.created_at)),
-      h("td", {}, last(e)),
-      h("td", {}, cancellable ? h("button", { type: "button", class: "small", onclick: () => cancel(this.store, e.id),
-        "aria-label": `Cancel experiment ${e.id}` }, "Cancel") : (e.error ? h("span", { class: "muted small", title: e.error }, e.error.slice(0, 60)) : "")),
+      h("td", { class: "when" }, when(e.created_at)),
+      h("td", { class: "when" }, last(e)),
+      cancellable ? h("td", {}, h("button", { type: "button", class: "small", onclick: () => cancel(this.store, e.id),
+        "aria-label": `Cancel experiment ${e.id}` }, "Cancel")) : h("td", { class: "reason" }, e.error || ""),
     )) : h("tr", { class: "empty-row" }, h("td", { colspan: selectable ? 12 : 11 }, "None")));
     el.replaceChildren(head, body);
   }
@@ -122,14 +124,9 @@ const RUN_COLUMNS = [
   ["collided", "Collided"],
 ];
 
-const CHARTS = [
-  ["length_m", "Path length", "m", true],
-  ["execution_time_s", "Execution time", "s", false],
-  ["average_speed_m_s", "Average speed", "m/s", false],
-  ["deviation_mean_m", "Mean deviation from plan", "m", false],
-  ["smoothness_rad", "Smoothness κ'", "rad", true],
-  ["clearance_min_m", "Minimum clearance", "m", true],
-];
+/** The charted metrics: [key, whether the planned path's value is drawn as a reference]. */
+const CHARTS = [["length_m", true], ["execution_time_s", false], ["average_speed_m_s", false], ["deviation_mean_m", false],
+  ["smoothness_rad", true], ["clearance_min_m", true]];
 
 export class ExperimentPage {
   constructor(store) {
@@ -177,8 +174,9 @@ export class ExperimentPage {
       legend: h("div", { class: "legend", role: "group", "aria-label": "Paths shown" }),
       charts: h("div", { class: "charts", id: "experiment-charts" }),
       speed: h("div", { class: "wide-chart" }),
-      runs: h("table", { class: "grid", id: "runs-table" }),
+      runs: h("table", { class: "grid dense", id: "runs-table" }),
       aggregates: h("table", { class: "grid", id: "aggregates-table" }),
+      aggNote: clipNote("aggregates-note"),
       direct: h("table", { class: "grid", id: "direct-table" }),
       downloads: h("div", { class: "downloads" }),
     };
@@ -194,7 +192,7 @@ export class ExperimentPage {
           h("p", { class: "muted small" }, "Bars: mean per mode; whiskers: 95% confidence interval; dots: runs; dashed green: the planned path."),
           e.charts, e.speed)),
       h("div", { class: "panel" }, h("h2", {}, "Runs"), h("div", { class: "table-scroll" }, e.runs)),
-      h("div", { class: "panel" }, h("h2", {}, "Aggregates per mode"), h("div", { class: "table-scroll" }, e.aggregates)),
+      h("div", { class: "panel" }, h("h2", {}, "Aggregates per mode"), h("div", { class: "table-scroll" }, e.aggregates), e.aggNote),
       h("div", { class: "panel" }, h("h2", {}, "Direct comparison, sim vs field per repetition"),
         h("div", { class: "table-scroll" }, e.direct)),
       h("div", { class: "panel" }, h("h2", {}, "Downloads"), e.downloads),
@@ -308,23 +306,23 @@ export class ExperimentPage {
   }
 
   renderRuns(d, m) {
-    const head = h("thead", {}, h("tr", {}, ["Run", "Mode", "Rep.", "Status", "Robot", "Sub-field",
-      ...RUN_COLUMNS.map(([, t]) => t), "Downloads"].map((t, i) => h("th", { scope: "col", class: i > 5 && i < 6 + RUN_COLUMNS.length ? "num" : null }, t))));
+    const head = h("thead", {}, h("tr", {}, ["Run", "Mode #", "Status", "Robot", "Sub-field", ...RUN_COLUMNS.map(([, t]) => t),
+      "Poses, messages"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + RUN_COLUMNS.length ? "num" : null }, t))));
     const rows = this.runs().map((r) => {
       const mt = r.metrics || {};
       return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
-        h("td", {}, r.id), h("td", {}, r.mode), h("td", { class: "num" }, r.repetition), h("td", {}, badge(r.status),
-          r.error ? h("div", { class: "muted small" }, r.error) : "",
+        h("td", {}, r.id), h("td", {}, `${r.mode} #${r.repetition}`), h("td", {}, badge(r.status),
+          r.error ? h("div", { class: "muted small run-error" }, r.error) : "",
           r.stopped_at ? h("div", { class: "muted small stopped" }, `✕ stopped at ${pose(r.stopped_at)}`) : ""),
         h("td", {}, r.robot_id || "–"), h("td", {}, r.subfield ?? "–"),
         ...RUN_COLUMNS.map(([k]) => h("td", { class: "num", dataset: { metric: k } }, num(mt[k]))),
         h("td", {}, r.t_start == null ? "–" : h("span", { class: "downloads" },
-          this.dl(`/api/v1/runs/${r.id}/poses?format=csv`, `run-${r.id}-poses.csv`, "poses CSV", `Download poses of run ${r.id} as CSV`),
+          this.dl(`/api/v1/runs/${r.id}/poses?format=csv`, `run-${r.id}-poses.csv`, "CSV", `Download poses of run ${r.id} as CSV`),
           this.dl(`/api/v1/runs/${r.id}/poses?format=json`, `run-${r.id}-poses.json`, "JSON", `Download poses of run ${r.id} as JSON`),
           this.dl(`/api/v1/runs/${r.id}/messages?limit=10000`, `run-${r.id}-messages.json`, "messages", `Download protocol messages of run ${r.id}`))));
     });
     if (m.planned) {
-      rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, "planned"), h("td", {}, ""), h("td", {}, ""),
+      rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, "planned"), h("td", {}, ""),
         h("td", {}, ""), h("td", {}, ""), ...RUN_COLUMNS.map(([k]) => h("td", { class: "num" }, num(m.planned[k]))), h("td", {}, "")));
     }
     this.els.runs.replaceChildren(head, h("tbody", {}, rows));
@@ -340,23 +338,25 @@ export class ExperimentPage {
     const head = h("thead", {}, h("tr", {}, h("th", { scope: "col" }, "Metric"),
       ...modes.flatMap((md) => [h("th", { scope: "col", class: "num" }, `${md} mean ± std`), h("th", { scope: "col", class: "num" }, `${md} 95% CI`),
         h("th", { scope: "col", class: "num" }, "n")])));
-    const body = h("tbody", {}, keys.map((k) => h("tr", { dataset: { metric: k } }, h("th", { scope: "row" }, k),
+    const body = h("tbody", {}, keys.map((k) => h("tr", { dataset: { metric: k } }, h("th", { scope: "row", title: k }, metricLabel(k)),
       ...modes.flatMap((md) => {
         const a = m.aggregates[md].metrics[k] || {};
         // identical repetitions (the deterministic simulation): a zero-width interval would be a fake certainty
-        const same = a.n >= 2 && a.std === 0;
+        const same = allEqual(a);
         return [h("td", { class: "num" }, `${num(a.mean)} ± ${num(a.std)}`),
-          h("td", { class: "num" }, same ? (md === "sim" && !d.jitter ? "identical repetitions (deterministic simulation)" : "all equal: no interval")
-            : a.ci_low == null ? "–" : `[${num(a.ci_low)}, ${num(a.ci_high)}]`),
+          h("td", { class: same ? "num said" : "num" }, same ? (md === "sim" && !d.jitter ? "identical repetitions (deterministic simulation)" : "all equal: no interval")
+            : intervalText(k, a.ci_low, a.ci_high)),
           h("td", { class: "num" }, a.n ?? "–")];
       }))));
     this.els.aggregates.replaceChildren(head, body);
+    showIfClipped(this.els.aggNote, this.els.aggregates);
   }
 
   renderDirect(m) {
     const rows = m.direct || [];
     const keys = ["deviation_mean_m", "deviation_max_m", "hausdorff_m", "frechet_m"];
-    const head = h("thead", {}, h("tr", {}, ["Repetition", "sim run", "twb run", ...keys].map((t, i) => h("th", { scope: "col", class: i > 2 ? "num" : null }, t))));
+    const head = h("thead", {}, h("tr", {}, ["Repetition", "sim run", "twb run", ...keys.map(metricLabel)].map((t, i) =>
+      h("th", { scope: "col", class: i > 2 ? "num" : null, title: i > 2 ? keys[i - 3] : null }, t))));
     const body = h("tbody", {}, rows.length ? rows.map((r) => h("tr", {}, h("td", {}, r.repetition), h("td", {}, r.sim_run_id), h("td", {}, r.twb_run_id),
       ...keys.map((k) => h("td", { class: "num" }, num(r[k]))))) :
       h("tr", { class: "empty-row" }, h("td", { colspan: 7 }, "Needs a completed sim and twb run of the same repetition.")));
@@ -366,7 +366,8 @@ export class ExperimentPage {
   renderCharts(d, m) {
     const modes = d.modes;
     const done = (m.runs || []).filter((r) => r.status === "completed");
-    const charts = CHARTS.map(([key, title, unit, withRef]) => {
+    const charts = CHARTS.map(([key, withRef]) => {
+      const [title, unit] = METRICS[key];
       const groups = modes.map((md) => ({
         // a mode whose runs all failed says so instead of showing an empty slot
         label: done.some((r) => r.mode === md) || !d.runs.some((r) => r.mode === md) ? md : `${md}: none completed`,
@@ -379,15 +380,16 @@ export class ExperimentPage {
     });
     this.els.charts.replaceChildren(...charts);
     const series = this.runs().filter((r) => this.poses.has(r.id)).map((r) => ({
-      label: `${r.mode} #${r.repetition}`, color: MODE_COLOR[r.mode], alpha: 0.85,
+      label: `${r.mode} #${r.repetition}`, color: MODE_COLOR[r.mode], alpha: 0.85, mode: r.mode,
       points: speedProfile(this.poses.get(r.id), r.t_start),
     }));
     this.els.speed.replaceChildren(series.length ? h("figure", {}, h("figcaption", { class: "small" }, "Speed over time (m/s against s since EV,START)"),
-      lineChart({ title: "Speed over time", xLabel: "time since start (s)", yLabel: "speed (m/s)", series })) : "");
+      lineChart({ title: "Speed over time", xLabel: "time since start (s)", yLabel: "speed (m/s)", series,
+        legend: [...new Set(series.map((q) => q.mode))].map((md) => ({ label: MODE_NAME[md] || md, color: MODE_COLOR[md] })) })) : "");
   }
 
   dl(path, filename, label, aria) {
-    return h("button", { type: "button", class: "small", "aria-label": aria, onclick: () =>
+    return h("button", { type: "button", class: "small", "aria-label": aria, title: aria, onclick: () =>
       this.store.api.download(path, filename).catch((err) => report(err, "Download")) }, label);
   }
 

@@ -18,8 +18,11 @@ export const COLORS = {
 
 const STATE_FILL = {
   idle: "#ffffff",
-  building: "#ffe8a3",
+  building: "#ffe8a3", // the gripper at work: hatched
+  placing: "#ffe8a3",
+  planning: "#ffe8a3",
   running: "#d6e9fb",
+  analyzing: "#d6e9fb",
   reserved: "#ece4f7",
   offline: "#c9ced6",
 };
@@ -114,7 +117,7 @@ export class MapView {
       const [sw, sh] = sf.size;
       ctx.fillStyle = STATE_FILL[sf.state] || "#ffffff";
       ctx.fillRect(X(sx), Y(sy + sh), sw * g.scale, sh * g.scale);
-      if (sf.state === "offline" || sf.state === "building") this.hatch(X(sx), Y(sy + sh), sw * g.scale, sh * g.scale);
+      if (sf.state === "offline" || sf.state === "building" || sf.state === "placing") this.hatch(X(sx), Y(sy + sh), sw * g.scale, sh * g.scale);
     }
 
     // 0.3 m grid

@@ -36,11 +36,31 @@ export class FieldPage {
     this.renderTables();
   }
 
+  /**
+   * The state a sub-field shows.  The server's sub-field states are coarser than a run's and lag it: a
+   * sub-field stays "building" (or "idle" until the gripper starts) while its run is placing or
+   * planning, and the queue and the experiment page show the run's status.  So while a run the
+   * dashboard knows is on the sub-field, its status is shown (building, placing, planning, running,
+   * analyzing); otherwise (another user's run, none) the sub-field's own state.
+   */
+  shownState(sf) {
+    return this.activeRun(sf)?.status ?? sf.state;
+  }
+
+  /** The run under way on sub-field `sf` that the dashboard knows (the gripper's or the robot's), if any. */
+  activeRun(sf) {
+    if (sf.state === "offline") return null;
+    const runId = sf.run_id ?? this.store.subfieldRun.get(sf.id);
+    const run = runId != null ? this.store.runs.get(runId) : null;
+    if (!run || run.subfield !== sf.id || run.status === "queued" || TERMINAL.has(run.status)) return null;
+    return run;
+  }
+
   layers() {
     const st = this.store;
     const subfields = st.subfields.map((sf) => ({
-      origin: sf.origin, size: sf.size, state: sf.state,
-      label: `${sf.id} · ${sf.state}${sf.environment ? ` · ${sf.environment}` : ""}`,
+      origin: sf.origin, size: sf.size, state: this.shownState(sf),
+      label: `${sf.id} · ${this.shownState(sf)}${sf.environment ? ` · ${sf.environment}` : ""}`,
     }));
     const blocks = [];
     const fullDone = new Set();
@@ -102,7 +122,7 @@ export class FieldPage {
 
   /** The canvas's text alternative: what a sighted user sees on it. */
   describe(robots) {
-    const parts = this.store.subfields.map((sf) => `sub-field ${sf.id} ${sf.state}${sf.environment ? ` with ${sf.environment}` : ""}`);
+    const parts = this.store.subfields.map((sf) => `sub-field ${sf.id} ${this.shownState(sf)}${sf.environment ? ` with ${sf.environment}` : ""}`);
     const rs = robots.map((r) => `${r.label} at (${r.x.toFixed(2)}, ${r.y.toFixed(2)}) m heading ${Math.round((r.theta * 180) / Math.PI)}°`);
     const text = `Field 3.6 by 3.6 m: ${parts.join("; ")}. Robots: ${rs.join("; ") || "none known"}.`;
     const c = this.map.canvas;
@@ -113,11 +133,13 @@ export class FieldPage {
     const st = this.store;
     const body = $("#subfield-table tbody");
     body.replaceChildren(...st.subfields.map((sf) => {
-      const run = sf.run_id != null ? st.runs.get(sf.run_id) : null;
-      const runCell = sf.run_id == null ? "–"
-        : run ? h("a", { href: `#/experiments/${run.experiment_id}` }, `run ${sf.run_id}`) : `run ${sf.run_id}`;
-      return h("tr", { dataset: { subfield: sf.id, state: sf.state } },
-        h("td", {}, sf.id), h("td", {}, badge(sf.state)), h("td", {}, sf.environment || "–"),
+      const runId = sf.run_id ?? this.activeRun(sf)?.id;
+      const run = runId != null ? st.runs.get(runId) : null;
+      const runCell = runId == null ? "–"
+        : run ? h("a", { href: `#/experiments/${run.experiment_id}` }, `run ${runId}`) : `run ${runId}`;
+      const state = this.shownState(sf);
+      return h("tr", { dataset: { subfield: sf.id, state } },
+        h("td", {}, sf.id), h("td", {}, badge(state)), h("td", {}, sf.environment || "–"),
         h("td", {}, sf.robot_id || "–"), h("td", {}, runCell));
     }));
     const pool = st.robots.filter((r) => r.pool !== "field");

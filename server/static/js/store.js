@@ -35,6 +35,10 @@ export class Store extends EventTarget {
     this.poses = new Map(); // robot id -> {x, y, theta, t, run_id, source: live|log|home}
     this.traces = new Map(); // run id -> {robot_id, points: [[x, y]] field frame, exact}
     this.subfieldRun = new Map(); // sub-field id -> latest run id seen on it
+    // when an event last told a run's or a sub-field's state (performance.now()): an API answer asked for
+    // before that is older than what the dashboard shows, and does not overwrite it
+    this.runToldAt = new Map();
+    this.subfieldToldAt = new Map();
     this.streamState = "stopped";
     this.timers = [];
     this.pending = new Map();
@@ -101,8 +105,9 @@ export class Store extends EventTarget {
 
   async refreshField() {
     try {
+      const asked = performance.now();
       const [subs, robots] = await Promise.all([this.api.get("/api/v1/subfields"), this.api.get("/api/v1/robots")]);
-      this.subfields = subs.data;
+      this.subfields = subs.data.map((sf) => this.newer(this.subfieldToldAt, asked, sf, this.subfields.find((s) => s.id === sf.id)));
       this.robots = robots.data;
       for (const sf of this.subfields) if (sf.run_id != null) this.subfieldRun.set(sf.id, sf.run_id);
       this.emit("field");
@@ -194,7 +199,9 @@ export class Store extends EventTarget {
   async detail(id, { fresh = false } = {}) {
     const have = this.details.get(id);
     if (have && !fresh) return have;
+    const asked = performance.now();
     const d = await this.api.get(`/api/v1/experiments/${id}`);
+    d.runs = d.runs.map((r) => this.newer(this.runToldAt, asked, r, this.runs.get(r.id)));
     this.details.set(id, d);
     for (const r of d.runs) this.runs.set(r.id, r);
     return d;
@@ -202,9 +209,15 @@ export class Store extends EventTarget {
 
   async run(id) {
     if (this.runs.has(id)) return this.runs.get(id);
-    const r = await this.api.get(`/api/v1/runs/${id}`);
+    const asked = performance.now();
+    const r = this.newer(this.runToldAt, asked, await this.api.get(`/api/v1/runs/${id}`), this.runs.get(id));
     this.runs.set(id, r);
     return r;
+  }
+
+  /** `fetched` (asked for at `asked`), or `known` when an event told about it since (`toldAt`: id -> time). */
+  newer(toldAt, asked, fetched, known) {
+    return known && (toldAt.get(fetched.id) ?? -Infinity) > asked ? known : fetched;
   }
 
   /** Planned paths of what is running on the field. */
@@ -339,6 +352,7 @@ export class Store extends EventTarget {
   onRun(run) {
     if (!run) return;
     this.runs.set(run.id, run);
+    this.runToldAt.set(run.id, performance.now());
     if (run.mode === "twb" && run.subfield != null && run.status !== "queued") this.subfieldRun.set(run.subfield, run.id);
     const d = this.details.get(run.experiment_id);
     if (d) {
@@ -373,6 +387,7 @@ export class Store extends EventTarget {
 
   onSubfield(sf) {
     if (!sf) return;
+    this.subfieldToldAt.set(sf.id, performance.now());
     const i = this.subfields.findIndex((s) => s.id === sf.id);
     if (i >= 0) this.subfields[i] = sf;
     else this.subfields.push(sf);

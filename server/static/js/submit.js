@@ -3,7 +3,7 @@
 // uploaded programs, or an explicit path through waypoints), modes, repetitions, seed.
 // The server validates; its message is shown next to the field it is about.
 
-import { $, $$, checkRadio, deg, h, num, radioValue, report, toast } from "./dom.js";
+import { $, $$, TERMINAL, checkRadio, deg, h, num, radioValue, report, retoast, toast } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
 import { programLabel } from "./programs.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
@@ -476,6 +476,25 @@ export class SubmitPage {
     };
   }
 
+  /** Keep the "Experiment #N queued" toast true: it shows each new status while it is up, and stops following
+   * when the experiment has finished or the toast has gone. */
+  followToast(id, status) {
+    const key = `experiment-${id}`;
+    let last = status;
+    const check = () => {
+      const e = this.store.experiments.find((x) => x.id === id) || this.store.details.get(id);
+      if (!e || e.status === last) return;
+      last = e.status;
+      if (!retoast(key, `Experiment #${id} ${e.status}`) || TERMINAL.has(e.status)) stop();
+    };
+    const stop = () => {
+      this.store.removeEventListener("experiments", check);
+      this.store.removeEventListener("experiment", check);
+    };
+    this.store.addEventListener("experiments", check);
+    this.store.addEventListener("experiment", check);
+  }
+
   async submit() {
     this.clearErrors();
     const { problems, body } = this.body();
@@ -490,7 +509,8 @@ export class SubmitPage {
     button.disabled = true;
     try {
       const exp = await this.store.api.post("/api/v1/experiments", body);
-      toast(`Experiment #${exp.id} queued`);
+      toast(`Experiment #${exp.id} ${exp.status}`, false, `experiment-${exp.id}`);
+      this.followToast(exp.id, exp.status);
       this.store.refreshExperiments();
       this.onSubmitted(exp.id);
     } catch (err) {
