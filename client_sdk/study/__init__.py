@@ -15,6 +15,7 @@ offline from the study directory (:func:`load_study`).  The command line is
 from ._collect import StudyJob, flat_metrics, plan_jobs, run_study
 from ._replay import replay_animation
 from ._data import StudyData, load_study
+from ._findings import FINDINGS, Finding, findings_json, findings_markdown, paper_findings, write_findings
 from ._figures import figure_metrics, figure_paths, figure_ratios, make_figures, save_figures
 from ._ompl import export_ompl
 from ._report import summary_markdown, write_report
@@ -22,6 +23,8 @@ from ._spec import PAPER, PlannerSpec, PlanSpec, StudySpec, StudySpecError, load
 
 __all__ = sorted(
     [
+        "FINDINGS",
+        "Finding",
         "PAPER",
         "PlanSpec",
         "PlannerSpec",
@@ -31,18 +34,22 @@ __all__ = sorted(
         "StudySpecError",
         "export_ompl",
         "figure_metrics",
+        "findings_json",
+        "findings_markdown",
         "flat_metrics",
         "figure_paths",
         "figure_ratios",
         "load_spec",
         "load_study",
         "make_figures",
+        "paper_findings",
         "paper_spec",
         "plan_jobs",
         "replay_animation",
         "run_study",
         "save_figures",
         "summary_markdown",
+        "write_findings",
         "write_report",
     ]
 )
