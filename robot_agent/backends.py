@@ -38,7 +38,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from .compiled import kernel
-from .physics import FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
+from .physics import BIAS_FEATURES, FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
 from .params import RobotParams
 from .stepper import FIELD, IDEAL
 
@@ -113,12 +113,17 @@ class Emulated(Backend):
         self.ring_ok = np.zeros((n, self.fg.delay + 1), dtype=bool)
         self.ring_pos = np.zeros(n, dtype=np.int64)
         self.noise = np.zeros((n, 2))  # this step's track noise (standard normals)
+        self.odo = np.zeros((n, 2))  # the localisation's model of the track speeds, m/s
+        self.odo_ring = np.zeros((n, self.fg.predict + 1, 2))  # ... of the last steps (latency compensation)
+        self.bias = np.zeros((n, 2 * BIAS_FEATURES, 3))  # the tracker's bias field of each robot's run
+        self.ctl = self.belief  #: the poses the controller acts on (the field robot predicts them ahead)
 
     @property
     def arrays(self) -> tuple:
-        """``(pose, belief, tracks, gain, keys, ring, ring_ok, ring_pos, noise)``, the arrays themselves."""
-        return (self.pose, self.belief, self.tracks, self.gain, self.keys, self.ring, self.ring_ok,
-                self.ring_pos, self.noise)
+        """``(pose, belief, ctl, tracks, gain, keys, ring, ring_ok, ring_pos, noise, odo, odo_ring, bias)``,
+        the arrays themselves."""
+        return (self.pose, self.belief, self.ctl, self.tracks, self.gain, self.keys, self.ring, self.ring_ok,
+                self.ring_pos, self.noise, self.odo, self.odo_ring, self.bias)
 
 
 @kernel
@@ -156,21 +161,23 @@ class IdealBackend(Emulated):
 
 
 @kernel
-def _field_sense_all(step: np.ndarray, keys: np.ndarray, pose: np.ndarray, belief: np.ndarray, ring: np.ndarray,
-                     ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, fg: FieldGains
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def _field_sense_all(step: np.ndarray, keys: np.ndarray, pose: np.ndarray, belief: np.ndarray, ctl: np.ndarray,
+                     ring: np.ndarray, ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, odo: np.ndarray,
+                     odo_ring: np.ndarray, bias: np.ndarray, fg: FieldGains) -> tuple[np.ndarray, np.ndarray]:
     seen = np.zeros(len(pose), dtype=np.bool_)
     meas = np.empty((len(pose), 3))
     for i in range(len(pose)):
-        seen[i] = field_sense(i, step[i], keys[i], pose, belief, ring, ring_ok, ring_pos, noise, meas[i], fg)
+        seen[i] = field_sense(i, step[i], keys[i], pose, belief, ctl, ring, ring_ok, ring_pos, noise, meas[i], odo,
+                              odo_ring, bias, fg)
     return seen, meas
 
 
 @kernel
 def _field_actuate_all(cmd: np.ndarray, pose: np.ndarray, tracks: np.ndarray, gain: np.ndarray,
-                       noise: np.ndarray, fg: FieldGains) -> None:
+                       noise: np.ndarray, ring_pos: np.ndarray, odo: np.ndarray, odo_ring: np.ndarray,
+                       fg: FieldGains) -> None:
     for i in range(len(pose)):
-        field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, fg)
+        field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, ring_pos, odo, odo_ring, fg)
 
 
 class FieldBackend(Emulated):
@@ -192,21 +199,23 @@ class FieldBackend(Emulated):
     def __init__(self, n: int, params: RobotParams) -> None:
         super().__init__(n, params)
         self.belief = np.zeros((n, 3))
+        self.ctl = np.zeros((n, 3))
 
     def begin_path(self, mask: np.ndarray, keys: np.ndarray, from_rest: np.ndarray) -> None:
         for i in np.flatnonzero(mask):
             self.keys[i] = keys[i]
-            field_begin(int(i), self.keys[i], bool(from_rest[i]), self.pose, self.belief, self.gain,
-                        self.ring_ok, self.fg)
+            field_begin(int(i), self.keys[i], bool(from_rest[i]), self.pose, self.belief, self.ctl, self.gain,
+                        self.ring_ok, self.odo, self.odo_ring, self.bias, self.fg)
 
     def sense(self, step: np.ndarray, moving: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        seen, meas = _field_sense_all(np.asarray(step, dtype=np.int64), self.keys, self.pose, self.belief,
-                                      self.ring, self.ring_ok, self.ring_pos, self.noise, self.fg)
-        return self.belief, seen & moving, meas
+        seen, meas = _field_sense_all(np.asarray(step, dtype=np.int64), self.keys, self.pose, self.belief, self.ctl,
+                                      self.ring, self.ring_ok, self.ring_pos, self.noise, self.odo, self.odo_ring,
+                                      self.bias, self.fg)
+        return self.ctl, seen & moving, meas
 
     def actuate(self, cmd: np.ndarray) -> None:
         _field_actuate_all(np.ascontiguousarray(cmd, dtype=float), self.pose, self.tracks, self.gain,
-                           self.noise, self.fg)
+                           self.noise, self.ring_pos, self.odo, self.odo_ring, self.fg)
 
     def halt(self, mask: np.ndarray) -> None:
         self.tracks[mask] = 0.0
@@ -214,8 +223,11 @@ class FieldBackend(Emulated):
     def place(self, i: int, pose: tuple[float, float, float]) -> None:
         self.pose[i] = pose
         self.belief[i] = pose
+        self.ctl[i] = pose
         self.tracks[i] = 0.0
         self.ring_ok[i] = False
+        self.odo[i] = 0.0
+        self.odo_ring[i] = 0.0
 
     def in_motion(self) -> np.ndarray:
         return self.tracks.any(axis=1)

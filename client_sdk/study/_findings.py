@@ -2,11 +2,11 @@
 
 Tanoto et al. (*Teletesting*, §IV, Fig. 6 and 7) compare the paths FMM, FM² and
 PRM compute with what a simulated robot (S) and the Teleworkbench's real robots
-(T) drove.  :func:`paper_findings` turns their claims into nine checks, each a
-comparison of per-planner means over the study's completed runs (the bars of
-Fig. 6 and 7) with a stated threshold, and returns each with the numbers behind
-it and whether it held.  It is a pure function of a
-:class:`~client_sdk.study.StudyData`: the study directory of ``twb study`` is
+(T) drove, and the two drives with each other (ST).  :func:`paper_findings`
+turns their claims into nine checks.  Each compares per-planner means over the
+study's completed runs (the bars of Fig. 6 and 7) with a stated threshold, and
+comes back with the numbers behind it and whether it held.  It is a pure
+function of a :class:`~client_sdk.study.StudyData`, so a study directory is
 enough, offline.  docs/fidelity.md explains each check and the mechanism of the
 emulated field that makes it hold.
 
@@ -17,20 +17,22 @@ applicable* (``held`` is None), never passed by default.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from ._data import StudyData
 from ._figures import mean_std
 
 __all__ = ["FINDINGS", "Finding", "findings_json", "findings_markdown", "paper_findings", "write_findings"]
 
-#: thresholds of the checks (see docs/fidelity.md)
-SIM_LENGTH_TOLERANCE = 0.03  #: |S length ratio − 1| at most this: the simulated robot drives the planned length
-SIM_DEVIATION_MAX_M = 0.01  #: S mean deviation below this (m): the simulated robot stays on the path
-SIMILAR_LENGTH_RATIO = 0.05  #: |T length ratio − S length ratio| at most this: "similar" length deviation
+#: |S length ratio − 1| at most this: the simulated robot drives the planned length
+SIM_LENGTH_TOLERANCE = 0.03
+#: S mean deviation below this (m): the simulated robot stays on the computed path
+SIM_DEVIATION_MAX_M = 0.01
+#: |T length ratio − S length ratio| at most this: "similar" length deviation
+SIMILAR_LENGTH_RATIO = 0.05
+PLANNERS = ("fmm", "fm2", "prm")
 
 
 @dataclass(frozen=True)
@@ -38,164 +40,191 @@ class Finding:
     """One of the paper's claims, checked: ``held`` is True, False or None (not applicable)."""
 
     key: str
-    claim: str  #: the paper's claim, in its words where it has them
+    claim: str  #: the paper's claim
     check: str  #: how it is checked: metric, comparison, threshold
     held: Optional[bool]
     numbers: dict[str, Any] = field(default_factory=dict)  #: the means behind the verdict
-    detail: str = ""  #: the comparison with the numbers, one line
+    detail: str = ""  #: the comparison with its numbers, one line
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
 
 
-#: (key, claim, check) of the nine findings, in the order they are reported
-FINDINGS: tuple[tuple[str, str, str], ...] = (
-    ("fmm_shortest", "FMM computes the shortest paths.",
-     "computed paths: mean length of FMM ≤ mean length of FM² and of PRM"),
-    ("fm2_safest", "FM² computes the safest paths: the largest clearance.",
-     "computed paths: mean minimum clearance of FM² > that of FMM and of PRM"),
-    ("prm_sharpest", "PRM's paths are characterised by sharp curves: the least smooth.",
-     "computed paths: mean κ' of PRM > mean κ' of FMM and of FM²"),
-    ("sim_follows_plan", "In simulation the robot drives the computed path almost exactly.",
-     f"every planner: |S length ratio − 1| ≤ {SIM_LENGTH_TOLERANCE:g} and S mean deviation "
-     f"< {SIM_DEVIATION_MAX_M * 1000:g} mm"),
-    ("field_slower", "Real runs take longer than simulated ones.",
-     "every planner: mean execution time T > S"),
-    ("field_deviates_more", "The real robot deviates more from the computed path than the simulated one.",
-     "every planner: mean deviation T > S"),
-    ("length_similar", "Path length deviation shows similar results in simulation and in real experiments.",
-     f"every planner: |T length ratio − S length ratio| ≤ {SIMILAR_LENGTH_RATIO:g}"),
-    ("prm_smoother_on_field", "The smoothness of PRM is improved on the real robot: the controller cannot "
-     "follow the sharp curves a PRM path is characterised by.",
-     "PRM's T smoothness ratio < 1 and < S smoothness ratio, and the lowest T smoothness ratio of all planners"),
-    ("field_less_clearance", "The real robot keeps less clearance than the simulated one.",
-     "every planner: mean minimum clearance T < S"),
-)
-
-
-def _mean(rows: list[dict[str, Any]], key: str) -> Optional[float]:
-    return mean_std(r.get(key) for r in rows)[0]
-
-
-def _r(x: Optional[float], digits: int = 4) -> Optional[float]:
-    return None if x is None else round(x, digits)
+#: key -> (claim, check) of the nine findings, in the order they are reported
+FINDINGS: dict[str, tuple[str, str]] = {
+    "fmm_shortest": ("FMM computes the shortest paths.",
+                     "computed paths: mean length of FMM ≤ that of FM² and of PRM"),
+    "fm2_safest": ("FM² computes the safest paths, with the largest clearance.",
+                   "computed paths: mean minimum clearance of FM² > that of FMM and of PRM"),
+    "prm_sharpest": ("PRM's paths are characterised by sharp curves: they are the least smooth.",
+                     "computed paths: mean κ' of PRM > that of FMM and of FM²"),
+    "sim_follows_plan": ("In simulation the robot drives the computed path almost exactly.",
+                         f"every planner: |S length ratio − 1| ≤ {SIM_LENGTH_TOLERANCE:g} and S mean deviation "
+                         f"< {SIM_DEVIATION_MAX_M * 1000:g} mm"),
+    "field_slower": ("Real runs take longer than simulated ones: the real robot is slower.",
+                     "every planner: mean execution time T > S and mean average speed T < S"),
+    "field_deviates_more": ("The real robot deviates more from the computed path than the simulated one.",
+                            "every planner: mean deviation T > S"),
+    "length_similar": ("Path length deviation shows similar results in simulation and in real experiments.",
+                       f"every planner: |mean T length ratio − mean S length ratio| ≤ {SIMILAR_LENGTH_RATIO:g}"),
+    "prm_smoother_on_field": ("The smoothness of PRM is improved on the real robot: the controller cannot follow "
+                              "the sharp curves a PRM path is characterised by.",
+                              "T smoothness ratio (mean T κ' / mean computed κ', over the field runs) of PRM < 1 "
+                              "and < that of FMM and of FM²"),
+    "sim_mispredicts_field": ("Simulation does not predict the real robot's path accurately.",
+                              "every planner: mean ST deviation (field path against the simulated one) > mean "
+                              "S deviation (simulated path against the computed one)"),
+}
 
 
 def _fmt(x: Optional[float], digits: int = 3) -> str:
     return "–" if x is None else f"{x:.{digits}f}"
 
 
-def paper_findings(data: StudyData) -> list[Finding]:
-    """The nine findings (:data:`FINDINGS`) on ``data``'s completed runs, in that order.
+def _r(x: Optional[float], digits: int = 5) -> Optional[float]:
+    return None if x is None else round(x, digits)
 
-    Means are per planner (and mode) over the completed runs; computed-path
-    means are over the planner's experiments (each counted once).
-    """
-    done = [r for r in data.rows if r.get("status") == "completed"]
-    planners = list(dict.fromkeys(r["planner"] for r in done))
 
-    def runs(p: str, mode: str) -> list[dict[str, Any]]:
-        return [r for r in done if r["planner"] == p and r["mode"] == mode]
+class _Means:
+    """Per-planner means of a study's completed runs."""
 
-    def planned(p: str, key: str) -> Optional[float]:
-        per_exp = {r["experiment_id"]: r.get(f"planned_{key}") for r in done if r["planner"] == p}
+    def __init__(self, data: StudyData) -> None:
+        self.done = [r for r in data.rows if r.get("status") == "completed"]
+        self.direct = data.direct
+
+    def runs(self, planner: str, mode: str) -> list[dict[str, Any]]:
+        return [r for r in self.done if r["planner"] == planner and r["mode"] == mode]
+
+    def mode(self, planner: str, mode: str, key: str) -> Optional[float]:
+        return mean_std(r.get(key) for r in self.runs(planner, mode))[0]
+
+    def planned(self, planner: str, key: str) -> Optional[float]:
+        """Mean over the planner's experiments (each once) of the computed path's ``key``."""
+        per_exp = {r["experiment_id"]: r.get(f"planned_{key}") for r in self.done if r["planner"] == planner}
         return mean_std(per_exp.values())[0]
 
-    def mode_mean(p: str, mode: str, key: str) -> Optional[float]:
-        return _mean(runs(p, mode), key)
+    def st(self, planner: str, key: str) -> Optional[float]:
+        return mean_std(d.get(key) for d in self.direct if d["planner"] == planner)[0]
 
-    out: list[Finding] = []
-    spec = {k: (claim, check) for k, claim, check in FINDINGS}
+    def has(self, planner: str, *modes: str) -> bool:
+        return all(self.runs(planner, m) for m in modes)
 
-    def add(key: str, held: Optional[bool], numbers: dict[str, Any], detail: str) -> None:
-        claim, check = spec[key]
-        out.append(Finding(key, claim, check, held, numbers, detail))
 
-    # 1-3: computed paths
-    for key, metric, best, sign in (("fmm_shortest", "length_m", "fmm", -1), ("fm2_safest", "clearance_min_m", "fm2", 1),
-                                    ("prm_sharpest", "smoothness_rad", "prm", 1)):
-        vals = {p: planned(p, metric) for p in ("fmm", "fm2", "prm")}
-        numbers = {f"{p}_planned_{metric}": _r(v) for p, v in vals.items()}
-        if any(v is None for v in vals.values()):
-            add(key, None, numbers, "needs computed paths of FMM, FM² and PRM")
-            continue
-        others = [v for p, v in vals.items() if p != best]
-        held = all(vals[best] <= o for o in others) if sign < 0 else all(vals[best] > o for o in others)
-        rel = "≤" if sign < 0 else ">"
-        add(key, held, numbers, f"{best}: {_fmt(vals[best])} {rel} " +
-            ", ".join(f"{p} {_fmt(v)}" for p, v in vals.items() if p != best) + f" ({metric})")
-
-    both = [p for p in planners if runs(p, "sim") and runs(p, "twb")]
-
-    # 4: simulation follows the plan
-    sim_planners = [p for p in planners if runs(p, "sim")]
-    numbers = {}
-    held: Optional[bool] = None
-    parts = []
-    if sim_planners:
-        held = True
-        for p in sim_planners:
-            lr, dev = mode_mean(p, "sim", "length_ratio"), mode_mean(p, "sim", "deviation_mean_m")
-            numbers[f"{p}_sim_length_ratio"], numbers[f"{p}_sim_deviation_mean_m"] = _r(lr), _r(dev, 5)
-            ok = lr is not None and dev is not None and abs(lr - 1) <= SIM_LENGTH_TOLERANCE and dev < SIM_DEVIATION_MAX_M
-            held = held and ok
-            parts.append(f"{p} {_fmt(lr)} / {_fmt(None if dev is None else dev * 1000, 1)} mm")
-    add("sim_follows_plan", held, numbers, "S length ratio / mean deviation: " + "; ".join(parts) if parts
-        else "needs simulated runs")
-
-    # 5, 6, 9: T against S, every planner
-    for key, metric, rel in (("field_slower", "execution_time_s", ">"), ("field_deviates_more", "deviation_mean_m", ">"),
-                             ("field_less_clearance", "clearance_min_m", "<")):
-        if key == "field_less_clearance":
-            continue  # reported last, after the two findings on ratios
-        add(key, *_t_vs_s(both, metric, rel, mode_mean))
-
-    # 7: length ratios similar
-    numbers, parts = {}, []
-    held = None
-    if both:
-        held = True
-        for p in both:
-            s, t = mode_mean(p, "sim", "length_ratio"), mode_mean(p, "twb", "length_ratio")
-            numbers[f"{p}_sim_length_ratio"], numbers[f"{p}_twb_length_ratio"] = _r(s), _r(t)
-            ok = s is not None and t is not None and abs(t - s) <= SIMILAR_LENGTH_RATIO
-            held = held and ok
-            parts.append(f"{p} S {_fmt(s)} T {_fmt(t)}")
-    add("length_similar", held, numbers, "; ".join(parts) if parts else "needs simulated and field runs")
-
-    # 8: PRM smoother on the field
-    numbers = {}
-    if "prm" in both:
-        t_ratio = {p: mode_mean(p, "twb", "smoothness_ratio") for p in both}
-        s_prm = mode_mean("prm", "sim", "smoothness_ratio")
-        numbers = {f"{p}_twb_smoothness_ratio": _r(v) for p, v in t_ratio.items()}
-        numbers["prm_sim_smoothness_ratio"] = _r(s_prm)
-        tp = t_ratio["prm"]
-        held = (tp is not None and s_prm is not None and tp < 1 and tp < s_prm
-                and all(v is None or tp <= v for v in t_ratio.values()))
-        detail = (f"prm T {_fmt(tp)} (S {_fmt(s_prm)}); " +
-                  ", ".join(f"{p} T {_fmt(v)}" for p, v in t_ratio.items() if p != "prm"))
-        add("prm_smoother_on_field", held, numbers, detail)
-    else:
-        add("prm_smoother_on_field", None, numbers, "needs simulated and field runs of PRM")
-
-    add("field_less_clearance", *_t_vs_s(both, "clearance_min_m", "<", mode_mean))
+def paper_findings(data: StudyData) -> list[Finding]:
+    """The nine findings (:data:`FINDINGS`) on ``data``'s completed runs, in that order."""
+    m = _Means(data)
+    both = [p for p in dict.fromkeys(r["planner"] for r in m.done) if m.has(p, "sim", "twb")]
+    out = [
+        _planned_best(m, "fmm_shortest", "length_m", "fmm", lower=True),
+        _planned_best(m, "fm2_safest", "clearance_min_m", "fm2", lower=False),
+        _planned_best(m, "prm_sharpest", "smoothness_rad", "prm", lower=False),
+        _sim_follows_plan(m),
+        _every_planner(m, "field_slower", both, [("execution_time_s", ">"), ("average_speed_m_s", "<")]),
+        _every_planner(m, "field_deviates_more", both, [("deviation_mean_m", ">")]),
+        _length_similar(m, both),
+        _prm_smoother(m, both),
+        _sim_mispredicts(m, both),
+    ]
     return out
 
 
-def _t_vs_s(planners: list[str], metric: str, rel: str, mode_mean: Any) -> tuple[Optional[bool], dict[str, Any], str]:
-    numbers: dict[str, Any] = {}
+def _finding(key: str, held: Optional[bool], numbers: dict[str, Any], detail: str) -> Finding:
+    claim, check = FINDINGS[key]
+    return Finding(key, claim, check, held, numbers, detail)
+
+
+def _planned_best(m: _Means, key: str, metric: str, best: str, *, lower: bool) -> Finding:
+    vals = {p: m.planned(p, metric) for p in PLANNERS}
+    numbers = {f"{p}_planned_{metric}": _r(v) for p, v in vals.items()}
+    if any(v is None for v in vals.values()):
+        return _finding(key, None, numbers, "needs computed paths of FMM, FM² and PRM")
+    b = vals[best]
+    others = {p: v for p, v in vals.items() if p != best}
+    held = all(b <= v for v in others.values()) if lower else all(b > v for v in others.values())
+    rel = "≤" if lower else ">"
+    detail = f"{metric}: {best} {_fmt(b)} {rel} " + ", ".join(f"{p} {_fmt(v)}" for p, v in others.items())
+    return _finding(key, held, numbers, detail)
+
+
+def _sim_follows_plan(m: _Means) -> Finding:
+    planners = [p for p in dict.fromkeys(r["planner"] for r in m.done) if m.has(p, "sim")]
     if not planners:
-        return None, numbers, "needs simulated and field runs"
-    held = True
-    parts = []
+        return _finding("sim_follows_plan", None, {}, "needs simulated runs")
+    numbers: dict[str, Any] = {}
+    held, parts = True, []
     for p in planners:
-        s, t = mode_mean(p, "sim", metric), mode_mean(p, "twb", metric)
-        numbers[f"{p}_sim_{metric}"], numbers[f"{p}_twb_{metric}"] = _r(s, 5), _r(t, 5)
-        ok = s is not None and t is not None and (t > s if rel == ">" else t < s)
-        held = held and ok
-        parts.append(f"{p} T {_fmt(t)} {rel} S {_fmt(s)}")
-    return held, numbers, f"{metric}: " + "; ".join(parts)
+        lr, dev = m.mode(p, "sim", "length_ratio"), m.mode(p, "sim", "deviation_mean_m")
+        numbers[f"{p}_sim_length_ratio"], numbers[f"{p}_sim_deviation_mean_m"] = _r(lr), _r(dev)
+        held = held and lr is not None and dev is not None and abs(lr - 1) <= SIM_LENGTH_TOLERANCE \
+            and dev < SIM_DEVIATION_MAX_M
+        parts.append(f"{p} {_fmt(lr)} / {_fmt(None if dev is None else dev * 1000, 1)} mm")
+    return _finding("sim_follows_plan", held, numbers, "S length ratio / mean deviation: " + "; ".join(parts))
+
+
+_COMPARE: dict[str, Callable[[float, float], bool]] = {">": lambda a, b: a > b, "<": lambda a, b: a < b}
+
+
+def _every_planner(m: _Means, key: str, planners: list[str], metrics: list[tuple[str, str]]) -> Finding:
+    """T against S for every planner: ``T rel S`` for each (metric, rel)."""
+    if not planners:
+        return _finding(key, None, {}, "needs simulated and field runs")
+    numbers: dict[str, Any] = {}
+    held, parts = True, []
+    for metric, rel in metrics:
+        cells = []
+        for p in planners:
+            s, t = m.mode(p, "sim", metric), m.mode(p, "twb", metric)
+            numbers[f"{p}_sim_{metric}"], numbers[f"{p}_twb_{metric}"] = _r(s), _r(t)
+            held = held and s is not None and t is not None and _COMPARE[rel](t, s)
+            cells.append(f"{p} T {_fmt(t)} {rel} S {_fmt(s)}")
+        parts.append(f"{metric}: " + ", ".join(cells))
+    return _finding(key, held, numbers, "; ".join(parts))
+
+
+def _length_similar(m: _Means, planners: list[str]) -> Finding:
+    if not planners:
+        return _finding("length_similar", None, {}, "needs simulated and field runs")
+    numbers: dict[str, Any] = {}
+    held, parts = True, []
+    for p in planners:
+        s, t = m.mode(p, "sim", "length_ratio"), m.mode(p, "twb", "length_ratio")
+        numbers[f"{p}_sim_length_ratio"], numbers[f"{p}_twb_length_ratio"] = _r(s), _r(t)
+        held = held and s is not None and t is not None and abs(t - s) <= SIMILAR_LENGTH_RATIO
+        parts.append(f"{p} S {_fmt(s)} T {_fmt(t)}")
+    return _finding("length_similar", held, numbers, "length ratio: " + "; ".join(parts))
+
+
+def _prm_smoother(m: _Means, planners: list[str]) -> Finding:
+    """The T smoothness ratio as a ratio of means: a nearly straight computed path (κ' → 0) would
+    make a mean of per-run ratios explode."""
+    if "prm" not in planners:
+        return _finding("prm_smoother_on_field", None, {}, "needs field runs of PRM")
+    ratio: dict[str, Optional[float]] = {}
+    for p in planners:
+        runs = m.runs(p, "twb")
+        t = mean_std(r.get("smoothness_rad") for r in runs)[0]
+        c = mean_std(r.get("planned_smoothness_rad") for r in runs)[0]
+        ratio[p] = None if t is None or c is None or c <= 0 else t / c
+    numbers = {f"{p}_twb_smoothness_ratio": _r(v) for p, v in ratio.items()}
+    prm = ratio["prm"]
+    held = prm is not None and prm < 1 and all(v is not None and prm < v for p, v in ratio.items() if p != "prm")
+    return _finding("prm_smoother_on_field", held, numbers,
+                    "T κ' / computed κ': " + ", ".join(f"{p} {_fmt(v)}" for p, v in ratio.items()))
+
+
+def _sim_mispredicts(m: _Means, planners: list[str]) -> Finding:
+    planners = [p for p in planners if any(d["planner"] == p for d in m.direct)]
+    if not planners:
+        return _finding("sim_mispredicts_field", None, {}, "needs pairs of simulated and field runs")
+    numbers: dict[str, Any] = {}
+    held, parts = True, []
+    for p in planners:
+        st, s = m.st(p, "deviation_mean_m"), m.mode(p, "sim", "deviation_mean_m")
+        numbers[f"{p}_st_deviation_mean_m"], numbers[f"{p}_sim_deviation_mean_m"] = _r(st), _r(s)
+        held = held and st is not None and s is not None and st > s
+        parts.append(f"{p} ST {_fmt(None if st is None else st * 1000, 1)} > S "
+                     f"{_fmt(None if s is None else s * 1000, 1)} mm")
+    return _finding("sim_mispredicts_field", held, numbers, "mean deviation: " + "; ".join(parts))
 
 
 def _verdict(held: Optional[bool]) -> str:
@@ -204,10 +233,11 @@ def _verdict(held: Optional[bool]) -> str:
 
 def findings_markdown(findings: list[Finding]) -> str:
     """The findings as a Markdown table: finding, check, numbers, verdict."""
-    n = sum(f.held is True for f in findings)
+    held = sum(f.held is True for f in findings)
     applicable = sum(f.held is not None for f in findings)
-    lines = ["# The paper's findings", "", f"{n} of {applicable} applicable findings held "
-             f"({len(findings)} checked; docs/fidelity.md explains each check).", "",
+    lines = ["# The paper's findings", "",
+             f"{held} of {applicable} applicable findings held ({len(findings)} checked; docs/fidelity.md "
+             "explains each check). S = simulation, T = Teleworkbench (field), ST = field against simulation.", "",
              "| # | finding | check | numbers | verdict |", "|---|---|---|---|---|"]
     for i, f in enumerate(findings, 1):
         cells = [str(i), f.claim, f.check, f.detail, _verdict(f.held)]
@@ -216,20 +246,17 @@ def findings_markdown(findings: list[Finding]) -> str:
 
 
 def findings_json(findings: list[Finding]) -> dict[str, Any]:
-    """The findings as a JSON-ready document."""
+    """The findings as a JSON-ready document: counts and every finding."""
     return {"held": sum(f.held is True for f in findings), "applicable": sum(f.held is not None for f in findings),
             "findings": [f.to_json() for f in findings]}
 
 
 def write_findings(data: StudyData, directory: Optional[Path] = None) -> list[Finding]:
-    """Check the findings on ``data`` and write ``findings.md`` and ``findings.json`` (default: the study's directory)."""
+    """Check the findings on ``data``; write ``findings.md`` and ``findings.json`` into ``directory``
+    (default: the study's).  Returns the findings."""
     found = paper_findings(data)
     d = Path(directory or data.directory or ".")
     d.mkdir(parents=True, exist_ok=True)
     (d / "findings.md").write_text(findings_markdown(found))
-    (d / "findings.json").write_text(json.dumps(findings_json(found), indent=1, allow_nan=False) + "\n")
+    (d / "findings.json").write_text(json.dumps(findings_json(found), indent=1, ensure_ascii=False) + "\n")
     return found
-
-
-def _finite(x: Any) -> bool:
-    return isinstance(x, (int, float)) and math.isfinite(x)
