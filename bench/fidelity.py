@@ -1,19 +1,22 @@
-"""Field fidelity: the paper's sim-vs-field findings over many seeds and environments, offline.
+"""Field fidelity: the paper's findings over many seeds and environments, what causes them, and figures.
 
-A study's runs are reproduced in this process, exactly as the testbed runs them
-(the same planning call with the robot radius plus the planning margin, the
-same path on the wire, the same per-run noise seeds, the same metrics), but
-without a server: the simulation core (:class:`robot_agent.sim.SimCore`) drives
-one robot per run.  The result is a :class:`client_sdk.study.StudyData`, so the
-findings (:func:`client_sdk.study.paper_findings`) apply to it as they do to a
-study the testbed ran.
+A study is run in this process exactly as the testbed runs it (the same planning
+call with the robot radius plus the planning margin, the same path on the wire,
+the same per-run seeds, the same metrics), without a server: the simulation core
+(:class:`robot_agent.sim.SimCore`) drives one robot per run.  The result is a
+:class:`client_sdk.study.StudyData`, so :func:`client_sdk.study.paper_findings`
+checks it as it checks a study the testbed ran (and the numbers are the same:
+``twb study paper --embedded --seed S`` gives the same runs.csv values).
 
-    python bench/fidelity.py paper --seeds 0-19             # held-counts of the nine findings
-    python bench/fidelity.py varied --seeds 0-9             # the varied environments (corridors, clutter, open)
-    python bench/fidelity.py ablate --seeds 0-9             # one profile change at a time
-    python bench/fidelity.py figures --out docs/img         # the figures of docs/fidelity.md
+    python bench/fidelity.py paper --seeds 0-19            # held-counts of the nine findings, means
+    python bench/fidelity.py varied --seeds 0-19           # on corridors, clutter, an open field, a zig-zag
+    python bench/fidelity.py paper --set field.tracker_latency_s=0   # with a profile change
+    python bench/fidelity.py paper --main                  # the field robot as it was on e2c6fc3
+    python bench/fidelity.py ablate --seeds 0-9            # one change at a time, driven and logged paths
+    python bench/fidelity.py figures --out docs/img        # the figures of docs/fidelity.md (a few minutes)
 
-Profile overrides are ``section.key=value`` (``field.tracker_latency_s=0``).
+Output is JSON on stdout (figures: PNG files).  Profile changes are
+``section.key=value`` (a top-level key without a section: ``max_accel_m_s2=1``).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import math
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 from typing import Any, Iterable, Optional
 
 if __package__ in (None, ""):  # run as a script: bench/ must not shadow the project's packages
@@ -32,9 +36,10 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 
 import numpy as np  # noqa: E402
 
-from client_sdk.study import StudyData, StudySpec, paper_findings, paper_spec  # noqa: E402
+from client_sdk.study import PlanSpec, StudyData, StudySpec, paper_findings, paper_spec  # noqa: E402
 from client_sdk.study._collect import flat_metrics  # noqa: E402
-from planners import load_environment, parse_environment, plan_path  # noqa: E402
+from planners import PlanningError, distance_to_obstacles, load_environment, parse_environment, plan_path  # noqa: E402
+from planners.metrics import path_length, smoothness  # noqa: E402
 from robot_agent.backends import make_backend  # noqa: E402
 from robot_agent.frames import field_layout  # noqa: E402
 from robot_agent.noise import path_key  # noqa: E402
@@ -48,6 +53,13 @@ from server.store.experiments import run_seed  # noqa: E402
 
 ROBOT_RADIUS, PLANNING_MARGIN = 0.045, 0.02  # the testbed's defaults (server/core/settings.py)
 BACKEND = {"sim": "ideal", "twb": "field"}
+PLANNERS = ("fmm", "fm2", "prm")
+
+#: the field robot before the fidelity work (e2c6fc3): white 1 mm tracker noise, the controller on the
+#: latest (0.1 s old) fix held between frames; with these values the trajectories are those of e2c6fc3 (its
+#: study's metrics agree to 1e-6: the testbed stores poses rounded)
+MAIN = {"field.tracker_noise_xy_m": 0.001, "field.tracker_bias_xy_m": 0.0, "field.latency_compensation_s": 0.0,
+        "field.control_lead_s": 0.0}
 
 
 # ---------------------------------------------------------------- environments of our own
@@ -58,16 +70,13 @@ def _block(x: float, y: float, w: float, h: float, a: float = 0.0) -> dict[str, 
 
 
 def varied_environments() -> list[dict[str, Any]]:
-    """Environments unlike the paper's two: corridors, clutter, an open field, a zig-zag."""
+    """Four 1.8 m environments unlike the paper's two: corridors, clutter, an open field, a zig-zag."""
     corridors = {"name": "corridors", "size": [1.8, 1.8], "blocks": [
         _block(0.55, 0.6, 0.1, 1.2), _block(1.25, 1.2, 0.1, 1.2), _block(0.9, 0.05, 0.1, 0.1)]}
     rng = np.random.default_rng(11)
-    clutter_blocks = []
-    for _ in range(14):
-        x, y = rng.uniform(0.3, 1.5, 2)
-        clutter_blocks.append(_block(float(x), float(y), float(rng.uniform(0.06, 0.16)),
-                                     float(rng.uniform(0.06, 0.16)), float(rng.uniform(0, math.pi))))
-    clutter = {"name": "clutter", "size": [1.8, 1.8], "blocks": clutter_blocks}
+    clutter = {"name": "clutter", "size": [1.8, 1.8], "blocks": [
+        _block(*map(float, rng.uniform(0.3, 1.5, 2)), float(rng.uniform(0.06, 0.16)), float(rng.uniform(0.06, 0.16)),
+               float(rng.uniform(0, math.pi))) for _ in range(14)]}
     open_field = {"name": "open", "size": [1.8, 1.8], "blocks": [_block(0.9, 0.9, 0.2, 0.2, 0.3)]}
     zigzag = {"name": "zigzag", "size": [1.8, 1.8], "blocks": [
         _block(0.45, 0.55, 0.9, 0.08), _block(1.35, 0.95, 0.9, 0.08), _block(0.45, 1.35, 0.9, 0.08)]}
@@ -75,9 +84,8 @@ def varied_environments() -> list[dict[str, Any]]:
 
 
 def random_plans(env_data: dict[str, Any], n: int, seed: int, min_dist: float = 0.9) -> list[dict[str, Any]]:
-    """``n`` start/goal pairs drawn uniformly in free space at least ``min_dist`` apart."""
-    from planners import distance_to_obstacles
-
+    """``n`` start/goal pairs drawn uniformly in free space at least ``min_dist`` apart; the start faces
+    the goal, the goal's heading is random."""
     env = parse_environment(env_data)
     rng = np.random.default_rng(seed)
     clear = ROBOT_RADIUS + PLANNING_MARGIN + 0.02
@@ -92,7 +100,7 @@ def random_plans(env_data: dict[str, Any], n: int, seed: int, min_dist: float = 
     return out
 
 
-# ---------------------------------------------------------------- one run, as the testbed runs it
+# ---------------------------------------------------------------- runs, as the testbed runs them
 
 
 def profile_with(overrides: Optional[dict[str, float]] = None, name: str = "bebot") -> dict[str, Any]:
@@ -104,9 +112,14 @@ def profile_with(overrides: Optional[dict[str, float]] = None, name: str = "bebo
     return prof
 
 
-def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backend: str, seed: int,
-          params: Any) -> tuple[np.ndarray, Optional[float], Optional[float], str]:
-    """Drive ``path`` from ``start`` at rest; returns (poses (N, 4), t START, t end, DONE/FAIL reason)."""
+def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backend: str, seed: int, params: Any,
+          truth: bool = False) -> tuple[np.ndarray, Optional[float], Optional[float], str, Optional[np.ndarray]]:
+    """Drive ``path`` from ``start`` at rest with run seed ``seed``.
+
+    Returns the logged poses ``(N, 4)``, the times of START and of the end, ``DONE`` or the FAIL
+    reason, and with ``truth`` the true poses ``(M, 4)`` of every step (one compiled step per call:
+    slower).
+    """
     sizes, world_of, origin, area = field_layout(1, "separate")
     world = World(sizes, world_of, origin, area, params.collision_radius_m)
     blocks = np.array([[b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)] for b in env_data["blocks"]])
@@ -116,120 +129,401 @@ def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backen
     core.set_path(0, path, path_key(seed))
     t0 = t1 = None
     end = "?"
+    true: list[list[float]] = []
     while core.state[0] == State.MOVING:
-        for ev in core.advance(100_000):
+        for ev in core.advance(1 if truth else 100_000):
             if ev.kind == "START":
                 t0 = ev.t
             elif ev.kind in ("DONE", "FAIL"):
-                t1, end = ev.t, ev.kind if ev.kind == "DONE" else ev.reason
+                t1, end = ev.t, ev.kind if ev.kind == "DONE" else str(ev.reason)
+        if truth:
+            true.append([core.t, *core.backend.pose[0]])
     poses = core.poses.drain().get(0, np.zeros((0, 4)))
-    return poses, t0, t1, end
+    return poses, t0, t1, end, (np.array(true) if truth else None)
 
 
-def study_data(spec: StudySpec, overrides: Optional[dict[str, float]] = None,
-               environments: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
-    """``spec`` run offline (see the module docstring); ``environments`` adds environment files by name."""
-    params = robot_params(profile_with(overrides))
-    envs: dict[str, dict[str, Any]] = {}
-    for e in spec.environments:
-        if isinstance(e, str):
-            envs[e] = (environments or {}).get(e) or load_environment(e).to_dict()
+def _problems(env: Any, spec: StudySpec) -> list[tuple[str, list[float], list[float]]]:
+    """(plan name, start, goal) of every plan of the study in ``env``, as :func:`client_sdk.study.plan_jobs`
+    and the testbed's placement (a start without heading faces the goal) make them."""
+    out = []
+    for plan in spec.plans if spec.plans is not None else [PlanSpec(p.name) for p in env.plans]:
+        if plan.start is None:
+            p = env.plan(plan.name)
+            start, goal = list(p.start), list(p.goal)
         else:
-            envs[e["name"]] = dict(e)
+            start, goal = list(plan.start), list(plan.goal or [])
+        if len(start) < 3:
+            start.append(math.atan2(goal[1] - start[1], goal[0] - start[0]))
+        out.append((plan.name, start, goal))
+    return out
+
+
+def study_data(spec: StudySpec, overrides: Optional[dict[str, float]] = None, truth: bool = False) -> StudyData:
+    """``spec`` run offline (see the module docstring).  With ``truth`` every completed run's row also
+    has ``true_length_m`` and ``true_smoothness_rad``: the metrics of the path the robot really drove
+    (its true poses), beside those of the logged (tracker) path."""
+    params = robot_params(profile_with(overrides))
+    envs = {(e if isinstance(e, str) else e["name"]): (load_environment(e).to_dict() if isinstance(e, str) else dict(e))
+            for e in spec.environments}
     data = StudyData(spec, envs, [], [], [])
-    experiments, rows, direct = data.experiments, data.rows, data.direct
-    eid = rid = 0
+    rid = 0
     for name, env_data in envs.items():
         env = parse_environment(env_data)
-        plans = spec.plans if spec.plans is not None else [type("P", (), {"name": p.name, "start": None})()
-                                                           for p in env.plans]
-        for plan in plans:
-            if plan.start is None:
-                p = env.plan(plan.name)
-                start, goal = list(p.start), list(p.goal)
-            else:
-                start, goal = list(plan.start), list(plan.goal)
-            if len(start) < 3:
-                start.append(math.atan2(goal[1] - start[1], goal[0] - start[0]))
+        for plan_name, start, goal in _problems(env, spec):
             for planner in spec.planners:
-                eid += 1
-                r = plan_path(env, start, goal, planner.name, robot_radius=ROBOT_RADIUS + PLANNING_MARGIN,
-                              params=planner.params, seed=spec.seed)
+                eid = len(data.experiments) + 1
+                ident = {"study": spec.name, "experiment_id": eid, "environment": name, "plan": plan_name,
+                         "planner": planner.name}
+                try:
+                    r = plan_path(env, start, goal, planner.name, robot_radius=ROBOT_RADIUS + PLANNING_MARGIN,
+                                  params=planner.params, seed=spec.seed)
+                except PlanningError as exc:  # the testbed fails the whole experiment, every run of it
+                    _planning_failed(data, spec, ident, planner.params, start, goal, rid, f"planning failed: {exc}")
+                    rid += spec.repetitions * len(spec.modes)
+                    continue
                 planned = np.round(r.path, 6)
                 wire = decode_path(encode_path(planned))
-                ident = {"study": spec.name, "experiment_id": eid, "environment": name, "plan": plan.name,
-                         "planner": planner.name}
-                run_ids = []
-                poses_of: dict[tuple[str, int], np.ndarray] = {}
-                data_rows = []
+                rows, logged = [], {}
                 for rep in range(1, spec.repetitions + 1):
                     for mode in spec.modes:
                         rid += 1
-                        run_ids.append(rid)
                         seed = run_seed(spec.seed, mode, rep)
-                        poses, t0, t1, end = drive(env_data, wire, start, BACKEND[mode], seed, params)
+                        poses, t0, t1, end, true = drive(env_data, wire, start, BACKEND[mode], seed, params, truth)
                         row = {**ident, "run_id": rid, "mode": mode, "repetition": rep, "seed": seed,
                                "status": "completed" if end == "DONE" else "failed",
                                "error": "" if end == "DONE" else end.lower(), "t_start": t0, "t_end": t1}
                         if t0 is not None and t1 is not None:
-                            inside = (poses[:, 0] >= t0 - 1e-9) & (poses[:, 0] <= t1 + 1e-9)
                             row.update(flat_metrics(measure_run(env_data, planned.tolist(), poses.tolist(), t0, t1,
                                                                 goal, ROBOT_RADIUS, r.planning_time_s)))
-                            poses_of[(mode, rep)] = poses[inside]
-                        data_rows.append((rid, row))
+                            inside = poses[(poses[:, 0] >= t0 - 1e-9) & (poses[:, 0] <= t1 + 1e-9)]
+                            logged[(mode, rep)] = inside
+                            data.add_poses(rid, inside)
+                            if true is not None:
+                                drv = true[(true[:, 0] >= t0 - 1e-9) & (true[:, 0] <= t1 + 1e-9), 1:3]
+                                row["true_length_m"], row["true_smoothness_rad"] = path_length(drv), smoothness(drv)
+                        rows.append(row)
                 for rep in range(1, spec.repetitions + 1):
-                    if ("sim", rep) in poses_of and ("twb", rep) in poses_of:
-                        st = compare_runs(poses_of[("sim", rep)].tolist(), poses_of[("twb", rep)].tolist())
-                        direct.append({**ident, "repetition": rep, **st})
-                        for _, row in data_rows:
+                    if ("sim", rep) in logged and ("twb", rep) in logged:
+                        st = compare_runs(logged[("sim", rep)].tolist(), logged[("twb", rep)].tolist())
+                        data.direct.append({**ident, "repetition": rep, **st})
+                        for row in rows:
                             if row["repetition"] == rep:
                                 row.update({f"st_{k}": v for k, v in st.items()})
-                rows += [row for _, row in data_rows]
-                experiments.append({**ident, "planner_params": planner.params, "start": start, "goal": goal,
-                                    "status": "completed", "error": "", "planned_path": planned.tolist(),
-                                    "planning_time_s": r.planning_time_s, "runs": run_ids})
-                for rid_, row in data_rows:
-                    if (row["mode"], row["repetition"]) in poses_of:
-                        data.add_poses(rid_, poses_of[(row["mode"], row["repetition"])])
+                data.rows += rows
+                data.experiments.append({**ident, "planner_params": planner.params, "start": start, "goal": goal,
+                                         "status": "completed", "error": "", "planned_path": planned.tolist(),
+                                         "planning_time_s": r.planning_time_s, "runs": [x["run_id"] for x in rows]})
     return data
 
 
-def paper(seed: int, overrides: Optional[dict[str, float]] = None) -> StudyData:
+def _planning_failed(data: StudyData, spec: StudySpec, ident: dict[str, Any], planner_params: dict[str, Any],
+                     start: list[float], goal: list[float], rid: int, error: str) -> None:
+    """Record an experiment whose planning failed as the testbed does: failed, every run failed, no poses."""
+    runs = []
+    for rep in range(1, spec.repetitions + 1):
+        for mode in spec.modes:
+            rid += 1
+            runs.append(rid)
+            data.rows.append({**ident, "run_id": rid, "mode": mode, "repetition": rep,
+                              "seed": run_seed(spec.seed, mode, rep), "status": "failed", "error": error,
+                              "t_start": None, "t_end": None})
+    data.experiments.append({**ident, "planner_params": planner_params, "start": start, "goal": goal,
+                             "status": "failed", "error": error, "planned_path": None, "planning_time_s": None,
+                             "runs": runs})
+
+
+def paper(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False) -> StudyData:
     """The paper's 48 runs with study seed ``seed``, offline."""
-    return study_data(StudySpec.from_json({**paper_spec().to_json(), "seed": seed}, "paper"), overrides)
+    return study_data(StudySpec.from_json({**paper_spec().to_json(), "seed": seed}, "paper"), overrides, truth)
 
 
-def varied(seed: int, overrides: Optional[dict[str, float]] = None, plans_per_env: int = 3) -> StudyData:
-    """The varied environments, ``plans_per_env`` random start/goal pairs each (drawn with ``seed``)."""
+def varied(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False,
+           plans_per_env: int = 3) -> StudyData:
+    """:func:`varied_environments`, ``plans_per_env`` random start/goal pairs each (drawn from ``seed``),
+    FMM, FM² and PRM, 2 repetitions: 144 runs."""
     datas = []
-    for env in varied_environments():
-        spec = StudySpec.from_json({"name": "varied", "environments": [env], "planners": ["fmm", "fm2", "prm"],
-                                    "plans": random_plans(env, plans_per_env, seed * 1000 + len(datas)),
+    for i, env in enumerate(varied_environments()):
+        spec = StudySpec.from_json({"name": "varied", "environments": [env], "planners": list(PLANNERS),
+                                    "plans": random_plans(env, plans_per_env, seed * 1000 + i),
                                     "repetitions": 2, "seed": seed}, "varied")
-        datas.append(study_data(spec, overrides))
+        datas.append(study_data(spec, overrides, truth))
     return merge(datas)
 
 
 def merge(datas: list[StudyData]) -> StudyData:
     """One StudyData of several (experiment and run ids renumbered)."""
-    first = datas[0]
-    out = StudyData(first.spec, {}, [], [], [])
-    eid = rid = 0
+    out = StudyData(datas[0].spec, {}, [], [], [])
     for d in datas:
         out.environments.update(d.environments)
-        emap, rmap = {}, {}
-        for e in d.experiments:
-            eid += 1
-            emap[e["experiment_id"]] = eid
-            e = {**e, "experiment_id": eid, "runs": []}
-            out.experiments.append(e)
-        for r in d.rows:
-            rid += 1
-            rmap[r["run_id"]] = rid
-            out.rows.append({**r, "experiment_id": emap[r["experiment_id"]], "run_id": rid})
-        for x in d.direct:
-            out.direct.append({**x, "experiment_id": emap[x["experiment_id"]]})
+        e0, r0 = len(out.experiments), len(out.rows)
+        emap = {e["experiment_id"]: e0 + i + 1 for i, e in enumerate(d.experiments)}
+        rmap = {r["run_id"]: r0 + i + 1 for i, r in enumerate(d.rows)}
+        out.experiments += [{**e, "experiment_id": emap[e["experiment_id"]], "runs": [rmap[x] for x in e["runs"]]}
+                            for e in d.experiments]
+        out.rows += [{**r, "experiment_id": emap[r["experiment_id"]], "run_id": rmap[r["run_id"]]} for r in d.rows]
+        out.direct += [{**x, "experiment_id": emap[x["experiment_id"]]} for x in d.direct]
+        for old, new in rmap.items():
+            try:
+                out.add_poses(new, d.poses(old))
+            except KeyError:
+                pass
     return out
+
+
+# ---------------------------------------------------------------- summaries
+
+
+def _mean(rows: list[dict[str, Any]], key: str) -> Optional[float]:
+    vals = [r[key] for r in rows if isinstance(r.get(key), (int, float)) and not isinstance(r.get(key), bool)]
+    return float(np.mean(vals)) if vals else None
+
+
+def means(data: StudyData) -> dict[str, dict[str, Any]]:
+    """Per planner and mode: mean length ratio, κ' ratio (ratio of means), κ', deviation, time, clearance,
+    failed runs; with true paths also the true length ratio and κ' ratio."""
+    out: dict[str, dict[str, Any]] = {}
+    for p in dict.fromkeys(r["planner"] for r in data.rows):
+        for m in ("sim", "twb"):
+            mine = [r for r in data.rows if r["planner"] == p and r["mode"] == m]
+            done = [r for r in mine if r["status"] == "completed"]
+            if not mine:
+                continue
+            k, k0 = _mean(done, "smoothness_rad"), _mean(done, "planned_smoothness_rad")
+            g = {"length_ratio": _mean(done, "length_ratio"), "smoothness_ratio": k / k0 if k and k0 else None,
+                 "smoothness_rad": k, "deviation_mean_m": _mean(done, "deviation_mean_m"),
+                 "execution_time_s": _mean(done, "execution_time_s"), "clearance_min_m": _mean(done, "clearance_min_m"),
+                 "failed": len(mine) - len(done)}
+            if any("true_length_m" in r for r in done):
+                g["true_length_ratio"] = float(np.mean([r["true_length_m"] / r["planned_length_m"] for r in done]))
+                g["true_smoothness_ratio"] = _mean(done, "true_smoothness_rad") / k0 if k0 else None
+            out[f"{p}/{m}"] = {key: (round(v, 4) if isinstance(v, float) else v) for key, v in g.items()}
+    return out
+
+
+def _one(job: tuple[str, int, dict[str, float], bool]) -> dict[str, Any]:
+    kind, seed, overrides, truth = job
+    data = (paper if kind == "paper" else varied)(seed, overrides, truth)
+    found = paper_findings(data)
+    return {"seed": seed, "held": {f.key: f.held for f in found}, "details": {f.key: f.detail for f in found},
+            "means": means(data)}
+
+
+def run_many(kind: str, seeds: list[int], overrides: Optional[dict[str, float]] = None, workers: int = 2,
+             truth: bool = False) -> list[dict[str, Any]]:
+    """:func:`paper` or :func:`varied` for every seed (in ``workers`` processes): findings and means."""
+    jobs = [(kind, s, dict(overrides or {}), truth) for s in seeds]
+    if workers <= 1:
+        return [_one(j) for j in jobs]
+    with ProcessPoolExecutor(workers) as ex:
+        return list(ex.map(_one, jobs))
+
+
+def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """Held-counts per finding, the failing seeds, and the means over seeds."""
+    keys = list(results[0]["held"])
+    held = {k: sum(bool(r["held"][k]) for r in results) for k in keys}
+    avg: dict[str, dict[str, float]] = {}
+    for g in results[0]["means"]:
+        avg[g] = {k: round(float(np.mean([r["means"][g][k] for r in results if r["means"][g].get(k) is not None])), 4)
+                  for k in results[0]["means"][g]}
+    failing = {r["seed"]: {k: r["details"][k] for k, v in r["held"].items() if not v} for r in results}
+    return {"seeds": [r["seed"] for r in results], "held": held, "failing": {s: f for s, f in failing.items() if f},
+            "means": avg}
+
+
+#: one change at a time: (label, profile overrides)
+ABLATION: list[tuple[str, dict[str, float]]] = [
+    ("e2c6fc3 (before)", MAIN),
+    ("before, tracker noise 0", {**MAIN, "field.tracker_noise_xy_m": 0.0, "field.tracker_noise_theta_rad": 0.0}),
+    ("before, wheel noise 0", {**MAIN, "field.wheel_noise_rel": 0.0, "field.wheel_noise_abs_m_s": 0.0}),
+    ("before, tracker latency 0", {**MAIN, "field.tracker_latency_s": 0.0}),
+    ("before, motor lag 0", {**MAIN, "field.motor_time_constant_s": 0.0}),
+    ("before, heading gain 2/s", {**MAIN, "controller.heading_gain_1_s": 2.0}),
+    ("+ latency compensation", {**MAIN, "field.latency_compensation_s": 0.1}),
+    ("+ tracker: 1 mm bias, 0.3 mm jitter", {**MAIN, "field.latency_compensation_s": 0.1,
+                                             "field.tracker_noise_xy_m": 0.0003, "field.tracker_bias_xy_m": 0.001}),
+    ("+ steering lead 0.12 s (shipped)", {}),
+    ("shipped, 1 mm white tracker noise", {"field.tracker_noise_xy_m": 0.001, "field.tracker_bias_xy_m": 0.0}),
+    ("shipped, no latency compensation", {"field.latency_compensation_s": 0.0}),
+]
+
+
+def ablate(seeds: list[int], workers: int) -> list[dict[str, Any]]:
+    """:data:`ABLATION` on the paper study: per variant the field means (logged and true paths)."""
+    out = []
+    for label, ov in ABLATION:
+        s = summarize(run_many("paper", seeds, ov, workers, truth=True))
+        out.append({"variant": label, "overrides": ov, "held": s["held"],
+                    **{p: s["means"][f"{p}/twb"] for p in PLANNERS},
+                    "sim": {p: s["means"][f"{p}/sim"] for p in PLANNERS}})
+    return out
+
+
+# ---------------------------------------------------------------- figures
+
+
+def figures(out: Path, workers: int) -> list[Path]:
+    """The figures of docs/fidelity.md, as PNG files in ``out``."""
+    from matplotlib.figure import Figure
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    blocks_style = {"color": "0.82", "lw": 0}
+
+    def draw_env(ax, env_data: dict[str, Any]) -> None:  # type: ignore[no-untyped-def]
+        from matplotlib.patches import Rectangle
+        for b in env_data["blocks"]:
+            ax.add_patch(Rectangle((b["x"] - b["w"] / 2, b["y"] - b["h"] / 2), b["w"], b["h"],
+                                   angle=math.degrees(b.get("angle", 0.0)), rotation_point="center", **blocks_style))
+        ax.set_aspect("equal")
+
+    # 1. the weave and its cause: a PRM path driven before and after
+    env = load_environment("room")
+    p = env.plan("B")
+    start, goal = list(p.start), list(p.goal)
+    r = plan_path(env, start, goal, "prm", robot_radius=ROBOT_RADIUS + PLANNING_MARGIN, seed=0)
+    wire = decode_path(encode_path(np.round(r.path, 6)))
+    fig = Figure(figsize=(12, 6.2))
+    axes = fig.subplots(1, 2)
+    sim = drive(env.to_dict(), wire, start, "ideal", run_seed(0, "sim", 1), robot_params(), truth=True)
+    for ax, (title, ov) in zip(axes, [("before (e2c6fc3): acts on the 0.1 s old fix", MAIN),
+                                      ("now: latency compensated, steers 0.12 s ahead", {})]):
+        draw_env(ax, env.to_dict())
+        poses, t0, t1, end, true = drive(env.to_dict(), wire, start, "field", run_seed(0, "twb", 1),
+                                         robot_params(profile_with(ov)), truth=True)
+        ax.plot(wire[:, 0], wire[:, 1], "k.--", lw=0.8, ms=4, label="computed (PRM)")
+        ax.plot(sim[4][:, 1], sim[4][:, 2], color="#1f77b4", lw=1.2, label="simulation (S)")
+        ax.plot(true[:, 1], true[:, 2], color="#d62728", lw=1.2, label="field robot, driven")
+        ax.plot(poses[:, 1], poses[:, 2], ".", color="#ff9896", ms=1.5, label="field robot, tracker log")
+        inside = poses[(poses[:, 0] >= t0) & (poses[:, 0] <= t1)]
+        ratio = path_length(inside[:, 1:3]) / path_length(wire)
+        kappa = smoothness(inside[:, 1:3]) / smoothness(wire[:, :2])
+        ax.set_title(f"{title}\nT length ratio {ratio:.3f}, κ' ratio {kappa:.2f}", fontsize=10)
+        ax.set_xlim(0.2, 1.6)
+        ax.set_ylim(0.2, 1.6)
+        ax.legend(loc="lower left", fontsize=8)
+    fig.suptitle("room, plan B, PRM (seed 0): the same path, the same noise, before and after", fontsize=11)
+    written.append(out / "fidelity-weave.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+
+    # 2. the ablation: length and κ' ratios per variant
+    rows = ablate(list(range(10)), workers)
+    (out / "fidelity-ablation.json").write_text(json.dumps(rows, indent=1) + "\n")
+    fig = Figure(figsize=(12, 7))
+    axes = fig.subplots(2, 1, sharex=True)
+    x = np.arange(len(rows))
+    colors = {"fmm": "#2ca02c", "fm2": "#9467bd", "prm": "#ff7f0e"}
+    for i, pl in enumerate(PLANNERS):
+        off = (i - 1) * 0.26
+        axes[0].bar(x + off, [row[pl]["length_ratio"] for row in rows], 0.25, color=colors[pl], label=f"{pl} logged")
+        axes[0].scatter(x + off, [row[pl]["true_length_ratio"] for row in rows], color="k", marker="_", s=120,
+                        zorder=3, label="driven (true path)" if i == 0 else None)
+        axes[1].bar(x + off, [row[pl]["smoothness_ratio"] for row in rows], 0.25, color=colors[pl], label=pl)
+        sim_len = rows[0]["sim"][pl]["length_ratio"]
+        sim_k = rows[0]["sim"][pl]["smoothness_ratio"]
+        axes[0].axhline(sim_len, color=colors[pl], lw=0.8, ls=":")
+        axes[1].axhline(sim_k, color=colors[pl], lw=0.8, ls=":")
+    axes[0].set_ylim(0.95, 1.25)
+    axes[0].set_ylabel("T length ratio")
+    axes[1].set_ylabel("T κ' ratio (mean κ' / mean computed κ')")
+    axes[0].legend(fontsize=8, ncol=4)
+    axes[1].legend(fontsize=8)
+    axes[1].set_xticks(x, [row["variant"] for row in rows], rotation=30, ha="right", fontsize=8)
+    axes[0].set_title("paper study, seeds 0-9, field runs; dotted: the simulation's ratio", fontsize=10)
+    written.append(out / "fidelity-ablation.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+
+    # 3. a sharp zig-zag: rounding and a little overshoot
+    half = math.radians(30)
+    pts, sign = [(0.2, 0.9)], 1
+    for _ in range(7):
+        for _ in range(2):
+            pts.append((pts[-1][0] + 0.1 * math.cos(sign * half), pts[-1][1] + 0.1 * math.sin(sign * half)))
+        sign = -sign
+    zz = np.array(pts)
+    zz = np.column_stack([zz, np.r_[np.arctan2(np.diff(zz[:, 1]), np.diff(zz[:, 0])), 0.0]])
+    empty = {"name": "empty", "size": [1.8, 1.8], "blocks": []}
+    fig = Figure(figsize=(12, 4.2))
+    ax = fig.subplots()
+    ax.plot(zz[:, 0], zz[:, 1], "k.--", lw=0.8, label=f"computed (κ' {smoothness(zz[:, :2]):.3f})")
+    for label, backend, ov, color in [("ideal (S)", "ideal", {}, "#1f77b4"),
+                                      ("field, steering lead 0", "field", {"field.control_lead_s": 0.0}, "#ff7f0e"),
+                                      ("field as shipped", "field", {}, "#d62728")]:
+        _, _, _, _, true = drive(empty, zz, list(zz[0]), backend, 1, robot_params(profile_with(ov)), truth=True)
+        ax.plot(true[:, 1], true[:, 2], color=color, lw=1.3, label=f"{label} (κ' {smoothness(true[:, 1:3]):.3f})")
+    ax.set_aspect("equal")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set_title("60° corners every 0.2 m (true paths): the field robot rounds them; without the lead it turns "
+                 "late and overshoots", fontsize=10)
+    written.append(out / "fidelity-corners.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+
+    # 4. the tracker: a robot at rest and one driving a straight line
+    from robot_agent.physics import tracker_bias
+    fig = Figure(figsize=(12, 4.6))
+    axes = fig.subplots(1, 2)
+    for label, ov, color in [("before: 1 mm white", MAIN, "#ff7f0e"), ("now: 1 mm bias field + 0.3 mm jitter", {},
+                                                                       "#d62728")]:
+        params = robot_params(profile_with(ov))
+        b = make_backend("field", 1, params)
+        b.place(0, (0.9, 0.9, 0.0))
+        b.begin_path(np.array([True]), np.array([path_key(4)], dtype=np.uint64), np.array([True]))
+        m = []
+        for k in range(1, 301):
+            seen, meas = b.sense(np.array([k]), np.array([True]))[1:]
+            if seen[0]:
+                m.append((meas[0, :2] - b.pose[0, :2]) * 1000)
+            b.actuate(np.zeros((1, 2)))
+        m = np.array(m)
+        axes[0].plot(m[:, 0], m[:, 1], ".-", color=color, lw=0.4, ms=3,
+                     label=f"{label}: logged length {np.hypot(*np.diff(m, axis=0).T).sum():.0f} mm in 6 s")
+    axes[0].set_aspect("equal")
+    axes[0].set_xlabel("x error (mm)")
+    axes[0].set_ylabel("y error (mm)")
+    axes[0].set_title("a robot at rest, 6 s of tracker frames", fontsize=10)
+    axes[0].legend(fontsize=8)
+    sig = np.linspace(0, 1.5, 31)
+    spacing = 0.17 / 30 * 1000  # mm between frames at the field robot's mean speed
+    axes[1].plot(sig, 100 * sig**2 / spacing, "k-", label="σ² / spacing (straight line, 5.7 mm per frame)")
+    line = np.array([[0.2 + 0.1 * i, 0.9, 0.0] for i in range(14)])
+    for s_mm in (0.0, 0.3, 0.6, 1.0, 1.5):
+        params = robot_params(profile_with({"field.tracker_noise_xy_m": s_mm / 1000, "field.tracker_bias_xy_m": 0.0}))
+        infl = []
+        for seed in range(5):
+            poses, t0, t1, _, true = drive(empty, line, list(line[0]), "field", seed, params, truth=True)
+            inside = poses[(poses[:, 0] >= t0) & (poses[:, 0] <= t1)]
+            drv = true[(true[:, 0] >= t0) & (true[:, 0] <= t1)]
+            infl.append(100 * (path_length(inside[:, 1:3]) / path_length(drv[:, 1:3]) - 1))
+        axes[1].plot(s_mm, np.mean(infl), "o", color="#d62728")
+    axes[1].set_xlabel("white tracker noise σ per axis (mm)")
+    axes[1].set_ylabel("logged length − driven length (%)")
+    axes[1].set_title("a noisy log is longer than the path driven (1.3 m line, incl. start and stop)", fontsize=10)
+    axes[1].legend(fontsize=8)
+    written.append(out / "fidelity-tracker.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    _ = tracker_bias
+
+    # 5. the findings: held-counts before and after, paper study and varied environments
+    counts = {}
+    for kind in ("paper", "varied"):
+        for label, ov in (("before", MAIN), ("now", {})):
+            counts[f"{kind} {label}"] = summarize(run_many(kind, list(range(20)), ov, workers))["held"]
+    (out / "fidelity-findings.json").write_text(json.dumps(counts, indent=1) + "\n")
+    keys = list(counts["paper now"])
+    fig = Figure(figsize=(12, 4.5))
+    ax = fig.subplots()
+    x = np.arange(len(keys))
+    for i, (label, color) in enumerate(zip(counts, ("#ffbb78", "#d62728", "#aec7e8", "#1f77b4"))):
+        ax.bar(x + (i - 1.5) * 0.2, [counts[label][k] for k in keys], 0.19, color=color, label=label)
+    ax.axhline(18, color="k", lw=0.8, ls=":")
+    ax.set_xticks(x, [f"{i + 1}. {k}" for i, k in enumerate(keys)], rotation=25, ha="right", fontsize=8)
+    ax.set_ylabel("seeds (of 20) where it held")
+    ax.legend(fontsize=8, ncol=4, loc="lower left")
+    ax.set_title("the nine findings over seeds 0-19: paper study and the varied environments, before and now",
+                 fontsize=10)
+    written.append(out / "fidelity-findings.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    return written
 
 
 # ---------------------------------------------------------------- command line
@@ -251,57 +545,25 @@ def _overrides(items: Iterable[str]) -> dict[str, float]:
     return out
 
 
-def _one(args: tuple[str, int, dict[str, float]]) -> dict[str, Any]:
-    kind, seed, ov = args
-    data = paper(seed, ov) if kind == "paper" else varied(seed, ov)
-    found = paper_findings(data)
-    return {"seed": seed, "held": {f.key: f.held for f in found}, "numbers": {f.key: f.numbers for f in found},
-            "means": _means(data)}
-
-
-def _means(data: StudyData) -> dict[str, dict[str, float]]:
-    out: dict[str, dict[str, float]] = {}
-    for p in data.planners:
-        for m in ("sim", "twb"):
-            rows = [r for r in data.rows if r["planner"] == p and r["mode"] == m and r["status"] == "completed"]
-            out[f"{p}/{m}"] = {k: float(np.mean([r[k] for r in rows if r.get(k) is not None]))
-                               for k in ("length_ratio", "smoothness_ratio", "smoothness_rad", "deviation_mean_m",
-                                         "execution_time_s", "clearance_min_m")}
-            out[f"{p}/{m}"]["failed"] = sum(r["status"] != "completed" for r in data.rows
-                                            if r["planner"] == p and r["mode"] == m)
-    return out
-
-
-def run_many(kind: str, seeds: list[int], overrides: dict[str, float], workers: int) -> list[dict[str, Any]]:
-    jobs = [(kind, s, overrides) for s in seeds]
-    if workers <= 1:
-        return [_one(j) for j in jobs]
-    with ProcessPoolExecutor(workers) as ex:
-        return list(ex.map(_one, jobs))
-
-
-def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
-    keys = list(results[0]["held"])
-    held = {k: sum(r["held"][k] for r in results) for k in keys}
-    means: dict[str, dict[str, float]] = {}
-    for g in results[0]["means"]:
-        means[g] = {k: round(float(np.mean([r["means"][g][k] for r in results])), 4) for k in results[0]["means"][g]}
-    return {"seeds": len(results), "held": held, "means": means}
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("what", choices=["paper", "varied"])
+    ap.add_argument("what", choices=["paper", "varied", "ablate", "figures"])
     ap.add_argument("--seeds", default="0-19")
-    ap.add_argument("--set", action="append", default=[], help="profile override section.key=value")
+    ap.add_argument("--set", action="append", default=[], help="profile change section.key=value")
+    ap.add_argument("--main", action="store_true", help="the field robot as on e2c6fc3 (before this work)")
+    ap.add_argument("--truth", action="store_true", help="also the true (driven) paths' ratios (slower)")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--per-seed", action="store_true")
+    ap.add_argument("--out", type=Path, default=Path("docs/img"))
     a = ap.parse_args()
-    results = run_many(a.what, _seeds(a.seeds), _overrides(a.set), a.workers)
-    out = summarize(results)
-    if a.per_seed:
-        out["per_seed"] = [{"seed": r["seed"], "failed": [k for k, v in r["held"].items() if not v]} for r in results]
-    print(json.dumps(out, indent=1))
+    if a.what == "figures":
+        for p in figures(a.out, a.workers):
+            print(p)
+        return
+    if a.what == "ablate":
+        print(json.dumps(ablate(_seeds(a.seeds), a.workers), indent=1))
+        return
+    ov = {**(MAIN if a.main else {}), **_overrides(a.set)}
+    print(json.dumps(summarize(run_many(a.what, _seeds(a.seeds), ov, a.workers, a.truth)), indent=1))
 
 
 if __name__ == "__main__":

@@ -26,8 +26,10 @@ through the methods below, one step at a time.
 
 **A real robot plugs in here**: subclass :class:`Backend`, send the commands
 of :meth:`actuate` to the robots (radio/Bluetooth), fill the beliefs and
-logged poses of :meth:`sense` from the real overhead tracker, report
-:attr:`pose` from the tracker too, and refuse :meth:`place` (no emulated
+logged poses of :meth:`sense` from the real overhead tracker (the field
+backend's latency compensation, :func:`robot_agent.physics.localise` with
+:func:`robot_agent.physics.odometry`, works on late fixes from any tracker),
+report :attr:`pose` from the tracker too, and refuse :meth:`place` (no emulated
 gripper) by raising ``NotImplementedError``.  No such driver ships.
 """
 
@@ -67,9 +69,10 @@ class Backend(ABC):
         """Localise at the start of a control step.
 
         ``step`` ``(N,)`` counts control steps since each robot's path began;
-        ``moving`` marks robots following a path.  Returns the beliefs
-        ``(N, 3)``, the mask of robots whose pose the tracker logs now and
-        those logged poses ``(N, 3)``.
+        ``moving`` marks robots following a path.  Returns the poses the
+        controller acts on ``(N, 3)`` (the beliefs, or a prediction from
+        them), the mask of robots whose pose the tracker logs now and those
+        logged poses ``(N, 3)``.
         """
 
     @abstractmethod
@@ -183,14 +186,18 @@ def _field_actuate_all(cmd: np.ndarray, pose: np.ndarray, tracks: np.ndarray, ga
 class FieldBackend(Emulated):
     """The emulated physical robot on the field (see :mod:`robot_agent.physics`).
 
-    Localisation: the overhead tracker measures each robot at
-    ``camera_rate_hz`` (frames timed from the path start, on the control
-    grid), with Gaussian noise, dropped frames and ``tracker_latency_s``
-    delay (rounded to control steps); between frames the belief is held.
-    Actuation: body commands become track speeds, scaled by a per-run gain
-    per track (bias), perturbed by speed noise, zeroed below the dead band,
-    then the tracks follow with a first-order lag (``motor_time_constant_s``)
-    and at most ``max_accel_m_s2``.
+    Tracker: each robot is measured at ``camera_rate_hz`` (frames timed from
+    the path start, on the control grid) with a smooth position error over
+    the field (``tracker_bias_xy_m``), per-frame jitter, dropped frames and
+    ``tracker_latency_s`` delay (rounded to control steps).  Localisation: a
+    fix that arrives is moved forward over ``latency_compensation_s`` with
+    the robot's odometry (its commands through its model of the tracks) and
+    the belief is dead-reckoned between fixes; the controller steers by the
+    pose predicted ``control_lead_s`` ahead (:attr:`ctl`, what :meth:`sense`
+    returns).  Actuation: body commands become track speeds, scaled by a
+    per-run gain per track (bias), perturbed by speed noise, zeroed below the
+    dead band, then the tracks follow with a first-order lag
+    (``motor_time_constant_s``) and at most ``max_accel_m_s2``.
     """
 
     name = "field"
