@@ -164,6 +164,7 @@ class AgentHost:
         self._timers: list[tuple[int, int, asyncio.Future]] = []
         self._seq = itertools.count()
         self._wake = asyncio.Event()
+        self._delivering = asyncio.Lock()
         self._wall0 = 0.0
         self._step0 = 0
         self._last_lag_warning = -math.inf
@@ -272,8 +273,7 @@ class AgentHost:
         until a server sink delivered them."""
         if self.sink is None:
             return
-        for idx, rows in self.core.poses.drain().items():
-            await self.sink.send(self.robots[idx].robot_id, rows)
+        await self._deliver()
         if wait and isinstance(self.sink, ServerLink):
             await self.sink.flush(timeout_s)
 
@@ -378,12 +378,21 @@ class AgentHost:
         for ev in events:
             self.robots[ev.robot].on_event(ev)
 
+    async def _deliver(self) -> None:
+        """Hand the logged poses to the sink, one delivery at a time: a flush that finds the periodic
+        delivery under way waits for it, so when :meth:`flush_tracker` returns every pose logged
+        before it was called has been handed over (at maximum speed a whole run fits in one batch:
+        a flush that returned while that batch was still on its way let the run's window close
+        before its poses arrived)."""
+        async with self._delivering:
+            for idx, rows in self.core.poses.drain().items():
+                await self.sink.send(self.robots[idx].robot_id, rows)  # type: ignore[union-attr]
+
     async def _flush_loop(self) -> None:
         while True:
             await asyncio.sleep(self.flush_interval_s)
             try:
-                for idx, rows in self.core.poses.drain().items():
-                    await self.sink.send(self.robots[idx].robot_id, rows)  # type: ignore[union-attr]
+                await self._deliver()
             except Exception:  # noqa: BLE001 - a failing sink must not stop the robots
                 log.exception("tracker sink failed")
 
