@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 from client_sdk.study import PlanSpec, StudyData, StudySpec, paper_findings, paper_spec  # noqa: E402
 from client_sdk.study._collect import flat_metrics  # noqa: E402
 from planners import PlanningError, distance_to_obstacles, load_environment, parse_environment, plan_path  # noqa: E402
-from planners.metrics import path_length, smoothness  # noqa: E402
+from planners.metrics import path_length, smoothness, turning_angles  # noqa: E402
 from robot_agent.backends import make_backend  # noqa: E402
 from robot_agent.frames import field_layout  # noqa: E402
 from robot_agent.noise import path_key  # noqa: E402
@@ -300,12 +300,35 @@ def means(data: StudyData) -> dict[str, dict[str, Any]]:
     return out
 
 
+#: a vertex turning by more than this (rad) is a corner in :func:`corners`
+CORNER_RAD = math.radians(20)
+
+
+def corners(data: StudyData) -> dict[str, dict[str, float]]:
+    """Per planner, pooled over its computed paths: vertices and corners (turns over :data:`CORNER_RAD`)
+    per metre, the mean corner and the sharpest (degrees)."""
+    out: dict[str, dict[str, float]] = {}
+    for p in dict.fromkeys(e["planner"] for e in data.experiments):
+        paths = [np.asarray(e["planned_path"], dtype=float)[:, :2] for e in data.experiments
+                 if e["planner"] == p and e.get("planned_path")]
+        if not paths:
+            continue
+        length = sum(path_length(xy) for xy in paths)
+        turns = np.concatenate([turning_angles(xy) for xy in paths])
+        sharp = np.degrees(turns[turns > CORNER_RAD])
+        out[p] = {"vertices_per_m": round(sum(map(len, paths)) / length, 2),
+                  "corners_per_m": round(len(sharp) / length, 2),
+                  "corner_mean_deg": round(float(sharp.mean()), 1) if len(sharp) else 0.0,
+                  "corner_max_deg": round(float(sharp.max()), 1) if len(sharp) else 0.0}
+    return out
+
+
 def _one(job: tuple[str, int, dict[str, float], bool]) -> dict[str, Any]:
     kind, seed, overrides, truth = job
     data = (paper if kind == "paper" else varied)(seed, overrides, truth)
     found = paper_findings(data)
     return {"seed": seed, "held": {f.key: f.held for f in found}, "details": {f.key: f.detail for f in found},
-            "means": means(data)}
+            "means": means(data), "corners": corners(data)}
 
 
 def run_many(kind: str, seeds: list[int], overrides: Optional[dict[str, float]] = None, workers: int = 2,
@@ -319,7 +342,7 @@ def run_many(kind: str, seeds: list[int], overrides: Optional[dict[str, float]] 
 
 
 def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
-    """Held-counts per finding, the failing seeds, and the means over seeds."""
+    """Held-counts per finding, the failing seeds, the means over seeds and the computed paths' corners."""
     keys = list(results[0]["held"])
     held = {k: sum(bool(r["held"][k]) for r in results) for k in keys}
     avg: dict[str, dict[str, float]] = {}
@@ -327,11 +350,15 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
         avg[g] = {k: round(float(np.mean([r["means"][g][k] for r in results if r["means"][g].get(k) is not None])), 4)
                   for k in results[0]["means"][g]}
     failing = {r["seed"]: {k: r["details"][k] for k, v in r["held"].items() if not v} for r in results}
+    shape = {p: {k: round(float(np.mean([r["corners"][p][k] for r in results if p in r["corners"]])), 2)
+                 for k in results[0]["corners"][p]} for p in results[0]["corners"]}  # the seeds' mean
     return {"seeds": [r["seed"] for r in results], "held": held, "failing": {s: f for s, f in failing.items() if f},
-            "means": avg}
+            "means": avg, "computed_paths": shape}
 
 
-#: one change at a time: (label, profile overrides)
+#: one change at a time: (label, profile overrides); from the field robot before this work (e2c6fc3), then
+#: the changes added one by one, then each part of the shipped robot taken away (the follower's too: its
+#: switching radius, its turning on the spot; 3.2 rad > π never turns on the spot)
 ABLATION: list[tuple[str, dict[str, float]]] = [
     ("e2c6fc3 (before)", MAIN),
     ("before, tracker noise 0", {**MAIN, "field.tracker_noise_xy_m": 0.0, "field.tracker_noise_theta_rad": 0.0}),
@@ -345,6 +372,13 @@ ABLATION: list[tuple[str, dict[str, float]]] = [
     ("+ steering lead 0.12 s (shipped)", {}),
     ("shipped, 1 mm white tracker noise", {"field.tracker_noise_xy_m": 0.001, "field.tracker_bias_xy_m": 0.0}),
     ("shipped, no latency compensation", {"field.latency_compensation_s": 0.0}),
+    ("shipped, steering lead 0", {"field.control_lead_s": 0.0}),
+    ("shipped, motor lag 0, lead 0", {"field.motor_time_constant_s": 0.0, "field.control_lead_s": 0.0}),
+    ("shipped, tracker error 0", {"field.tracker_noise_xy_m": 0.0, "field.tracker_noise_theta_rad": 0.0,
+                                  "field.tracker_bias_xy_m": 0.0}),
+    ("shipped, wheel noise 0", {"field.wheel_noise_rel": 0.0, "field.wheel_noise_abs_m_s": 0.0}),
+    ("shipped, switch radius 3 cm", {"controller.switch_radius_m": 0.03}),
+    ("shipped, no turn on the spot", {"controller.turn_in_place_rad": 3.2}),
 ]
 
 
@@ -357,173 +391,6 @@ def ablate(seeds: list[int], workers: int) -> list[dict[str, Any]]:
                     **{p: s["means"][f"{p}/twb"] for p in PLANNERS},
                     "sim": {p: s["means"][f"{p}/sim"] for p in PLANNERS}})
     return out
-
-
-# ---------------------------------------------------------------- figures
-
-
-def figures(out: Path, workers: int) -> list[Path]:
-    """The figures of docs/fidelity.md, as PNG files in ``out``."""
-    from matplotlib.figure import Figure
-
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    blocks_style = {"color": "0.82", "lw": 0}
-
-    def draw_env(ax, env_data: dict[str, Any]) -> None:  # type: ignore[no-untyped-def]
-        from matplotlib.patches import Rectangle
-        for b in env_data["blocks"]:
-            ax.add_patch(Rectangle((b["x"] - b["w"] / 2, b["y"] - b["h"] / 2), b["w"], b["h"],
-                                   angle=math.degrees(b.get("angle", 0.0)), rotation_point="center", **blocks_style))
-        ax.set_aspect("equal")
-
-    # 1. the weave and its cause: a PRM path driven before and after
-    env = load_environment("room")
-    p = env.plan("B")
-    start, goal = list(p.start), list(p.goal)
-    r = plan_path(env, start, goal, "prm", robot_radius=ROBOT_RADIUS + PLANNING_MARGIN, seed=0)
-    wire = decode_path(encode_path(np.round(r.path, 6)))
-    fig = Figure(figsize=(12, 6.2))
-    axes = fig.subplots(1, 2)
-    sim = drive(env.to_dict(), wire, start, "ideal", run_seed(0, "sim", 1), robot_params(), truth=True)
-    for ax, (title, ov) in zip(axes, [("before (e2c6fc3): acts on the 0.1 s old fix", MAIN),
-                                      ("now: latency compensated, steers 0.12 s ahead", {})]):
-        draw_env(ax, env.to_dict())
-        poses, t0, t1, end, true = drive(env.to_dict(), wire, start, "field", run_seed(0, "twb", 1),
-                                         robot_params(profile_with(ov)), truth=True)
-        ax.plot(wire[:, 0], wire[:, 1], "k.--", lw=0.8, ms=4, label="computed (PRM)")
-        ax.plot(sim[4][:, 1], sim[4][:, 2], color="#1f77b4", lw=1.2, label="simulation (S)")
-        ax.plot(true[:, 1], true[:, 2], color="#d62728", lw=1.2, label="field robot, driven")
-        ax.plot(poses[:, 1], poses[:, 2], ".", color="#ff9896", ms=1.5, label="field robot, tracker log")
-        inside = poses[(poses[:, 0] >= t0) & (poses[:, 0] <= t1)]
-        ratio = path_length(inside[:, 1:3]) / path_length(wire)
-        kappa = smoothness(inside[:, 1:3]) / smoothness(wire[:, :2])
-        ax.set_title(f"{title}\nT length ratio {ratio:.3f}, κ' ratio {kappa:.2f}", fontsize=10)
-        ax.set_xlim(0.2, 1.6)
-        ax.set_ylim(0.2, 1.6)
-        ax.legend(loc="lower left", fontsize=8)
-    fig.suptitle("room, plan B, PRM (seed 0): the same path, the same noise, before and after", fontsize=11)
-    written.append(out / "fidelity-weave.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-
-    # 2. the ablation: length and κ' ratios per variant
-    rows = ablate(list(range(10)), workers)
-    (out / "fidelity-ablation.json").write_text(json.dumps(rows, indent=1) + "\n")
-    fig = Figure(figsize=(12, 7))
-    axes = fig.subplots(2, 1, sharex=True)
-    x = np.arange(len(rows))
-    colors = {"fmm": "#2ca02c", "fm2": "#9467bd", "prm": "#ff7f0e"}
-    for i, pl in enumerate(PLANNERS):
-        off = (i - 1) * 0.26
-        axes[0].bar(x + off, [row[pl]["length_ratio"] for row in rows], 0.25, color=colors[pl], label=f"{pl} logged")
-        axes[0].scatter(x + off, [row[pl]["true_length_ratio"] for row in rows], color="k", marker="_", s=120,
-                        zorder=3, label="driven (true path)" if i == 0 else None)
-        axes[1].bar(x + off, [row[pl]["smoothness_ratio"] for row in rows], 0.25, color=colors[pl], label=pl)
-        sim_len = rows[0]["sim"][pl]["length_ratio"]
-        sim_k = rows[0]["sim"][pl]["smoothness_ratio"]
-        axes[0].axhline(sim_len, color=colors[pl], lw=0.8, ls=":")
-        axes[1].axhline(sim_k, color=colors[pl], lw=0.8, ls=":")
-    axes[0].set_ylim(0.95, 1.25)
-    axes[0].set_ylabel("T length ratio")
-    axes[1].set_ylabel("T κ' ratio (mean κ' / mean computed κ')")
-    axes[0].legend(fontsize=8, ncol=4)
-    axes[1].legend(fontsize=8)
-    axes[1].set_xticks(x, [row["variant"] for row in rows], rotation=30, ha="right", fontsize=8)
-    axes[0].set_title("paper study, seeds 0-9, field runs; dotted: the simulation's ratio", fontsize=10)
-    written.append(out / "fidelity-ablation.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-
-    # 3. a sharp zig-zag: rounding and a little overshoot
-    half = math.radians(30)
-    pts, sign = [(0.2, 0.9)], 1
-    for _ in range(7):
-        for _ in range(2):
-            pts.append((pts[-1][0] + 0.1 * math.cos(sign * half), pts[-1][1] + 0.1 * math.sin(sign * half)))
-        sign = -sign
-    zz = np.array(pts)
-    zz = np.column_stack([zz, np.r_[np.arctan2(np.diff(zz[:, 1]), np.diff(zz[:, 0])), 0.0]])
-    empty = {"name": "empty", "size": [1.8, 1.8], "blocks": []}
-    fig = Figure(figsize=(12, 4.2))
-    ax = fig.subplots()
-    ax.plot(zz[:, 0], zz[:, 1], "k.--", lw=0.8, label=f"computed (κ' {smoothness(zz[:, :2]):.3f})")
-    for label, backend, ov, color in [("ideal (S)", "ideal", {}, "#1f77b4"),
-                                      ("field, steering lead 0", "field", {"field.control_lead_s": 0.0}, "#ff7f0e"),
-                                      ("field as shipped", "field", {}, "#d62728")]:
-        _, _, _, _, true = drive(empty, zz, list(zz[0]), backend, 1, robot_params(profile_with(ov)), truth=True)
-        ax.plot(true[:, 1], true[:, 2], color=color, lw=1.3, label=f"{label} (κ' {smoothness(true[:, 1:3]):.3f})")
-    ax.set_aspect("equal")
-    ax.legend(fontsize=8, loc="upper right")
-    ax.set_title("60° corners every 0.2 m (true paths): the field robot rounds them; without the lead it turns "
-                 "late and overshoots", fontsize=10)
-    written.append(out / "fidelity-corners.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-
-    # 4. the tracker: a robot at rest and one driving a straight line
-    from robot_agent.physics import tracker_bias
-    fig = Figure(figsize=(12, 4.6))
-    axes = fig.subplots(1, 2)
-    for label, ov, color in [("before: 1 mm white", MAIN, "#ff7f0e"), ("now: 1 mm bias field + 0.3 mm jitter", {},
-                                                                       "#d62728")]:
-        params = robot_params(profile_with(ov))
-        b = make_backend("field", 1, params)
-        b.place(0, (0.9, 0.9, 0.0))
-        b.begin_path(np.array([True]), np.array([path_key(4)], dtype=np.uint64), np.array([True]))
-        m = []
-        for k in range(1, 301):
-            seen, meas = b.sense(np.array([k]), np.array([True]))[1:]
-            if seen[0]:
-                m.append((meas[0, :2] - b.pose[0, :2]) * 1000)
-            b.actuate(np.zeros((1, 2)))
-        m = np.array(m)
-        axes[0].plot(m[:, 0], m[:, 1], ".-", color=color, lw=0.4, ms=3,
-                     label=f"{label}: logged length {np.hypot(*np.diff(m, axis=0).T).sum():.0f} mm in 6 s")
-    axes[0].set_aspect("equal")
-    axes[0].set_xlabel("x error (mm)")
-    axes[0].set_ylabel("y error (mm)")
-    axes[0].set_title("a robot at rest, 6 s of tracker frames", fontsize=10)
-    axes[0].legend(fontsize=8)
-    sig = np.linspace(0, 1.5, 31)
-    spacing = 0.17 / 30 * 1000  # mm between frames at the field robot's mean speed
-    axes[1].plot(sig, 100 * sig**2 / spacing, "k-", label="σ² / spacing (straight line, 5.7 mm per frame)")
-    line = np.array([[0.2 + 0.1 * i, 0.9, 0.0] for i in range(14)])
-    for s_mm in (0.0, 0.3, 0.6, 1.0, 1.5):
-        params = robot_params(profile_with({"field.tracker_noise_xy_m": s_mm / 1000, "field.tracker_bias_xy_m": 0.0}))
-        infl = []
-        for seed in range(5):
-            poses, t0, t1, _, true = drive(empty, line, list(line[0]), "field", seed, params, truth=True)
-            inside = poses[(poses[:, 0] >= t0) & (poses[:, 0] <= t1)]
-            drv = true[(true[:, 0] >= t0) & (true[:, 0] <= t1)]
-            infl.append(100 * (path_length(inside[:, 1:3]) / path_length(drv[:, 1:3]) - 1))
-        axes[1].plot(s_mm, np.mean(infl), "o", color="#d62728")
-    axes[1].set_xlabel("white tracker noise σ per axis (mm)")
-    axes[1].set_ylabel("logged length − driven length (%)")
-    axes[1].set_title("a noisy log is longer than the path driven (1.3 m line, incl. start and stop)", fontsize=10)
-    axes[1].legend(fontsize=8)
-    written.append(out / "fidelity-tracker.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-    _ = tracker_bias
-
-    # 5. the findings: held-counts before and after, paper study and varied environments
-    counts = {}
-    for kind in ("paper", "varied"):
-        for label, ov in (("before", MAIN), ("now", {})):
-            counts[f"{kind} {label}"] = summarize(run_many(kind, list(range(20)), ov, workers))["held"]
-    (out / "fidelity-findings.json").write_text(json.dumps(counts, indent=1) + "\n")
-    keys = list(counts["paper now"])
-    fig = Figure(figsize=(12, 4.5))
-    ax = fig.subplots()
-    x = np.arange(len(keys))
-    for i, (label, color) in enumerate(zip(counts, ("#ffbb78", "#d62728", "#aec7e8", "#1f77b4"))):
-        ax.bar(x + (i - 1.5) * 0.2, [counts[label][k] for k in keys], 0.19, color=color, label=label)
-    ax.axhline(18, color="k", lw=0.8, ls=":")
-    ax.set_xticks(x, [f"{i + 1}. {k}" for i, k in enumerate(keys)], rotation=25, ha="right", fontsize=8)
-    ax.set_ylabel("seeds (of 20) where it held")
-    ax.legend(fontsize=8, ncol=4, loc="lower left")
-    ax.set_title("the nine findings over seeds 0-19: paper study and the varied environments, before and now",
-                 fontsize=10)
-    written.append(out / "fidelity-findings.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-    return written
 
 
 # ---------------------------------------------------------------- command line
@@ -556,6 +423,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("docs/img"))
     a = ap.parse_args()
     if a.what == "figures":
+        from bench.fidelity_figures import figures
+
         for p in figures(a.out, a.workers):
             print(p)
         return

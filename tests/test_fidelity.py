@@ -4,8 +4,11 @@ and its corners (docs/fidelity.md)."""
 
 from __future__ import annotations
 
+import csv
 import json
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +27,7 @@ from robot_agent.sim import SimCore, State
 from robot_agent.world import World
 
 P = robot_params()
+ROOT = Path(__file__).resolve().parent.parent
 
 # ---------------------------------------------------------------- the findings on a reduced study
 
@@ -49,6 +53,49 @@ def test_a_reduced_study_reproduces_the_nine_findings(twb, tmp_path):
     assert json.loads((out / "study.json").read_text())["spec"]["seed"] == 0
     md = (out / "findings.md").read_text()
     assert md.count("| held |") == 9 and "Path length deviation shows similar results" in md
+    # bench/fidelity.py's offline runs are these runs: the same metrics, run for run
+    offline = {_run_key(r): r for r in _bench().study_data(StudySpec.from_json(REDUCED, "reduced")).rows}
+    with open(out / "runs.csv", newline="") as f:
+        online = list(csv.DictReader(f))
+    assert len(online) == len(offline) == 12
+    for row in online:
+        mine = offline[_run_key(row)]
+        for key in ("length_m", "smoothness_rad", "deviation_mean_m", "clearance_min_m", "execution_time_s"):
+            assert float(row[key]) == pytest.approx(mine[key], rel=1e-4, abs=1e-6), (_run_key(row), key)
+
+
+def _run_key(row: dict) -> tuple:
+    return row["environment"], row["plan"], row["planner"], row["mode"], int(row["repetition"])
+
+
+def _bench():
+    """bench/fidelity.py as a module (bench/ is not an installed package)."""
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    import bench.fidelity
+
+    return bench.fidelity
+
+
+def test_offline_a_planning_failure_fails_the_experiment_as_the_testbed_does():
+    spec = StudySpec.from_json({**REDUCED, "plans": ["A"], "planners": [{"name": "prm", "params": {"samples": 2}}]},
+                               "tiny")
+    data = _bench().study_data(spec)
+    (exp,) = data.experiments
+    assert exp["status"] == "failed" and exp["error"].startswith("planning failed: ") and exp["planned_path"] is None
+    assert [(r["mode"], r["status"], r["error"]) for r in data.rows] == [("sim", "failed", exp["error"]),
+                                                                         ("twb", "failed", exp["error"])]
+    assert [f.held for f in paper_findings(data)] == [None] * 9
+
+
+def test_offline_varied_environments_and_their_random_problems():
+    fid = _bench()
+    for env in fid.varied_environments():
+        plans = fid.random_plans(env, 5, seed=3)
+        assert plans == fid.random_plans(env, 5, seed=3)  # seeded
+        for plan in plans:
+            assert math.dist(plan["start"][:2], plan["goal"][:2]) >= 0.9
+    assert [e["name"] for e in fid.varied_environments()] == ["corridors", "clutter", "open", "zigzag"]
 
 
 # ---------------------------------------------------------------- the checks, on synthetic data
