@@ -140,7 +140,9 @@ def test_a_path_grazing_a_block_collides_on_the_field_for_some_seeds(client):
         assert m["length_m"] > 0.2  # measured either way: a failed run's driving is data too
         if run["status"] == "failed":
             assert run["error"] == "collision: the robot hit an obstacle"
-            assert m["collided"] is True and m["clearance_min_m"] < 0.045
+            # the robot's own verdict; its logged path ends at the tracker's last frame before the contact, up to
+            # 0.1 s earlier (30 Hz, a dropped frame): within that much travel at 0.2 m/s of the collision radius
+            assert m["collided"] is True and m["clearance_min_m"] < 0.04 + 0.2 * 0.1
             assert m["goal_reached"] is False
         else:
             assert run["status"] == "completed" and m["collided"] is False and m["goal_reached"] is True
