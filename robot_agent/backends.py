@@ -26,8 +26,10 @@ through the methods below, one step at a time.
 
 **A real robot plugs in here**: subclass :class:`Backend`, send the commands
 of :meth:`actuate` to the robots (radio/Bluetooth), fill the beliefs and
-logged poses of :meth:`sense` from the real overhead tracker, report
-:attr:`pose` from the tracker too, and refuse :meth:`place` (no emulated
+logged poses of :meth:`sense` from the real overhead tracker (the field
+backend's latency compensation, :func:`robot_agent.physics.localise` with
+:func:`robot_agent.physics.odometry`, works on late fixes from any tracker),
+report :attr:`pose` from the tracker too, and refuse :meth:`place` (no emulated
 gripper) by raising ``NotImplementedError``.  No such driver ships.
 """
 
@@ -38,7 +40,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from .compiled import kernel
-from .physics import FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
+from .physics import BIAS_FEATURES, FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
 from .params import RobotParams
 from .stepper import FIELD, IDEAL
 
@@ -67,9 +69,10 @@ class Backend(ABC):
         """Localise at the start of a control step.
 
         ``step`` ``(N,)`` counts control steps since each robot's path began;
-        ``moving`` marks robots following a path.  Returns the beliefs
-        ``(N, 3)``, the mask of robots whose pose the tracker logs now and
-        those logged poses ``(N, 3)``.
+        ``moving`` marks robots following a path.  Returns the poses the
+        controller acts on ``(N, 3)`` (the beliefs, or a prediction from
+        them), the mask of robots whose pose the tracker logs now and those
+        logged poses ``(N, 3)``.
         """
 
     @abstractmethod
@@ -113,12 +116,17 @@ class Emulated(Backend):
         self.ring_ok = np.zeros((n, self.fg.delay + 1), dtype=bool)
         self.ring_pos = np.zeros(n, dtype=np.int64)
         self.noise = np.zeros((n, 2))  # this step's track noise (standard normals)
+        self.odo = np.zeros((n, 2))  # the localisation's model of the track speeds, m/s
+        self.odo_ring = np.zeros((n, self.fg.predict + 1, 2))  # ... of the last steps (latency compensation)
+        self.bias = np.zeros((n, 2 * BIAS_FEATURES, 3))  # the tracker's bias field of each robot's run
+        self.ctl = self.belief  #: the poses the controller acts on (the field robot predicts them ahead)
 
     @property
     def arrays(self) -> tuple:
-        """``(pose, belief, tracks, gain, keys, ring, ring_ok, ring_pos, noise)``, the arrays themselves."""
-        return (self.pose, self.belief, self.tracks, self.gain, self.keys, self.ring, self.ring_ok,
-                self.ring_pos, self.noise)
+        """``(pose, belief, ctl, tracks, gain, keys, ring, ring_ok, ring_pos, noise, odo, odo_ring, bias)``,
+        the arrays themselves."""
+        return (self.pose, self.belief, self.ctl, self.tracks, self.gain, self.keys, self.ring, self.ring_ok,
+                self.ring_pos, self.noise, self.odo, self.odo_ring, self.bias)
 
 
 @kernel
@@ -156,34 +164,40 @@ class IdealBackend(Emulated):
 
 
 @kernel
-def _field_sense_all(step: np.ndarray, keys: np.ndarray, pose: np.ndarray, belief: np.ndarray, ring: np.ndarray,
-                     ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, fg: FieldGains
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def _field_sense_all(step: np.ndarray, keys: np.ndarray, pose: np.ndarray, belief: np.ndarray, ctl: np.ndarray,
+                     ring: np.ndarray, ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, odo: np.ndarray,
+                     odo_ring: np.ndarray, bias: np.ndarray, fg: FieldGains) -> tuple[np.ndarray, np.ndarray]:
     seen = np.zeros(len(pose), dtype=np.bool_)
     meas = np.empty((len(pose), 3))
     for i in range(len(pose)):
-        seen[i] = field_sense(i, step[i], keys[i], pose, belief, ring, ring_ok, ring_pos, noise, meas[i], fg)
+        seen[i] = field_sense(i, step[i], keys[i], pose, belief, ctl, ring, ring_ok, ring_pos, noise, meas[i], odo,
+                              odo_ring, bias, fg)
     return seen, meas
 
 
 @kernel
 def _field_actuate_all(cmd: np.ndarray, pose: np.ndarray, tracks: np.ndarray, gain: np.ndarray,
-                       noise: np.ndarray, fg: FieldGains) -> None:
+                       noise: np.ndarray, ring_pos: np.ndarray, odo: np.ndarray, odo_ring: np.ndarray,
+                       fg: FieldGains) -> None:
     for i in range(len(pose)):
-        field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, fg)
+        field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, ring_pos, odo, odo_ring, fg)
 
 
 class FieldBackend(Emulated):
     """The emulated physical robot on the field (see :mod:`robot_agent.physics`).
 
-    Localisation: the overhead tracker measures each robot at
-    ``camera_rate_hz`` (frames timed from the path start, on the control
-    grid), with Gaussian noise, dropped frames and ``tracker_latency_s``
-    delay (rounded to control steps); between frames the belief is held.
-    Actuation: body commands become track speeds, scaled by a per-run gain
-    per track (bias), perturbed by speed noise, zeroed below the dead band,
-    then the tracks follow with a first-order lag (``motor_time_constant_s``)
-    and at most ``max_accel_m_s2``.
+    Tracker: each robot is measured at ``camera_rate_hz`` (frames timed from
+    the path start, on the control grid) with a smooth position error over
+    the field (``tracker_bias_xy_m``), per-frame jitter, dropped frames and
+    ``tracker_latency_s`` delay (rounded to control steps).  Localisation: a
+    fix that arrives is moved forward over ``latency_compensation_s`` with
+    the robot's odometry (its commands through its model of the tracks) and
+    the belief is dead-reckoned between fixes; the controller steers by the
+    pose predicted ``control_lead_s`` ahead (:attr:`ctl`, what :meth:`sense`
+    returns).  Actuation: body commands become track speeds, scaled by a
+    per-run gain per track (bias), perturbed by speed noise, zeroed below the
+    dead band, then the tracks follow with a first-order lag
+    (``motor_time_constant_s``) and at most ``max_accel_m_s2``.
     """
 
     name = "field"
@@ -192,21 +206,23 @@ class FieldBackend(Emulated):
     def __init__(self, n: int, params: RobotParams) -> None:
         super().__init__(n, params)
         self.belief = np.zeros((n, 3))
+        self.ctl = np.zeros((n, 3))
 
     def begin_path(self, mask: np.ndarray, keys: np.ndarray, from_rest: np.ndarray) -> None:
         for i in np.flatnonzero(mask):
             self.keys[i] = keys[i]
-            field_begin(int(i), self.keys[i], bool(from_rest[i]), self.pose, self.belief, self.gain,
-                        self.ring_ok, self.fg)
+            field_begin(int(i), self.keys[i], bool(from_rest[i]), self.pose, self.belief, self.ctl, self.gain,
+                        self.ring_ok, self.odo, self.odo_ring, self.bias, self.fg)
 
     def sense(self, step: np.ndarray, moving: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        seen, meas = _field_sense_all(np.asarray(step, dtype=np.int64), self.keys, self.pose, self.belief,
-                                      self.ring, self.ring_ok, self.ring_pos, self.noise, self.fg)
-        return self.belief, seen & moving, meas
+        seen, meas = _field_sense_all(np.asarray(step, dtype=np.int64), self.keys, self.pose, self.belief, self.ctl,
+                                      self.ring, self.ring_ok, self.ring_pos, self.noise, self.odo, self.odo_ring,
+                                      self.bias, self.fg)
+        return self.ctl, seen & moving, meas
 
     def actuate(self, cmd: np.ndarray) -> None:
         _field_actuate_all(np.ascontiguousarray(cmd, dtype=float), self.pose, self.tracks, self.gain,
-                           self.noise, self.fg)
+                           self.noise, self.ring_pos, self.odo, self.odo_ring, self.fg)
 
     def halt(self, mask: np.ndarray) -> None:
         self.tracks[mask] = 0.0
@@ -214,8 +230,11 @@ class FieldBackend(Emulated):
     def place(self, i: int, pose: tuple[float, float, float]) -> None:
         self.pose[i] = pose
         self.belief[i] = pose
+        self.ctl[i] = pose
         self.tracks[i] = 0.0
         self.ring_ok[i] = False
+        self.odo[i] = 0.0
+        self.odo_ring[i] = 0.0
 
     def in_motion(self) -> np.ndarray:
         return self.tracks.any(axis=1)

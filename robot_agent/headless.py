@@ -25,7 +25,12 @@ from .robot_profile import DEFAULT_PROFILE
 from .sim import SimCore, SimEvent
 from .world import World
 
-__all__ = ["HeadlessRun", "simulate_run"]
+__all__ = ["HeadlessRun", "PlacementRefused", "simulate_run"]
+
+
+class PlacementRefused(ValueError):
+    """The gripper cannot put the robot at the start (a wall or a block within the collision radius), as an
+    agent answers ``ERR,RANGE`` to ``T,T,I`` there."""
 
 _CHUNK = 4096  # control steps per compiled call
 
@@ -57,7 +62,7 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
                  max_s: float = 3600.0) -> HeadlessRun:
     """Run ``path`` ``(N, 3)`` (m, m, rad) from ``start`` (x, y, theta) among ``blocks`` (cx, cy, w, h,
     angle: m, rad) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
-    ``max_s`` of experiment time passed."""
+    ``max_s`` of experiment time passed.  Raises :class:`PlacementRefused` when the start is not free."""
     params = robot_params(profile)
     sizes, world_of, origin, areas = field_layout(1, "separate", area)
     world = World(sizes, world_of, origin, areas, params.collision_radius_m)
@@ -68,6 +73,9 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
     sent = parse_command(encode_path(path), field_size=size)
     assert isinstance(built, BuildCommand) and isinstance(placed, PlaceCommand) and isinstance(sent, PathCommand)
     world.set_blocks(0, built.blocks)
+    why = world.place_conflict(0, placed.pose, core.backend.pose)
+    if why:
+        raise PlacementRefused(f"cannot place the robot: {why}")
     core.place(0, placed.pose)
     core.poses.drain()
     core.set_path(0, sent.points, path_key(seed))

@@ -135,6 +135,7 @@ class AgentHost:
         self.world = World(sizes, world_of, origin, areas, self.params.collision_radius_m)
         self.link = ServerLink(server_url, token or "") if server_url else None
         self.sink: TrackerSink | None = tracker_sink if tracker_sink is not None else self.link
+        self._shipping = asyncio.Lock()  # one tracker shipment at a time (see _ship_poses)
         self.core = SimCore(self.params, make_backend(backend, robots, self.params), self.world,
                             log_poses=self.sink is not None)
         self._chunk = max(1, _CHUNK_ROBOT_STEPS // robots)  # steps per compiled call when running ahead
@@ -272,8 +273,7 @@ class AgentHost:
         until a server sink delivered them."""
         if self.sink is None:
             return
-        for idx, rows in self.core.poses.drain().items():
-            await self.sink.send(self.robots[idx].robot_id, rows)
+        await self._ship_poses()
         if wait and isinstance(self.sink, ServerLink):
             await self.sink.flush(timeout_s)
 
@@ -378,12 +378,18 @@ class AgentHost:
         for ev in events:
             self.robots[ev.robot].on_event(ev)
 
+    async def _ship_poses(self) -> None:
+        """Hand the logged poses to the sink, one shipment at a time: a flush returns only once a shipment
+        already under way (the periodic one, its poses drained but not yet delivered) has been delivered too."""
+        async with self._shipping:
+            for idx, rows in self.core.poses.drain().items():
+                await self.sink.send(self.robots[idx].robot_id, rows)  # type: ignore[union-attr]
+
     async def _flush_loop(self) -> None:
         while True:
             await asyncio.sleep(self.flush_interval_s)
             try:
-                for idx, rows in self.core.poses.drain().items():
-                    await self.sink.send(self.robots[idx].robot_id, rows)  # type: ignore[union-attr]
+                await self._ship_poses()
             except Exception:  # noqa: BLE001 - a failing sink must not stop the robots
                 log.exception("tracker sink failed")
 

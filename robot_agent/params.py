@@ -61,7 +61,11 @@ class FieldParams:
     tracker_latency_s: float = 0.0
     tracker_noise_xy_m: float = 0.0
     tracker_noise_theta_rad: float = 0.0
+    tracker_bias_xy_m: float = 0.0
+    tracker_bias_length_m: float = 0.0
     tracker_dropout_prob: float = 0.0
+    latency_compensation_s: float = 0.0
+    control_lead_s: float = 0.0
     motor_time_constant_s: float = 0.0
     wheel_noise_rel: float = 0.0
     wheel_noise_abs_m_s: float = 0.0
@@ -117,6 +121,8 @@ class RobotParams:
             raise ValueError(f"profile {name}: control and camera rates must be >= 1 Hz")
         if fld.tracker_dropout_prob >= 1:
             raise ValueError(f"profile {name}: `field.tracker_dropout_prob` must be < 1")
+        if fld.tracker_bias_xy_m > 0 and fld.tracker_bias_length_m <= 0:
+            raise ValueError(f"profile {name}: `field.tracker_bias_length_m` must be > 0 with a tracker bias")
         return cls(name=name, platform=str(profile.get("platform", name)), controller=ctrl, field=fld,
                    gripper=grip, **top)
 

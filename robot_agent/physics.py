@@ -8,11 +8,15 @@ backends' array methods and by the fused simulation loop
 - ideal (Player/Stage-like): the commands move the robot exactly
   (:func:`ideal_actuate`); it knows its pose.
 - field (the emulated physical robot): :func:`field_sense` is the overhead
-  tracker (a frame at ``camera_rate_hz`` timed from the path start, Gaussian
-  noise, dropped frames, ``tracker_latency_s`` delay) and the belief it
-  gives; :func:`field_actuate` the tracks (per-run gain, speed noise, dead
-  band, first-order lag, acceleration limit); :func:`field_begin` the
-  per-run draws.
+  tracker (a frame at ``camera_rate_hz`` timed from the path start; a
+  position error that varies smoothly over the field, :func:`tracker_bias`,
+  plus per-frame jitter; dropped frames; ``tracker_latency_s`` delay) and the
+  robot's localisation, which turns those late fixes into its belief
+  (:func:`localise`: each fix is projected forward over the latency with the
+  robot's odometry, and the belief is dead-reckoned between fixes);
+  :func:`field_actuate` the tracks (per-run gain, speed noise, dead band,
+  first-order lag, acceleration limit) and the odometry model of them
+  (:func:`odometry`); :func:`field_begin` the per-run draws.
 
 All noise comes from :mod:`robot_agent.noise`, keyed per run, so runs replay
 exactly.  Units: m, rad, s.
@@ -30,12 +34,15 @@ from .kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angl
 from .noise import box_muller, uniform
 from .params import RobotParams
 
-__all__ = ["FieldGains", "RUN_COUNTER", "field_actuate", "field_begin", "field_gains", "field_sense",
-           "ideal_actuate"]
+__all__ = ["BIAS_FEATURES", "FieldGains", "RUN_COUNTER", "field_actuate", "field_begin", "field_gains", "field_sense",
+           "ideal_actuate", "localise", "odometry", "tracker_bias"]
 
-#: noise counter reserved for per-run draws (a path never runs 2**40 steps)
+#: noise counter reserved for per-run draws (a path never runs 2**40 steps); the tracker's bias
+#: field draws from the counters after it
 RUN_COUNTER = 1 << 40
 _SENSE_CHANNELS = 8  # normals 0-2 tracker noise, 3-4 track noise, (5 unused), uniform 6 dropout
+#: random Fourier features per axis of the tracker's position bias (:func:`tracker_bias`)
+BIAS_FEATURES = 8
 
 
 class FieldGains(NamedTuple):
@@ -56,16 +63,22 @@ class FieldGains(NamedTuple):
     accel_step: float  #: largest track speed change per step (m/s)
     alpha: float  #: first-order lag factor per step
     dt: float
+    bias_xy: float  #: standard deviation of the tracker's smooth position error (m)
+    bias_wavenumber: float  #: 1 / its correlation length (1/m)
+    predict: int  #: steps over which the localisation projects each fix forward (latency compensation)
+    lead: float  #: how far ahead (s) of its belief the controller's pose is predicted
 
 
 def field_gains(p: RobotParams) -> FieldGains:
     """The :class:`FieldGains` of robot parameters ``p``."""
     f = p.field
     alpha = 1.0 - math.exp(-p.dt / f.motor_time_constant_s) if f.motor_time_constant_s > 0 else 1.0
+    k = 1.0 / f.tracker_bias_length_m if f.tracker_bias_length_m > 0 else 0.0
     return FieldGains(int(p.controller.control_rate_hz), int(f.camera_rate_hz), int(round(f.tracker_latency_s / p.dt)),
                       f.tracker_dropout_prob, f.tracker_noise_xy_m, f.tracker_noise_theta_rad, p.wheel_base_m,
                       f.wheel_noise_rel, f.wheel_noise_abs_m_s, f.wheel_gain_mean, f.wheel_bias_sigma,
-                      f.dead_band_m_s, p.max_accel_m_s2 * p.dt, alpha, p.dt)
+                      f.dead_band_m_s, p.max_accel_m_s2 * p.dt, alpha, p.dt, f.tracker_bias_xy_m, k,
+                      int(round(f.latency_compensation_s / p.dt)), f.control_lead_s)
 
 
 @kernel
@@ -87,48 +100,116 @@ def ideal_actuate(i: int, v: float, w: float, pose: np.ndarray, dt: float) -> No
 
 
 @kernel
-def field_begin(i: int, key: np.uint64, from_rest: bool, pose: np.ndarray, belief: np.ndarray,
-                gain: np.ndarray, ring_ok: np.ndarray, fg: FieldGains) -> None:
-    """A path with noise ``key`` starts for robot ``i``: draw its track gains; a robot that was at
-    rest gets a fresh tracker measurement as its belief (the tracker was watching it)."""
+def field_begin(i: int, key: np.uint64, from_rest: bool, pose: np.ndarray, belief: np.ndarray, ctl: np.ndarray,
+                gain: np.ndarray, ring_ok: np.ndarray, odo: np.ndarray, odo_ring: np.ndarray, bias: np.ndarray,
+                fg: FieldGains) -> None:
+    """A path with noise ``key`` starts for robot ``i``: draw its track gains and the tracker's
+    bias field (``bias`` ``(N, 2 * BIAS_FEATURES, 3)``); a robot that was at rest gets a fresh
+    tracker measurement as its belief (the tracker was watching it) and odometry at rest."""
     z0, z1, z2, z3, z4, _ = _six_normals(key, RUN_COUNTER, np.empty(6))
     gain[i, 0] = fg.gain_mean + fg.bias_sigma * z0
     gain[i, 1] = fg.gain_mean + fg.bias_sigma * z1
+    for j in range(bias.shape[1]):  # features of x (first half) and y: wave vector ~ N(0, k^2 I), phase
+        c = RUN_COUNTER + 1 + j
+        kx, ky = box_muller(uniform(key, c, 4, 0), uniform(key, c, 4, 1))
+        bias[i, j, 0] = kx * fg.bias_wavenumber
+        bias[i, j, 1] = ky * fg.bias_wavenumber
+        bias[i, j, 2] = 2.0 * math.pi * uniform(key, c, 4, 2)
     if from_rest:
-        belief[i, 0] = pose[i, 0] + z2 * fg.sigma_xy
-        belief[i, 1] = pose[i, 1] + z3 * fg.sigma_xy
+        bx, by = tracker_bias(i, pose[i, 0], pose[i, 1], bias, fg)
+        belief[i, 0] = pose[i, 0] + bx + z2 * fg.sigma_xy
+        belief[i, 1] = pose[i, 1] + by + z3 * fg.sigma_xy
         belief[i, 2] = wrap_angle(pose[i, 2] + z4 * fg.sigma_theta)
+        ctl[i, :] = belief[i]
         ring_ok[i, :] = False
+        odo[i, :] = 0.0
+        odo_ring[i, :, :] = 0.0
 
 
 @kernel
-def field_sense(i: int, step: int, key: np.uint64, pose: np.ndarray, belief: np.ndarray, ring: np.ndarray,
-                ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, meas: np.ndarray,
-                fg: FieldGains) -> bool:
+def tracker_bias(i: int, x: float, y: float, bias: np.ndarray, fg: FieldGains) -> tuple[float, float]:
+    """The tracker's position error (m) at ``(x, y)`` in robot ``i``'s run: a smooth random field.
+
+    Random Fourier features (Rahimi and Recht 2007): per axis ``sigma sqrt(2/F) sum_j cos(k_j . p +
+    phi_j)`` over ``F`` features drawn in :func:`field_begin`; a Gaussian-like field of standard
+    deviation ``bias_xy`` whose correlation falls as ``exp(-d^2 / (2 l^2))`` with distance ``d``
+    (``l`` = ``tracker_bias_length_m``): the lens-distortion and calibration residue of the
+    cameras, the same wherever the robot passes the same spot.
+    """
+    if fg.bias_xy == 0.0:
+        return 0.0, 0.0
+    f = bias.shape[1] // 2
+    sx = sy = 0.0
+    for j in range(f):
+        sx += math.cos(bias[i, j, 0] * x + bias[i, j, 1] * y + bias[i, j, 2])
+        sy += math.cos(bias[i, f + j, 0] * x + bias[i, f + j, 1] * y + bias[i, f + j, 2])
+    scale = fg.bias_xy * math.sqrt(2.0 / f)
+    return scale * sx, scale * sy
+
+
+@kernel
+def field_sense(i: int, step: int, key: np.uint64, pose: np.ndarray, belief: np.ndarray, ctl: np.ndarray,
+                ring: np.ndarray, ring_ok: np.ndarray, ring_pos: np.ndarray, noise: np.ndarray, meas: np.ndarray,
+                odo: np.ndarray, odo_ring: np.ndarray, bias: np.ndarray, fg: FieldGains) -> bool:
     """The tracker at control step ``step`` of robot ``i``'s run; returns whether it saw the robot.
 
-    Writes the measurement (noisy pose, ``meas`` ``(3,)``), puts it in flight
-    (``ring`` ``(N, delay + 1, 3)``), updates ``belief[i]`` with the
-    measurement that arrives now, and keeps this step's track noise in
-    ``noise[i]`` for :func:`field_actuate`.
+    Writes the measurement (pose plus the tracker's bias and jitter, ``meas``
+    ``(3,)``), puts it in flight (``ring`` ``(N, delay + 1, 3)``), updates
+    ``belief[i]`` (:func:`localise`) with the measurement that arrives now, and
+    keeps this step's track noise in ``noise[i]`` for :func:`field_actuate`.
     """
     u = np.empty(_SENSE_CHANNELS)
     z0, z1, z2, z3, z4, _ = _six_normals(key, step, u)
     noise[i, 0], noise[i, 1] = z3, z4
     frame = (step * fg.camera_rate) // fg.control_rate != ((step - 1) * fg.camera_rate) // fg.control_rate
     ok = frame and u[6] >= fg.dropout
-    meas[0] = pose[i, 0] + z0 * fg.sigma_xy
-    meas[1] = pose[i, 1] + z1 * fg.sigma_xy
+    bx, by = tracker_bias(i, pose[i, 0], pose[i, 1], bias, fg)
+    meas[0] = pose[i, 0] + bx + z0 * fg.sigma_xy
+    meas[1] = pose[i, 1] + by + z1 * fg.sigma_xy
     meas[2] = wrap_angle(pose[i, 2] + z2 * fg.sigma_theta)
     slots = fg.delay + 1
     slot = ring_pos[i] % slots
     ring[i, slot, :] = meas
     ring_ok[i, slot] = ok
     ready = (ring_pos[i] + 1) % slots
-    if ring_ok[i, ready]:
-        belief[i, :] = ring[i, ready, :]
+    localise(i, ring_pos[i], ring_ok[i, ready], ring[i, ready], belief, ctl, odo, odo_ring, fg)
     ring_pos[i] += 1
     return ok
+
+
+@kernel
+def localise(i: int, pos: int, arrived: bool, fix: np.ndarray, belief: np.ndarray, ctl: np.ndarray, odo: np.ndarray,
+             odo_ring: np.ndarray, fg: FieldGains) -> None:
+    """Robot ``i``'s belief at the start of its step number ``pos`` (its ``ring_pos``).
+
+    Without latency compensation (``predict`` = 0) the belief is the latest
+    fix that arrived, held until the next one.  With it, as robot software
+    that knows its tracker's latency does: a fix that arrives now (taken
+    ``predict`` steps ago) is moved forward by the odometry of those steps
+    (``odo_ring`` ``(N, predict + 1, 2)``: the modelled track speeds of each
+    step, :func:`odometry`); between fixes the belief moves on by the last
+    step's odometry (dead reckoning).
+    """
+    p = fg.predict
+    if p == 0:
+        if arrived:
+            belief[i, :] = fix
+    elif arrived:
+        slots = p + 1
+        x, y, th = fix[0], fix[1], fix[2]
+        for j in range(pos - p, pos):
+            s = (j + slots) % slots
+            v, w = tracks_to_body(odo_ring[i, s, 0], odo_ring[i, s, 1], fg.wheel_base)
+            x, y, th = unicycle_step(x, y, th, v, w, fg.dt)
+        belief[i, 0], belief[i, 1], belief[i, 2] = x, y, th
+    else:
+        v, w = tracks_to_body(odo[i, 0], odo[i, 1], fg.wheel_base)
+        belief[i, 0], belief[i, 1], belief[i, 2] = unicycle_step(belief[i, 0], belief[i, 1], belief[i, 2], v, w, fg.dt)
+    if fg.lead > 0.0:
+        v, w = tracks_to_body(odo[i, 0], odo[i, 1], fg.wheel_base)
+        ctl[i, 0], ctl[i, 1], ctl[i, 2] = unicycle_step(belief[i, 0], belief[i, 1], belief[i, 2], v, w, fg.lead)
+    else:
+        ctl[i, :] = belief[i]
 
 
 @kernel
@@ -144,11 +225,33 @@ def _track(current: float, want: float, gain: float, z: float, fg: FieldGains) -
 
 
 @kernel
+def odometry(i: int, v: float, w: float, pos: int, odo: np.ndarray, odo_ring: np.ndarray, fg: FieldGains) -> None:
+    """The robot's model of its own tracks after commands ``(v, w)`` in its step ``pos``.
+
+    The same track model as the physics (:func:`_track`: dead band, lag,
+    acceleration limit) with what the robot knows of itself, the nominal
+    unit gain and no noise; what the per-run gains, the slip noise and the
+    tracker reveal later is not in it.  Kept in ``odo[i]`` and, for
+    :func:`localise`, in ``odo_ring[i]`` at slot ``pos % (predict + 1)``.
+    """
+    if fg.predict == 0 and fg.lead == 0.0:
+        return
+    left, right = body_to_tracks(v, w, fg.wheel_base)
+    odo[i, 0] = _track(odo[i, 0], left, 1.0, 0.0, fg)
+    odo[i, 1] = _track(odo[i, 1], right, 1.0, 0.0, fg)
+    s = pos % (fg.predict + 1)
+    odo_ring[i, s, 0], odo_ring[i, s, 1] = odo[i, 0], odo[i, 1]
+
+
+@kernel
 def field_actuate(i: int, v: float, w: float, pose: np.ndarray, tracks: np.ndarray, gain: np.ndarray,
-                  noise: np.ndarray, fg: FieldGains) -> None:
-    """Robot ``i``'s tracks follow commands ``(v, w)`` for one step and move it (in place)."""
+                  noise: np.ndarray, ring_pos: np.ndarray, odo: np.ndarray, odo_ring: np.ndarray,
+                  fg: FieldGains) -> None:
+    """Robot ``i``'s tracks follow commands ``(v, w)`` for one step and move it (in place); its
+    odometry model follows the same commands (:func:`odometry`)."""
     left, right = body_to_tracks(v, w, fg.wheel_base)
     tracks[i, 0] = _track(tracks[i, 0], left, gain[i, 0], noise[i, 0], fg)
     tracks[i, 1] = _track(tracks[i, 1], right, gain[i, 1], noise[i, 1], fg)
     bv, bw = tracks_to_body(tracks[i, 0], tracks[i, 1], fg.wheel_base)
     pose[i, 0], pose[i, 1], pose[i, 2] = unicycle_step(pose[i, 0], pose[i, 1], pose[i, 2], bv, bw, fg.dt)
+    odometry(i, v, w, ring_pos[i] - 1, odo, odo_ring, fg)

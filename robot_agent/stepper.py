@@ -105,7 +105,7 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
     Returns ``(steps done, event rows, pose rows)``.
     """
     state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
-    pose, belief, tracks, gain, keys, ring, ring_ok, ring_pos, noise = phys
+    pose, belief, ctl, tracks, gain, keys, ring, ring_ok, ring_pos, noise, odo, odo_ring, bias = phys
     origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until = world
     events, pose_rows, pose_xyt, flags, old, moving, check, hit, meas = out
     n = len(state)
@@ -116,7 +116,8 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
         for i in range(n):
             moving[i] = state[i] == State.MOVING
             if kind == FIELD:
-                seen = field_sense(i, k[i], keys[i], pose, belief, ring, ring_ok, ring_pos, noise, meas, fg)
+                seen = field_sense(i, k[i], keys[i], pose, belief, ctl, ring, ring_ok, ring_pos, noise, meas, odo,
+                                   odo_ring, bias, fg)
             else:
                 meas[:] = pose[i]
                 seen = True
@@ -124,10 +125,10 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
                 pose_rows[n_pose, 0], pose_rows[n_pose, 1] = step, i
                 pose_xyt[n_pose, :] = meas
                 n_pose += 1
-        control_fleet(belief, moving, ctrl, g, flags, old)
+        control_fleet(ctl, moving, ctrl, g, flags, old)
         for i in range(n):
             if kind == FIELD:
-                field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, fg)
+                field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, ring_pos, odo, odo_ring, fg)
                 check[i] = (moving[i] and not flags[i] & ENDED) or tracks[i, 0] != 0.0 or tracks[i, 1] != 0.0
             else:
                 ideal_actuate(i, cmd[i, 0], cmd[i, 1], pose, g.dt)

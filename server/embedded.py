@@ -79,9 +79,10 @@ class EmbeddedField:
             AgentHost(robots=4, backend="field", world="shared", robot_ids=[f"field-{k}" for k in range(1, 5)],
                       area=[FIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE, SUBFIELD_SIZE], origins=list(SUBFIELD_ORIGINS),
                       **common),
-            AgentHost(robots=self.sim_robots, backend="ideal", world="separate", area=FIELD_SIZE,
-                      robot_ids=[f"sim-{i}" for i in range(1, self.sim_robots + 1)], **common),
         ]
+        if self.sim_robots:  # none when simulation runs go to Ray
+            self._hosts.append(AgentHost(robots=self.sim_robots, backend="ideal", world="separate", area=FIELD_SIZE,
+                                         robot_ids=[f"sim-{i}" for i in range(1, self.sim_robots + 1)], **common))
         for host in self._hosts:
             await host.start()
             for r in host.robots:

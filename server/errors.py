@@ -32,6 +32,7 @@ __all__ = [
     "AgentRefused",
     "AgentUnavailable",
     "Conflict",
+    "EngineFault",
     "FailureKind",
     "Forbidden",
     "Invalid",
@@ -156,3 +157,8 @@ class AgentRefused(TestbedFault):
     def __init__(self, code: str, message: str) -> None:
         super().__init__(f"{code}: {message}")
         self.code, self.message = code, message
+
+
+class EngineFault(TestbedFault):
+    """The compute engine (Ray) lost a task: a worker or node died, the cluster went away.  The run ends
+    ``error`` and is retried once, as after a dead agent; no robot is blamed."""

@@ -19,7 +19,7 @@ from sqlalchemy.exc import DBAPIError
 from sqlalchemy.orm import Session, sessionmaker
 
 from robot_agent.auth import control_key as derive_key
-from robot_agent.frames import SUBFIELD_SIZE
+from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from .broker import EventBroker
 from .core.security import Principal
@@ -124,6 +124,16 @@ class FieldState:
         self._broker.publish({"type": "robot", "robot_id": rid})
         return slot
 
+    def add_engine_slots(self, engine: str, n: int) -> list[RobotSlot]:
+        """``n`` simulation slots of a compute engine (``{engine}-1`` ...): whole-field ideal robots that are
+        Ray tasks, not agents; kept in memory only (they come and go with the engine)."""
+        slots = [RobotSlot(f"{engine}-{i}", engine, 0, "ideal", origin=(0.0, 0.0), area=FIELD_SIZE, engine=engine)
+                 for i in range(1, n + 1)]
+        for slot in slots:
+            self._install(slot, None, None)
+            self._broker.publish({"type": "robot", "robot_id": slot.robot_id})
+        return slots
+
     def set_offline(self, robot_id: str, reason: str) -> None:
         """A run failed for this robot's fault (``reason``): no runs for it until it answers again."""
         self.robots[robot_id].healthy = False
@@ -140,7 +150,7 @@ class FieldState:
     async def probe_offline(self) -> list[str]:
         """Try the idle offline robots; the ones that answer are back online (returned)."""
         back = []
-        for r in [r for r in self.robots.values() if not r.healthy and r.run_id is None]:
+        for r in [r for r in self.robots.values() if not r.healthy and r.run_id is None and not r.engine]:
             if await agent_answers(r.host, r.port):
                 log.info("robot %s answers again", r.robot_id)
                 self.set_online(r.robot_id)

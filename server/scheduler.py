@@ -74,6 +74,8 @@ class RobotSlot:
     area: tuple[float, float] = SUBFIELD_SIZE
     run_id: Optional[int] = None
     healthy: bool = True
+    #: a slot of a compute engine (``ray``), not a robot agent: its runs are tasks, there is nothing to reach
+    engine: str = ""
 
     @property
     def pool(self) -> str:

@@ -5,7 +5,7 @@ API routes reach its services through dependencies (``server.api.deps``).
 It holds no logic of its own beyond wiring, start-up and shutdown::
 
     store (SQLAlchemy) ── broker (live events) ── finished views (response cache)
-    field (robots, sub-fields) ── tracker (pose windows) ── worker pool ── sandbox
+    field (robots, sub-fields) ── tracker (pose windows) ── worker pool or Ray ── sandbox
     recorder ── paths ── run services ── dispatcher (queue → runs)
     embedded robots (``twb up`` only)
 
@@ -30,6 +30,7 @@ from .embedded import EmbeddedField
 from .field import FieldState
 from .pipeline.paths import PathService
 from .pipeline.pool import WorkerPool
+from .pipeline.ray_pool import RayPool
 from .pipeline.recorder import RunRecorder
 from .pipeline.context import NoHooks, RunServices
 from .sandbox import Sandbox
@@ -65,7 +66,10 @@ class Testbed:
         self.views = FinishedViews()
         self.field = FieldState(self.sessions, self.broker)
         self.tracker = PoseRouter(self.sessions, self.broker, self.field.origin_of)
-        self.pool = WorkerPool(settings.planning_workers)
+        #: planning and metrics, off the loop: worker processes, or Ray tasks (then simulation runs too)
+        self.pool: WorkerPool | RayPool = (
+            RayPool(address=settings.ray_address, cpus=settings.ray_cpus, slots=settings.ray_slots,
+                    log_dir=settings.data_dir) if settings.sim_engine == "ray" else WorkerPool(settings.planning_workers))
         #: runs uploaded planner programs (docs/uploads.md)
         self.sandbox = Sandbox(settings)
         self.recorder = RunRecorder(self.sessions, self.broker, self.views)
@@ -82,6 +86,8 @@ class Testbed:
         """Migrate and bootstrap the store (blocking); returns the admin token."""
         migrate(self.engine)
         self.admin_token = bootstrap_store(self.settings, self.sessions)
+        if isinstance(self.pool, RayPool):
+            self.pool.start()  # the cluster is reached (or started) before the server listens: EngineUnavailable
         return self.admin_token
 
     def _principal(self, token_hash: str) -> Optional[Principal]:
@@ -91,7 +97,10 @@ class Testbed:
     async def start(self) -> None:
         """Start the services (after :meth:`prepare`): workers, known robots, the queue, embedded robots."""
         self.broker.bind(asyncio.get_running_loop())
-        self.pool.start()
+        if isinstance(self.pool, RayPool):
+            self.field.add_engine_slots(self.pool.engine, self.pool.slots)
+        else:
+            self.pool.start()
         await self.field.load()
         self.dispatcher.start(await asyncio.to_thread(self._queued))
         if self.embedded is not None:
@@ -107,5 +116,5 @@ class Testbed:
         await self.dispatcher.stop()
         if self.embedded is not None:
             await self.embedded.stop()
-        self.pool.stop()
+        await asyncio.to_thread(self.pool.stop)
         self.engine.dispose()

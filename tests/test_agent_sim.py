@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 import numpy as np
 from agent_support import CORNERS, OK_I, LineClient, densify, running_agents
 
 from planners.metrics import deviation, path_length
+from robot_agent.host import AgentHost
 from robot_agent.protocol import ErrorCode, encode_build, encode_path, encode_place, format_ok, parse_reply
 from robot_agent.robot_profile import load_profile
+from robot_agent.sinks import MemoryTrackerSink
 
 SEEDS = list(range(6))
 PATH = densify(CORNERS)
@@ -72,11 +75,13 @@ def _overshoot(xy: np.ndarray) -> float:
 async def test_field_backend_is_worse_than_ideal_on_sharp_corners():
     ideal = await _runs("ideal")
     field = await _runs("field")
-    # ideal runs are identical (no noise); every field seed must be worse, with a clear margin
+    # ideal runs are identical (no noise); every field seed must be worse, with a clear margin; the field
+    # robot overshoots the corners a little, so it drives a little further, but it does not weave around
+    # the path (a weaving robot drove 5-10 % further; docs/fidelity.md)
     assert len({round(r["length"], 9) for r in ideal}) == 1
     base = ideal[0]
     for f in field:
-        assert f["length"] > 1.05 * base["length"], (f, base)
+        assert 1.005 * base["length"] < f["length"] < 1.03 * base["length"], (f, base)
         assert f["deviation"] > 1.3 * base["deviation"], (f, base)
         assert f["speed"] < 0.97 * base["speed"], (f, base)
         assert f["overshoot"] > base["overshoot"] + 0.005, (f, base)
@@ -166,3 +171,34 @@ async def test_live_time_scale_runs_in_experiment_time():
         dt = np.diff(poses[:, 0])
         np.testing.assert_allclose(dt, agents.core.dt, atol=1e-9)  # ideal: ground truth at the control rate
         assert math.isclose(poses[0, 0], parse_reply(lines[0]).time)
+
+
+class _HeldSink(MemoryTrackerSink):
+    """Holds the first batch on its way until released: a delivery under way."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.holding, self.release = asyncio.Event(), asyncio.Event()
+
+    async def send(self, robot_id: str, poses: np.ndarray) -> None:
+        if not self.holding.is_set():
+            self.holding.set()
+            await self.release.wait()
+        await super().send(robot_id, poses)
+
+
+async def test_a_flush_returns_only_once_the_delivery_under_way_has_arrived():
+    """At maximum speed a whole run fits in one batch of the periodic delivery; a flush (the testbed's,
+    at DONE, before it closes the run's window) must not return while that batch is still on its way."""
+    sink = _HeldSink()
+    host = AgentHost(backend="ideal", time_scale=math.inf, tracker_sink=sink)  # not started: no periodic delivery
+    host.core.poses.add(np.array([1.0, 1.02]), np.array([0, 0]), np.array([[0.1, 0.1, 0.0], [0.11, 0.1, 0.0]]))
+    under_way = asyncio.create_task(host.flush_tracker())  # stands in for the periodic delivery
+    await sink.holding.wait()
+    flush = asyncio.create_task(host.flush_tracker())
+    for _ in range(5):
+        await asyncio.sleep(0)
+    assert not flush.done() and len(sink.poses(host.robots[0].robot_id)) == 0
+    sink.release.set()
+    await asyncio.gather(under_way, flush)
+    assert len(sink.poses(host.robots[0].robot_id)) == 2

@@ -9,7 +9,7 @@ import pytest
 from agent_support import LineClient, densify, CORNERS, running_agents
 
 from robot_agent.frames import FIELD_SIZE
-from robot_agent.headless import simulate_run
+from robot_agent.headless import PlacementRefused, simulate_run
 from robot_agent.protocol import encode_build, encode_path, encode_place, format_event
 
 BLOCKS = [(0.9, 0.55, 0.3, 0.1, 0.2)]
@@ -56,3 +56,8 @@ def test_a_path_into_a_block_ends_in_a_collision():
 def test_max_s_ends_a_run_that_goes_on():
     run = simulate_run(densify(CORNERS), (0.3, 0.3, 0.0), seed=1, max_s=2.0)
     assert run.outcome == "TIMEOUT_SIM" and run.t_end is None and run.poses[-1, 0] <= 2.0 + 1e-9
+
+
+def test_a_start_touching_a_block_is_refused_as_an_agent_refuses_it():
+    with pytest.raises(PlacementRefused, match="touch a block"):
+        simulate_run([[0.9, 0.55, 0.0], [1.5, 0.3, 0.0]], (0.86, 0.55, 0.0), seed=1, blocks=BLOCKS)

@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 from typing import AsyncIterator
 
+import numpy as np
 import pytest
 from sqlalchemy import select
 
@@ -194,3 +195,38 @@ async def test_start_pose_jitter_is_seeded_and_small(tmp_path):
         assert firsts[0] == firsts[1] and firsts[0] != firsts[2]  # the run's seed decides
         for x, y in firsts:
             assert 1e-4 < math.hypot(x - 0.3, y - 0.3) < 0.05
+
+
+@pytest.mark.parametrize("through_block", [False, True])
+async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through_block):
+    """The same run on the agent's robot and as one compute task (the Ray pool's code path, here on the
+    worker processes): the same outcome, where it stopped, poses (bit for bit) and metrics (1e-9)."""
+    async with running(tmp_path) as tb:
+        tb.field.add_engine_slots("engine", 1)
+        kw = dict(start=(0.3, 0.9, 0.0), goal=(1.5, 0.9, 0.0), planner=None,
+                  planned_path=[[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]) if through_block else \
+            dict(jitter={"xy_m": 0.01, "theta_rad": 0.05})
+        found = []
+        for robot in ("sim-1", "engine-1"):
+            _, run_id = add_experiment(tb, mode="sim", **kw)
+            end = await execute_run(Assignment(run_id, robot, ()), tb.services, stopping=lambda: False)
+            with tb.sessions() as s:
+                run = s.get(Run, run_id)
+                poses = np.array([[p.t, p.x, p.y, p.theta] for p in
+                                  s.scalars(select(Pose).where(Pose.run_id == run_id).order_by(Pose.id))])
+                found.append((end, run.robot_id, run.metrics, run.stopped_at, run.t_start, run.t_end, poses))
+        (ea, ra, ma, sa, t0a, t1a, pa), (eb, rb, mb, sb, t0b, t1b, pb) = found
+        assert (ra, rb) == ("sim-1", "engine-1")
+        assert (ea.status, ea.failure, ea.error) == (eb.status, eb.failure, eb.error)
+        assert eb.robot_fault is None
+        assert ea.status is (RunStatus.FAILED if through_block else RunStatus.COMPLETED)
+        assert sa == sb and (sa is not None) == through_block
+        pa = pa[pa[:, 0] >= t0a - 1e-9]
+        assert pa.shape == pb.shape and np.array_equal(pa[:, 1:], pb[:, 1:])
+        assert math.isclose(t1a - t0a, t1b - t0b, abs_tol=1e-9)
+        assert ma.keys() == mb.keys()
+        for k in ma:
+            if isinstance(ma[k], float) and k != "planning_time_s":
+                assert math.isclose(ma[k], mb[k], rel_tol=1e-9, abs_tol=1e-12), k
+            elif k != "planning_time_s":
+                assert ma[k] == mb[k], k

@@ -141,7 +141,9 @@ def test_a_path_grazing_a_block_collides_on_the_field_for_some_seeds(client):
         assert m["length_m"] > 0.2  # measured either way: a failed run's driving is data too
         if run["status"] == "failed":
             assert run["error"] == "collision: the robot hit an obstacle" and run["failure"] == "collision"
-            assert m["collided"] is True and m["clearance_min_m"] < 0.045
+            # the robot's own verdict; its logged path ends at the tracker's last frame before the contact, up to
+            # 0.1 s earlier (30 Hz, a dropped frame): within that much travel at 0.2 m/s of the collision radius
+            assert m["collided"] is True and m["clearance_min_m"] < 0.04 + 0.2 * 0.1
             assert m["goal_reached"] is False
             x, y = run["stopped_at"]  # where it touched: at the block (0.75..1.05 x 0.75..1.05)
             gap = ((max(0.75 - x, 0, x - 1.05)) ** 2 + (max(0.75 - y, 0, y - 1.05)) ** 2) ** 0.5

@@ -103,6 +103,7 @@ def _open(settings, **kwargs):  # type: ignore[no-untyped-def]
     from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
     from sqlalchemy.engine import make_url
 
+    from server.pipeline.ray_pool import EngineUnavailable
     from server.testbed import Testbed
 
     try:
@@ -115,11 +116,39 @@ def _open(settings, **kwargs):  # type: ignore[no-untyped-def]
     try:
         testbed = Testbed(settings, **kwargs)
         return testbed, testbed.prepare()
+    except EngineUnavailable as exc:
+        fail(str(exc))
     except NoSuchModuleError as exc:
         fail(f"--database-url {shown}: {exc}")
     except OperationalError as exc:
         reason = " ".join(str(exc.orig).split()) if exc.orig is not None else str(exc)
         fail(f"cannot use the database at {shown}: {reason}")
+
+
+SIM_ENGINE_HELP = ("Where simulation runs go: 'local' (robot agents) or 'ray' (Ray tasks; a local Ray cluster "
+                   "unless --ray-address; docs/scale-out.md). Also TWB_SIM_ENGINE.")
+RAY_ADDRESS_HELP = "host:port of an existing Ray cluster's head (implies --sim-engine ray; also TWB_RAY_ADDRESS)."
+RAY_CPUS_HELP = "CPUs of the local Ray cluster (default: this machine's)."
+
+
+def _engine(sim_engine: Optional[str], ray_address: Optional[str], ray_cpus: Optional[int]) -> dict:
+    """Settings for --sim-engine/--ray-address/--ray-cpus; without them the TWB_* variables decide."""
+    out: dict = {}
+    if sim_engine:
+        if sim_engine not in ("local", "ray"):
+            fail(f"--sim-engine {sim_engine!r}: expected 'local' or 'ray'")
+        out["sim_engine"] = sim_engine
+    if ray_address:
+        out["ray_address"] = ray_address
+    if ray_cpus:
+        out["ray_cpus"] = ray_cpus
+    return out
+
+
+def _engine_line(testbed) -> str:  # type: ignore[no-untyped-def]
+    """How simulation runs are carried out, for the start-up lines."""
+    pool = testbed.pool
+    return f"Simulation runs: Ray tasks on {pool.description}." if getattr(pool, "engine", "") else ""
 
 
 def _uploads(enable: bool) -> dict:
@@ -148,20 +177,29 @@ def up(
     seed: Annotated[int, typer.Option(help="Agent seed (runs are seeded from their job's seed).", min=0)] = 0,
     enable_uploads: Annotated[bool, typer.Option("--enable-uploads", help=UPLOADS_HELP)] = False,
     database_url: Annotated[Optional[str], typer.Option(help=DATABASE_HELP)] = None,
+    sim_engine: Annotated[Optional[str], typer.Option(help=SIM_ENGINE_HELP)] = None,
+    ray_address: Annotated[Optional[str], typer.Option(help=RAY_ADDRESS_HELP)] = None,
+    ray_cpus: Annotated[Optional[int], typer.Option(help=RAY_CPUS_HELP, min=1)] = None,
 ) -> None:
     """The whole testbed on this machine: server (on SQLite unless told), four field robots, a simulation pool."""
     from server.embedded import EmbeddedField
 
     scale = parse_time_scale(time_scale)
-    settings = _settings(data_dir, token, scale, **_uploads(enable_uploads), **_database(database_url))
-    testbed, admin = _open(settings, embedded=EmbeddedField(sim_robots=sim_robots, seed=seed, time_scale=scale))
+    settings = _settings(data_dir, token, scale, **_uploads(enable_uploads), **_database(database_url),
+                         **_engine(sim_engine, ray_address, ray_cpus))
+    on_ray = settings.sim_engine == "ray"
+    testbed, admin = _open(settings, embedded=EmbeddedField(sim_robots=0 if on_ray else sim_robots, seed=seed,
+                                                            time_scale=scale))
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
         shown = "max" if math.isinf(scale) else f"{scale:g}x"
         print(f"Teleworkbench is up: {url}  (dashboard {url}/ , API docs {url}/docs)", flush=True)
         print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
-        print(f"Robots: 4 field robots (sub-fields 1-4), {sim_robots} simulated; time scale {shown}. "
+        sims = "simulation runs on Ray" if on_ray else f"{sim_robots} simulated"
+        print(f"Robots: 4 field robots (sub-fields 1-4), {sims}; time scale {shown}. "
               "Ctrl-C stops everything.", flush=True)
+        if on_ray:
+            print(_engine_line(testbed), flush=True)
         await _print_uploads(testbed)
         return None
 
@@ -176,15 +214,20 @@ def server(
     token: Annotated[Optional[str], typer.Option(help="Fix the admin token instead of generating one.")] = None,
     enable_uploads: Annotated[bool, typer.Option("--enable-uploads", help=UPLOADS_HELP)] = False,
     database_url: Annotated[Optional[str], typer.Option(help=DATABASE_HELP)] = None,
+    sim_engine: Annotated[Optional[str], typer.Option(help=SIM_ENGINE_HELP)] = None,
+    ray_address: Annotated[Optional[str], typer.Option(help=RAY_ADDRESS_HELP)] = None,
+    ray_cpus: Annotated[Optional[int], typer.Option(help=RAY_CPUS_HELP, min=1)] = None,
 ) -> None:
     """The server alone; robots join with `twb agent --server URL --token T`."""
     settings = _settings(data_dir, token, parse_time_scale(time_scale), **_uploads(enable_uploads),
-                         **_database(database_url))
+                         **_database(database_url), **_engine(sim_engine, ray_address, ray_cpus))
     testbed, admin = _open(settings)
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
         print(f"Teleworkbench server: {url}  (API docs {url}/docs)", flush=True)
         print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
+        if settings.sim_engine == "ray":
+            print(_engine_line(testbed), flush=True)
         await _print_uploads(testbed)
         return None
 

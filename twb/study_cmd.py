@@ -34,6 +34,8 @@ def study(
     embedded: Annotated[bool, typer.Option("--embedded", help="Start a testbed of our own (twb up --time-scale max) in OUT/testbed and stop it after.")] = False,
     ompl: Annotated[Optional[Path], typer.Option("--ompl", help="Also write an OMPL benchmark database (Planner Arena) here.")] = None,
     sim_robots: Annotated[int, typer.Option(help="With --embedded: size of the simulation pool.", min=1, max=64)] = 4,
+    seed: Annotated[Optional[int], typer.Option(help="The study's seed (planner sampling, every run's noise); "
+                                                     "default: the study file's (paper: 0).", min=0)] = None,
     timeout: Annotated[Optional[float], typer.Option(help="Give up (and cancel) after this many seconds.")] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Progress bar on stderr.")] = True,
     url: UrlOpt = None,
@@ -44,11 +46,16 @@ def study(
     OUT gets runs.csv, outcomes.csv, comparisons.csv, direct.csv, study.json, poses/, summary.md (which planner
     is better, in words), fig5-8 (PNG, SVG) and report.html.  Exit status: 0 every run was submitted and ended
     completed or failed (a failure is a result); 1 the study ran but jobs were refused, runs ended in a testbed
-    error, or nothing ran; 2 the study was refused before it ran (with the reasons).
+    error, or nothing ran; 2 the study was refused before it ran (with the reasons).  The paper's findings are checked on the
+    study (findings.md, findings.json; also printed).
     """
+    import dataclasses
+
     from client_sdk.study import load_spec
 
     study_spec = load_spec(spec)  # bad files fail before anything starts
+    if seed is not None:
+        study_spec = dataclasses.replace(study_spec, seed=seed)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     if embedded:
@@ -62,6 +69,7 @@ def study(
         data = _collect(study_spec, url, token, progress, timeout)
     _write(data, out, ompl, progress)
     code = _outcome_line(data, study_spec, time.monotonic() - t0, out)
+    _print_findings(data, out)
     if code:
         raise typer.Exit(code)
 
@@ -111,22 +119,45 @@ def _collect(spec, url, token, progress, timeout):  # type: ignore[no-untyped-de
 
 def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # type: ignore[no-untyped-def]
     from client_sdk.study import export_ompl as _export
-    from client_sdk.study import write_report
+    from client_sdk.study import write_findings, write_report
 
     data.save(out)
     if progress:
         typer.echo("writing summary, figures and report...", err=True)
     write_report(data, out)
+    write_findings(data, out)
     if ompl is not None:
         counts = _export(data, ompl)
         if progress:
             typer.echo(f"OMPL database {ompl}: {counts['runs']} runs, {counts['experiments']} experiments", err=True)
 
 
+def _print_findings(data, out: Path) -> None:  # type: ignore[no-untyped-def]
+    """The paper's findings on this study as a table on stdout (when any of them applies)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from client_sdk.study import paper_findings
+
+    found = paper_findings(data)
+    applicable = [f for f in found if f.held is not None]
+    if not applicable:
+        return
+    held = sum(f.held is True for f in found)
+    table = Table(title=f"The paper's findings on this study: {held} of {len(applicable)} held "
+                        f"({out / 'findings.md'}; checks: docs/fidelity.md)", title_justify="left")
+    for col in ("#", "finding", "numbers", "verdict"):
+        table.add_column(col, overflow="fold")
+    for i, f in enumerate(found, 1):
+        verdict = "n/a" if f.held is None else ("[green]held[/]" if f.held else "[red]NOT held[/]")
+        table.add_row(str(i), f.claim, f.detail, verdict)
+    Console(width=max(Console().width, 120)).print(table)
+
+
 def export_ompl(
     study_dir: Annotated[Path, typer.Argument(help="A study directory written by `twb study`.")],
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="SQLite file (default: STUDY_DIR/study.db).")] = None,
-    report: Annotated[bool, typer.Option("--report", help="Also redraw summary.md, figures and report.html.")] = False,
+    report: Annotated[bool, typer.Option("--report", help="Also redraw summary.md, figures, report.html and the findings.")] = False,
 ) -> None:
     """Export a study to OMPL's benchmark database (SQLite) for Planner Arena; works offline."""
     from client_sdk.study import export_ompl as _export
@@ -134,7 +165,10 @@ def export_ompl(
 
     data = load_study(study_dir)
     if report:
+        from client_sdk.study import write_findings
+
         write_report(data, study_dir)
+        write_findings(data, study_dir)
     path = out or study_dir / "study.db"
     counts = _export(data, path)
     typer.echo(f"{path}: {counts['experiments']} experiments, {counts['plannerConfigs']} planner configurations, "

@@ -21,6 +21,7 @@ from ._replay import replay_animation
 from ._data import StudyData, load_study
 from ._figures import figure_metrics, figure_outcomes, figure_paths, figure_ratios, make_figures, save_figures
 from ._limits import StudyRefused, check_study
+from ._findings import FINDINGS, Finding, findings_json, findings_markdown, paper_findings, write_findings
 from ._ompl import export_ompl
 from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
@@ -34,6 +35,8 @@ __all__ = sorted(
         "Comparison",
         "Comparisons",
         "OutcomeSummary",
+        "FINDINGS",
+        "Finding",
         "PAPER",
         "PlanSpec",
         "PlannerSpec",
@@ -47,6 +50,8 @@ __all__ = sorted(
         "export_ompl",
         "figure_metrics",
         "figure_outcomes",
+        "findings_json",
+        "findings_markdown",
         "flat_metrics",
         "figure_paths",
         "figure_ratios",
@@ -54,6 +59,7 @@ __all__ = sorted(
         "load_study",
         "make_figures",
         "outcome_table",
+        "paper_findings",
         "paper_spec",
         "plan_jobs",
         "replay_animation",
@@ -61,6 +67,7 @@ __all__ = sorted(
         "save_figures",
         "summary_markdown",
         "which_is_better",
+        "write_findings",
         "write_report",
     ]
 )

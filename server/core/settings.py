@@ -41,6 +41,13 @@ class Settings(BaseSettings):
         default=10.0, gt=0, description="Wall seconds a run waits for a robot beyond the time an answer takes at the "
                                         "time scale (then a run in progress asks the robot's own clock).")
     planning_workers: int = Field(default=2, gt=0, description="Processes planning and computing metrics.")
+    sim_engine: Literal["local", "ray"] = Field(
+        default="local", description="Where simulation-mode runs go: the registered simulation robots (`local`) or "
+                                     "Ray tasks (`ray`: planning and metrics run on Ray too; docs/scale-out.md).")
+    ray_address: str = Field(default="", description="host:port of an existing Ray cluster's head (GCS); empty: "
+                                                     "start a local Ray cluster with the testbed.")
+    ray_cpus: int = Field(default=0, ge=0, description="CPUs of the local Ray cluster (0: this machine's).")
+    ray_slots: int = Field(default=0, ge=0, description="Simulation runs at once on Ray (0: the cluster's CPUs).")
     robot_radius_m: float = Field(default=0.045, gt=0, description="Robot radius: validation, metrics (collided).")
     planning_margin_m: float = Field(
         default=0.02, ge=0,
@@ -73,6 +80,12 @@ class Settings(BaseSettings):
     def _room_for_programs(self) -> "Settings":
         """A request body must fit the largest program, base64-encoded (4/3), with its JSON around it."""
         self.max_body_bytes = max(self.max_body_bytes, (self.max_program_bytes + 2) // 3 * 4 + (64 << 10))
+        return self
+
+    @model_validator(mode="after")
+    def _ray_address_means_ray(self) -> "Settings":
+        if self.ray_address:
+            self.sim_engine = "ray"
         return self
 
     @model_validator(mode="after")

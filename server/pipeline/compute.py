@@ -13,7 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 __all__ = ["TooFewPoses", "compare_runs", "expected_duration_s", "explicit_path", "jittered", "measure_run",
-           "plan_job", "warm_up"]
+           "plan_job", "simulate_job", "warm_up"]
 
 
 class TooFewPoses(Exception):
@@ -94,6 +94,56 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
     out["poses"] = int(len(pr))
     out["settings"] = settings.to_dict()
     return _clean(out)
+
+
+def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list[list[float]], seed: int,
+                 max_s: float, goal: list[float], robot_radius: float,
+                 planning_time_s: Optional[float]) -> dict[str, Any]:
+    """One simulation-mode run without a robot agent (a Ray task): the ideal robot follows ``path`` from the
+    first free pose of ``starts`` (x, y, theta; m, rad: the jittered start, then the start itself) among the
+    environment's blocks for at most ``max_s`` experiment seconds, as an agent's simulation robot would
+    (:func:`robot_agent.headless.simulate_run`), then is measured.
+
+    Returns ``{"poses"`` ``(N, 4)`` t s, x m, y m, theta rad (field frame), ``"lines"`` the protocol
+    lines an agent would have exchanged (``[direction, line, t]``), ``"t_start"``, ``"t_end"``,
+    ``"outcome"`` (``DONE``, a ``FAIL`` reason or ``TIMEOUT_SIM``), ``"metrics"`` (None with
+    ``"metrics_error"`` when too few poses were logged)``}``; or ``{"placement_error": why, "lines"}`` when no
+    pose of ``starts`` is free.
+    """
+    import os
+    import time
+
+    from robot_agent.headless import PlacementRefused, simulate_run
+    from robot_agent.protocol import encode_build, encode_path, encode_place, format_event
+
+    pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
+    if pause > 0:
+        time.sleep(pause)
+    blocks = [(b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)) for b in env_data.get("blocks", [])]
+    lines: list[list[Any]] = [[">", encode_build(blocks), None]]
+    run = None
+    for i, start in enumerate(starts):
+        lines.append([">", encode_place(start), None])
+        try:
+            run = simulate_run(path, start, seed=seed, blocks=blocks, max_s=max_s)
+            break
+        except PlacementRefused as exc:
+            lines.append(["<", f"ERR,RANGE,{exc}", None])
+            if i + 1 == len(starts):
+                return {"placement_error": str(exc), "lines": lines}
+            lines.append(["s", f"the jittered start is not free ({exc}); placing at the start itself", None])
+    assert run is not None
+    lines.append([">", encode_path(path), run.t_start])
+    lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
+    out: dict[str, Any] = {"poses": run.poses, "lines": lines, "t_start": run.t_start, "t_end": run.t_end,
+                           "outcome": run.outcome, "metrics": None, "metrics_error": None}
+    t_end = run.t_end if run.t_end is not None else (float(run.poses[-1, 0]) if len(run.poses) else None)
+    try:
+        out["metrics"] = measure_run(env_data, path, run.poses, run.t_start, t_end, goal, robot_radius,
+                                     planning_time_s)
+    except TooFewPoses as exc:
+        out["metrics_error"] = str(exc)
+    return out
 
 
 def compare_runs(sim_poses: list[list[float]], twb_poses: list[list[float]]) -> dict[str, Any]:

@@ -12,7 +12,7 @@ from ..field import FieldState
 from ..scheduler import Assignment, RobotSlot
 from ..tracking import PoseRouter
 from .paths import PathService
-from .pool import WorkerPool
+from .pool import ComputePool
 from .recorder import RunRecorder
 
 __all__ = ["NoHooks", "RobotHooks", "RunContext", "RunServices"]
@@ -45,7 +45,7 @@ class RunServices:
     settings: Settings
     recorder: RunRecorder
     paths: PathService
-    pool: WorkerPool
+    pool: ComputePool
     field: FieldState
     tracker: PoseRouter
     hooks: RobotHooks = field(default_factory=NoHooks)

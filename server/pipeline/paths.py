@@ -33,7 +33,7 @@ from ..models import Experiment, Program
 from ..sandbox import ProgramSpec, Sandbox
 from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_path
 from . import compute
-from .pool import WorkerPool
+from .pool import ComputePool
 from .recorder import RunRecorder
 
 __all__ = ["LineLog", "PathService", "Plan"]
@@ -53,7 +53,7 @@ class Plan:
 class PathService:
     """Gets each experiment's path once (see the module docstring)."""
 
-    def __init__(self, sessions: sessionmaker[Session], recorder: RunRecorder, pool: WorkerPool, sandbox: Sandbox,
+    def __init__(self, sessions: sessionmaker[Session], recorder: RunRecorder, pool: ComputePool, sandbox: Sandbox,
                  settings: Settings) -> None:
         self._sessions = sessions
         self._recorder = recorder
@@ -62,6 +62,7 @@ class PathService:
         self._settings = settings
         self._locks: weakref.WeakValueDictionary[int, asyncio.Lock] = weakref.WeakValueDictionary()
         self._failures: OrderedDict[int, RunFailed] = OrderedDict()
+        self._plans: OrderedDict[int, Plan] = OrderedDict()  # recent experiments' paths (they never change)
 
     async def path_for(self, experiment_id: int, *, run_id: Optional[int] = None, robot_id: str = "robot",
                        platform: str = "BeBot", on_line: Optional[LineLog] = None) -> Plan:
@@ -70,6 +71,9 @@ class PathService:
         ``run_id``, ``robot_id``, ``platform``, ``on_line``: the run asking, for
         an uploaded program (its environment, and the run's log of its output).
         """
+        known = self.known(experiment_id)
+        if known is not None:
+            return known
         lock = self._locks.get(experiment_id)
         if lock is None:
             lock = self._locks[experiment_id] = asyncio.Lock()
@@ -77,12 +81,20 @@ class PathService:
             if experiment_id in self._failures:
                 raise self._failures[experiment_id]
             try:
-                return await self._plan(experiment_id, run_id, robot_id, platform, on_line)
+                plan = await self._plan(experiment_id, run_id, robot_id, platform, on_line)
             except RunFailed as exc:
                 self._failures[experiment_id] = exc
                 while len(self._failures) > 10_000:
                     self._failures.popitem(last=False)
                 raise
+            self._plans[experiment_id] = plan
+            while len(self._plans) > 1_000:
+                self._plans.popitem(last=False)
+            return plan
+
+    def known(self, experiment_id: int) -> Optional[Plan]:
+        """The experiment's path if it was had recently (no database read), else None."""
+        return self._plans.get(experiment_id)
 
     async def _plan(self, experiment_id: int, run_id: Optional[int], robot_id: str, platform: str,
                     on_line: Optional[LineLog]) -> Plan:

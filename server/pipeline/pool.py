@@ -13,12 +13,19 @@ import multiprocessing
 import os
 import signal
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Protocol
 
 from ..core.lifeline import exit_with_parent
 from . import compute
 
-__all__ = ["WorkerPool"]
+__all__ = ["ComputePool", "WorkerPool"]
+
+
+class ComputePool(Protocol):
+    """Where the pipeline's pure functions run: these worker processes, or Ray tasks (:mod:`.ray_pool`)."""
+
+    async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)`` off the event loop; its result, or its exception."""
 
 
 def _worker_init(server_pid: int) -> None:

@@ -9,6 +9,9 @@ The steps, in order (each in :mod:`server.pipeline.steps`)::
     analyzing  metrics, in a worker process
     completed
 
+A simulation run on a compute engine's slot (Ray) is one task instead
+(planning, running, analyzing: :mod:`server.pipeline.remote`).
+
 Whose fault an ending is (:mod:`server.errors`): ``failed`` is the job's
 (no path, collision, stall, timeout), ``error`` the testbed's (robot
 unreachable, died, refused a command the pre-flight accepted; the
@@ -29,12 +32,13 @@ from typing import Callable, Optional
 
 from sqlalchemy.exc import DBAPIError
 
-from ..errors import AgentRefused, AgentUnavailable, FailureKind, RunEnded, RunFailed, TestbedFault
+from ..errors import AgentRefused, AgentUnavailable, EngineFault, FailureKind, RunEnded, RunFailed, TestbedFault
 from ..models import utcnow
 from ..scheduler import Assignment
 from ..status import RunStatus
 from . import steps
 from .context import RunContext, RunServices
+from .remote import run_on_engine
 
 __all__ = ["RunEnd", "execute_run"]
 
@@ -68,8 +72,10 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     ctx = RunContext(assignment, svc.field.robots[assignment.robot_id], svc.settings.time_scale,
                      svc.settings.run_slack_s)
     robot = ctx.robot.robot_id
+    # an engine slot is not a robot: nothing to avoid on the retry, nothing to take offline
+    blame = None if ctx.robot.engine else robot
     try:
-        await _steps(ctx, svc)
+        await (run_on_engine(ctx, svc) if ctx.robot.engine else _steps(ctx, svc))
         end = RunEnd(RunStatus.COMPLETED)
     except RunFailed as exc:
         end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment, failure=exc.kind)
@@ -77,12 +83,14 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         end = RunEnd(RunStatus.ERROR, f"robot {robot} refused a command: {exc}", robot_fault=robot)
     except AgentUnavailable as exc:
         end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot)
+    except EngineFault as exc:
+        end = RunEnd(RunStatus.ERROR, str(exc))
     except TestbedFault as exc:
-        end = RunEnd(RunStatus.ERROR, str(exc), robot_fault=robot)
+        end = RunEnd(RunStatus.ERROR, str(exc), robot_fault=blame)
     except RunEnded as exc:
         end = RunEnd(exc.status, str(exc))
     except OSError as exc:
-        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot)
+        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=blame)
     except DBAPIError as exc:
         log.warning("run %d: the database went away: %s", ctx.run_id, exc.orig)
         end = RunEnd(RunStatus.INTERRUPTED, "the database was unreachable during this run", resume=True)
@@ -91,7 +99,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
                else RunEnd(RunStatus.CANCELLED, "cancelled by its owner"))
     except Exception as exc:  # noqa: BLE001 - a bug must end the run as an error, not kill the testbed
         log.exception("run %d crashed", ctx.run_id)
-        end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=robot)
+        end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=blame)
     finally:
         svc.tracker.close(robot)
     try:

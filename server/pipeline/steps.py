@@ -16,7 +16,7 @@ from . import compute
 from .context import RunContext, RunServices
 from .paths import Plan
 
-__all__ = ["PARK", "analyze", "build", "connect", "drive", "place"]
+__all__ = ["PARK", "analyze", "build", "connect", "drive", "failure_of", "place", "run_timeout_s", "start_pose"]
 
 #: park positions (robot frame) of sub-field robots 2-4 during full-field runs: their outer corners
 PARK = {2: (1.7, 0.1, 0.0), 3: (0.1, 1.7, 0.0), 4: (1.7, 1.7, 0.0)}
@@ -27,6 +27,31 @@ _FAILURES = {
     "TIMEOUT": (FailureKind.CONTROLLER_TIMEOUT, "timeout: the robot's controller gave up on the path"),
     "STALLED": (FailureKind.STALLED, "stalled: the robot could not make progress"),
 }
+
+
+def failure_of(reason: str) -> RunFailed | TestbedFault:
+    """What the robot's ``EV,FAIL,<reason>`` means for the run: the job's failure, or the testbed's fault
+    (``STOPPED``: someone else stopped the robot)."""
+    if reason == "STOPPED":
+        return TestbedFault("the robot was stopped by someone else during the run")
+    fkind, message = _FAILURES.get(reason, (FailureKind.OTHER, reason.lower()))
+    return RunFailed(message, fkind)
+
+
+def run_timeout_s(svc: RunServices, path: list[list[float]]) -> float:
+    """Experiment seconds a run along ``path`` may take before it is stopped (``failed``, timeout)."""
+    length = sum(math.dist(a[:2], b[:2]) for a, b in zip(path[:-1], path[1:]))
+    settings = svc.settings
+    return max(settings.run_timeout_min_s, settings.run_timeout_factor * compute.expected_duration_s(length, 0))
+
+
+def start_pose(job: RunJob) -> list[float]:
+    """Where the gripper puts the robot (x, y, theta; m, rad): the start, facing the goal when it has no
+    heading (before any jitter)."""
+    start = list(job.start)
+    if len(start) < 3:
+        start = [*start[:2], math.atan2(job.goal[1] - start[1], job.goal[0] - start[0])]
+    return start
 
 
 async def connect(ctx: RunContext, svc: RunServices, robot_id: Optional[str] = None) -> AgentLink:
@@ -84,9 +109,7 @@ async def _park(ctx: RunContext, svc: RunServices, robot_id: str, k: int) -> Non
 async def place(ctx: RunContext, link: AgentLink, job: RunJob) -> None:
     """The gripper puts the robot at the start (facing the goal when the start has no heading), moved by the
     job's seeded jitter if it has one (where the jittered pose is not free, at the start itself)."""
-    start = job.start
-    if len(start) < 3:
-        start = [*start[:2], math.atan2(job.goal[1] - start[1], job.goal[0] - start[0])]
+    start = start_pose(job)
     pose = compute.jittered(start, job.jitter, job.seed)
     try:
         await link.request(encode_place(pose), ctx.wall(30))
@@ -111,9 +134,7 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
     rec, robot_id = svc.recorder, ctx.robot.robot_id
     for k in ctx.subfields:
         await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id, owner_id=job.owner_id)
-    length = sum(math.dist(a[:2], b[:2]) for a, b in zip(path[:-1], path[1:]))
-    settings = svc.settings
-    timeout_exp = max(settings.run_timeout_min_s, settings.run_timeout_factor * compute.expected_duration_s(length, 0))
+    timeout_exp = run_timeout_s(svc, path)
     svc.hooks.seed_next_path(robot_id, job.seed)
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
     t_sent = (await link.request("T,T,Q", ctx.wall(0))).time or 0.0  # the robot's clock, not ours
@@ -147,11 +168,7 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
             await _collect_poses(svc, robot_id, ev.time or 0.0)
             if kind == "DONE":
                 return
-            reason = ev.fields[1] if len(ev.fields) > 1 else "UNKNOWN"
-            if reason == "STOPPED":
-                raise TestbedFault("the robot was stopped by someone else during the run")
-            fkind, message = _FAILURES.get(reason, (FailureKind.OTHER, reason.lower()))
-            raise RunFailed(message, fkind)
+            raise failure_of(ev.fields[1] if len(ev.fields) > 1 else "UNKNOWN")
 
 
 async def _collect_poses(svc: RunServices, robot_id: str, t_end: float) -> None:

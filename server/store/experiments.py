@@ -6,7 +6,7 @@ import hashlib
 from typing import Any, Optional, Sequence
 
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, object_session
 
 from ..core.security import Principal
 from ..models import Experiment, Run, utcnow
@@ -83,7 +83,11 @@ def lock_experiments(session: Session, *, experiment_ids: Sequence[int] = (),
 def finish_if_done(exp: Experiment) -> bool:
     """Update ``exp.status`` from its runs; stamp ``started_at`` / ``finished_at``; a finished experiment
     whose runs did not all complete says why in ``error`` (unless it already does). True if the status changed."""
-    new = roll_up(r.status for r in exp.runs)
+    session = object_session(exp)
+    # the runs' statuses alone (not every run's metrics): this runs on every change of every run
+    statuses = session.scalars(select(Run.status).where(Run.experiment_id == exp.id)).all() if session is not None \
+        else [r.status for r in exp.runs]
+    new = roll_up(statuses)
     changed = new != exp.status
     exp.status = new
     if new in TERMINAL and exp.finished_at is None:

@@ -1,0 +1,269 @@
+"""The paper's qualitative findings, checked on a study's data.
+
+Tanoto et al. (*Teletesting*, §IV, Fig. 6 and 7) compare the paths FMM, FM² and
+PRM compute with what a simulated robot (S) and the Teleworkbench's real robots
+(T) drove, and the two drives with each other (ST).  :func:`paper_findings`
+turns their claims into nine checks.  Each compares per-planner means over the
+study's completed runs (the bars of Fig. 6 and 7) with a stated threshold, and
+comes back with the numbers behind it and whether it held.  It is a pure
+function of a :class:`~client_sdk.study.StudyData`, so a study directory is
+enough, offline.  docs/fidelity.md explains each check and the mechanism of the
+emulated field that makes it hold.
+
+A check needs the planners and modes it speaks of; without them it is *not
+applicable* (``held`` is None), never passed by default.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+from ._data import StudyData
+from ._figures import mean_std
+
+__all__ = ["FINDINGS", "Finding", "findings_json", "findings_markdown", "paper_findings", "write_findings"]
+
+#: |S length ratio − 1| at most this: the simulated robot drives the planned length
+SIM_LENGTH_TOLERANCE = 0.03
+#: S mean deviation below this (m): the simulated robot stays on the computed path
+SIM_DEVIATION_MAX_M = 0.01
+#: |T length ratio − S length ratio| at most this: "similar" length deviation
+SIMILAR_LENGTH_RATIO = 0.05
+PLANNERS = ("fmm", "fm2", "prm")
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One of the paper's claims, checked: ``held`` is True, False or None (not applicable)."""
+
+    key: str
+    claim: str  #: the paper's claim
+    check: str  #: how it is checked: metric, comparison, threshold
+    held: Optional[bool]
+    numbers: dict[str, Any] = field(default_factory=dict)  #: the means behind the verdict
+    detail: str = ""  #: the comparison with its numbers, one line
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+#: key -> (claim, check) of the nine findings, in the order they are reported
+FINDINGS: dict[str, tuple[str, str]] = {
+    "fmm_shortest": ("FMM computes the shortest paths.",
+                     "computed paths: mean length of FMM ≤ that of FM² and of PRM"),
+    "fm2_safest": ("FM² computes the safest paths, with the largest clearance.",
+                   "computed paths: mean minimum clearance of FM² > that of FMM and of PRM"),
+    "prm_sharpest": ("PRM's paths are characterised by sharp curves: they are the least smooth.",
+                     "computed paths: mean κ' of PRM > that of FMM and of FM²"),
+    "sim_follows_plan": ("In simulation the robot drives the computed path almost exactly.",
+                         f"every planner: |S length ratio − 1| ≤ {SIM_LENGTH_TOLERANCE:g} and S mean deviation "
+                         f"< {SIM_DEVIATION_MAX_M * 1000:g} mm"),
+    "field_slower": ("Real runs take longer than simulated ones: the real robot is slower.",
+                     "every planner: mean execution time T > S and mean average speed T < S"),
+    "field_deviates_more": ("The real robot deviates more from the computed path than the simulated one.",
+                            "every planner: mean deviation T > S"),
+    "length_similar": ("Path length deviation shows similar results in simulation and in real experiments.",
+                       f"every planner: |mean T length ratio − mean S length ratio| ≤ {SIMILAR_LENGTH_RATIO:g}"),
+    "prm_smoother_on_field": ("The smoothness of PRM is improved on the real robot: the controller cannot follow "
+                              "the sharp curves a PRM path is characterised by.",
+                              "T smoothness ratio (mean T κ' / mean computed κ', over the field runs) of PRM < 1 "
+                              "and < that of FMM and of FM²"),
+    "field_less_clearance": ("The real robot keeps less clearance from the obstacles than the simulated one.",
+                             "mean over the planners of (mean minimum clearance T − S) < 0"),
+}
+
+
+def _fmt(x: Optional[float], digits: int = 3) -> str:
+    return "–" if x is None else f"{x:.{digits}f}"
+
+
+def _r(x: Optional[float], digits: int = 5) -> Optional[float]:
+    return None if x is None else round(x, digits)
+
+
+class _Means:
+    """Per-planner means of a study's completed runs."""
+
+    def __init__(self, data: StudyData) -> None:
+        self.done = [r for r in data.rows if r.get("status") == "completed"]
+        self.direct = data.direct
+
+    def runs(self, planner: str, mode: str) -> list[dict[str, Any]]:
+        return [r for r in self.done if r["planner"] == planner and r["mode"] == mode]
+
+    def mode(self, planner: str, mode: str, key: str) -> Optional[float]:
+        return mean_std(r.get(key) for r in self.runs(planner, mode))[0]
+
+    def planned(self, planner: str, key: str) -> Optional[float]:
+        """Mean over the planner's experiments (each once) of the computed path's ``key``."""
+        per_exp = {r["experiment_id"]: r.get(f"planned_{key}") for r in self.done if r["planner"] == planner}
+        return mean_std(per_exp.values())[0]
+
+    def st(self, planner: str, key: str) -> Optional[float]:
+        return mean_std(d.get(key) for d in self.direct if d["planner"] == planner)[0]
+
+    def has(self, planner: str, *modes: str) -> bool:
+        return all(self.runs(planner, m) for m in modes)
+
+
+def paper_findings(data: StudyData) -> list[Finding]:
+    """The nine findings (:data:`FINDINGS`) on ``data``'s completed runs, in that order."""
+    m = _Means(data)
+    both = [p for p in dict.fromkeys(r["planner"] for r in m.done) if m.has(p, "sim", "twb")]
+    out = [
+        _planned_best(m, "fmm_shortest", "length_m", "fmm", lower=True),
+        _planned_best(m, "fm2_safest", "clearance_min_m", "fm2", lower=False),
+        _planned_best(m, "prm_sharpest", "smoothness_rad", "prm", lower=False),
+        _sim_follows_plan(m),
+        _every_planner(m, "field_slower", both, [("execution_time_s", ">", 1.0, "s"), ("average_speed_m_s", "<", 1.0, "m/s")]),
+        _every_planner(m, "field_deviates_more", both, [("deviation_mean_m", ">", 1000.0, "mm")]),
+        _length_similar(m, both),
+        _prm_smoother(m, both),
+        _less_clearance(m, both),
+    ]
+    return out
+
+
+def _finding(key: str, held: Optional[bool], numbers: dict[str, Any], detail: str) -> Finding:
+    claim, check = FINDINGS[key]
+    return Finding(key, claim, check, held, numbers, detail)
+
+
+def _planned_best(m: _Means, key: str, metric: str, best: str, *, lower: bool) -> Finding:
+    vals = {p: m.planned(p, metric) for p in PLANNERS}
+    numbers = {f"{p}_planned_{metric}": _r(v) for p, v in vals.items()}
+    if any(v is None for v in vals.values()):
+        return _finding(key, None, numbers, "needs computed paths of FMM, FM² and PRM")
+    b = vals[best]
+    others = {p: v for p, v in vals.items() if p != best}
+    held = all(b <= v for v in others.values()) if lower else all(b > v for v in others.values())
+    rel = "≤" if lower else ">"
+    detail = f"{metric}: {best} {_fmt(b)} {rel} " + ", ".join(f"{p} {_fmt(v)}" for p, v in others.items())
+    return _finding(key, held, numbers, detail)
+
+
+def _sim_follows_plan(m: _Means) -> Finding:
+    planners = [p for p in dict.fromkeys(r["planner"] for r in m.done) if m.has(p, "sim")]
+    if not planners:
+        return _finding("sim_follows_plan", None, {}, "needs simulated runs")
+    numbers: dict[str, Any] = {}
+    held, parts = True, []
+    for p in planners:
+        lr, dev = m.mode(p, "sim", "length_ratio"), m.mode(p, "sim", "deviation_mean_m")
+        numbers[f"{p}_sim_length_ratio"], numbers[f"{p}_sim_deviation_mean_m"] = _r(lr), _r(dev)
+        held = held and lr is not None and dev is not None and abs(lr - 1) <= SIM_LENGTH_TOLERANCE \
+            and dev < SIM_DEVIATION_MAX_M
+        parts.append(f"{p} {_fmt(lr)} / {_fmt(None if dev is None else dev * 1000, 1)} mm")
+    return _finding("sim_follows_plan", held, numbers, "S length ratio / mean deviation: " + "; ".join(parts))
+
+
+_COMPARE: dict[str, Callable[[float, float], bool]] = {">": lambda a, b: a > b, "<": lambda a, b: a < b}
+
+
+def _every_planner(m: _Means, key: str, planners: list[str], metrics: list[tuple[str, str, float, str]]) -> Finding:
+    """T against S for every planner: ``T rel S`` for each (metric, rel, display scale, display unit)."""
+    if not planners:
+        return _finding(key, None, {}, "needs simulated and field runs")
+    numbers: dict[str, Any] = {}
+    held, parts = True, []
+    for metric, rel, scale, unit in metrics:
+        cells = []
+        for p in planners:
+            s, t = m.mode(p, "sim", metric), m.mode(p, "twb", metric)
+            numbers[f"{p}_sim_{metric}"], numbers[f"{p}_twb_{metric}"] = _r(s), _r(t)
+            held = held and s is not None and t is not None and _COMPARE[rel](t, s)
+            digits = 1 if scale > 1 else 3
+            cells.append(f"{p} T {_fmt(None if t is None else t * scale, digits)} {rel} "
+                         f"S {_fmt(None if s is None else s * scale, digits)}")
+        parts.append(f"{metric} ({unit}): " + ", ".join(cells))
+    return _finding(key, held, numbers, "; ".join(parts))
+
+
+def _length_similar(m: _Means, planners: list[str]) -> Finding:
+    if not planners:
+        return _finding("length_similar", None, {}, "needs simulated and field runs")
+    numbers: dict[str, Any] = {}
+    held, parts = True, []
+    for p in planners:
+        s, t = m.mode(p, "sim", "length_ratio"), m.mode(p, "twb", "length_ratio")
+        numbers[f"{p}_sim_length_ratio"], numbers[f"{p}_twb_length_ratio"] = _r(s), _r(t)
+        held = held and s is not None and t is not None and abs(t - s) <= SIMILAR_LENGTH_RATIO
+        parts.append(f"{p} S {_fmt(s)} T {_fmt(t)}")
+    return _finding("length_similar", held, numbers, "length ratio: " + "; ".join(parts))
+
+
+def _prm_smoother(m: _Means, planners: list[str]) -> Finding:
+    """The T smoothness ratio as a ratio of means: a nearly straight computed path (κ' → 0) would
+    make a mean of per-run ratios explode."""
+    if "prm" not in planners:
+        return _finding("prm_smoother_on_field", None, {}, "needs field runs of PRM")
+    ratio: dict[str, Optional[float]] = {}
+    for p in planners:
+        runs = m.runs(p, "twb")
+        t = mean_std(r.get("smoothness_rad") for r in runs)[0]
+        c = mean_std(r.get("planned_smoothness_rad") for r in runs)[0]
+        ratio[p] = None if t is None or c is None or c <= 0 else t / c
+    numbers = {f"{p}_twb_smoothness_ratio": _r(v) for p, v in ratio.items()}
+    prm = ratio["prm"]
+    held = prm is not None and prm < 1 and all(v is not None and prm < v for p, v in ratio.items() if p != "prm")
+    return _finding("prm_smoother_on_field", held, numbers,
+                    "T κ' / computed κ': " + ", ".join(f"{p} {_fmt(v)}" for p, v in ratio.items()))
+
+
+def _less_clearance(m: _Means, planners: list[str]) -> Finding:
+    """Pooled over the planners: per planner the difference is a few millimetres, and for PRM, whose
+    corners the field robot rounds more than the simulated one, it can go either way."""
+    if not planners:
+        return _finding("field_less_clearance", None, {}, "needs simulated and field runs")
+    numbers: dict[str, Any] = {}
+    diffs, parts = [], []
+    for p in planners:
+        s, t = m.mode(p, "sim", "clearance_min_m"), m.mode(p, "twb", "clearance_min_m")
+        numbers[f"{p}_sim_clearance_min_m"], numbers[f"{p}_twb_clearance_min_m"] = _r(s), _r(t)
+        if s is not None and t is not None:
+            diffs.append(t - s)
+            parts.append(f"{p} {(t - s) * 1000:+.1f}")
+    if len(diffs) < len(planners):
+        return _finding("field_less_clearance", None, numbers, "needs minimum clearances (an environment)")
+    mean = sum(diffs) / len(diffs)
+    numbers["mean_difference_m"] = _r(mean)
+    return _finding("field_less_clearance", mean < 0, numbers,
+                    f"T − S minimum clearance: {'; '.join(parts)} mm; mean {mean * 1000:+.1f} mm")
+
+
+def _verdict(held: Optional[bool]) -> str:
+    return "n/a" if held is None else ("held" if held else "NOT held")
+
+
+def findings_markdown(findings: list[Finding]) -> str:
+    """The findings as a Markdown table: finding, check, numbers, verdict."""
+    held = sum(f.held is True for f in findings)
+    applicable = sum(f.held is not None for f in findings)
+    lines = ["# The paper's findings", "",
+             f"{held} of {applicable} applicable findings held ({len(findings)} checked; docs/fidelity.md "
+             "explains each check). S = simulation, T = Teleworkbench (the field).", "",
+             "| # | finding | check | numbers | verdict |", "|---|---|---|---|---|"]
+    for i, f in enumerate(findings, 1):
+        cells = [str(i), f.claim, f.check, f.detail, _verdict(f.held)]
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def findings_json(findings: list[Finding]) -> dict[str, Any]:
+    """The findings as a JSON-ready document: counts and every finding."""
+    return {"held": sum(f.held is True for f in findings), "applicable": sum(f.held is not None for f in findings),
+            "findings": [f.to_json() for f in findings]}
+
+
+def write_findings(data: StudyData, directory: Optional[Path] = None) -> list[Finding]:
+    """Check the findings on ``data``; write ``findings.md`` and ``findings.json`` into ``directory``
+    (default: the study's).  Returns the findings."""
+    found = paper_findings(data)
+    d = Path(directory or data.directory or ".")
+    d.mkdir(parents=True, exist_ok=True)
+    (d / "findings.md").write_text(findings_markdown(found))
+    (d / "findings.json").write_text(json.dumps(findings_json(found), indent=1, ensure_ascii=False) + "\n")
+    return found
