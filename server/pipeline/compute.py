@@ -12,7 +12,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["TooFewPoses", "compare_runs", "expected_duration_s", "explicit_path", "jittered", "measure_run",
+__all__ = ["TooFewPoses", "block_tuples", "compare_runs", "expected_duration_s", "explicit_path", "jittered", "measure_run",
            "plan_job", "simulate_job", "warm_up"]
 
 
@@ -96,6 +96,11 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
     return _clean(out)
 
 
+def block_tuples(env_data: dict[str, Any]) -> list[tuple[float, float, float, float, float]]:
+    """The environment's blocks as the gripper's ``T,T,B`` takes them: (cx, cy, w, h, angle) in m, rad."""
+    return [(b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)) for b in env_data.get("blocks", [])]
+
+
 def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list[list[float]], seed: int,
                  max_s: float, goal: list[float], robot_radius: float,
                  planning_time_s: Optional[float]) -> dict[str, Any]:
@@ -119,7 +124,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
     if pause > 0:
         time.sleep(pause)
-    blocks = [(b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)) for b in env_data.get("blocks", [])]
+    blocks = block_tuples(env_data)
     lines: list[list[Any]] = [[">", encode_build(blocks), None]]
     run = None
     for i, start in enumerate(starts):

@@ -24,6 +24,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -152,8 +153,6 @@ class RayPool:
                 ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING, namespace="twb")
             except BaseException as exc:  # noqa: BLE001 - reported below
                 errors.append(exc)
-
-        import threading
 
         t = threading.Thread(target=connect, name="twb-ray-connect", daemon=True)
         t.start()

@@ -43,8 +43,9 @@ async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
     starts = [jittered, start] if jittered != start else [start]
     ctx.on_line("s", f"simulated as a task on {ctx.robot.engine} ({ctx.robot.robot_id}): the lines below are "
                      "the ones an agent's robot would have exchanged", None, False)
+    timeout_s = steps.run_timeout_s(svc, plan.path)
     out: dict[str, Any] = await svc.pool.run(compute.simulate_job, job.environment_data, plan.path, starts,
-                                             job.seed, steps.run_timeout_s(svc, plan.path), job.goal,
+                                             job.seed, timeout_s, job.goal,
                                              job.robot_radius, plan.planning_time_s)
     for direction, line, t in out["lines"]:
         ctx.on_line(direction, line, t, False)
@@ -61,7 +62,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
     failure: RunFailed | TestbedFault | None = None
     if outcome == "TIMEOUT_SIM":
         t_end = float(poses[-1, 0]) if len(poses) else None
-        failure = RunFailed(f"timeout: the robot did not finish within {steps.run_timeout_s(svc, plan.path):.0f} s "
+        failure = RunFailed(f"timeout: the robot did not finish within {timeout_s:.0f} s "
                             "of experiment time", FailureKind.TIMEOUT)
     elif outcome != "DONE":
         failure = steps.failure_of(outcome)

@@ -77,7 +77,7 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
                 await _park(ctx, svc, other.robot_id, k)
     if field.built.get(ctx.robot.robot_id) == key:
         return
-    blocks = [(b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)) for b in job.environment_data.get("blocks", [])]
+    blocks = compute.block_tuples(job.environment_data)
     for k in ctx.subfields:
         await field.set_subfield(k, state=SubfieldState.BUILDING)
     await link.request(encode_build(blocks), ctx.wall(60 * (len(blocks) + 10)))
