@@ -30,19 +30,22 @@ def field_layout(
     to sub-field i (origins (0,0), (1.8,0), (0,1.8), (1.8,1.8)), or to origin
     (0, 0) when its area is larger than a sub-field (e.g. the whole field).
     ``separate``: every robot has a world of its own, of its area's size,
-    origin (0, 0).  ``auto``: shared for up to 4 robots, separate beyond.
+    origin (0, 0).  ``auto``: shared for up to 4 robots on their sub-fields,
+    separate beyond, or when several robots each cover more than a sub-field.
     """
     if n < 1:
         raise ValueError("`robots` must be >= 1")
-    if mode == "auto":
-        mode = "shared" if n <= 4 else "separate"
-    if mode not in ("shared", "separate"):
+    if mode not in ("auto", "shared", "separate"):
         raise ValueError(f"`world` must be auto, shared or separate, got {mode!r}")
     a = np.array(area if area is not None else SUBFIELD_SIZE, dtype=float)
     if a.shape == (2,):
         a = np.tile(a, (n, 1))
     if a.shape != (n, 2) or not np.isfinite(a).all() or (a <= 0).any():
         raise ValueError(f"`area` must be W,H > 0 (metres), once or once per robot ({n}), got {area!r}")
+    if mode == "auto":
+        # several robots each larger than a sub-field (a simulation pool) would drive through each other
+        overlapping = n > 1 and origins is None and (a > np.array(SUBFIELD_SIZE) + 1e-9).any()
+        mode = "shared" if n <= 4 and not overlapping else "separate"
     if mode == "separate":
         if origins is not None:
             raise ValueError("`origins` only apply to a shared world")

@@ -18,9 +18,9 @@ from typing import Callable, Optional
 
 from robot_agent.protocol import MAX_LINE_BYTES, ProtocolError, Reply, parse_reply
 
-from .errors import AgentRefused, AgentUnavailable
+from .errors import AgentRefused, AgentUnavailable, AgentUnreachable
 
-__all__ = ["AgentLink", "AgentRefused", "AgentUnavailable"]
+__all__ = ["AgentLink", "AgentRefused", "AgentUnavailable", "AgentUnreachable"]
 
 LineLog = Callable[[str, str, Optional[float], bool], None]
 
@@ -49,7 +49,7 @@ class AgentLink:
             reader, writer = await asyncio.wait_for(
                 asyncio.open_connection(host, port, limit=MAX_LINE_BYTES), timeout_s)
         except (OSError, asyncio.TimeoutError, UnicodeError, ValueError) as exc:
-            raise AgentUnavailable(f"cannot connect to robot agent {host}:{port}: {exc or 'timeout'}") from None
+            raise AgentUnreachable(f"cannot connect to robot agent {host}:{port}: {exc or 'timeout'}") from None
         link = cls(reader, writer, time_scale=time_scale, on_line=on_line)
         try:
             line = await asyncio.wait_for(reader.readline(), timeout_s)

@@ -19,15 +19,16 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+from dataclasses import replace
 from typing import Any, Iterable, Optional
 
 from sqlalchemy.exc import DBAPIError
 
 from .field import FieldState
-from .models import Experiment, Run, utcnow
+from .models import Experiment, Run
 from .pipeline import compute
 from .pipeline.context import RunServices
-from .pipeline.runner import RunEnd, execute_run
+from .pipeline.runner import RunEnd, execute_run, failure_text, store_end
 from .scheduler import Assignment, Pending, Scheduler
 from .status import RunStatus, SubfieldState
 
@@ -182,27 +183,20 @@ class Dispatcher:
             self.wake()
 
     async def _store_end(self, run_id: int, experiment_id: int, end: RunEnd) -> None:
-        """The database work of a run's end (repeatable: each step is idempotent), then what it queues."""
-        rec = self._svc.recorder
+        """The database work of a run's end (one transaction: repeatable until it is stored), then what it queues."""
         if (end.resume or end.status is RunStatus.ERROR) and experiment_id in self._cancelled:
-            end = RunEnd(RunStatus.CANCELLED, CANCELLED)  # its owner cancelled it while it ended: no retry
-        if end.resume:
-            rows = await rec.resume(run_id, end.error)
-            await self._queue_again(rows, experiment_id)
-            return
-        if end.status is RunStatus.ERROR:
-            rows = await rec.requeue(run_id, end.error)
-            if rows is not None:
+            # its owner cancelled it while it ended: no retry (what it produced is kept)
+            end = replace(end, status=RunStatus.CANCELLED, error=CANCELLED, resume=False)
+        rows = await store_end(self._svc.recorder, run_id, end)
+        if rows is not None:
+            retry = end.status is RunStatus.ERROR
+            if retry:
                 log.warning("run %d: %s; retrying on another robot", run_id, end.error)
-                await self._queue_again(rows, experiment_id, frozenset({end.robot_fault} if end.robot_fault else ()))
-                return
-        # a completed second attempt keeps the note about the first one
-        extra = {"error": end.error} if end.error else {}
-        if end.failure is not None and end.status is RunStatus.FAILED:
-            extra["failure"] = str(end.failure)
-        await rec.update(run_id, status=end.status, finished_at=utcnow(), **extra)
+            await self._queue_again(rows, experiment_id,
+                                    frozenset({end.robot_fault} if retry and end.robot_fault else ()))
+            return
         if end.status is RunStatus.FAILED and end.whole_experiment:
-            await self._fail_experiment(experiment_id, end.error, str(end.failure) if end.failure else None)
+            await self._fail_experiment(experiment_id, end.error, failure_text(end))
 
     async def _queue_again(self, rows: tuple[Run, Experiment], experiment_id: int,
                            exclude: frozenset[str] = frozenset()) -> None:

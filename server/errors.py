@@ -151,6 +151,10 @@ class AgentUnavailable(TestbedFault):
     """The robot agent cannot be reached, closed the connection or stopped answering."""
 
 
+class AgentUnreachable(AgentUnavailable):
+    """The robot agent could not be connected to: nothing was sent, the run did not begin on it."""
+
+
 class AgentRefused(TestbedFault):
     """The robot agent answered ``ERR,<code>,<message>``."""
 

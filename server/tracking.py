@@ -108,6 +108,17 @@ class PoseRouter:
                 w.stored += stored
         else:
             self.dropped += len(rows)
+        self._seen(robot_id, rows, w)
+        return stored, (w.run_id if w else None)
+
+    def show(self, robot_id: str, run_id: int, owner_id: int, rows: np.ndarray) -> None:
+        """Poses ``(N, 4)`` of a run that are stored with its end (a compute engine's run): known as the
+        robot's last pose and shown live, not stored here."""
+        if len(rows):
+            self._seen(robot_id, rows, _Window(run_id, owner_id))
+
+    def _seen(self, robot_id: str, rows: np.ndarray, w: Optional[_Window]) -> None:
+        """The robot's last pose and time, its waiters woken, and a live event (at most every 0.1 s)."""
         last = float(rows[:, 0].max())
         t_last, x_last, y_last, a_last = (float(v) for v in rows[-1])
         ox, oy = self._origin_of(robot_id)
@@ -128,7 +139,6 @@ class PoseRouter:
                 "owner_id": w.owner_id if w else None, "t": t_last, "x": x_last + ox, "y": y_last + oy,
                 "theta": a_last,
             })
-        return stored, (w.run_id if w else None)
 
 
 def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:

@@ -161,7 +161,10 @@ def test_field_layout():
     with pytest.raises(ValueError, match="4 sub-fields"):
         field_layout(5, "shared")
     with pytest.raises(ValueError, match="inside"):
-        field_layout(2, area=(3.6, 3.7))
+        field_layout(1, area=(3.6, 3.7))
+    # several whole-field robots (a simulation pool's agent): a world each, or they would drive through each other
+    sizes, world_of, origin, area = field_layout(2, area=(3.6, 3.6))
+    assert world_of.tolist() == [0, 1] and origin.tolist() == [[0, 0], [0, 0]] and sizes.tolist() == [[3.6, 3.6]] * 2
 
 
 def test_world_collisions_blocks_walls_robots_and_frames():

@@ -21,21 +21,20 @@ class Recorder:
         self.gate = asyncio.Event()
         self.calls: list[tuple] = []
 
-    async def requeue(self, run_id: int, error: str):  # type: ignore[no-untyped-def]
-        self.calls.append(("requeue", run_id))
-        await self.gate.wait()
-        return SimpleNamespace(id=run_id), SimpleNamespace(id=EXPERIMENT)
-
-    async def resume(self, run_id: int, why: str):  # type: ignore[no-untyped-def]
-        self.calls.append(("resume", run_id))
-        return SimpleNamespace(id=run_id), SimpleNamespace(id=EXPERIMENT)
+    async def finish(self, run_id: int, status, error, *, retry=False, resume=False, **_):  # type: ignore[no-untyped-def]
+        if resume:
+            self.calls.append(("resume", run_id))
+            return SimpleNamespace(id=run_id), SimpleNamespace(id=EXPERIMENT)
+        if retry:
+            self.calls.append(("requeue", run_id))
+            await self.gate.wait()
+            return SimpleNamespace(id=run_id), SimpleNamespace(id=EXPERIMENT)
+        self.calls.append(("update", run_id, status))
+        return None
 
     async def end(self, run_ids, status, error, *, failure=None) -> None:  # type: ignore[no-untyped-def]
         if list(run_ids):
             self.calls.append(("end", list(run_ids), status, error))
-
-    async def update(self, run_id: int, **fields) -> None:  # type: ignore[no-untyped-def]
-        self.calls.append(("update", run_id, fields["status"]))
 
 
 def dispatcher(monkeypatch) -> tuple[Dispatcher, Recorder]:  # type: ignore[no-untyped-def]

@@ -17,7 +17,7 @@ from server.core.settings import Settings
 from server.embedded import EmbeddedField
 from server.errors import FailureKind, RunFailed
 from server.models import Experiment, Message, Pose, Run, User
-from server.pipeline.runner import execute_run
+from server.pipeline.runner import RunEnd, execute_run, store_end
 from server.scheduler import Assignment
 from server.schemas import ExperimentCreate
 from server.status import RunStatus
@@ -64,6 +64,13 @@ def assignment(tb: Testbed, run_id: int, mode: str = "twb") -> Assignment:
     return Assignment(run_id, robot, (2,) if mode == "twb" else ())
 
 
+async def run_and_store(tb: Testbed, a: Assignment, *, stopping) -> RunEnd:  # type: ignore[no-untyped-def]
+    """One run through the pipeline, its end stored as the dispatcher stores it."""
+    end = await execute_run(a, tb.services, stopping=stopping)
+    await store_end(tb.services.recorder, a.run_id, end)
+    return end
+
+
 def run_row(tb: Testbed, run_id: int) -> tuple[Run, int, int]:
     with tb.sessions() as s:
         run = s.get(Run, run_id)
@@ -75,10 +82,10 @@ def run_row(tb: Testbed, run_id: int) -> tuple[Run, int, int]:
 async def test_a_run_goes_through_every_step_to_completed(tmp_path, database_url):
     async with running(tmp_path, database_url=database_url) as tb:
         exp_id, run_id = add_experiment(tb)
-        end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)
+        end = await run_and_store(tb, assignment(tb, run_id), stopping=lambda: False)
         assert end.status is RunStatus.COMPLETED and end.error == "", end
         run, poses, messages = run_row(tb, run_id)
-        assert run.status == "analyzing"  # the last step's state: the dispatcher writes the end
+        assert run.status == "completed" and run.finished_at is not None
         assert run.robot_id == "field-2" and run.subfield == 2 and run.t_end > run.t_start
         assert run.metrics["goal_reached"] is True and run.metrics["collided"] is False
         assert run.metrics["planning_time_s"] > 0  # the experiment's, on every run
@@ -92,7 +99,7 @@ async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path, data
     async with running(tmp_path, database_url=database_url) as tb:
         through = [[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]  # straight through the block
         _, run_id = add_experiment(tb, start=(0.3, 0.9, 0.0), goal=(1.5, 0.9, 0.0), planned_path=through)
-        end = await execute_run(assignment(tb, run_id), tb.services, stopping=lambda: False)
+        end = await run_and_store(tb, assignment(tb, run_id), stopping=lambda: False)
         assert end.status is RunStatus.FAILED and end.error.startswith("collision"), end
         assert end.failure is FailureKind.COLLISION and not end.whole_experiment and end.robot_fault is None
         run, poses, _ = run_row(tb, run_id)
@@ -104,7 +111,7 @@ async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path, data
 async def test_no_path_fails_the_whole_experiment_and_is_not_planned_twice(tmp_path):
     async with running(tmp_path) as tb:
         exp_id, run_id = add_experiment(tb, planner="prm", params={"samples": 2, "k": 1}, mode="sim")
-        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
         assert end.status is RunStatus.FAILED and end.whole_experiment
         assert end.error.startswith("planning failed: PRM found no path")
         with pytest.raises(RunFailed) as exc:  # the remembered failure, not a second planning
@@ -115,7 +122,7 @@ async def test_no_path_fails_the_whole_experiment_and_is_not_planned_twice(tmp_p
 async def test_a_robot_that_dies_mid_run_is_the_testbeds_fault(tmp_path):
     async with running(tmp_path, time_scale=5.0) as tb:
         _, run_id = add_experiment(tb, mode="sim")
-        task = asyncio.create_task(execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False))
+        task = asyncio.create_task(run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False))
         for _ in range(300):
             if run_row(tb, run_id)[0].status == "running":
                 break
@@ -130,7 +137,7 @@ async def test_too_few_tracker_poses_is_the_testbeds_fault(tmp_path):
     async with running(tmp_path, tracker_grace_s=0.0) as tb:
         _, run_id = add_experiment(tb, mode="sim")
         tb.tracker.open = lambda *a: None  # no pose window: the tracker stores nothing for the run
-        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
         assert end.status is RunStatus.ERROR and end.error.startswith("cannot compute metrics: only 0 pose(s)")
 
 
@@ -138,7 +145,7 @@ async def test_too_few_tracker_poses_is_the_testbeds_fault(tmp_path):
 async def test_a_cancelled_run_ends_cancelled_or_interrupted_and_keeps_its_log(tmp_path, stopping):
     async with running(tmp_path, time_scale=2.0) as tb:
         _, run_id = add_experiment(tb, mode="sim")
-        task = asyncio.create_task(execute_run(assignment(tb, run_id, "sim"), tb.services,
+        task = asyncio.create_task(run_and_store(tb, assignment(tb, run_id, "sim"),
                                                stopping=lambda: stopping))
         for _ in range(300):
             if run_row(tb, run_id)[0].status == "running":
@@ -157,7 +164,7 @@ async def test_the_run_timeout_counts_the_robots_time_not_the_testbeds(tmp_path)
     async with running(tmp_path, time_scale=1000.0, robots_time_scale=5.0, run_slack_s=0.3,
                        run_timeout_min_s=30.0) as tb:
         _, run_id = add_experiment(tb, mode="sim")
-        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
         assert end.status is RunStatus.COMPLETED, end
         with tb.sessions() as s:
             queries = s.scalars(select(Message.line).where(Message.run_id == run_id, Message.line == "T,T,Q")).all()
@@ -170,7 +177,7 @@ async def test_a_robot_whose_own_time_runs_out_is_stopped_and_the_run_fails(tmp_
     monkeypatch.setattr(compute, "expected_duration_s", lambda *a, **k: 0.5)  # the run's budget: 1 s of its time
     async with running(tmp_path, time_scale=5.0, run_slack_s=0.3, run_timeout_min_s=1.0) as tb:
         _, run_id = add_experiment(tb, mode="sim")
-        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
         assert end.status is RunStatus.FAILED and end.error.startswith("timeout: the robot did not finish"), end
         with tb.sessions() as s:
             lines = s.scalars(select(Message.line).where(Message.run_id == run_id)).all()
@@ -186,7 +193,7 @@ async def test_start_pose_jitter_is_seeded_and_small(tmp_path):
         firsts = []
         for seed in (1, 1, 2):
             _, run_id = add_experiment(tb, mode="sim", jitter=jitter, seed=seed)
-            end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+            end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
             assert end.status is RunStatus.COMPLETED, end
             with tb.sessions() as s:
                 first, run_seed = run_poses(s, run_id)[0], s.get(Run, run_id).seed
@@ -209,7 +216,7 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
         found = []
         for robot in ("sim-1", "engine-1"):
             _, run_id = add_experiment(tb, mode="sim", **kw)
-            end = await execute_run(Assignment(run_id, robot, ()), tb.services, stopping=lambda: False)
+            end = await run_and_store(tb, Assignment(run_id, robot, ()), stopping=lambda: False)
             with tb.sessions() as s:
                 run = s.get(Run, run_id)
                 poses = np.array([[p.t, p.x, p.y, p.theta] for p in

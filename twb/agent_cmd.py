@@ -49,7 +49,7 @@ def agent(
     seed: Annotated[int, typer.Option(help="Agent seed: each path's noise derives from (seed, robot id, path count).", envvar="TWB_AGENT_SEED")] = 0,
     tracker_csv: Annotated[Optional[str], typer.Option(help="Write tracker poses (t,x,y,theta) to this CSV file; {robot_id} or -<id> per robot.")] = None,
     area: Annotated[Optional[str], typer.Option(help="Working area W,H in metres, e.g. 3.6,3.6 for the whole field (default: 1.8,1.8, a sub-field).")] = None,
-    world: Annotated[WorldMode, typer.Option(help="shared: one field for all robots; separate: a world each; auto: shared up to 4 robots.")] = WorldMode.auto,
+    world: Annotated[WorldMode, typer.Option(help="shared: one field for all robots; separate: a world each; auto: shared up to 4 robots on sub-fields, separate for more or for several whole-field robots (a simulation pool).")] = WorldMode.auto,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     subfield: Annotated[Optional[int], typer.Option(help="Put a single robot on sub-field K (1-4) of the field: its frame's origin is that sub-field's lower-left corner.", min=1, max=4)] = None,
     advertise_host: Annotated[Optional[str], typer.Option(help="Host name the server should use to reach these robots (e.g. a container name) (default: --host).")] = None,

@@ -64,9 +64,9 @@ def study(
         with embedded_testbed(out / "testbed", sim_robots=sim_robots) as (u, tok):
             if progress:
                 typer.echo(f"embedded testbed: {u} (log {out / 'testbed' / 'stdout.log'})", err=True)
-            data = _collect(study_spec, u, tok, progress, timeout)
+            data = _collect(study_spec, u, tok, progress, timeout, out)
     else:
-        data = _collect(study_spec, url, token, progress, timeout)
+        data = _collect(study_spec, url, token, progress, timeout, out)
     _write(data, out, ompl, progress)
     code = _outcome_line(data, study_spec, time.monotonic() - t0, out)
     _print_findings(data, out)
@@ -101,13 +101,13 @@ def _outcome_line(data, spec, wall: float, out: Path) -> int:  # type: ignore[no
     return 1 if refused or lost or not ran else 0
 
 
-def _collect(spec, url, token, progress, timeout):  # type: ignore[no-untyped-def]
+def _collect(spec, url, token, progress, timeout, out):  # type: ignore[no-untyped-def]
     from client_sdk.study import StudyRefused, run_study
 
     with sdk_client(url, token) as client:
         client.health()
         try:
-            return run_study(client, spec, progress=progress, timeout=timeout)
+            return run_study(client, spec, progress=progress, timeout=timeout, out=out)
         except StudyRefused as exc:
             where = f"study {spec.name!r} refused by the testbed at {client.url}"
             if len(exc.reasons) == 1:
@@ -121,7 +121,8 @@ def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # ty
     from client_sdk.study import export_ompl as _export
     from client_sdk.study import write_findings, write_report
 
-    data.save(out)
+    if data.directory is None or data.directory.resolve() != out.resolve():
+        data.save(out)  # run_study wrote it there already as the experiments finished
     if progress:
         typer.echo("writing summary, figures and report...", err=True)
     write_report(data, out)

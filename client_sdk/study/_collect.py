@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import sys
+import tempfile
 import time
 from collections import Counter
 from datetime import datetime, timezone
+from pathlib import Path
 from typing import Any, Optional
 
 from .._client import Client
@@ -14,6 +16,7 @@ from .._models import Environment, Experiment, ExperimentMetrics
 from ._data import StudyData
 from ._limits import StudyRefused, check_study, refusal
 from ._spec import PlannerSpec, PlanSpec, StudySpec, StudySpecError
+from ._stream import StudySink
 
 __all__ = ["StudyJob", "StudyRefused", "flat_metrics", "plan_jobs", "run_study"]
 
@@ -75,31 +78,71 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
     return jobs
 
 
+#: how many of the oldest unfinished experiments are looked at per poll (the queue runs them about in order)
+_WINDOW = 16
+_TERMINAL = ("completed", "failed", "error", "cancelled", "interrupted")
+
+
 class _StudyProgress:
-    def __init__(self, name: str, total: int, enabled: bool) -> None:
+    """Runs done of the total, runs/s over the last half minute and the time left: a bar on a terminal, a line
+    every ``every_s`` otherwise (logs)."""
+
+    def __init__(self, name: str, total: int, enabled: bool, *, every_s: float = 10.0) -> None:
+        self._name, self._total, self._enabled, self._every_s = name, total, enabled, every_s
+        self._samples: list[tuple[float, int]] = []
+        self._printed = time.monotonic()
         self._p = None
-        if not enabled:
+        if not enabled or not sys.stderr.isatty():
             return
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
         self._p = Progress(TextColumn(f"study {name}"), BarColumn(), MofNCompleteColumn(), TextColumn("runs"),
-                           TimeElapsedColumn(), TextColumn("{task.fields[states]}"), console=Console(stderr=True))
-        self._task = self._p.add_task("", total=total, states="submitting")
+                           TimeElapsedColumn(), TextColumn("{task.fields[rate]}"), TextColumn("{task.fields[states]}"),
+                           console=Console(stderr=True))
+        self._task = self._p.add_task("", total=total, rate="", states="submitting")
         self._p.start()
 
+    def rate(self, done: int, now: float) -> tuple[Optional[float], Optional[float]]:
+        """Runs per second over the last 30 s of samples and the seconds left at that rate (None: unknown)."""
+        self._samples.append((now, done))
+        while len(self._samples) > 2 and now - self._samples[1][0] >= 30.0:
+            self._samples.pop(0)
+        (t0, d0), (t1, d1) = self._samples[0], self._samples[-1]
+        if t1 - t0 < 1.0 or d1 <= d0:
+            return None, None
+        per_s = (d1 - d0) / (t1 - t0)
+        return per_s, (self._total - done) / per_s
+
     def update(self, done: int, states: str) -> None:
+        if not self._enabled:
+            return
+        now = time.monotonic()
+        per_s, left = self.rate(done, now)
+        rate = "" if per_s is None else f"{per_s:.1f} runs/s, ETA {_duration(left)}"
         if self._p is not None:
-            self._p.update(self._task, completed=done, states=states)
+            self._p.update(self._task, completed=done, rate=rate, states=states)
+        elif now - self._printed >= self._every_s or done == self._total:
+            self._printed = now
+            print(f"study {self._name}: {done}/{self._total} runs{', ' + rate if rate else ''}; {states}",
+                  file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self._p is not None:
             self._p.stop()
 
 
+def _duration(seconds: Optional[float]) -> str:
+    if seconds is None:
+        return "?"
+    m, s = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
+
+
 def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = None, timeout: Optional[float] = None,
-              interval: float = 0.5) -> StudyData:
-    """Submit every experiment of ``spec``, wait for all of them and collect runs, metrics and poses.
+              interval: float = 0.5, out: Optional[str | Path] = None) -> StudyData:
+    """Submit every experiment of ``spec``, follow them and collect runs, metrics and poses into ``out``.
 
     Before submitting, the study is checked against the testbed
     (:func:`~client_sdk.study._limits.check_study`: planners, environments,
@@ -109,9 +152,14 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
     cancelling what was submitted.  A job the server refuses for its own
     reason (422, e.g. a start inside an obstacle) is kept as an experiment
     with status ``rejected`` and the server's reason; the others go on.
-    ``progress`` (default: when stderr is a terminal) shows runs done / total
-    and the run states.  On Ctrl-C or a timeout the unfinished experiments are
-    cancelled.
+
+    Results are written to ``out`` (default: a new temporary directory) as
+    each experiment finishes (:class:`~client_sdk.study._stream.StudySink`),
+    so a study of thousands of runs keeps no poses in memory; the returned
+    data reads them from there.  ``progress`` (default: when stderr is a
+    terminal) shows runs done / total, runs/s and the time left (a line every
+    10 s when stderr is not a terminal).  On Ctrl-C or a timeout the
+    unfinished experiments are cancelled.
     """
     t0 = time.monotonic()
     started = datetime.now(timezone.utc)
@@ -121,9 +169,11 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
     envs = _environments(client, spec)
     jobs = plan_jobs(spec, envs)
     total = len(jobs) * spec.runs_per_experiment
+    sink = StudySink(Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="twb-study-")))
     bar = _StudyProgress(spec.name, total, sys.stderr.isatty() if progress is None else progress)
     submitted: dict[int, StudyJob] = {}
-    final: dict[int, Experiment] = {}
+    final: dict[int, dict[str, Any]] = {}  # experiment id -> its entry in study.json
+    ended: Counter[str] = Counter()  # run statuses of the finished experiments
     try:
         for i, job in enumerate(jobs):
             try:
@@ -137,19 +187,24 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
                     raise StudyRefused([doom + (f"; the {len(submitted)} experiment(s) already submitted were "
                                                 "cancelled" if submitted else "")]) from None
                 job["experiment_id"], job["rejected"] = None, exc.detail if isinstance(exc.detail, str) else str(exc)
-        while True:
+            bar.update(0, f"submitting {i + 1}/{len(jobs)}")
+        pending = list(submitted)
+        while pending:
             states: Counter[str] = Counter()
-            for eid in submitted:
-                if eid in final:
-                    states.update(r.status for r in final[eid].runs)
-                    continue
+            for eid in pending[:_WINDOW]:
                 exp = client.get_experiment(eid)
-                states.update(r.status for r in exp.runs)
                 if exp.finished:
-                    final[eid] = exp
-            done = sum(n for s, n in states.items() if s in ("completed", "failed", "error", "cancelled", "interrupted"))
-            bar.update(done, " ".join(f"{s} {n}" for s, n in sorted(states.items())))
-            if len(final) == len(submitted):
+                    final[eid] = _collect_experiment(client, spec, submitted[eid], exp, sink)
+                    ended.update(r.status for r in exp.runs)
+                else:
+                    states.update(r.status for r in exp.runs)
+            pending = [eid for eid in pending if eid not in final]
+            states.update(ended)
+            states["queued"] += sum(submitted[eid]["body"]["repetitions"] * len(submitted[eid]["body"]["modes"])
+                                    for eid in pending[_WINDOW:])
+            done = sum(n for st, n in states.items() if st in _TERMINAL)
+            bar.update(done, " ".join(f"{st} {n}" for st, n in sorted(states.items()) if n))
+            if not pending:
                 break
             if timeout is not None and time.monotonic() - t0 > timeout:
                 raise TimeoutError(f"study {spec.name!r} not finished after {timeout:g} s "
@@ -160,19 +215,26 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
         raise
     finally:
         bar.close()
-    metrics = {eid: client.get_metrics(eid) for eid in final}
-    data = _assemble(spec, envs, jobs, final, metrics)
-    for exp in final.values():
-        for run in exp.runs:
-            # a failed run's driving is data too: Fig. 8 draws it up to where it stopped
-            if run.status in ("completed", "failed") and run.t_start is not None:
-                try:
-                    data.add_poses(run.id, client.get_poses(run.id))
-                except NotFound:
-                    pass
-    data.meta.update(server=client.url, started_at=started.isoformat(timespec="seconds"),
-                     wall_s=round(time.monotonic() - t0, 3), runs=total)
-    return data
+    experiments = [final.get(job.get("experiment_id"), None) or _experiment_entry(job, None) for job in jobs]
+    meta = {"server": client.url, "started_at": started.isoformat(timespec="seconds"),
+            "wall_s": round(time.monotonic() - t0, 3), "runs": total}
+    return sink.close(spec, {n: e.to_json() for n, e in envs.items()}, experiments, meta)
+
+
+def _collect_experiment(client: Client, spec: StudySpec, job: StudyJob, exp: Experiment,
+                        sink: StudySink) -> dict[str, Any]:
+    """A finished experiment's rows and poses to the sink; its entry in study.json."""
+    rows, direct = _rows(spec, job, exp, client.get_metrics(exp.id))
+    poses = {}
+    for run in exp.runs:
+        # a failed run's driving is data too: Fig. 8 draws it up to where it stopped
+        if run.status in ("completed", "failed") and run.t_start is not None:
+            try:
+                poses[run.id] = client.get_poses(run.id)
+            except NotFound:
+                pass
+    sink.add(rows, direct, poses)
+    return _experiment_entry(job, exp)
 
 
 def _cancel(client: Client, submitted: dict[int, StudyJob], final: dict[int, Experiment]) -> None:
@@ -198,39 +260,39 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _assemble(spec: StudySpec, envs: dict[str, Environment], jobs: list[StudyJob], final: dict[int, Experiment],
-              metrics: dict[int, ExperimentMetrics]) -> StudyData:
-    experiments, rows, direct = [], [], []
-    for job in jobs:
-        eid = job.get("experiment_id")
-        exp = final.get(eid) if eid is not None else None
-        body = job["body"]
-        experiments.append({
-            "experiment_id": eid, "environment": job["environment"], "plan": job["plan"], "planner": job["planner"],
-            "configuration": job["configuration"], "planner_params": body.get("planner_params", {}),
-            "path": body.get("path"), "start": body["start"], "goal": body["goal"],
-            "repetitions": body["repetitions"], "modes": body["modes"],
-            "status": exp.status if exp else "rejected", "error": exp.error if exp else job.get("rejected", ""),
-            "planned_path": exp.planned_path.tolist() if exp is not None and exp.planned_path is not None else None,
-            "planning_time_s": exp.planning_time_s if exp else None,
-            "runs": [r.id for r in exp.runs] if exp else [],
-        })
-        if exp is None:
-            continue
-        st = {d.repetition: d for d in metrics[exp.id].direct}
-        ident = {"study": spec.name, "experiment_id": exp.id, "environment": job["environment"], "plan": job["plan"],
-                 "planner": job["planner"], "configuration": job["configuration"]}
-        for run in exp.runs:
-            stop = run.stopped_at or [None, None]
-            row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,
-                   "status": run.status, "outcome": run.outcome, "failure": run.failure, "error": run.error,
-                   "stopped_at_x": stop[0], "stopped_at_y": stop[1], "subfield": run.subfield,
-                   "robot_id": run.robot_id, "t_start": run.t_start, "t_end": run.t_end, **flat_metrics(run.metrics)}
-            d = st.get(run.repetition)
-            if d is not None:
-                row.update({f"st_{k}": v for k, v in d.metrics.items()})
-            rows.append(row)
-        for d in metrics[exp.id].direct:
-            direct.append({**ident, "repetition": d.repetition, "sim_run_id": d.sim_run_id,
-                           "twb_run_id": d.twb_run_id, **d.metrics})
-    return StudyData(spec, {n: e.to_json() for n, e in envs.items()}, experiments, rows, direct)
+def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any]:
+    """An experiment's entry in study.json: its job, how it ended and its runs (``rejected``: never submitted)."""
+    body = job["body"]
+    return {
+        "experiment_id": job.get("experiment_id"), "environment": job["environment"], "plan": job["plan"],
+        "planner": job["planner"], "configuration": job["configuration"],
+        "planner_params": body.get("planner_params", {}), "path": body.get("path"), "start": body["start"],
+        "goal": body["goal"], "repetitions": body["repetitions"], "modes": body["modes"],
+        "status": exp.status if exp else "rejected", "error": exp.error if exp else job.get("rejected", ""),
+        "planned_path": exp.planned_path.tolist() if exp is not None and exp.planned_path is not None else None,
+        "planning_time_s": exp.planning_time_s if exp else None,
+        "runs": [r.id for r in exp.runs] if exp else [],
+    }
+
+
+def _rows(spec: StudySpec, job: StudyJob, exp: Experiment,
+          metrics: ExperimentMetrics) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """A finished experiment's rows of runs.csv and direct.csv."""
+    rows, direct = [], []
+    st = {d.repetition: d for d in metrics.direct}
+    ident = {"study": spec.name, "experiment_id": exp.id, "environment": job["environment"], "plan": job["plan"],
+             "planner": job["planner"], "configuration": job["configuration"]}
+    for run in exp.runs:
+        stop = run.stopped_at or [None, None]
+        row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,
+               "status": run.status, "outcome": run.outcome, "failure": run.failure, "error": run.error,
+               "stopped_at_x": stop[0], "stopped_at_y": stop[1], "subfield": run.subfield,
+               "robot_id": run.robot_id, "t_start": run.t_start, "t_end": run.t_end, **flat_metrics(run.metrics)}
+        d = st.get(run.repetition)
+        if d is not None:
+            row.update({f"st_{k}": v for k, v in d.metrics.items()})
+        rows.append(row)
+    for d in metrics.direct:
+        direct.append({**ident, "repetition": d.repetition, "sim_run_id": d.sim_run_id,
+                       "twb_run_id": d.twb_run_id, **d.metrics})
+    return rows, direct

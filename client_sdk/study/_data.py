@@ -23,6 +23,7 @@ import csv
 import io
 import json
 import math
+import shutil
 from dataclasses import dataclass
 from dataclasses import field as _field
 from pathlib import Path
@@ -32,7 +33,8 @@ import numpy as np
 
 from ._spec import StudySpec
 
-__all__ = ["ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "run_outcome", "write_csv_rows"]
+__all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "csv_cell", "load_study", "read_csv_rows", "run_outcome",
+           "write_csv_rows", "write_poses"]
 
 #: leading columns of runs.csv (the metrics follow)
 ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "configuration", "mode",
@@ -131,11 +133,21 @@ class StudyData:
         pdir = directory / "poses"
         pdir.mkdir(exist_ok=True)
         for run_id, arr in self._poses.items():
-            buf = io.StringIO()
-            buf.write("t,x,y,theta\n")
-            np.savetxt(buf, arr, delimiter=",", fmt="%.5f")
-            (pdir / f"run-{run_id}.csv").write_text(buf.getvalue())
+            write_poses(pdir / f"run-{run_id}.csv", arr)
+        if self.directory is not None and self.directory.resolve() != directory.resolve():
+            # poses still on disk where the study was written (a streamed study keeps none in memory)
+            for src in (self.directory / "poses").glob("run-*.csv"):
+                if not (pdir / src.name).exists():
+                    shutil.copyfile(src, pdir / src.name)
         self.directory = directory
+
+
+def write_poses(path: Path, poses: np.ndarray) -> None:
+    """``poses`` ``(N, 4)`` t, x, y, theta (s, m, m, rad) as a study's CSV (header ``t,x,y,theta``)."""
+    buf = io.StringIO()
+    buf.write("t,x,y,theta\n")
+    np.savetxt(buf, np.asarray(poses, dtype=float).reshape(-1, 4), delimiter=",", fmt="%.5f")
+    path.write_text(buf.getvalue())
 
 
 def run_outcome(status: Optional[str], failure: Optional[str] = None) -> str:
@@ -164,7 +176,8 @@ def load_study(directory: str | Path) -> StudyData:
     return StudyData(spec, doc["environments"], doc["experiments"], rows, direct, meta, d)
 
 
-def _cell(v: Any) -> str:
+def csv_cell(v: Any) -> str:
+    """A value as a CSV cell (None: empty; booleans ``true``/``false``; non-finite floats: empty)."""
     if v is None:
         return ""
     if isinstance(v, bool):
@@ -203,7 +216,7 @@ def write_csv_rows(path: Path, rows: Iterable[dict[str, Any]], first: Iterable[s
         w = csv.writer(f)
         w.writerow(cols)
         for r in rows:
-            w.writerow([_cell(r.get(c)) for c in cols])
+            w.writerow([csv_cell(r.get(c)) for c in cols])
     return cols
 
 

@@ -7,6 +7,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Optional, Protocol
 
+import numpy as np
+
 from ..core.settings import Settings
 from ..field import FieldState
 from ..scheduler import Assignment, RobotSlot
@@ -62,6 +64,10 @@ class RunContext:
         self.slack_s = slack_s
         self.messages: list[dict[str, Any]] = []
         self._taken_at = time.monotonic()
+        #: what is stored with the run's end, in its one transaction: run fields (metrics, t_start …) and the
+        #: poses a compute engine's task returned (s, m, m, rad)
+        self.end_fields: dict[str, Any] = {}
+        self.end_poses: Optional[np.ndarray] = None
 
     @property
     def subfields(self) -> tuple[int, ...]:

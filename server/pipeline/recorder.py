@@ -10,12 +10,14 @@ blocks on it.
 from __future__ import annotations
 
 import asyncio
-from typing import Any, Iterable, Optional
+from typing import Any, Callable, Iterable, Optional, Sequence
+
+import numpy as np
 
 from sqlalchemy.orm import Session, sessionmaker
 
 from ..broker import EventBroker
-from ..models import Experiment, Run
+from ..models import Experiment, Run, utcnow
 from ..schemas import ExperimentPublic, RunPublic
 from ..status import TERMINAL, RunStatus
 from ..store import experiments as exp_store
@@ -35,25 +37,23 @@ class RunRecorder:
         self._broker = broker
         self._views = views
 
-    async def job(self, run_id: int) -> RunJob:
-        """What the pipeline needs of a run and its experiment."""
+    async def start(self, run_id: int, *, status: RunStatus | Callable[[RunJob], RunStatus],
+                    **fields: Any) -> RunJob:
+        """A try of the run starts, in one transaction: what an interrupted earlier try left goes, ``status``
+        (or ``status(job)``, decided on the run's job) and ``fields`` are written as by :meth:`update`;
+        returns what the pipeline needs of the run and its experiment."""
 
-        def load() -> RunJob:
-            with self._sessions() as s:
-                return run_store.load_job(s, run_id)
-
-        return await asyncio.to_thread(load)
-
-    async def begin(self, run_id: int, **fields: Any) -> None:
-        """A try of the run starts (what an interrupted earlier try left goes); then as :meth:`update`."""
-
-        def write() -> list[dict[str, Any]]:
+        def write() -> tuple[RunJob, list[dict[str, Any]]]:
             with self._sessions.begin() as s:
                 run_store.clear_try(s, run_id)
+                job = run_store.job_of(s.get(Run, run_id))
+                fields["status"] = status(job) if callable(status) else status
                 run, exp, changed = run_store.update_run(s, run_id, fields)
-                return self._events([run], {exp.id: changed})
+                return job, self._events([run], {exp.id: changed})
 
-        self._publish(await asyncio.to_thread(write))
+        job, events = await asyncio.to_thread(write)
+        self._publish(events)
+        return job
 
     async def update(self, run_id: int, **fields: Any) -> None:
         """Write run fields (``status``, ``t_start``, ``metrics`` …), roll the experiment up, publish."""
@@ -78,27 +78,38 @@ class RunRecorder:
 
         self._publish(await asyncio.to_thread(write))
 
-    async def requeue(self, run_id: int, error: str) -> Optional[tuple[Run, Experiment]]:
-        """Queue a run that hit a testbed fault again (once): its run and experiment rows, or None."""
+    async def finish(self, run_id: int, status: RunStatus, error: str, *, failure: Optional[str] = None,
+                     fields: Optional[dict[str, Any]] = None, poses: Optional[np.ndarray] = None,
+                     messages: Sequence[dict[str, Any]] = (), retry: bool = False,
+                     resume: bool = False) -> Optional[tuple[Run, Experiment]]:
+        """Store a run's end in one transaction: the rest of its protocol log, then
+
+        - ``resume``: the run is queued again, through nobody's fault (not counted as a retry);
+        - ``retry`` (a testbed fault): the run is queued again once, its poses go;
+        - otherwise (or when the retry was had already): its ``poses`` ``(N, 4)`` (s, m, m, rad), ``fields``
+          (``metrics``, ``t_start`` …), ``status``, ``finished_at``, ``error`` (kept when empty: a completed
+          second attempt keeps the note about the first) and ``failure``.
+
+        Returns the run and experiment rows when the run is queued again, else None.  All or nothing:
+        when the database is away nothing is written and the call can be repeated.
+        """
 
         def write() -> tuple[Optional[tuple[Run, Experiment]], list[dict[str, Any]]]:
             with self._sessions.begin() as s:
-                run = run_store.requeue_run(s, run_id, error)
-                if run is None:
-                    return None, []
-                return (run, run.experiment), self._events([run], {run.experiment_id: False})
-
-        rows, events = await asyncio.to_thread(write)
-        self._publish(events)
-        return rows
-
-    async def resume(self, run_id: int, why: str) -> tuple[Run, Experiment]:
-        """Queue a run again that ended through nobody's fault (not counted as a retry)."""
-
-        def write() -> tuple[tuple[Run, Experiment], list[dict[str, Any]]]:
-            with self._sessions.begin() as s:
-                run = run_store.resume_run(s, run_id, why)
-                return (run, run.experiment), self._events([run], {run.experiment_id: True})
+                run_store.add_messages(s, list(messages))
+                again = (run_store.resume_run(s, run_id, error) if resume
+                         else run_store.requeue_run(s, run_id, error) if retry else None)
+                if again is not None:
+                    return (again, again.experiment), self._events([again], {again.experiment_id: resume})
+                if poses is not None:
+                    pose_store.add_poses(s, run_id, poses)
+                end: dict[str, Any] = dict(fields or {}, status=status, finished_at=utcnow())
+                if error:
+                    end["error"] = error
+                if failure is not None:
+                    end["failure"] = failure
+                run, exp, changed = run_store.update_run(s, run_id, end)
+                return None, self._events([run], {exp.id: changed})
 
         rows, events = await asyncio.to_thread(write)
         self._publish(events)

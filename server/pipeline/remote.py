@@ -13,7 +13,6 @@ exchanged go to the run's log, and the end is classified as a robot's
 
 from __future__ import annotations
 
-import asyncio
 from typing import Any
 
 import numpy as np
@@ -30,10 +29,10 @@ __all__ = ["run_on_engine"]
 async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
     """Carry out the run as an engine task; raises as :func:`server.pipeline.runner` expects of its steps."""
     rec = svc.recorder
-    job = await rec.job(ctx.run_id)
-    plan = svc.paths.known(job.experiment_id)  # most runs of an experiment: planned already, one write less
-    await rec.begin(ctx.run_id, status=RunStatus.PLANNING if plan is None else RunStatus.RUNNING,
-                    robot_id=ctx.robot.robot_id, subfield=None, started_at=utcnow())
+    # most runs of an experiment: planned already, one write less
+    job = await rec.start(ctx.run_id, robot_id=ctx.robot.robot_id, subfield=None, started_at=utcnow(),
+                          status=lambda j: RunStatus.RUNNING if svc.paths.known(j.experiment_id) else RunStatus.PLANNING)
+    plan = svc.paths.known(job.experiment_id)
     if plan is None:
         plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
                                         platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
@@ -52,11 +51,9 @@ async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
     if "placement_error" in out:
         raise TestbedFault(f"the gripper could not place the robot at the start: {out['placement_error']}")
     poses = np.asarray(out["poses"], dtype=float).reshape(-1, 4)
-    svc.tracker.open(ctx.robot.robot_id, ctx.run_id, job.owner_id)
-    try:
-        await asyncio.to_thread(svc.tracker.ingest, ctx.robot.robot_id, poses)
-    finally:
-        svc.tracker.close(ctx.robot.robot_id)
+    # stored with the run's end, in its one transaction; shown live now
+    ctx.end_poses = poses
+    svc.tracker.show(ctx.robot.robot_id, ctx.run_id, job.owner_id, poses)
     outcome = out["outcome"]
     t_end = out["t_end"]
     failure: RunFailed | TestbedFault | None = None
@@ -68,14 +65,14 @@ async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
         failure = steps.failure_of(outcome)
     if isinstance(failure, TestbedFault):
         raise failure
-    fields: dict[str, Any] = {"t_start": out["t_start"], "t_end": t_end, "status": RunStatus.ANALYZING}
+    fields = ctx.end_fields
+    fields.update(t_start=out["t_start"], t_end=t_end)
     if out["metrics"] is not None:
         metrics = dict(out["metrics"])
         metrics["collided"] = failure is not None and failure.kind is FailureKind.COLLISION
         fields["metrics"] = metrics
         if failure is not None and len(poses):
             fields["stopped_at"] = [round(float(poses[-1, 1]), 4), round(float(poses[-1, 2]), 4)]
-    await rec.update(ctx.run_id, **fields)
     if failure is not None:
         raise failure
     if out["metrics"] is None:

@@ -27,20 +27,23 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from dataclasses import dataclass
-from typing import Callable, Optional
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Optional
+
+import numpy as np
 
 from sqlalchemy.exc import DBAPIError
 
-from ..errors import AgentRefused, AgentUnavailable, EngineFault, FailureKind, RunEnded, RunFailed, TestbedFault
-from ..models import utcnow
+from ..errors import AgentRefused, AgentUnavailable, AgentUnreachable, EngineFault, FailureKind, RunEnded, RunFailed, TestbedFault
+from ..models import Experiment, Run, utcnow
 from ..scheduler import Assignment
 from ..status import RunStatus
 from . import steps
 from .context import RunContext, RunServices
+from .recorder import RunRecorder
 from .remote import run_on_engine
 
-__all__ = ["RunEnd", "execute_run"]
+__all__ = ["RunEnd", "execute_run", "failure_text", "store_end"]
 
 log = logging.getLogger("twb.runner")
 
@@ -52,7 +55,10 @@ class RunEnd:
     ``robot_fault``: the robot to avoid when retrying (``error`` only);
     ``whole_experiment``: the experiment's path could not be had, so its
     queued runs fail too, and ``failure`` why (``failed`` only); ``resume``:
-    nobody's fault (the database went away), queue the run again.
+    the run did not really begin (the database went away, or the robot could
+    not be connected to), queue it again without counting a try.
+    ``fields``, ``poses`` and ``messages``: what the run produced that is
+    stored with its end (:meth:`RunRecorder.finish`).
     """
 
     status: RunStatus
@@ -61,6 +67,10 @@ class RunEnd:
     whole_experiment: bool = False
     failure: Optional[FailureKind] = None
     resume: bool = False
+    #: stored with the end, in one transaction: run fields, poses (N, 4) (s, m, m, rad), protocol-log rows
+    fields: dict[str, Any] = field(default_factory=dict)
+    poses: Optional[np.ndarray] = None
+    messages: list[dict[str, Any]] = field(default_factory=list)
 
 
 async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Callable[[], bool]) -> RunEnd:
@@ -81,6 +91,9 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment, failure=exc.kind)
     except AgentRefused as exc:
         end = RunEnd(RunStatus.ERROR, f"robot {robot} refused a command: {exc}", robot_fault=robot)
+    except AgentUnreachable as exc:
+        # nothing reached the robot: the run did not begin, so no attempt is spent; the robot goes offline
+        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot, resume=True)
     except AgentUnavailable as exc:
         end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=robot)
     except EngineFault as exc:
@@ -102,21 +115,27 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=blame)
     finally:
         svc.tracker.close(robot)
-    try:
-        await asyncio.shield(svc.recorder.add_messages(ctx.take_messages()))
-    except asyncio.CancelledError:
-        pass
-    except DBAPIError as exc:
-        log.warning("run %d: the end of its protocol log is lost: %s", ctx.run_id, exc.orig)
-    return end
+    return replace(end, fields=ctx.end_fields, poses=ctx.end_poses, messages=ctx.take_messages())
+
+
+async def store_end(recorder: RunRecorder, run_id: int, end: RunEnd) -> Optional[tuple[Run, Experiment]]:
+    """Store how a run ended, in one transaction (:meth:`RunRecorder.finish`): an ``error`` is queued again
+    once, a ``resume`` always; returns the run and experiment rows when queued again, else None."""
+    return await recorder.finish(run_id, end.status, end.error, failure=failure_text(end), fields=end.fields,
+                                 poses=end.poses, messages=end.messages, retry=end.status is RunStatus.ERROR,
+                                 resume=end.resume)
+
+
+def failure_text(end: RunEnd) -> Optional[str]:
+    """The failure kind stored with a ``failed`` run."""
+    return str(end.failure) if end.failure is not None and end.status is RunStatus.FAILED else None
 
 
 async def _steps(ctx: RunContext, svc: RunServices) -> None:
     rec = svc.recorder
-    job = await rec.job(ctx.run_id)
+    job = await rec.start(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
+                          subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
     svc.field.claim(ctx.subfields, job.owner_id)
-    await rec.begin(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
-                    subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
     link = await steps.connect(ctx, svc)
     try:
         await link.request("T,T,Q", ctx.wall(0))  # anchors the agent's clock
@@ -134,7 +153,6 @@ async def _steps(ctx: RunContext, svc: RunServices) -> None:
             failure = exc
     finally:
         await link.close()
-        await rec.add_messages(ctx.take_messages())
     await rec.update(ctx.run_id, status=RunStatus.ANALYZING)
     # a run that failed on the field (collision, stall, timeout) is measured too: what it drove until
     # then is data; its `collided` is the robot's own verdict, as for completed runs

@@ -9,7 +9,7 @@ from typing import Optional
 from robot_agent.protocol import encode_build, encode_path, encode_place
 
 from ..agent_link import AgentLink
-from ..errors import AgentRefused, FailureKind, RunFailed, TestbedFault
+from ..errors import AgentRefused, AgentUnavailable, AgentUnreachable, FailureKind, RunFailed, TestbedFault
 from ..status import SubfieldState
 from ..store.runs import RunJob
 from . import compute
@@ -58,8 +58,14 @@ async def connect(ctx: RunContext, svc: RunServices, robot_id: Optional[str] = N
     """An authenticated protocol connection to the run's robot (or ``robot_id``), logged to the run."""
     rid = robot_id or ctx.robot.robot_id
     r = svc.field.robots[rid]
-    return await AgentLink.connect(r.host, r.port, time_scale=ctx.time_scale, on_line=ctx.on_line,
-                                   control_key=svc.field.keys.get(rid))
+    try:
+        return await AgentLink.connect(r.host, r.port, time_scale=ctx.time_scale, on_line=ctx.on_line,
+                                       control_key=svc.field.keys.get(rid))
+    except AgentUnreachable as exc:
+        if rid == ctx.robot.robot_id:
+            raise
+        # another robot than the run's (one to park): the run's robot is not the one to avoid
+        raise AgentUnavailable(f"robot {rid}: {exc}") from None
 
 
 async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob) -> None:
@@ -200,6 +206,7 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
     except compute.TooFewPoses as exc:
         raise TestbedFault(f"cannot compute metrics: {exc}") from None
     metrics["collided"] = collided
-    extra = {"stopped_at": [round(poses[-1][1], 4), round(poses[-1][2], 4)]} if failed and poses else {}
-    await rec.update(ctx.run_id, metrics=metrics, **extra)
+    ctx.end_fields["metrics"] = metrics  # stored with the run's end
+    if failed and poses:
+        ctx.end_fields["stopped_at"] = [round(poses[-1][1], 4), round(poses[-1][2], 4)]
 

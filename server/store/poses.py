@@ -12,7 +12,7 @@ from sqlalchemy.orm import Session
 
 from ..models import Pose
 
-__all__ = ["insert_poses", "run_poses"]
+__all__ = ["add_poses", "insert_poses", "run_poses"]
 
 _COLUMNS = "run_id, t, x, y, theta"
 
@@ -58,6 +58,19 @@ def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threadi
             conn.close()
     except dbapi_error as exc:
         raise DBAPIError.instance("INSERT INTO poses", None, exc, dbapi_error) from exc
+
+
+def add_poses(session: Session, run_id: int, rows: np.ndarray) -> None:
+    """Store ``rows`` ``(N, 4)`` (t, x, y, theta: s, m, m, rad) for ``run_id`` inside the session's transaction
+    (a run's end written at once: its poses, log and status commit together), by the same bulk paths."""
+    if len(rows) == 0:
+        return
+    conn = session.connection()
+    if conn.dialect.name == "postgresql":
+        _copy(conn.connection.driver_connection, run_id, rows)
+    else:
+        conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle),
+                             [(run_id, t, x, y, a) for t, x, y, a in rows.tolist()])
 
 
 def _copy(pg: object, run_id: int, rows: np.ndarray) -> None:

@@ -12,7 +12,7 @@ from ..models import Experiment, Message, Pose, Run, utcnow
 from ..status import ACTIVE, RunStatus
 from .experiments import finish_if_done, lock_experiments
 
-__all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "resume_run", "interrupt_active", "load_job", "queued_runs", "requeue_interrupted",
+__all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "resume_run", "interrupt_active", "job_of", "queued_runs", "requeue_interrupted",
            "requeue_run", "update_run"]
 
 
@@ -34,9 +34,8 @@ class RunJob:
     jitter: Optional[dict[str, float]] = None
 
 
-def load_job(session: Session, run_id: int) -> RunJob:
-    """The :class:`RunJob` of ``run_id``."""
-    run = session.get(Run, run_id)
+def job_of(run: Run) -> RunJob:
+    """The :class:`RunJob` of a run row (its experiment loaded with it)."""
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
                   list(e.goal), e.field, e.robot_radius, e.jitter)
