@@ -215,7 +215,7 @@ SPEC = {"name": "s", "environments": ["room"], "planners": ["fmm", "fm2"], "repe
 
 
 def test_a_study_is_checked_before_anything_is_submitted():
-    transport, seen = fake_server(limits={"max_repetitions": 2, "max_queued_per_user": 3})
+    transport, seen = fake_server(limits={"max_repetitions": 2, "max_queued_per_user": 2})
     spec = StudySpec.from_json({**SPEC, "planners": ["fmm", {"name": "fm2", "params": {"sat": 1}}, "rrt"],
                                 "environments": ["room", "atlantis"]})
     with Client("http://testbed", "t", transport=transport) as c:
@@ -227,21 +227,21 @@ def test_a_study_is_checked_before_anything_is_submitted():
         "planner 'rrt' is not offered by this testbed (it offers fm2, fmm)",
         "unknown environment 'atlantis': create it first or give its file in the study's `environments`",
         "repetitions 3: the testbed allows at most 2 per experiment",
-        "the study queues 3 experiments and you already have 2 queued: the testbed allows 3 queued per user; "
-        "split the study",
+        "you already have 2 queued experiments and the testbed allows 2 per user: wait for them to finish or "
+        "cancel some",
     ]
     assert err.value.reasons == reasons and seen["submitted"] == []
 
 
-def test_a_quota_refusal_cancels_what_the_study_submitted():
-    transport, seen = fake_server(refuse_at=2)  # no limits endpoint: the 429 of the second job tells
+def test_a_quota_refusal_with_nothing_of_the_study_to_wait_for_stops_it():
+    transport, seen = fake_server(refuse_at=1)  # no limits endpoint: the 429 of the first job tells
     with Client("http://testbed", "t", transport=transport) as c:
         with pytest.raises(StudyRefused) as err:
             run_study(c, StudySpec.from_json(SPEC), progress=False)
     (reason,) = err.value.reasons
-    assert reason.startswith("the testbed refused experiment 2 of 2: you already have 3 queued experiments (limit 3)")
-    assert reason.endswith("the 1 experiment(s) already submitted were cancelled")
-    assert len(seen["submitted"]) == 1 and seen["cancelled"] == [1]
+    assert reason.startswith("the testbed refused experiment 1 of 2: you already have 3 queued experiments (limit 3)")
+    assert reason.endswith("ask the operator to raise TWB_MAX_QUEUED_PER_USER")
+    assert seen["submitted"] == [] and seen["cancelled"] == []
 
 
 def test_a_repetitions_refusal_stops_the_study_at_once():

@@ -54,8 +54,10 @@ def test_progress_gives_runs_per_second_and_the_time_left(monkeypatch):
     assert line.startswith("study sweep: 700/1000 runs, ") and "runs/s, ETA " in line and "failed 10" in line
 
 
-def test_a_sim_sweep_streams_its_results_to_disk(tmp_path):
-    tb = Process(["up", "--time-scale", "max", "--sim-robots", "4"], tmp_path / "tb")
+def test_a_sim_sweep_streams_its_results_to_disk_paced_by_the_queue_quota(tmp_path):
+    """8 experiments through a testbed that lets a user queue 3: the study goes in as its experiments finish."""
+    tb = Process(["up", "--time-scale", "max", "--sim-robots", "4"], tmp_path / "tb",
+                 env={"TWB_MAX_QUEUED_PER_USER": "3"})
     try:
         with Client(tb.url, token=tb.token) as c:
             data = run_study(c, StudySpec.from_json(SWEEP), progress=True, out=tmp_path / "out")

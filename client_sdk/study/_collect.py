@@ -174,22 +174,11 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
     submitted: dict[int, StudyJob] = {}
     final: dict[int, dict[str, Any]] = {}  # experiment id -> its entry in study.json
     ended: Counter[str] = Counter()  # run statuses of the finished experiments
+    waiting = list(enumerate(jobs))  # not submitted yet
+    pending: list[int] = []  # submitted, not finished, oldest first
     try:
-        for i, job in enumerate(jobs):
-            try:
-                exp = client.submit(job["body"])
-                job["experiment_id"] = exp.id
-                submitted[exp.id] = job
-            except (ValidationError, RateLimited) as exc:
-                doom = refusal(exc, spec, i, len(jobs))
-                if doom is not None:
-                    _cancel(client, submitted, final)
-                    raise StudyRefused([doom + (f"; the {len(submitted)} experiment(s) already submitted were "
-                                                "cancelled" if submitted else "")]) from None
-                job["experiment_id"], job["rejected"] = None, exc.detail if isinstance(exc.detail, str) else str(exc)
-            bar.update(0, f"submitting {i + 1}/{len(jobs)}")
-        pending = list(submitted)
-        while pending:
+        while waiting or pending:
+            waiting = _submit(client, spec, jobs, waiting, submitted, pending, final)
             states: Counter[str] = Counter()
             for eid in pending[:_WINDOW]:
                 exp = client.get_experiment(eid)
@@ -198,13 +187,13 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
                     ended.update(r.status for r in exp.runs)
                 else:
                     states.update(r.status for r in exp.runs)
-            pending = [eid for eid in pending if eid not in final]
+            pending[:] = [eid for eid in pending if eid not in final]
             states.update(ended)
-            states["queued"] += sum(submitted[eid]["body"]["repetitions"] * len(submitted[eid]["body"]["modes"])
-                                    for eid in pending[_WINDOW:])
+            states["queued"] += sum(_runs(submitted[eid]) for eid in pending[_WINDOW:]) + \
+                sum(_runs(job) for _, job in waiting)
             done = sum(n for st, n in states.items() if st in _TERMINAL)
             bar.update(done, " ".join(f"{st} {n}" for st, n in sorted(states.items()) if n))
-            if not pending:
+            if not (waiting or pending):
                 break
             if timeout is not None and time.monotonic() - t0 > timeout:
                 raise TimeoutError(f"study {spec.name!r} not finished after {timeout:g} s "
@@ -219,6 +208,39 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
     meta = {"server": client.url, "started_at": started.isoformat(timespec="seconds"),
             "wall_s": round(time.monotonic() - t0, 3), "runs": total}
     return sink.close(spec, {n: e.to_json() for n, e in envs.items()}, experiments, meta)
+
+
+def _runs(job: StudyJob) -> int:
+    return job["body"]["repetitions"] * len(job["body"]["modes"])
+
+
+def _submit(client: Client, spec: StudySpec, jobs: list[StudyJob], waiting: list[tuple[int, StudyJob]],
+            submitted: dict[int, StudyJob], pending: list[int], final: dict[int, Any]) -> list[tuple[int, StudyJob]]:
+    """Submit waiting jobs until the testbed's queue quota says wait (429 while experiments of this study are
+    still unfinished: a large study is paced, the rest goes in as they finish); the jobs still waiting.
+
+    A refusal that dooms the study (:func:`refusal`: the repetitions limit, or the quota with nothing of this
+    study left to finish) cancels what was submitted and raises :class:`StudyRefused`; a job refused for its
+    own reason is recorded as ``rejected``.
+    """
+    while waiting:
+        i, job = waiting[0]
+        try:
+            exp = client.submit(job["body"])
+            job["experiment_id"] = exp.id
+            submitted[exp.id] = job
+            pending.append(exp.id)
+        except (ValidationError, RateLimited) as exc:
+            if exc.status == 429 and pending:
+                return waiting  # the quota: go on when some of the study's experiments have finished
+            doom = refusal(exc, spec, i, len(jobs))
+            if doom is not None:
+                _cancel(client, submitted, final)
+                raise StudyRefused([doom + (f"; the {len(pending)} unfinished experiment(s) it had submitted were "
+                                            "cancelled" if pending else "")]) from None
+            job["experiment_id"], job["rejected"] = None, exc.detail if isinstance(exc.detail, str) else str(exc)
+        waiting = waiting[1:]
+    return waiting
 
 
 def _collect_experiment(client: Client, spec: StudySpec, job: StudyJob, exp: Experiment,

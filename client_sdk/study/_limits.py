@@ -7,6 +7,8 @@
 - the server's limits, where it states them (``GET /api/v1/limits``:
   ``max_repetitions``, ``max_queued_per_user``; a server without that endpoint
   states them only when it refuses a job, and :func:`refusal` reads that answer).
+  A study with more experiments than the queue quota is not refused: it is
+  paced (submitted as its earlier experiments finish).
 
 It returns every problem at once, so a study is fixed in one go.
 """
@@ -87,11 +89,13 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
     if max_reps is not None and spec.repetitions > max_reps:
         reasons.append(f"repetitions {spec.repetitions}: the testbed allows at most {max_reps} per experiment")
     quota = lim.get("max_queued_per_user")
-    if quota is not None:
+    if quota is not None and experiments:
+        # a study larger than the quota is paced (run_study submits more as its experiments finish), but it
+        # needs room for one
         queued = client.list_experiments(status="queued", limit=1).count
-        if queued + experiments > quota:
-            reasons.append(f"the study queues {experiments} experiments and you already have {queued} queued: the "
-                           f"testbed allows {quota} queued per user; split the study")
+        if queued >= quota:
+            reasons.append(f"you already have {queued} queued experiments and the testbed allows {quota} per user: "
+                           "wait for them to finish or cancel some")
     return reasons
 
 
@@ -102,7 +106,8 @@ def refusal(exc: ApiError, spec: StudySpec, submitted: int, total: int) -> Optio
     """The sentence for a refused submission that dooms the whole study, or None for one job's own problem.
 
     Study-wide: too many repetitions (422 ``repetitions must be at most N``)
-    and the queue quota (429).  Anything else (a start inside an obstacle,
+    and the queue quota (429; :func:`run_study` asks only when none of the
+    study's experiments is left to finish, else it waits).  Anything else (a start inside an obstacle,
     say) concerns one job, which is recorded as rejected while the others go on.
     """
     detail = exc.detail if isinstance(exc.detail, str) else str(exc)
@@ -113,6 +118,6 @@ def refusal(exc: ApiError, spec: StudySpec, submitted: int, total: int) -> Optio
                     f"({detail})")
         return None
     if exc.status == 429:
-        return (f"the testbed refused experiment {submitted + 1} of {total}: {detail}; split the study, wait for "
-                "your queued experiments, or ask the operator to raise TWB_MAX_QUEUED_PER_USER")
+        return (f"the testbed refused experiment {submitted + 1} of {total}: {detail}; wait for your queued "
+                "experiments, or ask the operator to raise TWB_MAX_QUEUED_PER_USER")
     return None
