@@ -23,6 +23,7 @@ import argparse
 import itertools
 import json
 import os
+import re
 import sys
 import tempfile
 import time
@@ -74,29 +75,42 @@ def in_process(jobs: list[dict[str, Any]]) -> dict[str, Any]:
             "cpu_ms_per_run": {"this_process": round(cpu * 1000 / n, 2)}}
 
 
-def _cpu_s(match) -> float:  # type: ignore[no-untyped-def]
-    """CPU seconds (user + system, threads included) of the processes whose command line ``match`` accepts."""
+def _processes() -> dict[int, tuple[int, str, float]]:
+    """Every process: pid -> (parent pid, command line, CPU seconds: user + system, threads included)."""
     tick = os.sysconf("SC_CLK_TCK")
-    total = 0.0
+    out = {}
     for d in Path("/proc").iterdir():
         if not d.name.isdigit():
             continue
         try:
             cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-            if not match(int(d.name), cmd):
-                continue
             fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
         except OSError:
             continue
-        total += (int(fields[11]) + int(fields[12])) / tick
-    return total
+        out[int(d.name)] = (int(fields[1]), cmd, (int(fields[11]) + int(fields[12])) / tick)
+    return out
 
 
-def _cpu_by_part(server_pid: int) -> dict[str, float]:
+def _cpu_by_part(server_pid: int, pg_port: int | None) -> dict[str, float]:
+    """CPU seconds so far of the server, of the Ray workers it started (its descendants: other Ray clusters on
+    the machine do not count) and of this bench's PostgreSQL (the postmaster on ``pg_port`` and its children)."""
+    procs = _processes()
+
+    def under(pid: int, root: int) -> bool:
+        while pid > 1:
+            if pid == root:
+                return True
+            pid = procs[pid][0] if pid in procs else 0
+        return False
+
+    postmaster = next((pid for pid, (_, cmd, _) in procs.items()
+                       if pg_port is not None and cmd.startswith("/") and "postgres" in cmd and f"-p {pg_port}" in cmd),
+                      None)
     return {
-        "server": _cpu_s(lambda pid, cmd: pid == server_pid),
-        "ray_workers": _cpu_s(lambda pid, cmd: cmd.startswith("ray::")),
-        "postgresql": _cpu_s(lambda pid, cmd: cmd.startswith("postgres: ")),
+        "server": procs.get(server_pid, (0, "", 0.0))[2],
+        "ray_workers": sum(c for pid, (_, cmd, c) in procs.items() if cmd.startswith("ray::") and under(pid, server_pid)),
+        "postgresql": sum(c for pid, (_, cmd, c) in procs.items()
+                          if postmaster is not None and pid != postmaster and under(pid, postmaster)),
     }
 
 
@@ -105,11 +119,14 @@ def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data
     from twb.launch import LocalTestbed
 
     env = {"TWB_MAX_QUEUED_PER_USER": "100000"}
+    url = args[args.index("--database-url") + 1] if "--database-url" in args else ""
+    m = re.search(r":(\d+)/", url)
+    pg_port = int(m.group(1)) if m else None
     with LocalTestbed(data_dir, "--time-scale", "max", *args, timeout=180, env=env) as tb:
         import httpx
 
         with httpx.Client(base_url=tb.url, headers={"Authorization": f"Bearer {tb.token}"}, timeout=60) as c:
-            cpu0 = _cpu_by_part(tb.proc.pid)
+            cpu0 = _cpu_by_part(tb.proc.pid, pg_port)
             t0 = time.perf_counter()
             ids = [c.post("/api/v1/experiments", json=job).raise_for_status().json()["id"] for job in jobs]
             submitted = time.perf_counter() - t0
@@ -121,7 +138,7 @@ def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data
                     break
                 time.sleep(0.25)
             wall = time.perf_counter() - t0
-            cpu1 = _cpu_by_part(tb.proc.pid)
+            cpu1 = _cpu_by_part(tb.proc.pid, pg_port)
             statuses: dict[str, int] = {}
             for i in ids:
                 for r in c.get(f"/api/v1/experiments/{i}").json()["runs"]:

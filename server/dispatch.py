@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import time
 from dataclasses import replace
 from typing import Any, Iterable, Optional
 
@@ -48,6 +49,7 @@ def pending_of(run: Run, exp: Experiment, exclude: frozenset[str] = frozenset())
 
 
 CANCELLED = "cancelled by its owner"
+_ESTIMATE_EVERY_S = 0.5
 
 
 class Dispatcher:
@@ -68,6 +70,8 @@ class Dispatcher:
         self._unsaved: list[tuple[int, int, RunEnd]] = []  # run ends that wait for the database
         # experiments cancelled since the start: a run of one that ends now is not queued again
         self._cancelled: set[int] = set()
+        self._estimated_at = -math.inf
+        self._estimate_later: Optional[asyncio.TimerHandle] = None
 
     # ------------------------------------------------------------------ life cycle
 
@@ -80,6 +84,8 @@ class Dispatcher:
     async def stop(self) -> None:
         """Stop dispatching; runs under way end ``interrupted``; queued runs stay queued."""
         self.stopping = True
+        if self._estimate_later is not None:
+            self._estimate_later.cancel()
         for t in self._background:
             t.cancel()
         tasks = list(self._tasks.values())
@@ -100,7 +106,7 @@ class Dispatcher:
             self._expected[p.run_id] = p.expected_s
             self._experiment[p.run_id] = p.experiment_id
             self.scheduler.add(p)
-        self._refresh_estimates()
+        self._refresh_estimates(now=True)
         self.wake()
 
     async def cancel(self, experiment_ids: Iterable[int]) -> None:
@@ -228,7 +234,20 @@ class Dispatcher:
 
     # ------------------------------------------------------------------ estimates and summary
 
-    def _refresh_estimates(self) -> None:
+    def _refresh_estimates(self, *, now: bool = False) -> None:
+        """Recompute the queue's estimated starts; unless ``now`` (a submission: its estimate is asked for at
+        once) at most every ``_ESTIMATE_EVERY_S``, as a long queue makes this a few milliseconds and runs end
+        many times a second at full speed; a skipped refresh is done later."""
+        wait = 0.0 if now else self._estimated_at + _ESTIMATE_EVERY_S - time.monotonic()
+        if wait > 0:
+            if self._estimate_later is None:
+                self._estimate_later = asyncio.get_running_loop().call_later(wait, self._estimate_now)
+            return
+        self._estimate_now()
+
+    def _estimate_now(self) -> None:
+        self._estimate_later = None
+        self._estimated_at = time.monotonic()
         remaining = {rid: self._expected.get(rid, 60.0) / 2 for rid in self._tasks}
         starts = self.scheduler.estimate_starts(remaining)
         scale = self._svc.settings.time_scale

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Optional
 
 from sqlalchemy import delete, insert, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, joinedload
 
 from ..models import Experiment, Message, Pose, Run, utcnow
 from ..status import ACTIVE, RunStatus
@@ -62,7 +62,7 @@ def clear_try(session: Session, run_id: int) -> None:
 def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
     """Write ``fields`` on the run and roll the experiment's status up; (run, experiment, status changed)."""
     lock_experiments(session, run_ids=[run_id])
-    run = session.get(Run, run_id)
+    run = session.get(Run, run_id, options=[joinedload(Run.experiment)])  # one query, not two
     for k, v in fields.items():
         setattr(run, k, v)
     exp = run.experiment
