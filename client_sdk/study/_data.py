@@ -37,9 +37,9 @@ __all__ = ["ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "run_outcom
 #: leading columns of runs.csv (the metrics follow)
 ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "configuration", "mode",
               "repetition", "seed", "status", "outcome", "failure", "error", "stopped_at_x", "stopped_at_y", "subfield",
-              "robot_id", "t_start", "t_end")
+              "robot_id", "t_start", "t_end", "profile")
 DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "configuration", "repetition",
-                  "sim_run_id", "twb_run_id")
+                  "sim_run_id", "twb_run_id", "profile")
 _STRINGS = {"study", "environment", "plan", "planner", "configuration", "mode", "status", "outcome", "failure", "error",
             "robot_id"}
 

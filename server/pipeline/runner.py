@@ -10,7 +10,10 @@ The steps, in order (each in :mod:`server.pipeline.steps`)::
     completed
 
 A simulation run on a compute engine's slot (Ray) is one task instead
-(planning, running, analyzing: :mod:`server.pipeline.remote`).
+(planning, running, analyzing: :mod:`server.pipeline.remote`), and so is a
+field run whose job has profile overrides: the emulated field robot with
+other parameters, computed in a worker while the run holds its robot and
+sub-field (a robot's physics cannot be changed for one run).
 
 Whose fault an ending is (:mod:`server.errors`): ``failed`` is the job's
 (no path, collision, stall, timeout), ``error`` the testbed's (robot
@@ -36,6 +39,7 @@ from ..errors import AgentRefused, AgentUnavailable, EngineFault, FailureKind, R
 from ..models import utcnow
 from ..scheduler import Assignment
 from ..status import RunStatus
+from ..store.runs import RunJob
 from . import steps
 from .context import RunContext, RunServices
 from .remote import run_on_engine
@@ -75,7 +79,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     # an engine slot is not a robot: nothing to avoid on the retry, nothing to take offline
     blame = None if ctx.robot.engine else robot
     try:
-        await (run_on_engine(ctx, svc) if ctx.robot.engine else _steps(ctx, svc))
+        await _carry_out(ctx, svc)
         end = RunEnd(RunStatus.COMPLETED)
     except RunFailed as exc:
         end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment, failure=exc.kind)
@@ -111,9 +115,21 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     return end
 
 
-async def _steps(ctx: RunContext, svc: RunServices) -> None:
+async def _carry_out(ctx: RunContext, svc: RunServices) -> None:
+    """On a compute engine's slot, or a field run with profile overrides (the emulated field robot with
+    other parameters, :mod:`.remote`): one task; else the steps on the robot."""
+    if ctx.robot.engine:
+        await run_on_engine(ctx, svc)
+        return
+    job = await svc.recorder.job(ctx.run_id)
+    if job.mode == "twb" and job.profile_overrides:
+        await run_on_engine(ctx, svc, job)
+    else:
+        await _steps(ctx, svc, job)
+
+
+async def _steps(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     rec = svc.recorder
-    job = await rec.job(ctx.run_id)
     svc.field.claim(ctx.subfields, job.owner_id)
     await rec.begin(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
                     subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
