@@ -40,7 +40,7 @@ ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planne
               "robot_id", "t_start", "t_end", "profile")
 DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "configuration", "repetition",
                   "sim_run_id", "twb_run_id", "profile")
-_STRINGS = {"study", "environment", "plan", "planner", "configuration", "mode", "status", "outcome", "failure", "error",
+_STRINGS = {"study", "environment", "plan", "planner", "configuration", "profile", "mode", "status", "outcome", "failure", "error",
             "robot_id"}
 
 
