@@ -23,7 +23,7 @@ The field robot's effects (docs/fidelity.md, "The emulated field robot") are fit
 Uncertainties: the motor time constant's from the fit's Jacobian (residuals along a run are correlated, so it
 is a lower bound); the tracker latency's from the profile of the fit over the grid (the steps whose fit is
 within one unit of chi-square, at least half a step); the gains' and the jitter's from a bootstrap over
-runs; the wheel noise's by the delta method from the statistic's spread over runs and simulations.
+runs (over groups of runs that share a seed); the wheel noise's by the delta method from the statistic's spread over runs and simulations.
 """
 
 from __future__ import annotations
@@ -58,7 +58,8 @@ _BOOTSTRAP = 400
 class RecordedRun:
     """One recorded field run: the ``path`` sent ``(P, 3)`` (m, rad), the ``start`` pose (x, y, theta), the
     tracked ``poses`` ``(N, 4)`` (t s counted from the path's start, x m, y m, theta rad, the robot's frame),
-    the environment's ``blocks`` (cx, cy, w, h, angle) and the ``area`` (w, h; m) the robot drove in."""
+    the environment's ``blocks`` (cx, cy, w, h, angle) and the ``area`` (w, h; m) the robot drove in; runs
+    with the same non-empty ``group`` drew the same random numbers (the same seed)."""
 
     path: np.ndarray
     start: tuple[float, float, float]
@@ -66,6 +67,8 @@ class RecordedRun:
     blocks: Sequence[Sequence[float]] = ()
     area: tuple[float, float] = SUBFIELD_SIZE
     name: str = ""
+    #: runs of one group share their random draws (a testbed run's seed): the bootstrap resamples groups
+    group: str = ""
 
 
 @dataclass
@@ -183,12 +186,13 @@ def _increments(res: np.ndarray, t: np.ndarray) -> float:
     return float(np.mean(np.sum(d * d, axis=1)))
 
 
-def _bootstrap(per_run: list[Any], stat: Any, rng: np.random.Generator) -> float:
-    """Standard deviation of ``stat`` over resamplings (with replacement) of the runs."""
-    n = len(per_run)
+def _bootstrap(per_run: list[Any], groups: list[list[int]], stat: Any, rng: np.random.Generator) -> float:
+    """Standard deviation of ``stat`` (of a list of per-run values) over resamplings, with replacement, of the
+    run ``groups`` (indices into ``per_run``; runs that share their random draws are resampled together)."""
+    n = len(groups)
     if n < 2:
         return float("nan")
-    vals = [stat([per_run[k] for k in rng.integers(0, n, n)]) for _ in range(_BOOTSTRAP)]
+    vals = [stat([per_run[i] for k in rng.integers(0, n, n) for i in groups[k]]) for _ in range(_BOOTSTRAP)]
     return float(np.std(vals, ddof=1))
 
 
@@ -282,15 +286,19 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
         "tracker_noise_theta_rad": sigma_th,
     }
     per_run_gains = list(gains)
+    by_group: dict[str, list[int]] = {}
+    for i, run in enumerate(runs):
+        by_group.setdefault(run.group or f"#{i}", []).append(i)
+    groups = list(by_group.values())
     std = {
         "motor_time_constant_s": _std_from_jacobian(res, 0),
-        "wheel_gain_mean": _bootstrap(per_run_gains, lambda gs: float(np.mean(gs)), rng),
-        "wheel_bias_sigma": _bootstrap(per_run_gains, lambda gs: float(np.ravel(gs).std(ddof=1)), rng),
+        "wheel_gain_mean": _bootstrap(per_run_gains, groups, lambda gs: float(np.mean(gs)), rng),
+        "wheel_bias_sigma": _bootstrap(per_run_gains, groups, lambda gs: float(np.ravel(gs).std(ddof=1)), rng),
         "wheel_noise_rel": rel_std,
         "wheel_noise_abs_m_s": rel_std * ratio,
         "tracker_latency_s": latency_std,
-        "tracker_noise_xy_m": _bootstrap([p for p, _ in d2], lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
-        "tracker_noise_theta_rad": _bootstrap([a for _, a in d2], lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
+        "tracker_noise_xy_m": _bootstrap([p for p, _ in d2], groups, lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
+        "tracker_noise_theta_rad": _bootstrap([a for _, a in d2], groups, lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
     }
     out_profile = apply_overrides(base, {k: min(max(v, OVERRIDE_LIMITS[k][0]), OVERRIDE_LIMITS[k][1])
                                          for k, v in values.items()})

@@ -93,3 +93,19 @@ def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
         assert im.size[0] > 600
     r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path / "nowhere")
     assert r.returncode == 2 and "is not a study directory" in r.stderr
+
+
+def test_twb_calibrate_asks_for_a_variant(capsys, monkeypatch, tmp_path):
+    from client_sdk.study import StudySpec
+
+    spec = StudySpec.from_json({"name": "two", "environments": ["room"], "plans": ["A", "B"], "planners": ["fmm"],
+                                "repetitions": 1, "modes": ["twb"], "seed": 1}, "two")
+    data = _bench().study_data(spec)
+    for row, label in zip(data.rows, ("noiseless", "tracker 3 mm")):
+        row["profile"] = label
+    data.save(tmp_path)
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path)
+    assert r.returncode == 2
+    assert "2 robot variants (noiseless, tracker 3 mm): choose one with --variant" in r.stderr
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path, "--variant", "noiseless")
+    assert r.returncode == 2 and "1 completed field run(s) of variant 'noiseless'; calibration needs at least 2" in r.stderr

@@ -18,7 +18,8 @@ def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
     """The completed field runs of a study (:class:`client_sdk.study.StudyData`) as
     :class:`robot_agent.calibration.RecordedRun`: the experiment's planned path, the start where the gripper
     put the robot (facing the goal without a heading; moved by the study's seeded jitter), the tracked poses
-    from the path's start to its end, the environment's blocks; only the profile ``variant`` if given."""
+    from the path's start to its end, the environment's blocks, grouped by seed (runs with one seed drew the
+    same random numbers); only the profile ``variant`` if given."""
     import numpy as np
 
     from robot_agent.calibration import RecordedRun
@@ -50,7 +51,8 @@ def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
         poses[:, 0] -= t0
         runs.append(RecordedRun(np.asarray(exp["planned_path"], dtype=float), tuple(start), poses,
                                 block_tuples(data.environments[exp["environment"]]), area,
-                                f"run {row['run_id']} ({exp['environment']} {exp['plan']} {row['configuration']})"))
+                                f"run {row['run_id']} ({exp['environment']} {exp['plan']} {row['configuration']})",
+                                str(row["seed"])))
     return runs
 
 
