@@ -58,16 +58,29 @@ def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
 
 def calibration_figure(runs: list[Any], cal: Any, columns: int = 4):  # type: ignore[no-untyped-def]
     """Measured (tracked) against re-simulated paths, one panel a run (at most 12): the planned path dashed,
-    the tracked one red, the noise-free re-simulation with the fitted values blue."""
+    the tracked one red, the noise-free re-simulation with the fitted values blue; below, every run's distance
+    between the two over time (mm)."""
+    import numpy as np
     from matplotlib.figure import Figure
 
     shown = runs[:12]
     cols = min(columns, len(shown))
     rows = math.ceil(len(shown) / cols)
-    fig = Figure(figsize=(3.0 * cols, 3.0 * rows + 0.7), layout="constrained")
-    axes = fig.subplots(rows, cols, squeeze=False)
+    fig = Figure(figsize=(3.0 * cols, 3.0 * rows + 2.6), layout="constrained")
+    grid = fig.add_gridspec(rows + 1, cols, height_ratios=[3.0] * rows + [1.9])
+    axes = np.array([[fig.add_subplot(grid[r, c]) for c in range(cols)] for r in range(rows)])
     for ax in axes.ravel()[len(shown):]:
         ax.set_visible(False)
+    dist = fig.add_subplot(grid[rows, :])
+    for run, sim in zip(runs, cal.resimulated):
+        t = run.poses[:, 0]
+        gap = np.hypot(run.poses[:, 1] - np.interp(t, sim[:, 0], sim[:, 1]),
+                       run.poses[:, 2] - np.interp(t, sim[:, 0], sim[:, 2]))
+        dist.plot(t, gap * 1000, lw=0.7, alpha=0.7)
+    dist.set_xlabel("time from the path's start (s)", fontsize=8)
+    dist.set_ylabel("tracked − re-simulated (mm)", fontsize=8)
+    dist.tick_params(labelsize=7)
+    dist.grid(alpha=0.3)
     for ax, run, sim in zip(axes.ravel(), shown, cal.resimulated):
         ax.plot(run.path[:, 0], run.path[:, 1], "--", color="0.55", lw=1, label="planned")
         ax.plot(run.poses[:, 1], run.poses[:, 2], color="tab:red", lw=1.2, label="tracked")
