@@ -76,8 +76,6 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     ctx = RunContext(assignment, svc.field.robots[assignment.robot_id], svc.settings.time_scale,
                      svc.settings.run_slack_s)
     robot = ctx.robot.robot_id
-    # an engine slot is not a robot: nothing to avoid on the retry, nothing to take offline
-    blame = None if ctx.robot.engine else robot
     try:
         await _carry_out(ctx, svc)
         end = RunEnd(RunStatus.COMPLETED)
@@ -90,11 +88,11 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     except EngineFault as exc:
         end = RunEnd(RunStatus.ERROR, str(exc))
     except TestbedFault as exc:
-        end = RunEnd(RunStatus.ERROR, str(exc), robot_fault=blame)
+        end = RunEnd(RunStatus.ERROR, str(exc), robot_fault=_blame(ctx))
     except RunEnded as exc:
         end = RunEnd(exc.status, str(exc))
     except OSError as exc:
-        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=blame)
+        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=_blame(ctx))
     except DBAPIError as exc:
         log.warning("run %d: the database went away: %s", ctx.run_id, exc.orig)
         end = RunEnd(RunStatus.INTERRUPTED, "the database was unreachable during this run", resume=True)
@@ -103,7 +101,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
                else RunEnd(RunStatus.CANCELLED, "cancelled by its owner"))
     except Exception as exc:  # noqa: BLE001 - a bug must end the run as an error, not kill the testbed
         log.exception("run %d crashed", ctx.run_id)
-        end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=blame)
+        end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=_blame(ctx))
     finally:
         svc.tracker.close(robot)
     try:
@@ -115,6 +113,12 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     return end
 
 
+def _blame(ctx: RunContext) -> Optional[str]:
+    """The robot a testbed fault is held against: none for a task (an engine slot is not a robot, and a
+    field-robot variant's task did not use it): nothing to avoid on the retry, nothing to take offline."""
+    return None if ctx.as_task else ctx.robot.robot_id
+
+
 async def _carry_out(ctx: RunContext, svc: RunServices) -> None:
     """On a compute engine's slot, or a field run with profile overrides (the emulated field robot with
     other parameters, :mod:`.remote`): one task; else the steps on the robot."""
@@ -123,6 +127,7 @@ async def _carry_out(ctx: RunContext, svc: RunServices) -> None:
         return
     job = await svc.recorder.job(ctx.run_id)
     if job.mode == "twb" and job.profile_overrides:
+        ctx.as_task = True
         await run_on_engine(ctx, svc, job)
     else:
         await _steps(ctx, svc, job)
