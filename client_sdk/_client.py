@@ -183,7 +183,8 @@ class Client(BaseClient):
                planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                repetitions: Optional[int] = None, seed: Optional[int] = None,
                field: Optional[str] = None, program: Optional[int] = None,
-               jitter: Optional[Mapping[str, float]] = None) -> Experiment:
+               jitter: Optional[Mapping[str, float]] = None,
+               profile_overrides: Optional[Mapping[str, float]] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
@@ -193,14 +194,17 @@ class Client(BaseClient):
         ``program``'s id (:meth:`upload_program`).  Omitted fields take
         the server's defaults (modes sim and twb, 1 repetition, seed 0,
         ``field="sub"``).  ``jitter`` (``{"xy_m", "theta_rad"}``, standard
-        deviations) starts every run a seeded little way off the start.
+        deviations) starts every run a seeded little way off the start;
+        ``profile_overrides`` (``{"tracker_noise_xy_m": 0.003}``, SI units)
+        gives the job's field runs other field parameters of the robot
+        profile (docs/fidelity.md, "Noise studies").
         :class:`ValidationError` carries the server's reason when the job
         cannot run.
         """
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program, jitter=jitter)
+                      program=program, jitter=jitter, profile_overrides=profile_overrides)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -352,12 +356,13 @@ class AsyncClient(BaseClient):
                      planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                      repetitions: Optional[int] = None, seed: Optional[int] = None,
                      field: Optional[str] = None, program: Optional[int] = None,
-                     jitter: Optional[Mapping[str, float]] = None) -> Experiment:
+                     jitter: Optional[Mapping[str, float]] = None,
+                     profile_overrides: Optional[Mapping[str, float]] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program, jitter=jitter)
+                      program=program, jitter=jitter, profile_overrides=profile_overrides)
         return await self._send(self._submit(job, fields))
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,

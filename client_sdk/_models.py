@@ -237,6 +237,7 @@ class Experiment(ExperimentSummary):
     planning_time_s: Optional[float] = None
     planning_info: dict[str, Any] = _field(default_factory=dict)
     jitter: Optional[dict[str, float]] = None
+    profile_overrides: Optional[dict[str, float]] = None
     started_at: Optional[datetime] = None
     runs: list[Run] = _field(default_factory=list)
 

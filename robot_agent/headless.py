@@ -59,10 +59,12 @@ class HeadlessRun:
 def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[float], *, seed: int,
                  blocks: Sequence[Sequence[float]] = (), backend: str = "ideal",
                  profile: str | dict = DEFAULT_PROFILE, area: tuple[float, float] = FIELD_SIZE,
-                 max_s: float = 3600.0) -> HeadlessRun:
+                 max_s: float = 3600.0, track_gains: tuple[float, float] | None = None) -> HeadlessRun:
     """Run ``path`` ``(N, 3)`` (m, m, rad) from ``start`` (x, y, theta) among ``blocks`` (cx, cy, w, h,
     angle: m, rad) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
-    ``max_s`` of experiment time passed.  Raises :class:`PlacementRefused` when the start is not free."""
+    ``max_s`` of experiment time passed.  ``track_gains`` (left, right; field backend) replaces the run's
+    drawn track gains (calibration re-simulates runs with fitted ones).  Raises :class:`PlacementRefused`
+    when the start is not free."""
     params = robot_params(profile)
     sizes, world_of, origin, areas = field_layout(1, "separate", area)
     world = World(sizes, world_of, origin, areas, params.collision_radius_m)
@@ -79,6 +81,8 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
     core.place(0, placed.pose)
     core.poses.drain()
     core.set_path(0, sent.points, path_key(seed))
+    if track_gains is not None:
+        core.backend.gain[0] = track_gains
     events: list[SimEvent] = []
     left = math.ceil(max_s / core.dt)
     while left > 0 and core.busy():

@@ -11,7 +11,7 @@ import json
 from importlib import resources
 from typing import Any
 
-__all__ = ["DEFAULT_PROFILE", "load_profile", "profile_names"]
+__all__ = ["DEFAULT_PROFILE", "load_profile", "profile_for_platform", "profile_names"]
 
 DEFAULT_PROFILE = "bebot"
 
@@ -28,3 +28,12 @@ def load_profile(name: str = DEFAULT_PROFILE) -> dict[str, Any]:
         raise ValueError(f"unknown robot profile {name!r} (profiles: {', '.join(profile_names())})")
     text = resources.files("robot_agent").joinpath("profiles", f"{name}.json").read_text("utf-8")
     return json.loads(text)
+
+
+def profile_for_platform(platform: str) -> str:
+    """The name of the shipped profile whose ``platform`` is ``platform`` (``BeBot`` -> ``bebot``); the default
+    profile when none is."""
+    for name in profile_names():
+        if load_profile(name).get("platform") == platform:
+            return name
+    return DEFAULT_PROFILE

@@ -135,6 +135,8 @@ class Experiment(Base):
     planning_info: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     #: start-pose jitter of every run, ``{"xy_m", "theta_rad"}`` (standard deviations), or None
     jitter: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, nullable=True)
+    #: field parameters of the robot profile for the field runs, ``{"tracker_noise_xy_m": 0.003}`` (SI), or None
+    profile_overrides: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, nullable=True)
     error: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)

@@ -183,6 +183,17 @@ class ExperimentCreate(Strict):
     jitter: Optional[Jitter] = Field(default=None, description=(
         "Seeded start-pose jitter for every run, both modes: repetitions then start a little apart, as on a "
         "real field (the ideal simulation is otherwise deterministic)."))
+    profile_overrides: Optional[dict[str, Any]] = Field(default=None, description=(
+        "Field parameters of the robot profile for this job's field runs, e.g. {\"tracker_noise_xy_m\": 0.003} "
+        "(SI units; names and physical ranges: robot_agent/overrides.py, docs/fidelity.md \"Noise studies\"): "
+        "its field runs are the emulated field robot with these values."))
+
+    @field_validator("profile_overrides")
+    @classmethod
+    def _overrides(cls, v: Optional[dict[str, Any]]) -> Optional[dict[str, float]]:
+        from robot_agent.overrides import check_overrides
+
+        return check_overrides(v) or None if v is not None else None
 
     @field_validator("start", "goal")
     @classmethod
@@ -212,6 +223,8 @@ class ExperimentCreate(Strict):
 
     @model_validator(mode="after")
     def _planner_or_path(self) -> "ExperimentCreate":
+        if self.profile_overrides and "twb" not in self.modes:
+            raise ValueError("profile_overrides change the emulated field robot: they need mode \"twb\"")
         if self.path is not None and self.planner is not None:
             raise ValueError("give either `planner` or `path`, not both")
         if self.program is not None:
@@ -293,6 +306,8 @@ class ExperimentPublic(ExperimentSummary):
     planning_time_s: Optional[float]
     planning_info: dict[str, Any]
     jitter: Optional[dict[str, float]] = None
+    profile_overrides: Optional[dict[str, float]] = Field(default=None, description=(
+        "The field parameters this job's field runs had instead of the robot profile's (None: the profile's)."))
     started_at: Optional[UTCDateTime]
     runs: list[RunPublic]
 

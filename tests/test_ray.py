@@ -28,6 +28,9 @@ JOBS = [
      "modes": ["sim"], "repetitions": 2, "seed": 42, "jitter": {"xy_m": 0.01, "theta_rad": 0.05}},
     {"environment": "blocks", "start": [0.2, 1.6, 0.0], "goal": [1.6, 0.2, 0.0], "planner": "fm2",
      "modes": ["sim"], "repetitions": 1, "seed": 7},
+    # a field-robot variant (noise study): a task in the worker pool there, on Ray here
+    {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fmm",
+     "modes": ["twb"], "repetitions": 1, "seed": 5, "profile_overrides": {"tracker_noise_xy_m": 0.002}},
 ]
 
 
@@ -75,10 +78,13 @@ def test_a_run_on_ray_equals_the_same_run_on_a_local_agent(postgres, tmp_path):
         assert on_ray.stop() == 0, on_ray.output()
     assert "Traceback" not in on_ray.output(), on_ray.output()
     statuses = [[r["status"] for r, _ in runs] for runs in theirs]
-    assert statuses == [["completed", "completed"], ["completed"]]
-    for runs_a, runs_b in zip(mine, theirs):
+    assert statuses == [["completed", "completed"], ["completed"], ["completed"]]
+    for job, runs_a, runs_b in zip(JOBS, mine, theirs):
         for (ra, pa), (rb, pb) in zip(runs_a, runs_b):
-            assert rb["robot_id"].startswith("ray-") and ra["robot_id"] == "sim-1"
+            if job["modes"] == ["twb"]:
+                assert ra["robot_id"].startswith("field-") and rb["robot_id"].startswith("field-")
+            else:
+                assert rb["robot_id"].startswith("ray-") and ra["robot_id"] == "sim-1"
             for k in ("status", "failure", "stopped_at", "error"):
                 assert ra.get(k) == rb.get(k), k
             pa = pa[pa[:, 0] >= ra["t_start"] - 1e-9]  # the agent logs the robot standing before the path too

@@ -10,8 +10,8 @@ import sys
 
 import typer
 
-from . import (agent_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, plugins_cmd, replay_cmd, server_cmd, study_cmd,
-               upload_cmd)
+from . import (agent_cmd, calibrate_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, plugins_cmd, replay_cmd, server_cmd,
+               study_cmd, upload_cmd)
 from .errors import report_exception
 
 app = typer.Typer(
@@ -41,6 +41,7 @@ app.command("upload")(upload_cmd.upload)
 app.command("replay")(replay_cmd.replay)
 app.command("study")(study_cmd.study)
 app.command("export-ompl")(study_cmd.export_ompl)
+app.command("calibrate")(calibrate_cmd.calibrate)
 
 
 def main(argv: list[str] | None = None) -> int:

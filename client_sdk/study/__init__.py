@@ -25,7 +25,7 @@ from ._findings import FINDINGS, Finding, findings_json, findings_markdown, pape
 from ._ompl import export_ompl
 from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
-from ._spec import PAPER, PlannerSpec, PlanSpec, StudySpec, StudySpecError, load_spec, paper_spec
+from ._spec import NOISE, PAPER, PlannerSpec, PlanSpec, ProfileSpec, StudySpec, StudySpecError, load_spec, noise_spec, paper_spec
 from ._verdict import Answer, which_is_better
 
 __all__ = sorted(
@@ -37,8 +37,10 @@ __all__ = sorted(
         "OutcomeSummary",
         "FINDINGS",
         "Finding",
+        "NOISE",
         "PAPER",
         "PlanSpec",
+        "ProfileSpec",
         "PlannerSpec",
         "StudyData",
         "StudyJob",
@@ -48,6 +50,7 @@ __all__ = sorted(
         "check_study",
         "compare",
         "export_ompl",
+        "noise_spec",
         "figure_metrics",
         "figure_outcomes",
         "findings_json",

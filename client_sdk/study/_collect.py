@@ -15,18 +15,20 @@ from .._exceptions import Conflict, NotFound, RateLimited, TwbError, ValidationE
 from .._models import Environment, Experiment, ExperimentMetrics
 from ._data import StudyData
 from ._limits import StudyRefused, check_study, refusal
-from ._spec import PlannerSpec, PlanSpec, StudySpec, StudySpecError
+from ._spec import PlannerSpec, PlanSpec, ProfileSpec, StudySpec, StudySpecError
 from ._stream import StudySink
 
-__all__ = ["StudyJob", "StudyRefused", "flat_metrics", "plan_jobs", "run_study"]
+__all__ = ["StudyJob", "StudyRefused", "configuration", "flat_metrics", "plan_jobs", "run_study"]
 
 
 class StudyJob(dict):
     """One experiment of a study: environment, plan, planner, configuration and the job body sent to the server."""
 
 
-def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, spec: StudySpec) -> dict[str, Any]:
-    """The job sent to the server for one problem and configuration (an explicit path: start, waypoints, goal)."""
+def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, spec: StudySpec,
+          profile: Optional[ProfileSpec] = None) -> dict[str, Any]:
+    """The job sent to the server for one problem and configuration (an explicit path: start, waypoints, goal),
+    with the field robot's ``profile`` variant."""
     body: dict[str, Any] = {"environment": name, "start": list(start), "goal": list(goal)}
     if planner.waypoints is not None:
         body["path"] = [list(start), *[list(w) for w in planner.waypoints], list(goal)]
@@ -35,6 +37,8 @@ def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec
     body.update(modes=list(spec.modes), repetitions=spec.repetitions, seed=spec.seed, field=spec.field)
     if spec.jitter is not None:
         body["jitter"] = dict(spec.jitter)
+    if profile is not None and profile.overrides:
+        body["profile_overrides"] = dict(profile.overrides)
     return body
 
 
@@ -71,11 +75,19 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
             else:
                 start, goal = plan.start, plan.goal
             for planner in spec.planners:
-                jobs.append(StudyJob(environment=name, plan=plan.name,
-                                     planner=planner.name if planner.waypoints is None else "path",
-                                     configuration=planner.configuration,
-                                     body=_body(name, start, goal, planner, spec)))
+                for profile in spec.profiles or [None]:
+                    jobs.append(StudyJob(environment=name, plan=plan.name,
+                                         planner=planner.name if planner.waypoints is None else "path",
+                                         configuration=configuration(planner, profile),
+                                         profile=profile.label if profile else "",
+                                         body=_body(name, start, goal, planner, spec, profile)))
     return jobs
+
+
+def configuration(planner: PlannerSpec, profile: Optional[ProfileSpec]) -> str:
+    """A compared configuration's name: the planner configuration's, with the field robot's variant if any
+    (``fmm · tracker 3 mm``)."""
+    return planner.configuration if profile is None else f"{planner.configuration} · {profile.label}"
 
 
 #: how many of the oldest unfinished experiments are looked at per poll (the queue runs them about in order)
@@ -287,8 +299,9 @@ def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any
     body = job["body"]
     return {
         "experiment_id": job.get("experiment_id"), "environment": job["environment"], "plan": job["plan"],
-        "planner": job["planner"], "configuration": job["configuration"],
-        "planner_params": body.get("planner_params", {}), "path": body.get("path"), "start": body["start"],
+        "planner": job["planner"], "configuration": job["configuration"], "profile": job.get("profile", ""),
+        "profile_overrides": body.get("profile_overrides", {}), "planner_params": body.get("planner_params", {}),
+        "path": body.get("path"), "start": body["start"],
         "goal": body["goal"], "repetitions": body["repetitions"], "modes": body["modes"],
         "status": exp.status if exp else "rejected", "error": exp.error if exp else job.get("rejected", ""),
         "planned_path": exp.planned_path.tolist() if exp is not None and exp.planned_path is not None else None,
@@ -303,7 +316,7 @@ def _rows(spec: StudySpec, job: StudyJob, exp: Experiment,
     rows, direct = [], []
     st = {d.repetition: d for d in metrics.direct}
     ident = {"study": spec.name, "experiment_id": exp.id, "environment": job["environment"], "plan": job["plan"],
-             "planner": job["planner"], "configuration": job["configuration"]}
+             "planner": job["planner"], "configuration": job["configuration"], "profile": job.get("profile", "")}
     for run in exp.runs:
         stop = run.stopped_at or [None, None]
         row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,

@@ -39,10 +39,10 @@ __all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "csv_cell", "load_study"
 #: leading columns of runs.csv (the metrics follow)
 ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "configuration", "mode",
               "repetition", "seed", "status", "outcome", "failure", "error", "stopped_at_x", "stopped_at_y", "subfield",
-              "robot_id", "t_start", "t_end")
+              "robot_id", "t_start", "t_end", "profile")
 DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "configuration", "repetition",
-                  "sim_run_id", "twb_run_id")
-_STRINGS = {"study", "environment", "plan", "planner", "configuration", "mode", "status", "outcome", "failure", "error",
+                  "sim_run_id", "twb_run_id", "profile")
+_STRINGS = {"study", "environment", "plan", "planner", "configuration", "profile", "mode", "status", "outcome", "failure", "error",
             "robot_id"}
 
 

@@ -83,14 +83,15 @@ def _completed(data: StudyData) -> list[dict[str, Any]]:
 
 
 def _tick_label(data: StudyData, config: str, modes: Iterable[str]) -> str:
-    """``FM²`` and, per mode, completed of runs: ``S 2/2 · T 0/2``."""
+    """``FM²`` (a field-robot variant on a line of its own: ``FMM\ntracker 3 mm``) and, per mode, completed of
+    runs: ``S 2/2 · T 0/2``."""
     from ._verdict import display_name
 
     counts = []
     for m in modes:
         mine = [r for r in data.rows if r["configuration"] == config and r["mode"] == m]
         counts.append(f"{SHORT.get(m, m)} {sum(r.get('status') == 'completed' for r in mine)}/{len(mine)}")
-    return display_name(config) + "\n" + " · ".join(counts)
+    return display_name(config).replace(" · ", "\n", 1) + "\n" + " · ".join(counts)
 
 
 def _grouped_bars(ax, labels: list[str], series: dict[str, list[tuple[Optional[float], Optional[float]]]],  # type: ignore[no-untyped-def]

@@ -8,15 +8,22 @@ dependency)::
      "plans": ["A", "B"],                          # plan names of each environment; omit for all of them
      "planners": ["fmm", "fm2", {"name": "prm", "params": {"samples": 800}}],
      "repetitions": 2, "modes": ["sim", "twb"], "seed": 0, "field": "sub",
-     "jitter": {"xy_m": 0.005, "theta_rad": 0.02}}  # optional: start-pose noise, so repetitions differ
+     "jitter": {"xy_m": 0.005, "theta_rad": 0.02},  # optional: start-pose noise, so repetitions differ
+     "profiles": [{"label": "noiseless", "tracker_noise_xy_m": 0},     # optional: field-robot variants
+                  {"tracker_noise_xy_m": 0.003}]}
 
 ``plans`` may also hold explicit start/goal pairs, ``{"name": "C", "start":
 [x, y, theta], "goal": [x, y, theta]}`` (m, rad), used in every environment.
 A planner entry may carry a ``"label"`` (the configuration's name in tables;
 default: the name, with the parameters if any) or, instead of a planner,
 ``"waypoints"``: ``{"name": "corner", "waypoints": [[x, y], ...]}`` sends the
-explicit path start -> waypoints -> goal of each problem.  Every combination
-environment x plan x planner is one experiment with ``repetitions`` runs per mode.
+explicit path start -> waypoints -> goal of each problem.  ``profiles`` lists
+variants of the field robot: field parameters of the robot profile
+(:data:`robot_agent.overrides.OVERRIDE_LIMITS`, SI units) with an optional
+``"label"`` (default: the overrides, ``tracker_noise_xy_m=0.003``; ``shipped``
+for none); each planner configuration is then compared per variant, as
+``fmm · noiseless``.  Every combination environment x plan x planner (x profile
+variant) is one experiment with ``repetitions`` runs per mode.
 """
 
 from __future__ import annotations
@@ -27,9 +34,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
-__all__ = ["JITTER_LIMITS", "PAPER", "PlannerSpec", "PlanSpec", "StudySpec", "StudySpecError", "load_spec", "paper_spec"]
+from robot_agent.overrides import OverrideError, check_overrides, overrides_label
 
-_KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter"}
+__all__ = ["JITTER_LIMITS", "NOISE", "PAPER", "PlannerSpec", "PlanSpec", "ProfileSpec", "StudySpec", "StudySpecError",
+           "load_spec", "noise_spec", "paper_spec"]
+
+_KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter",
+         "profiles"}
 _PLANNER_KEYS = {"name", "params", "label", "waypoints"}
 #: the server's bounds of a job's start-pose jitter (standard deviations: m, rad)
 JITTER_LIMITS = {"xy_m": 0.05, "theta_rad": 0.5}
@@ -82,6 +93,17 @@ class PlanSpec:
 
 
 @dataclass(frozen=True)
+class ProfileSpec:
+    """A variant of the field robot: field parameters of its profile (SI units) and the variant's name."""
+
+    label: str
+    overrides: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"label": self.label, **self.overrides}
+
+
+@dataclass(frozen=True)
 class StudySpec:
     """A cross-product study; see the module docstring for the file format."""
 
@@ -95,6 +117,7 @@ class StudySpec:
     field: str = "sub"
     description: str = ""
     jitter: Optional[dict[str, float]] = None
+    profiles: Optional[list[ProfileSpec]] = None
 
     def environment_names(self) -> list[str]:
         return [e if isinstance(e, str) else e["name"] for e in self.environments]
@@ -104,6 +127,10 @@ class StudySpec:
         d["planners"] = [p.to_json() for p in self.planners]
         if self.jitter is None:
             del d["jitter"]
+        if self.profiles is None:
+            del d["profiles"]
+        else:
+            d["profiles"] = [p.to_json() for p in self.profiles]
         if self.plans is not None:
             d["plans"] = [p["name"] if p["start"] is None else p for p in d["plans"]]
         return d
@@ -166,12 +193,15 @@ class StudySpec:
         if fld not in ("sub", "full"):
             raise bad(f"`field` must be \"sub\" or \"full\", got {fld!r}")
         jitter = _jitter(data.get("jitter"), bad)
+        profiles = _profiles(data.get("profiles"), bad)
+        if profiles is not None and "twb" not in modes:
+            raise bad("`profiles` vary the field robot: `modes` must include \"twb\"")
         name = data.get("name", Path(source).stem if source != "study" else "study")
         if not isinstance(name, str) or not name:
             raise bad("`name` must be a non-empty string")
         return cls(name=name, environments=list(envs), planners=pspecs, plans=plan_specs, repetitions=reps,
                    modes=list(modes), seed=seed, field=fld, description=str(data.get("description", "")),
-                   jitter=jitter)
+                   jitter=jitter, profiles=profiles)
 
     @property
     def runs_per_experiment(self) -> int:
@@ -227,6 +257,34 @@ def _jitter(j: Any, bad: Any) -> Optional[dict[str, float]]:
     return out
 
 
+def _profiles(p: Any, bad: Any) -> Optional[list[ProfileSpec]]:
+    """``profiles``: a non-empty list of ``{"label"?, <field parameter>: value, ...}``, each checked against the
+    parameter's physical range, with distinct labels."""
+    if p is None:
+        return None
+    if not isinstance(p, list) or not p:
+        raise bad("`profiles` must be a non-empty list of objects of field parameters, e.g. "
+                  "[{\"label\": \"noiseless\", \"tracker_noise_xy_m\": 0}]")
+    out: list[ProfileSpec] = []
+    for i, entry in enumerate(p):
+        if not isinstance(entry, Mapping):
+            raise bad(f"profiles[{i}] must be an object of field parameters with an optional \"label\"")
+        label = entry.get("label")
+        if label is not None and not (isinstance(label, str) and label.strip()):
+            raise bad(f"profiles[{i}].label must be a non-empty string")
+        try:
+            overrides = check_overrides({k: v for k, v in entry.items() if k != "label"}, f"profiles[{i}]")
+        except OverrideError as exc:
+            raise bad(str(exc)) from None
+        spec = ProfileSpec(label or overrides_label(overrides), overrides)
+        twin = next((j for j, o in enumerate(out) if o.label == spec.label), None)
+        if twin is not None:
+            raise bad(f"profiles[{i}] has the label of profiles[{twin}] ({spec.label}): give each variant a "
+                      "distinct \"label\"")
+        out.append(spec)
+    return out
+
+
 #: The paper's study: both environments x plans A and B x FMM, FM², PRM x 2 repetitions x {sim, twb}.
 PAPER: dict[str, Any] = {
     "name": "paper",
@@ -246,10 +304,39 @@ def paper_spec() -> StudySpec:
     return StudySpec.from_json(PAPER, "paper")
 
 
+#: The noise study: FMM on the paper's problems, on the field robot as shipped and with more tracker noise,
+#: slower motors, more wheel slip; 5 repetitions per variant and problem (80 field runs).
+NOISE: dict[str, Any] = {
+    "name": "noise",
+    "description": "Sensor noise and control inaccuracies: FMM on both paper environments x plans A, B on the field "
+                   "robot as shipped, with 3 mm tracker jitter, with 0.4 s motor lag and with 4x wheel slip, "
+                   "5 repetitions each (80 field runs)",
+    "environments": ["room", "blocks"],
+    "plans": ["A", "B"],
+    "planners": ["fmm"],
+    "repetitions": 5,
+    "modes": ["twb"],
+    "seed": 0,
+    "profiles": [
+        {"label": "shipped"},
+        {"label": "tracker 3 mm", "tracker_noise_xy_m": 0.003},
+        {"label": "motor lag 0.4 s", "motor_time_constant_s": 0.4},
+        {"label": "wheel slip x4", "wheel_noise_rel": 0.32, "wheel_noise_abs_m_s": 0.016},
+    ],
+}
+
+
+def noise_spec() -> StudySpec:
+    """The noise study (80 field runs; docs/fidelity.md, "Noise studies")."""
+    return StudySpec.from_json(NOISE, "noise")
+
+
 def load_spec(source: str | Path) -> StudySpec:
-    """``"paper"`` or a study file (``.json``; ``.yaml``/``.yml`` if PyYAML is installed)."""
+    """``"paper"``, ``"noise"`` or a study file (``.json``; ``.yaml``/``.yml`` if PyYAML is installed)."""
     if str(source) == "paper":
         return paper_spec()
+    if str(source) == "noise":
+        return noise_spec()
     path = Path(source)
     try:
         text = path.read_text()

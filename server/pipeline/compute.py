@@ -103,11 +103,15 @@ def block_tuples(env_data: dict[str, Any]) -> list[tuple[float, float, float, fl
 
 def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list[list[float]], seed: int,
                  max_s: float, goal: list[float], robot_radius: float,
-                 planning_time_s: Optional[float]) -> dict[str, Any]:
-    """One simulation-mode run without a robot agent (a Ray task): the ideal robot follows ``path`` from the
-    first free pose of ``starts`` (x, y, theta; m, rad: the jittered start, then the start itself) among the
-    environment's blocks for at most ``max_s`` experiment seconds, as an agent's simulation robot would
-    (:func:`robot_agent.headless.simulate_run`), then is measured.
+                 planning_time_s: Optional[float], backend: str = "ideal", platform: str = "BeBot",
+                 overrides: Optional[dict[str, float]] = None,
+                 area: Optional[tuple[float, float]] = None) -> dict[str, Any]:
+    """One run without a robot agent (a Ray or worker-process task): the ``backend`` robot (``ideal``; or
+    ``field``, the emulated field robot of ``platform``'s profile with the field parameters ``overrides``)
+    follows ``path`` from the first free pose of ``starts`` (x, y, theta; m, rad: the jittered start, then
+    the start itself) among the environment's blocks in a world of ``area`` (m; default the whole field) for at most ``max_s``
+    experiment seconds, as an agent's robot would (:func:`robot_agent.headless.simulate_run`), then is
+    measured.
 
     Returns ``{"poses"`` ``(N, 4)`` t s, x m, y m, theta rad (field frame), ``"lines"`` the protocol
     lines an agent would have exchanged (``[direction, line, t]``), ``"t_start"``, ``"t_end"``,
@@ -119,18 +123,22 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     import time
 
     from robot_agent.headless import PlacementRefused, simulate_run
+    from robot_agent.overrides import apply_overrides
     from robot_agent.protocol import encode_build, encode_path, encode_place, format_event
+    from robot_agent.robot_profile import load_profile, profile_for_platform
 
     pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
     if pause > 0:
         time.sleep(pause)
     blocks = block_tuples(env_data)
+    profile = apply_overrides(load_profile(profile_for_platform(platform)), overrides)
     lines: list[list[Any]] = [[">", encode_build(blocks), None]]
     run = None
     for i, start in enumerate(starts):
         lines.append([">", encode_place(start), None])
         try:
-            run = simulate_run(path, start, seed=seed, blocks=blocks, max_s=max_s)
+            run = simulate_run(path, start, seed=seed, blocks=blocks, max_s=max_s, backend=backend,
+                               profile=profile, **({} if area is None else {"area": tuple(area)}))
             break
         except PlacementRefused as exc:
             lines.append(["<", f"ERR,RANGE,{exc}", None])

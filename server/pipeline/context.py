@@ -62,6 +62,8 @@ class RunContext:
         self.robot = robot
         self.time_scale = time_scale
         self.slack_s = slack_s
+        #: the run is carried out as a task (an engine slot's, or a field-robot variant's), not by the robot
+        self.as_task = bool(robot.engine)
         self.messages: list[dict[str, Any]] = []
         self._taken_at = time.monotonic()
         #: what is stored with the run's end, in its one transaction: run fields (metrics, t_start …) and the

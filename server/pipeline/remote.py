@@ -1,5 +1,9 @@
 """A simulation-mode run as one compute-engine task (Ray): no agent, no socket, the same numbers.
 
+A field run whose job has profile overrides runs the same way, as the emulated field robot with those
+parameters (:func:`server.pipeline.compute.simulate_job` with the field backend), while it holds the robot
+and sub-field the scheduler gave it.
+
 The steps of :mod:`server.pipeline.runner` collapse into one task
 (:func:`server.pipeline.compute.simulate_job`): the gripper's build and
 placement (the jittered start when it is free, else the start), the path
@@ -13,26 +17,40 @@ exchanged go to the run's log, and the end is classified as a robot's
 
 from __future__ import annotations
 
-from typing import Any
+import json
+from typing import Any, Optional
 
 import numpy as np
+
+from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from ..errors import FailureKind, RunFailed, TestbedFault
 from ..models import utcnow
 from ..status import RunStatus
+from ..store.runs import RunJob
 from . import compute, steps
 from .context import RunContext, RunServices
 
-__all__ = ["run_on_engine"]
+__all__ = ["run_on_engine", "start_status"]
 
 
-async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
-    """Carry out the run as an engine task; raises as :func:`server.pipeline.runner` expects of its steps."""
+def start_status(svc: RunServices, job: RunJob) -> RunStatus:
+    """The state a task's run starts in: ``running``, or ``planning`` when its experiment has no path yet."""
+    return RunStatus.RUNNING if svc.paths.known(job.experiment_id) else RunStatus.PLANNING
+
+
+async def run_on_engine(ctx: RunContext, svc: RunServices, job: Optional[RunJob] = None) -> None:
+    """Carry out the run as a task (``job``: the run's, when already loaded); raises as
+    :func:`server.pipeline.runner` expects of its steps.  A field run (mode ``twb``, on a field robot) is
+    the emulated field robot with the job's profile overrides, in the robot's frame, holding its sub-field."""
     rec = svc.recorder
-    # most runs of an experiment: planned already, one write less
-    job = await rec.start(ctx.run_id, robot_id=ctx.robot.robot_id, subfield=None, started_at=utcnow(),
-                          status=lambda j: RunStatus.RUNNING if svc.paths.known(j.experiment_id) else RunStatus.PLANNING)
-    plan = svc.paths.known(job.experiment_id)
+    on_field = not ctx.robot.engine
+    if job is None:  # an engine's slot: the run starts here (a field variant's was started by the runner)
+        job = await rec.start(ctx.run_id, robot_id=ctx.robot.robot_id, subfield=None, started_at=utcnow(),
+                              status=lambda j: start_status(svc, j))
+    if on_field:
+        svc.field.claim(ctx.subfields, job.owner_id)
+    plan = svc.paths.known(job.experiment_id)  # most runs of an experiment: planned already, one write less
     if plan is None:
         plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
                                         platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
@@ -40,12 +58,21 @@ async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
     start = steps.start_pose(job)
     jittered = compute.jittered(start, job.jitter, job.seed)
     starts = [jittered, start] if jittered != start else [start]
-    ctx.on_line("s", f"simulated as a task on {ctx.robot.engine} ({ctx.robot.robot_id}): the lines below are "
-                     "the ones an agent's robot would have exchanged", None, False)
+    platform = ctx.robot.platform or "BeBot"
+    if on_field:
+        ctx.on_line("s", f"the emulated field robot {ctx.robot.robot_id} ({platform}) with profile overrides "
+                         f"{json.dumps(job.profile_overrides, sort_keys=True)}, computed as a task: the lines below "
+                         "are the ones the robot would have exchanged", None, False)
+    else:
+        ctx.on_line("s", f"simulated as a task on {ctx.robot.engine} ({ctx.robot.robot_id}): the lines below are "
+                         "the ones an agent's robot would have exchanged", None, False)
     timeout_s = steps.run_timeout_s(svc, plan.path)
+    area = None if not on_field else (FIELD_SIZE if job.field == "full" else SUBFIELD_SIZE)
     out: dict[str, Any] = await svc.pool.run(compute.simulate_job, job.environment_data, plan.path, starts,
                                              job.seed, timeout_s, job.goal,
-                                             job.robot_radius, plan.planning_time_s)
+                                             job.robot_radius, plan.planning_time_s,
+                                             "field" if job.mode == "twb" else "ideal", platform,
+                                             job.profile_overrides, area)
     for direction, line, t in out["lines"]:
         ctx.on_line(direction, line, t, False)
     if "placement_error" in out:

@@ -10,7 +10,10 @@ The steps, in order (each in :mod:`server.pipeline.steps`)::
     completed
 
 A simulation run on a compute engine's slot (Ray) is one task instead
-(planning, running, analyzing: :mod:`server.pipeline.remote`).
+(planning, running, analyzing: :mod:`server.pipeline.remote`), and so is a
+field run whose job has profile overrides: the emulated field robot with
+other parameters, computed in a worker while the run holds its robot and
+sub-field (a robot's physics cannot be changed for one run).
 
 Whose fault an ending is (:mod:`server.errors`): ``failed`` is the job's
 (no path, collision, stall, timeout), ``error`` the testbed's (robot
@@ -38,10 +41,11 @@ from ..errors import AgentRefused, AgentUnavailable, AgentUnreachable, EngineFau
 from ..models import Experiment, Run, utcnow
 from ..scheduler import Assignment
 from ..status import RunStatus
+from ..store.runs import RunJob
 from . import steps
 from .context import RunContext, RunServices
 from .recorder import RunRecorder
-from .remote import run_on_engine
+from .remote import run_on_engine, start_status
 
 __all__ = ["RunEnd", "execute_run", "failure_text", "store_end"]
 
@@ -82,10 +86,8 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     ctx = RunContext(assignment, svc.field.robots[assignment.robot_id], svc.settings.time_scale,
                      svc.settings.run_slack_s)
     robot = ctx.robot.robot_id
-    # an engine slot is not a robot: nothing to avoid on the retry, nothing to take offline
-    blame = None if ctx.robot.engine else robot
     try:
-        await (run_on_engine(ctx, svc) if ctx.robot.engine else _steps(ctx, svc))
+        await _carry_out(ctx, svc)
         end = RunEnd(RunStatus.COMPLETED)
     except RunFailed as exc:
         end = RunEnd(RunStatus.FAILED, str(exc), whole_experiment=exc.whole_experiment, failure=exc.kind)
@@ -99,11 +101,11 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     except EngineFault as exc:
         end = RunEnd(RunStatus.ERROR, str(exc))
     except TestbedFault as exc:
-        end = RunEnd(RunStatus.ERROR, str(exc), robot_fault=blame)
+        end = RunEnd(RunStatus.ERROR, str(exc), robot_fault=_blame(ctx))
     except RunEnded as exc:
         end = RunEnd(exc.status, str(exc))
     except OSError as exc:
-        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=blame)
+        end = RunEnd(RunStatus.ERROR, f"robot {robot}: {exc}", robot_fault=_blame(ctx))
     except DBAPIError as exc:
         log.warning("run %d: the database went away: %s", ctx.run_id, exc.orig)
         end = RunEnd(RunStatus.INTERRUPTED, "the database was unreachable during this run", resume=True)
@@ -112,7 +114,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
                else RunEnd(RunStatus.CANCELLED, "cancelled by its owner"))
     except Exception as exc:  # noqa: BLE001 - a bug must end the run as an error, not kill the testbed
         log.exception("run %d crashed", ctx.run_id)
-        end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=blame)
+        end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=_blame(ctx))
     finally:
         svc.tracker.close(robot)
     return replace(end, fields=ctx.end_fields, poses=ctx.end_poses, messages=ctx.take_messages())
@@ -131,10 +133,36 @@ def failure_text(end: RunEnd) -> Optional[str]:
     return str(end.failure) if end.failure is not None and end.status is RunStatus.FAILED else None
 
 
-async def _steps(ctx: RunContext, svc: RunServices) -> None:
+def _blame(ctx: RunContext) -> Optional[str]:
+    """The robot a testbed fault is held against: none for a task (an engine slot is not a robot, and a
+    field-robot variant's task did not use it): nothing to avoid on the retry, nothing to take offline."""
+    return None if ctx.as_task else ctx.robot.robot_id
+
+
+async def _carry_out(ctx: RunContext, svc: RunServices) -> None:
+    """On a compute engine's slot, or a field run with profile overrides (the emulated field robot with
+    other parameters, :mod:`.remote`): one task; else the steps on the robot."""
+    if ctx.robot.engine:
+        await run_on_engine(ctx, svc)
+        return
+    job = await svc.recorder.start(
+        ctx.run_id, robot_id=ctx.robot.robot_id, started_at=utcnow(),
+        subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None,
+        status=lambda j: start_status(svc, j) if _as_task(j) else RunStatus.BUILDING)
+    if _as_task(job):
+        ctx.as_task = True
+        await run_on_engine(ctx, svc, job)
+    else:
+        await _steps(ctx, svc, job)
+
+
+def _as_task(job: RunJob) -> bool:
+    """A field run with profile overrides runs as a task (the robot's physics cannot change for one run)."""
+    return job.mode == "twb" and bool(job.profile_overrides)
+
+
+async def _steps(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     rec = svc.recorder
-    job = await rec.start(ctx.run_id, status=RunStatus.BUILDING, robot_id=ctx.robot.robot_id,
-                          subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None, started_at=utcnow())
     svc.field.claim(ctx.subfields, job.owner_id)
     link = await steps.connect(ctx, svc)
     try:

@@ -57,6 +57,7 @@ def create_experiment(
         robot_radius=robot_radius,
         planning_margin=planning_margin if body.path is None else 0.0,
         jitter=body.jitter.model_dump() if body.jitter is not None else None,
+        profile_overrides=body.profile_overrides or None,
     )
     session.add(exp)
     session.flush()

@@ -32,13 +32,15 @@ class RunJob:
     field: str
     robot_radius: float
     jitter: Optional[dict[str, float]] = None
+    #: field parameters replacing the robot profile's in field runs (SI units), or None
+    profile_overrides: Optional[dict[str, float]] = None
 
 
 def job_of(run: Run) -> RunJob:
     """The :class:`RunJob` of a run row (its experiment loaded with it)."""
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
-                  list(e.goal), e.field, e.robot_radius, e.jitter)
+                  list(e.goal), e.field, e.robot_radius, e.jitter, e.profile_overrides)
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:

@@ -1,0 +1,306 @@
+"""Calibration: a robot profile's field parameters fitted to recorded runs (planned path and tracked poses).
+
+The field robot's effects (docs/fidelity.md, "The emulated field robot") are fitted in three stages, each by
+:func:`scipy.optimize.least_squares` or a statistic of the residuals, never a hand-written optimiser:
+
+1. **Tracks and lag.**  Every run is re-simulated without noise (:func:`robot_agent.headless.simulate_run`,
+   field backend, tracker jitter, bias, dropouts and wheel noise off) with the motor time constant and a
+   left/right track gain per run as unknowns; ``least_squares`` fits them to the tracked positions (at the
+   logged times, counted from the path's start).  ``wheel_gain_mean`` and ``wheel_bias_sigma`` are the mean
+   and standard deviation of the per-run gains.  The tracker latency takes the control grid's values
+   (0.02 s steps): it is the step whose fit is best (a profile over 0-0.3 s; the re-simulation's
+   localisation compensates the profile's ``latency_compensation_s`` as the robot does).
+2. **Tracker jitter.**  Second differences of the residual (tracked minus re-simulated) along each run:
+   white jitter of standard deviation s gives 6 s^2 per axis, the driving itself almost nothing at 30 frames
+   per second (a robust scale, the median absolute deviation).
+3. **Wheel noise.**  Simulated method of moments: the mean square of the residual's increments over 0.2 s
+   in the recorded runs against the same statistic of runs simulated with the fitted values and a candidate
+   wheel noise (seeded: the same random numbers for every candidate); ``least_squares`` solves for the
+   wheel noise, ``wheel_noise_rel`` and ``wheel_noise_abs_m_s`` in the profile's ratio.  Stage 1 fits part
+   of the noise (the recorded residual is smaller than the noise makes it), so the statistic is corrected by
+   the share stage 1 absorbs in runs simulated with the first estimate, and solved again.
+
+Uncertainties: the motor time constant's from the fit's Jacobian (residuals along a run are correlated, so it
+is a lower bound); the tracker latency's from the profile of the fit over the grid (the steps whose fit is
+within one unit of chi-square, at least half a step); the gains' and the jitter's from a bootstrap over
+runs (over groups of runs that share a seed); the wheel noise's by the delta method from the statistic's spread over runs and simulations.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
+
+from .frames import SUBFIELD_SIZE
+from .headless import simulate_run
+from .overrides import OVERRIDE_LIMITS, apply_overrides
+from .robot_profile import DEFAULT_PROFILE, load_profile
+
+__all__ = ["FITTED", "Calibration", "RecordedRun", "calibrate", "resimulate"]
+
+#: the field parameters :func:`calibrate` fits
+FITTED = ("motor_time_constant_s", "wheel_gain_mean", "wheel_bias_sigma", "wheel_noise_rel", "wheel_noise_abs_m_s",
+          "tracker_latency_s", "tracker_noise_xy_m", "tracker_noise_theta_rad")
+_QUIET = {"tracker_noise_xy_m": 0.0, "tracker_noise_theta_rad": 0.0, "tracker_bias_xy_m": 0.0,
+          "tracker_dropout_prob": 0.0, "wheel_noise_rel": 0.0, "wheel_noise_abs_m_s": 0.0, "wheel_bias_sigma": 0.0}
+_MAX_LATENCY_STEPS = 15
+_INCREMENT_S = 0.2  # the wheel-noise statistic's time step
+_REPLICATES = 4  # simulated copies of each run per wheel-noise candidate
+_BOOTSTRAP = 400
+
+
+@dataclass(frozen=True)
+class RecordedRun:
+    """One recorded field run: the ``path`` sent ``(P, 3)`` (m, rad), the ``start`` pose (x, y, theta), the
+    tracked ``poses`` ``(N, 4)`` (t s counted from the path's start, x m, y m, theta rad, the robot's frame),
+    the environment's ``blocks`` (cx, cy, w, h, angle) and the ``area`` (w, h; m) the robot drove in; runs
+    with the same non-empty ``group`` drew the same random numbers (the same seed)."""
+
+    path: np.ndarray
+    start: tuple[float, float, float]
+    poses: np.ndarray
+    blocks: Sequence[Sequence[float]] = ()
+    area: tuple[float, float] = SUBFIELD_SIZE
+    name: str = ""
+    #: runs of one group share their random draws (a testbed run's seed): the bootstrap resamples groups
+    group: str = ""
+
+
+@dataclass
+class Calibration:
+    """What :func:`calibrate` found: ``values`` and their standard errors ``std`` (SI units) of :data:`FITTED`,
+    the fitted ``profile``, each run's track ``gains`` ``(R, 2)``, its noise-free re-simulation with the
+    fitted values ``resimulated`` (``(M, 4)``, t from the path's start), the RMS position residual
+    ``rms_m`` and the fit's cost per tracker latency ``latency_cost`` (s -> sum of squares, m^2)."""
+
+    values: dict[str, float]
+    std: dict[str, float]
+    profile: dict[str, Any]
+    gains: np.ndarray
+    resimulated: list[np.ndarray]
+    rms_m: float
+    latency_cost: dict[float, float] = field(default_factory=dict)
+
+
+def _quiet_profile(base: Mapping[str, Any], tau: float, latency: float) -> dict[str, Any]:
+    return apply_overrides(base, {**_QUIET, "motor_time_constant_s": tau, "tracker_latency_s": latency})
+
+
+def _simulate(run: RecordedRun, profile: Mapping[str, Any], gains: tuple[float, float], seed: int) -> np.ndarray:
+    """Tracker poses ``(M, 4)`` of ``run`` driven by the field robot of ``profile`` with track ``gains``, t from
+    the path's start."""
+    duration = float(run.poses[-1, 0]) if len(run.poses) else 60.0
+    out = simulate_run(run.path, run.start, seed=seed, blocks=run.blocks, backend="field", profile=dict(profile),
+                       area=run.area, max_s=3.0 * duration + 20.0, track_gains=gains)
+    poses = out.poses.copy()
+    poses[:, 0] -= out.t_start or 0.0
+    return poses[poses[:, 0] >= -1e-9]
+
+
+def resimulate(run: RecordedRun, profile: Mapping[str, Any], gains: tuple[float, float]) -> np.ndarray:
+    """``run`` driven again without noise (tracker and wheels) by the robot of ``profile`` with track ``gains``
+    (left, right): its tracker poses ``(M, 4)``, t from the path's start (s)."""
+    f = profile["field"]
+    return _simulate(run, _quiet_profile(profile, f["motor_time_constant_s"], f["tracker_latency_s"]), gains, 0)
+
+
+def _residual(logged: np.ndarray, sim: np.ndarray) -> np.ndarray:
+    """Tracked minus simulated (x, y, theta) at the tracked times ``(N, 3)``; the simulation's last pose holds."""
+    t = logged[:, 0]
+    x = np.interp(t, sim[:, 0], sim[:, 1])
+    y = np.interp(t, sim[:, 0], sim[:, 2])
+    a = np.interp(t, sim[:, 0], np.unwrap(sim[:, 3]))
+    da = np.angle(np.exp(1j * (logged[:, 3] - a)))
+    return np.column_stack([logged[:, 1] - x, logged[:, 2] - y, da])
+
+
+def _fit_tracks(runs: Sequence[RecordedRun], base: Mapping[str, Any], latency: float,
+                x0: np.ndarray) -> Any:
+    """least_squares over (tau, gain left/right of each run) at tracker ``latency``; positions only."""
+    sizes = [len(r.poses) for r in runs]
+    ends = np.cumsum([0, *sizes])
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        prof = _quiet_profile(base, float(x[0]), latency)
+        out = np.empty(2 * ends[-1])
+        for i, run in enumerate(runs):
+            r = _residual(run.poses, _simulate(run, prof, (x[1 + 2 * i], x[2 + 2 * i]), 0))
+            out[2 * ends[i]:2 * ends[i + 1]] = r[:, :2].ravel()
+        return out
+
+    sparsity = lil_matrix((2 * ends[-1], len(x0)), dtype=int)
+    sparsity[:, 0] = 1
+    for i in range(len(runs)):
+        sparsity[2 * ends[i]:2 * ends[i + 1], 1 + 2 * i:3 + 2 * i] = 1
+    lo_tau, hi_tau = OVERRIDE_LIMITS["motor_time_constant_s"]
+    lo = np.r_[max(lo_tau, 0.005), np.full(len(x0) - 1, 0.3)]
+    hi = np.r_[hi_tau, np.full(len(x0) - 1, 1.7)]
+    return least_squares(fun, np.clip(x0, lo, hi), bounds=(lo, hi), jac_sparsity=sparsity, diff_step=1e-2,
+                         x_scale=np.r_[0.05, np.full(len(x0) - 1, 0.05)], xtol=1e-6, ftol=1e-8, max_nfev=60)
+
+
+def _refit_gains(run: RecordedRun, quiet: Mapping[str, Any], g0: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """The noise-free re-simulation of ``run`` whose track gains (from ``g0``) fit ``poses`` best (stage 1 with
+    the motor time constant and latency of ``quiet`` held)."""
+    def fun(g: np.ndarray) -> np.ndarray:
+        return _residual(poses, _simulate(run, quiet, (float(g[0]), float(g[1])), 0))[:, :2].ravel()
+
+    g = least_squares(fun, g0, bounds=([0.3, 0.3], [1.7, 1.7]), diff_step=1e-2, x_scale=0.05, max_nfev=20).x
+    return _simulate(run, quiet, (float(g[0]), float(g[1])), 0)
+
+
+def _std_from_jacobian(res: Any, index: int) -> float:
+    """Standard error of parameter ``index`` of a least_squares result: s^2 (J^T J)^-1."""
+    m, n = res.jac.shape
+    s2 = 2.0 * res.cost / max(m - n, 1)
+    jac = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)
+    cov = np.linalg.pinv(jac.T @ jac) * s2
+    return float(math.sqrt(max(cov[index, index], 0.0)))
+
+
+def _jitter_sigma(d2: np.ndarray) -> float:
+    """Standard deviation of white jitter from its second differences (variance 6 s^2), robustly (MAD)."""
+    if len(d2) == 0:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+
+
+def _second_differences(res: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Second differences of a residual ``(N, 3)``: positions (both axes pooled) and heading."""
+    d2 = res[2:] - 2.0 * res[1:-1] + res[:-2]
+    return d2[:, :2].ravel(), np.angle(np.exp(1j * d2[:, 2]))
+
+
+def _increments(res: np.ndarray, t: np.ndarray) -> float:
+    """Mean square (m^2) of the residual's position change over :data:`_INCREMENT_S`."""
+    j = np.searchsorted(t, t + _INCREMENT_S)
+    ok = j < len(t)
+    if not ok.any():
+        return 0.0
+    d = res[j[ok], :2] - res[ok, :2]
+    return float(np.mean(np.sum(d * d, axis=1)))
+
+
+def _bootstrap(per_run: list[Any], groups: list[list[int]], stat: Any, rng: np.random.Generator) -> float:
+    """Standard deviation of ``stat`` (of a list of per-run values) over resamplings, with replacement, of the
+    run ``groups`` (indices into ``per_run``; runs that share their random draws are resampled together)."""
+    n = len(groups)
+    if n < 2:
+        return float("nan")
+    vals = [stat([per_run[i] for k in rng.integers(0, n, n) for i in groups[k]]) for _ in range(_BOOTSTRAP)]
+    return float(np.std(vals, ddof=1))
+
+
+def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DEFAULT_PROFILE, *,
+              seed: int = 0) -> Calibration:
+    """Fit :data:`FITTED` of ``profile`` (a shipped name or a profile dict: its other values are kept, and are
+    the starting point) to the recorded field ``runs`` (at least 2); ``seed`` seeds the simulations of stage 3
+    and the bootstrap.  See the module docstring for the method."""
+    if len(runs) < 2:
+        raise ValueError("calibration needs at least 2 recorded runs")
+    for r in runs:
+        if len(r.poses) < 10:
+            raise ValueError(f"run {r.name or '?'} has {len(r.poses)} tracked poses: too few to calibrate")
+    base = load_profile(profile) if isinstance(profile, str) else dict(profile)
+    f0 = base["field"]
+    dt = 1.0 / base["controller"]["control_rate_hz"]
+    x0 = np.r_[f0["motor_time_constant_s"] or 0.05, np.full(2 * len(runs), f0["wheel_gain_mean"])]
+    # stage 1: tracks and lag at the profile's latency, then the latency over the grid, then again there
+    res = _fit_tracks(runs, base, f0["tracker_latency_s"], x0)
+    costs: dict[float, float] = {}
+    for d in range(_MAX_LATENCY_STEPS + 1):
+        prof = _quiet_profile(base, float(res.x[0]), d * dt)
+        costs[round(d * dt, 6)] = float(sum(
+            np.sum(_residual(run.poses, _simulate(run, prof, (res.x[1 + 2 * i], res.x[2 + 2 * i]), 0))[:, :2] ** 2)
+            for i, run in enumerate(runs)))
+    latency = min(costs, key=lambda k: costs[k])
+    res = _fit_tracks(runs, base, latency, res.x)
+    m, n = res.fun.size, res.x.size
+    s2 = 2.0 * res.cost / max(m - n, 1)
+    within = [lat for lat, c in costs.items() if (c - min(costs.values())) / s2 <= 1.0]
+    latency_std = max(dt / 2, (max(within) - min(within)) / 2)
+    tau = float(res.x[0])
+    gains = res.x[1:].reshape(-1, 2)
+    fitted = {**base, "field": {**f0, "motor_time_constant_s": tau, "tracker_latency_s": latency}}
+    resim = [_simulate(run, _quiet_profile(fitted, tau, latency), tuple(g), 0) for run, g in zip(runs, gains)]
+    residuals = [_residual(run.poses, s) for run, s in zip(runs, resim)]
+    rng = np.random.default_rng(seed)
+    # stage 2: tracker jitter
+    d2 = [_second_differences(r) for r in residuals]
+    sigma_xy = _jitter_sigma(np.concatenate([p for p, _ in d2]))
+    sigma_th = _jitter_sigma(np.concatenate([a for _, a in d2]))
+    # stage 3: wheel noise, simulated method of moments
+    w_data = np.array([_increments(r, run.poses[:, 0]) for r, run in zip(residuals, runs)])
+    rel0, abs0 = f0["wheel_noise_rel"], f0["wheel_noise_abs_m_s"]
+    ratio = abs0 / rel0 if rel0 > 0 else 0.05
+    noisy = {**fitted, "field": {**fitted["field"], "tracker_noise_xy_m": sigma_xy,
+                                 "tracker_noise_theta_rad": sigma_th, "wheel_bias_sigma": 0.0}}
+    seeds = rng.integers(1, 2**62, size=(_REPLICATES, len(runs)))
+
+    def w_sim(rel: float) -> np.ndarray:
+        prof = apply_overrides(noisy, {"wheel_noise_rel": min(rel, 1.0),
+                                       "wheel_noise_abs_m_s": min(rel * ratio, OVERRIDE_LIMITS["wheel_noise_abs_m_s"][1])})
+        def one(run: RecordedRun, g: np.ndarray, quiet: np.ndarray, run_seed: int) -> float:
+            sim = _simulate(run, prof, (float(g[0]), float(g[1])), run_seed)
+            return _increments(_residual(sim, quiet), sim[:, 0])
+
+        return np.array([[one(run, g, s, int(seeds[k, i])) for i, (run, g, s) in enumerate(zip(runs, gains, resim))]
+                         for k in range(_REPLICATES)])
+
+    def solve(target: float, start: float) -> Any:
+        return least_squares(lambda x: [(w_sim(float(x[0])).mean() - target) / target], [start],
+                             bounds=([0.0], [1.0]), diff_step=0.05, max_nfev=30)
+
+    wres = solve(float(w_data.mean()), max(rel0, 0.02))
+    # stage 1 fits part of the noise: the recorded runs' residual is smaller than the noise makes it; the same
+    # fit on runs simulated with the first estimate tells by how much
+    quiet = _quiet_profile(fitted, tau, latency)
+    prof = apply_overrides(noisy, {"wheel_noise_rel": float(wres.x[0]),
+                                   "wheel_noise_abs_m_s": min(float(wres.x[0]) * ratio, 0.1)})
+    known, refit = [], []
+    for i, (run, g, s) in enumerate(zip(runs, gains, resim)):
+        sim = _simulate(run, prof, (float(g[0]), float(g[1])), int(seeds[0, i]))
+        known.append(_increments(_residual(sim, s), sim[:, 0]))
+        refit.append(_increments(_residual(sim, _refit_gains(run, quiet, g, sim)), sim[:, 0]))
+    absorbed = float(np.mean(refit) / np.mean(known)) if np.mean(known) > 0 else 1.0
+    target = float(w_data.mean()) / absorbed
+    wres = solve(target, float(wres.x[0]) or 0.02)
+    rel = float(wres.x[0])
+    sims = w_sim(rel)
+    slope = abs(float(wres.jac[0, 0])) * target
+    w_var = w_data.var(ddof=1) / len(runs) + sims.mean(axis=1).var(ddof=1) / _REPLICATES
+    rel_std = float(math.sqrt(w_var) / slope) if slope > 0 else float("inf")
+    values = {
+        "motor_time_constant_s": tau,
+        "wheel_gain_mean": float(gains.mean()),
+        "wheel_bias_sigma": float(gains.ravel().std(ddof=1)),
+        "wheel_noise_rel": rel,
+        "wheel_noise_abs_m_s": rel * ratio,
+        "tracker_latency_s": latency,
+        "tracker_noise_xy_m": sigma_xy,
+        "tracker_noise_theta_rad": sigma_th,
+    }
+    per_run_gains = list(gains)
+    by_group: dict[str, list[int]] = {}
+    for i, run in enumerate(runs):
+        by_group.setdefault(run.group or f"#{i}", []).append(i)
+    groups = list(by_group.values())
+    std = {
+        "motor_time_constant_s": _std_from_jacobian(res, 0),
+        "wheel_gain_mean": _bootstrap(per_run_gains, groups, lambda gs: float(np.mean(gs)), rng),
+        "wheel_bias_sigma": _bootstrap(per_run_gains, groups, lambda gs: float(np.ravel(gs).std(ddof=1)), rng),
+        "wheel_noise_rel": rel_std,
+        "wheel_noise_abs_m_s": rel_std * ratio,
+        "tracker_latency_s": latency_std,
+        "tracker_noise_xy_m": _bootstrap([p for p, _ in d2], groups, lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
+        "tracker_noise_theta_rad": _bootstrap([a for _, a in d2], groups, lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
+    }
+    out_profile = apply_overrides(base, {k: min(max(v, OVERRIDE_LIMITS[k][0]), OVERRIDE_LIMITS[k][1])
+                                         for k, v in values.items()})
+    rms = float(math.sqrt(np.mean(np.concatenate([np.sum(r[:, :2] ** 2, axis=1) for r in residuals]))))
+    return Calibration(values, std, out_profile, gains, resim, rms, costs)

@@ -1,0 +1,111 @@
+"""Calibration: runs emulated with a known field profile (seeded), fitted back, each parameter within the
+tolerance docs/fidelity.md states; `twb calibrate` on a study directory writes a usable profile and a figure."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from robot_agent.calibration import FITTED, RecordedRun, calibrate
+from robot_agent.headless import simulate_run
+from robot_agent.overrides import apply_overrides
+from robot_agent.params import robot_params
+from robot_agent.robot_profile import load_profile
+from sdk_helpers import invoke
+
+#: the profile the runs are emulated with: every fitted value away from the shipped one (the fit's start)
+TRUE = {"motor_time_constant_s": 0.2, "wheel_gain_mean": 0.85, "wheel_bias_sigma": 0.04, "wheel_noise_rel": 0.12,
+        "wheel_noise_abs_m_s": 0.006, "tracker_latency_s": 0.14, "tracker_noise_xy_m": 0.0008,
+        "tracker_noise_theta_rad": 0.01}
+#: docs/fidelity.md, "Calibration": relative (rel) or absolute (abs) tolerances of six 10 s runs
+TOLERANCE = {"motor_time_constant_s": ("rel", 0.2), "wheel_gain_mean": ("abs", 0.04), "wheel_bias_sigma": ("abs", 0.02),
+             "wheel_noise_rel": ("rel", 0.3), "wheel_noise_abs_m_s": ("rel", 0.3), "tracker_latency_s": ("abs", 0.041),
+             "tracker_noise_xy_m": ("rel", 0.15), "tracker_noise_theta_rad": ("rel", 0.15)}
+
+
+def emulated_runs(profile: dict, seed: int, n: int = 6) -> list[RecordedRun]:
+    """``n`` runs of about 10 s on a sub-field: three-corner paths, each with its own seed (its own track gains)."""
+    rng = np.random.default_rng(seed)
+    runs = []
+    for k in range(n):
+        start = np.array([0.3, 0.3 + 0.2 * k])
+        corners = [start + [0.5, rng.uniform(-0.2, 0.2)], start + [0.9, rng.uniform(0.2, 0.5)],
+                   start + [1.2, rng.uniform(-0.1, 0.3)]]
+        path = np.clip(np.array([[*start, 0.0], *[[*p, 0.0] for p in corners]]), 0.15, 1.65)
+        path[:, 2] = 0.0
+        out = simulate_run(path, (*path[0, :2], 0.0), seed=seed * 100 + k, backend="field", profile=profile,
+                           area=(1.8, 1.8))
+        assert out.outcome == "DONE"
+        poses = out.poses.copy()
+        poses[:, 0] -= out.t_start
+        runs.append(RecordedRun(path, (*path[0, :2], 0.0), poses[poses[:, 0] >= 0], (), (1.8, 1.8), f"run {k}"))
+    return runs
+
+
+def test_calibration_recovers_a_known_profile():
+    truth = apply_overrides(load_profile("bebot"), TRUE)
+    cal = calibrate(emulated_runs(truth, seed=3), "bebot", seed=0)
+    for key in FITTED:
+        kind, tol = TOLERANCE[key]
+        err = cal.values[key] - TRUE[key]
+        assert abs(err if kind == "abs" else err / TRUE[key]) <= tol, (key, cal.values[key], TRUE[key])
+        assert 0 < cal.std[key] < float("inf"), key
+    assert cal.profile["field"]["motor_time_constant_s"] == pytest.approx(cal.values["motor_time_constant_s"])
+    robot_params(cal.profile)  # a valid profile
+    assert cal.rms_m < 0.01 and len(cal.resimulated) == 6 and cal.gains.shape == (6, 2)
+
+
+def test_calibration_needs_runs():
+    with pytest.raises(ValueError, match="at least 2"):
+        calibrate([], "bebot")
+
+
+def _bench():
+    root = str(Path(__file__).resolve().parents[1])
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    import bench.fidelity
+
+    return bench.fidelity
+
+
+def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
+    from client_sdk.study import StudySpec
+
+    spec = StudySpec.from_json({"name": "cal", "environments": ["room"], "plans": ["A"], "planners": ["fmm"],
+                                "repetitions": 3, "modes": ["twb"], "seed": 4}, "cal")
+    data = _bench().study_data(spec)
+    data.save(tmp_path)
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "3 runs, RMS tracked - re-simulated" in r.stdout
+    prof = json.loads((tmp_path / "calibrated-profile.json").read_text())
+    assert set(prof["calibration"]["values"]) == set(FITTED) and prof["calibration"]["runs"] == 3
+    assert prof["field"]["motor_time_constant_s"] == pytest.approx(prof["calibration"]["values"]["motor_time_constant_s"],
+                                                                   abs=1e-6)
+    robot_params(prof)
+    with Image.open(tmp_path / "calibration.png") as im:
+        assert im.size[0] > 600
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path / "nowhere")
+    assert r.returncode == 2 and "is not a study directory" in r.stderr
+
+
+def test_twb_calibrate_asks_for_a_variant(capsys, monkeypatch, tmp_path):
+    from client_sdk.study import StudySpec
+
+    spec = StudySpec.from_json({"name": "two", "environments": ["room"], "plans": ["A", "B"], "planners": ["fmm"],
+                                "repetitions": 1, "modes": ["twb"], "seed": 1}, "two")
+    data = _bench().study_data(spec)
+    for row, label in zip(data.rows, ("noiseless", "tracker 3 mm")):
+        row["profile"] = label
+    data.save(tmp_path)
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path)
+    assert r.returncode == 2
+    assert "2 robot variants (noiseless, tracker 3 mm): choose one with --variant" in r.stderr
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path, "--variant", "noiseless")
+    assert r.returncode == 2 and "1 completed field run(s) of variant 'noiseless'; calibration needs at least 2" in r.stderr
