@@ -197,14 +197,23 @@ async def test_start_pose_jitter_is_seeded_and_small(tmp_path):
             assert 1e-4 < math.hypot(x - 0.3, y - 0.3) < 0.05
 
 
-@pytest.mark.parametrize("through_block", [False, True])
-async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through_block):
+#: ONE_BLOCK with a disc crossing the straight way from (0.3, 0.3) to (1.5, 0.3) when the robot gets there
+MOVING = {**ONE_BLOCK, "name": "one-block-moving",
+          "moving_obstacles": [{"radius": 0.04, "waypoints": [[0.8, 0.05], [0.8, 0.6]], "speed": 0.1,
+                                "repeat": "pingpong", "delay_s": 0.5}]}
+
+
+@pytest.mark.parametrize("through", ["", "block", "obstacle"])
+async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through):
     """The same run on the agent's robot and as one compute task (the Ray pool's code path, here on the
     worker processes): the same outcome, where it stopped, poses (bit for bit) and metrics (1e-9)."""
     async with running(tmp_path) as tb:
         tb.field.add_engine_slots("engine", 1)
+        through_block = bool(through)
         kw = dict(start=(0.3, 0.9, 0.0), goal=(1.5, 0.9, 0.0), planner=None,
-                  planned_path=[[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]) if through_block else \
+                  planned_path=[[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]) if through == "block" else \
+            dict(env=MOVING, start=(0.3, 0.3, 0.0), goal=(1.5, 0.3, 0.0), planner=None,
+                 planned_path=[[0.3, 0.3, 0.0], [0.9, 0.3, 0.0], [1.5, 0.3, 0.0]]) if through == "obstacle" else \
             dict(jitter={"xy_m": 0.01, "theta_rad": 0.05})
         found = []
         for robot in ("sim-1", "engine-1"):
@@ -230,3 +239,7 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
                 assert math.isclose(ma[k], mb[k], rel_tol=1e-9, abs_tol=1e-12), k
             elif k != "planning_time_s":
                 assert ma[k] == mb[k], k
+        assert (ma["collisions_block"], ma["collisions_obstacle"]) == {
+            "": (0, 0), "block": (1, 0), "obstacle": (0, 1)}[through]
+        if through == "obstacle":
+            assert ea.error == "collision: the robot hit moving obstacle 0 (the environment's moving_obstacles[0])"
