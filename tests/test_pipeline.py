@@ -241,5 +241,7 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
                 assert ma[k] == mb[k], k
         assert (ma["collisions_block"], ma["collisions_obstacle"]) == {
             "": (0, 0), "block": (1, 0), "obstacle": (0, 1)}[through]
-        if through == "obstacle":
+        assert ("obstacle_distance_min_m" in ma) == (through == "obstacle")
+        if through == "obstacle":  # it touched the disc: the gap of its chassis (0.045 m) is about zero
+            assert -0.01 < ma["obstacle_distance_min_m"] < 0.01 and ma["obstacle_time_within_s"] > 0
             assert ea.error == "collision: the robot hit moving obstacle 0 (the environment's moving_obstacles[0])"
