@@ -245,3 +245,32 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
         if through == "obstacle":  # it touched the disc: the gap of its chassis (0.045 m) is about zero
             assert -0.01 < ma["obstacle_distance_min_m"] < 0.01 and ma["obstacle_time_within_s"] > 0
             assert ea.error == "collision: the robot hit moving obstacle 0 (the environment's moving_obstacles[0])"
+
+
+@pytest.mark.parametrize("planner", ["fmm", "st_astar"])
+async def test_the_crossing_disc_fails_an_uncoordinated_run_and_not_a_space_time_one(tmp_path, planner):
+    """Issue 17: plan A of the built-in `crossing` on the agent's robot, planned by the testbed; fmm's path
+    meets the disc that crosses it (a collision naming it, counted as one), st_astar's does not."""
+    from planners import load_environment
+
+    crossing = load_environment("crossing").to_dict()
+    async with running(tmp_path) as tb:
+        _, run_id = add_experiment(tb, env=crossing, start=(0.3, 0.3, 0.0), goal=(1.5, 1.5, 1.5708),
+                                   planner=planner, mode="sim")
+        end = await execute_run(assignment(tb, run_id, "sim"), tb.services, stopping=lambda: False)
+        run, poses, _ = run_row(tb, run_id)
+        if planner == "fmm":
+            assert end.status is RunStatus.FAILED and end.failure is FailureKind.COLLISION, end
+            assert end.error == "collision: the robot hit moving obstacle 0 (the environment's moving_obstacles[0])"
+            assert (run.metrics["collisions_obstacle"], run.metrics["collisions_block"]) == (1, 0)
+        else:
+            assert end.status is RunStatus.COMPLETED, end
+            assert (run.metrics["collisions_obstacle"], run.metrics["collisions_block"]) == (0, 0)
+            assert run.metrics["goal_reached"] and run.metrics["obstacle_distance_min_m"] > 0.02
+        assert "sim-1" in tb.field.moving  # the agent's world has the discs until an environment clears them
+        _, later = add_experiment(tb, mode="sim")  # one-block: no discs; building it clears them
+        end = await execute_run(assignment(tb, later, "sim"), tb.services, stopping=lambda: False)
+        assert end.status is RunStatus.COMPLETED and "sim-1" not in tb.field.moving
+        with tb.sessions() as s:
+            sent = s.scalars(select(Message.line).where(Message.run_id == later, Message.direction == ">")).all()
+        assert "T,T,M" in sent
