@@ -31,7 +31,7 @@ from .errors import InvalidEnvironment
 from .fields import check_keys, number as _num
 
 __all__ = ["MAX_MOVING_OBSTACLES", "MAX_OBSTACLE_RADIUS_M", "MAX_OBSTACLE_SPEED_M_S", "REPEAT_MODES",
-           "MovingObstacle", "parse_moving_obstacles", "positions", "track_arrays"]
+           "MovingObstacle", "obstacle_at", "parse_moving_obstacles", "positions", "track_arrays"]
 
 #: the tracked-robot budget: the overhead camera tracks the robot and at most this many emulated obstacle robots
 MAX_MOVING_OBSTACLES = 8
@@ -108,6 +108,18 @@ def positions(obstacles: Sequence[MovingObstacle], t: np.ndarray) -> np.ndarray:
         out[m, :, 0] = np.interp(s, cum, pts[:, 0])
         out[m, :, 1] = np.interp(s, cum, pts[:, 1])
     return out
+
+
+def obstacle_at(obstacles: Sequence[MovingObstacle], point: Sequence[float], t: float,
+                clearance: float) -> int | None:
+    """Index of the first obstacle whose disc comes closer than ``clearance`` (m) to ``point`` (x, y; m) at
+    obstacle time ``t`` (s), or None."""
+    if not obstacles:
+        return None
+    centres = positions(obstacles, np.array([float(t)]))[:, 0]
+    radii = np.array([o.radius for o in obstacles])
+    near = np.hypot(centres[:, 0] - point[0], centres[:, 1] - point[1]) - radii < clearance
+    return int(np.argmax(near)) if near.any() else None
 
 
 def track_arrays(obstacles: Sequence[MovingObstacle]) -> tuple[np.ndarray, np.ndarray]:

@@ -100,3 +100,18 @@ def test_st_astar_reports_a_start_taken_by_a_disc():
     with pytest.raises(NoPathFound, match="moving obstacle is at the start"):
         plan_path(env, (0.22, 0.5), (0.8, 0.5), "st_astar")
     assert math.isfinite(plan_path(env, (0.5, 0.8), (0.8, 0.5), "st_astar").length_m)
+
+
+def test_on_the_emulated_field_the_discs_move_the_same_and_the_run_replays_exactly():
+    """The field backend (tracker noise, track dynamics) meets the same discs: fmm's path on crossing A still
+    ends on disc 0, st_astar's still passes, and a seed replays bit for bit."""
+    data = CROSSING.to_dict()
+    p = CROSSING.plan("A")
+    outcomes = {}
+    for planner in ("fmm", "st_astar"):
+        r = plan_path(CROSSING, p.start, p.goal, planner, planning_margin=DEFAULT_PLANNING_MARGIN)
+        runs = [simulate_run(r.path, p.start, seed=11, blocks=block_tuples(data), moving=moving_tuples(data),
+                             area=CROSSING.size, backend="field") for _ in range(2)]
+        assert np.array_equal(runs[0].poses, runs[1].poses) and runs[0].events == runs[1].events
+        outcomes[planner] = (runs[0].outcome, runs[0].obstacle)
+    assert outcomes == {"fmm": ("COLLISION", 0), "st_astar": ("DONE", None)}

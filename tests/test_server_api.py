@@ -258,3 +258,11 @@ def test_environments_with_moving_obstacles_round_trip_and_bad_ones_are_422(alic
         r = alice.post("/api/v1/environments", json={**env, "name": "alice-bad", "moving_obstacles": [bad]})
         assert r.status_code == 422 and r.json()["detail"].startswith(detail), r.text
     assert alice.get("/api/v1/environments/room").json()["moving_obstacles"] == []
+    crossing = alice.get("/api/v1/environments/crossing").json()
+    assert crossing["builtin"] and len(crossing["moving_obstacles"]) == 2
+    # a start where a disc stands when the path begins is the job's mistake, refused before any run
+    r = alice.post("/api/v1/experiments", json={**JOB, "environment": "crossing", "start": [0.22, 1.2],
+                                               "goal": [1.5, 1.5], "planner": "st_astar"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == ("start (0.22, 1.2) is closer than the robot radius 0.045 m to moving obstacle 0 "
+                                  "(moving_obstacles[0]) when the path starts")
