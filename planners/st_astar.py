@@ -35,7 +35,9 @@ from __future__ import annotations
 
 import heapq
 import math
-from typing import Any
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Sequence
 
 import numpy as np
 from scipy import ndimage
@@ -47,28 +49,55 @@ from .errors import NoPathFound
 from .grid import ConfigSpace
 from .moving import MovingObstacle, positions
 
-__all__ = ["SpaceTimeAStar", "conflict_table"]
+__all__ = ["SpaceTimeAStar", "TimedPath", "conflict_table", "mover_positions", "plan_timed"]
 
 _MOVES = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
-_SAMPLES_PER_BUCKET = 4
+#: samples of each mover per time bucket
+SAMPLES_PER_BUCKET = 4
 MAX_BUCKETS = 20_000
 
 
-def conflict_table(obstacles: tuple[MovingObstacle, ...], shape: tuple[int, int], cell: float, dt: float,
-                   buckets: int, inflate: float, margin_buckets: int) -> np.ndarray:
-    """``(buckets, ny, nx)`` bool: lattice point ``(j cell, i cell)`` (m) comes within an obstacle's radius +
-    ``inflate`` (m) of a moving obstacle during time bucket ``k`` (``[k dt, (k+1) dt)`` s), widened by
-    ``margin_buckets`` both ways."""
+@dataclass(frozen=True)
+class TimedPath:
+    """A disc of ``radius`` (m) at ``points`` ``(N, 2)`` (m) at ``times`` ``(N,)`` (s, non-decreasing; a
+    repeated point is a wait), moving straight between them and standing at its last point afterwards."""
+
+    points: np.ndarray
+    times: np.ndarray
+    radius: float
+
+    def position(self, t: np.ndarray) -> np.ndarray:
+        """Centres ``(T, 2)`` (m) at times ``t`` ``(T,)`` (s)."""
+        tt = np.asarray(t, dtype=float)
+        return np.column_stack([np.interp(tt, self.times, self.points[:, 0]),
+                                np.interp(tt, self.times, self.points[:, 1])])
+
+
+def mover_positions(obstacles: Sequence[MovingObstacle], others: Sequence[TimedPath],
+                    t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centres ``(M, T, 2)`` (m) at times ``t`` (s) and radii ``(M,)`` (m) of moving obstacles, then timed paths."""
+    tt = np.asarray(t, dtype=float)
+    centres = [positions(obstacles, tt)] if obstacles else []
+    centres += [o.position(tt)[None] for o in others]
+    radii = [o.radius for o in obstacles] + [o.radius for o in others]
+    return (np.concatenate(centres) if centres else np.zeros((0, len(tt), 2))), np.array(radii, dtype=float)
+
+
+def conflict_table(centres: np.ndarray, radii: np.ndarray, shape: tuple[int, int], cell: float, buckets: int,
+                   inflate: float, margin_buckets: int) -> np.ndarray:
+    """``(buckets, ny, nx)`` bool: lattice point ``(j cell, i cell)`` (m) comes within a mover's radius +
+    ``inflate`` (m) of its centre during a time bucket, widened by ``margin_buckets`` both ways.
+
+    ``centres`` ``(M, S, 2)`` are the movers sampled :data:`SAMPLES_PER_BUCKET` times per bucket from time 0
+    (sample ``s`` in bucket ``s // SAMPLES_PER_BUCKET``); ``radii`` ``(M,)``.
+    """
     ny, nx = shape
     table = np.zeros((buckets, ny, nx), dtype=bool)
-    if not obstacles:
+    if not len(centres):
         return table
-    s = buckets * _SAMPLES_PER_BUCKET
-    tau = np.arange(s + 1) * (dt / _SAMPLES_PER_BUCKET)
-    centres = positions(obstacles, tau)  # (M, S + 1, 2)
-    bucket = np.minimum(np.arange(s + 1) // _SAMPLES_PER_BUCKET, buckets - 1)
-    for m, ob in enumerate(obstacles):  # a loop over the few obstacles; samples and stencil vectorised
-        reach = ob.radius + inflate
+    bucket = np.minimum(np.arange(centres.shape[1]) // SAMPLES_PER_BUCKET, buckets - 1)
+    for m in range(len(centres)):  # a loop over the movers; samples and stencil vectorised
+        reach = float(radii[m]) + inflate
         r = int(math.ceil(reach / cell))
         offs = np.arange(-r, r + 1)
         cx, cy = centres[m, :, 0], centres[m, :, 1]
@@ -84,6 +113,7 @@ def conflict_table(obstacles: tuple[MovingObstacle, ...], shape: tuple[int, int]
     return table
 
 
+@lru_cache(maxsize=8)
 def _lattice(space: ConfigSpace, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """Free lattice points ``(ny, nx)`` and, per move of :data:`_MOVES`, whether it is free ``(8, ny, nx)``."""
     env = space.env
@@ -138,85 +168,97 @@ class SpaceTimeAStar(Planner):
 
     def solve(self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any],
               seed: int) -> tuple[np.ndarray, dict[str, Any]]:
-        cell, speed = float(params["cell"]), float(params["speed"])
-        free, edges = _lattice(space, cell)
-        ny, nx = free.shape
-        s_cell, g_cell = _attach(space, start, free, cell), _attach(space, goal, free, cell)
-        # static heuristic: lattice distance to the goal, as the astar grid graph measures it
-        graph, ids = grid_graph(free, cell)
-        dist = dijkstra(graph, directed=False, indices=int(ids[g_cell]))
-        h = np.full(free.shape, np.inf)
-        h[free] = dist
-        if not math.isfinite(h[s_cell]):
-            raise NoPathFound("the goal cannot be reached from the start on the space-time lattice")
-        dt = cell / speed  # one straight move per bucket
-        t0 = math.hypot(*(np.array([s_cell[1], s_cell[0]]) * cell - start)) / speed
-        obstacles = space.env.moving_obstacles
-        horizon = float(params["horizon_s"]) or (3.0 * (h[s_cell] / speed + t0) + params["arrive_s"] + 20.0
-                                                 + max((o.delay_s for o in obstacles), default=0.0))
-        buckets = min(int(math.ceil(horizon / dt)) + 1, MAX_BUCKETS)
-        inflate = space.radius + cell * math.sqrt(0.5) + float(params["clearance"])
-        table = conflict_table(obstacles, free.shape, cell, dt, buckets, inflate,
-                               int(math.ceil(float(params["time_margin_s"]) / dt)))
-        stay = int(math.ceil(float(params["arrive_s"]) / dt))
-        times, cells, expanded = self._search(table, edges, h / speed, s_cell, g_cell, t0, dt, stay,
-                                              bool(params["wait"]))
-        pts = np.array([[i * cell, j * cell] for j, i in cells])
-        path = np.vstack([start, pts, goal])
-        t_goal = times[-1] + math.hypot(*(pts[-1] - goal)) / speed
-        all_times = [0.0, *times, t_goal]
-        # no waits and no zero legs; the exact start and goal stay
-        keep = np.concatenate([[True], np.hypot(*np.diff(path, axis=0).T) > 1e-9])
-        keep &= np.hypot(*(path - goal).T) > 1e-9
-        keep[0] = keep[-1] = True
-        info = {"times_s": [round(t, 4) for t, k in zip(all_times, keep) if k], "speed_m_s": speed,
-                "waits": sum(a == b for a, b in zip(cells[:-1], cells[1:])), "expanded": expanded, "time_buckets": buckets,
-                "moving_obstacles": len(obstacles)}
-        return path[keep], info
+        timed, info = plan_timed(space, start, goal, params)
+        # a wait repeats a point: keep it once, with the time the robot arrives there
+        first = np.flatnonzero(np.concatenate([[True], np.hypot(*np.diff(timed.points, axis=0).T) > 1e-9]))
+        path = timed.points[first]
+        path[-1] = timed.points[-1]  # the exact goal
+        info["times_s"] = [round(float(t), 4) for t in timed.times[first]]
+        return path, info
 
-    @staticmethod
-    def _search(table: np.ndarray, edges: np.ndarray, h_s: np.ndarray, s_cell: tuple[int, int],
-                g_cell: tuple[int, int], t0: float, dt: float, stay: int,
-                wait: bool) -> tuple[list[float], list[tuple[int, int]], int]:
-        """Earliest conflict-free arrival (times s, lattice points (j, i), states expanded)."""
-        buckets = len(table)
-        closed = np.zeros(table.shape, dtype=bool)
-        k0 = int(t0 / dt + 1e-6)
-        if table[min(k0, buckets - 1), s_cell[0], s_cell[1]]:
-            raise NoPathFound("a moving obstacle is at the start when the path begins")
-        parent: dict[tuple[int, int, int], tuple[int, int, int] | None] = {(k0, *s_cell): None}
-        arrival = {(k0, *s_cell): t0}
-        # among equally early arrivals the one that drives least first: a wait beats a dawdling loop
-        heap = [(t0 + h_s[s_cell], 0.0, t0, k0, *s_cell)]
-        steps = [(dy, dx, math.hypot(dy, dx) * dt) for dy, dx in _MOVES] + ([(0, 0, dt)] if wait else [])
-        expanded = 0
-        while heap:
-            _, moved, t, k, j, i = heapq.heappop(heap)
-            if closed[k, j, i]:
+
+def _search(table: np.ndarray, edges: np.ndarray, h_s: np.ndarray, s_cell: tuple[int, int],
+            g_cell: tuple[int, int], t0: float, dt: float, stay: int,
+            wait: bool) -> tuple[list[float], list[tuple[int, int]], int]:
+    """Earliest conflict-free arrival (times s, lattice points (j, i), states expanded)."""
+    buckets = len(table)
+    closed = np.zeros(table.shape, dtype=bool)
+    k0 = int(t0 / dt + 1e-6)
+    if table[min(k0, buckets - 1), s_cell[0], s_cell[1]]:
+        raise NoPathFound("a moving obstacle is at the start when the path begins")
+    parent: dict[tuple[int, int, int], tuple[int, int, int] | None] = {(k0, *s_cell): None}
+    arrival = {(k0, *s_cell): t0}
+    # among equally early arrivals the one that drives least first: a wait beats a dawdling loop
+    heap = [(t0 + h_s[s_cell], 0.0, t0, k0, *s_cell)]
+    steps = [(dy, dx, math.hypot(dy, dx) * dt) for dy, dx in _MOVES] + ([(0, 0, dt)] if wait else [])
+    expanded = 0
+    while heap:
+        _, moved, t, k, j, i = heapq.heappop(heap)
+        if closed[k, j, i]:
+            continue
+        closed[k, j, i] = True
+        expanded += 1
+        if (j, i) == g_cell and not table[k: k + stay + 1, j, i].any():
+            out, state = [], (k, j, i)
+            while state is not None:
+                out.append(state)
+                state = parent[state]
+            out.reverse()
+            return [arrival[s] for s in out], [(s[1], s[2]) for s in out], expanded
+        back = parent[(k, j, i)]
+        for d, (dy, dx, cost) in enumerate(steps):
+            if d < len(_MOVES) and not edges[d, j, i]:
                 continue
-            closed[k, j, i] = True
-            expanded += 1
-            if (j, i) == g_cell and not table[k: k + stay + 1, j, i].any():
-                out, state = [], (k, j, i)
-                while state is not None:
-                    out.append(state)
-                    state = parent[state]
-                out.reverse()
-                return [arrival[s] for s in out], [(s[1], s[2]) for s in out], expanded
-            back = parent[(k, j, i)]
-            for d, (dy, dx, cost) in enumerate(steps):
-                if d < len(_MOVES) and not edges[d, j, i]:
-                    continue
-                if back is not None and (dy or dx) and (j + dy, i + dx) == back[1:] and back[1:] != (j, i):
-                    continue  # no U-turn onto the point just left: the follower would skip it
-                tn = t + cost
-                kn = int(tn / dt + 1e-6)  # a move or wait of one dt always reaches the next bucket
-                jn, i_n = j + dy, i + dx
-                if kn >= buckets or closed[kn, jn, i_n] or table[kn, jn, i_n] or table[kn, j, i]:
-                    continue
-                key = (kn, jn, i_n)
-                if key not in arrival or tn < arrival[key]:
-                    arrival[key], parent[key] = tn, (k, j, i)
-                    heapq.heappush(heap, (tn + h_s[jn, i_n], moved + (cost if dy or dx else 0.0), tn, kn, jn, i_n))
-        raise NoPathFound("no path avoids the moving obstacles within the planning horizon "
-                          f"({buckets} time steps of {dt:.3f} s)")
+            if back is not None and (dy or dx) and (j + dy, i + dx) == back[1:] and back[1:] != (j, i):
+                continue  # no U-turn onto the point just left: the follower would skip it
+            tn = t + cost
+            kn = int(tn / dt + 1e-6)  # a move or wait of one dt always reaches the next bucket
+            jn, i_n = j + dy, i + dx
+            if kn >= buckets or closed[kn, jn, i_n] or table[kn, jn, i_n] or table[kn, j, i]:
+                continue
+            key = (kn, jn, i_n)
+            if key not in arrival or tn < arrival[key]:
+                arrival[key], parent[key] = tn, (k, j, i)
+                heapq.heappush(heap, (tn + h_s[jn, i_n], moved + (cost if dy or dx else 0.0), tn, kn, jn, i_n))
+    raise NoPathFound("no path avoids the moving obstacles within the planning horizon "
+                      f"({buckets} time steps of {dt:.3f} s)")
+
+
+def plan_timed(space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any],
+               others: Sequence[TimedPath] = ()) -> tuple[TimedPath, dict[str, Any]]:
+    """The earliest path from ``start`` to ``goal`` (m) avoiding the environment's moving obstacles and the
+    ``others`` (timed paths: other robots), under :class:`SpaceTimeAStar`'s parameters; its points ``(N, 2)``
+    with their times (a wait repeats a point) as a :class:`TimedPath` of the robot's radius, and an info dict."""
+    cell, speed = float(params["cell"]), float(params["speed"])
+    free, edges = _lattice(space, cell)
+    s_cell, g_cell = _attach(space, start, free, cell), _attach(space, goal, free, cell)
+    graph, ids = grid_graph(free, cell)  # static heuristic: lattice distance to the goal
+    dist = dijkstra(graph, directed=False, indices=int(ids[g_cell]))
+    h = np.full(free.shape, np.inf)
+    h[free] = dist
+    if not math.isfinite(h[s_cell]):
+        raise NoPathFound("the goal cannot be reached from the start on the space-time lattice")
+    dt = cell / speed  # one straight move per bucket
+    t0 = math.hypot(*(np.array([s_cell[1], s_cell[0]]) * cell - start)) / speed
+    obstacles = space.env.moving_obstacles
+    latest = max([o.delay_s for o in obstacles] + [float(o.times[-1]) for o in others] + [0.0])
+    horizon = float(params["horizon_s"]) or 3.0 * (h[s_cell] / speed + t0) + params["arrive_s"] + 20.0 + latest
+    buckets = min(int(math.ceil(horizon / dt)) + 1, MAX_BUCKETS)
+    centres, radii = mover_positions(obstacles, others, np.arange(buckets * SAMPLES_PER_BUCKET + 1)
+                                     * (dt / SAMPLES_PER_BUCKET))
+    inflate = space.radius + cell * math.sqrt(0.5) + float(params["clearance"])
+    table = conflict_table(centres, radii, free.shape, cell, buckets, inflate,
+                           int(math.ceil(float(params["time_margin_s"]) / dt)))
+    stay = int(math.ceil(float(params["arrive_s"]) / dt))
+    times, cells, expanded = _search(table, edges, h / speed, s_cell, g_cell, t0, dt, stay, bool(params["wait"]))
+    pts = np.array([[i * cell, j * cell] for j, i in cells])
+    t_goal = times[-1] + math.hypot(*(pts[-1] - goal)) / speed
+    points = np.vstack([start, pts, goal])
+    all_times = np.array([0.0, *times, t_goal])
+    # the exact start and goal replace lattice points that coincide with them
+    keep = np.ones(len(points), dtype=bool)
+    keep[1] = np.hypot(*(points[1] - start)) > 1e-9
+    keep[-2] = keep[-2] and np.hypot(*(points[-2] - goal)) > 1e-9
+    info = {"speed_m_s": speed, "waits": sum(a == b for a, b in zip(cells[:-1], cells[1:])),
+            "expanded": expanded, "time_buckets": buckets, "moving_obstacles": len(obstacles)}
+    return TimedPath(points[keep], all_times[keep], space.radius), info
