@@ -49,7 +49,7 @@ from .errors import NoPathFound
 from .grid import ConfigSpace
 from .moving import MovingObstacle, positions
 
-__all__ = ["SpaceTimeAStar", "TimedPath", "conflict_table", "mover_positions", "plan_timed"]
+__all__ = ["SpaceTimeAStar", "TimedPath", "conflict_table", "mover_positions", "movers_table", "plan_timed"]
 
 _MOVES = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
 #: samples of each mover per time bucket
@@ -224,11 +224,28 @@ def _search(table: np.ndarray, edges: np.ndarray, h_s: np.ndarray, s_cell: tuple
                       f"({buckets} time steps of {dt:.3f} s)")
 
 
+def movers_table(space: ConfigSpace, params: dict[str, Any], horizon_s: float,
+                 obstacles: Sequence[MovingObstacle] = (), others: Sequence[TimedPath] = ()) -> np.ndarray:
+    """The conflict table of ``obstacles`` and ``others`` on ``space``'s lattice over ``horizon_s`` (s), in
+    buckets of ``cell / speed`` s, inflated and widened as :class:`SpaceTimeAStar`'s parameters say."""
+    cell, dt = float(params["cell"]), float(params["cell"]) / float(params["speed"])
+    buckets = min(int(math.ceil(horizon_s / dt)) + 1, MAX_BUCKETS)
+    free, _ = _lattice(space, cell)
+    centres, radii = mover_positions(obstacles, others, np.arange(buckets * SAMPLES_PER_BUCKET + 1)
+                                     * (dt / SAMPLES_PER_BUCKET))
+    inflate = space.radius + cell * math.sqrt(0.5) + float(params["clearance"])
+    return conflict_table(centres, radii, free.shape, cell, buckets, inflate,
+                          int(math.ceil(float(params["time_margin_s"]) / dt)))
+
+
 def plan_timed(space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any],
-               others: Sequence[TimedPath] = ()) -> tuple[TimedPath, dict[str, Any]]:
+               others: Sequence[TimedPath] = (), table: np.ndarray | None = None) -> tuple[TimedPath, dict[str, Any]]:
     """The earliest path from ``start`` to ``goal`` (m) avoiding the environment's moving obstacles and the
     ``others`` (timed paths: other robots), under :class:`SpaceTimeAStar`'s parameters; its points ``(N, 2)``
-    with their times (a wait repeats a point) as a :class:`TimedPath` of the robot's radius, and an info dict."""
+    with their times (a wait repeats a point) as a :class:`TimedPath` of the robot's radius, and an info dict.
+
+    ``table``: a conflict table already built for this lattice and buckets of ``cell / speed`` s
+    (:func:`movers_table`); then ``others`` and the environment's moving obstacles are in it already."""
     cell, speed = float(params["cell"]), float(params["speed"])
     free, edges = _lattice(space, cell)
     s_cell, g_cell = _attach(space, start, free, cell), _attach(space, goal, free, cell)
@@ -241,14 +258,11 @@ def plan_timed(space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: 
     dt = cell / speed  # one straight move per bucket
     t0 = math.hypot(*(np.array([s_cell[1], s_cell[0]]) * cell - start)) / speed
     obstacles = space.env.moving_obstacles
-    latest = max([o.delay_s for o in obstacles] + [float(o.times[-1]) for o in others] + [0.0])
-    horizon = float(params["horizon_s"]) or 3.0 * (h[s_cell] / speed + t0) + params["arrive_s"] + 20.0 + latest
-    buckets = min(int(math.ceil(horizon / dt)) + 1, MAX_BUCKETS)
-    centres, radii = mover_positions(obstacles, others, np.arange(buckets * SAMPLES_PER_BUCKET + 1)
-                                     * (dt / SAMPLES_PER_BUCKET))
-    inflate = space.radius + cell * math.sqrt(0.5) + float(params["clearance"])
-    table = conflict_table(centres, radii, free.shape, cell, buckets, inflate,
-                           int(math.ceil(float(params["time_margin_s"]) / dt)))
+    if table is None:
+        latest = max([o.delay_s for o in obstacles] + [float(o.times[-1]) for o in others] + [0.0])
+        horizon = float(params["horizon_s"]) or 3.0 * (h[s_cell] / speed + t0) + params["arrive_s"] + 20.0 + latest
+        table = movers_table(space, params, horizon, obstacles, others)
+    buckets = len(table)
     stay = int(math.ceil(float(params["arrive_s"]) / dt))
     times, cells, expanded = _search(table, edges, h / speed, s_cell, g_cell, t0, dt, stay, bool(params["wait"]))
     pts = np.array([[i * cell, j * cell] for j, i in cells])
