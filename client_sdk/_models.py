@@ -105,7 +105,9 @@ class Plan(_FromJson):
 
 @dataclass
 class Environment(_FromJson):
-    """An environment (docs/design.md, "Environment file"): ``size`` (m) and rectangular ``blocks`` (centre, size, angle)."""
+    """An environment (docs/design.md, "Environment file"): ``size`` (m), rectangular ``blocks`` (centre, size,
+    angle) and ``moving_obstacles`` (discs moving in time: radius m, waypoints or random_walk, speed m/s,
+    repeat, delay_s s)."""
 
     name: str
     size: list[float]
@@ -114,6 +116,7 @@ class Environment(_FromJson):
     description: str = ""
     builtin: bool = False
     owner: Optional[str] = None
+    moving_obstacles: list[dict[str, Any]] = _field(default_factory=list)
 
     _conv = {"plans": lambda ps: [Plan.from_json(p) for p in ps]}
 
@@ -125,8 +128,9 @@ class Environment(_FromJson):
         raise KeyError(f"environment {self.name!r} has no plan {name!r} (plans: {', '.join(p.name for p in self.plans) or 'none'})")
 
     def same_geometry(self, other: "Environment | dict[str, Any]") -> bool:
-        """Whether ``other`` (an environment or its file as a dict) has the same name, size, blocks and plans
-        (the description may differ; a missing block angle is 0, a missing plan heading 0, as on the testbed)."""
+        """Whether ``other`` (an environment or its file as a dict) has the same name, size, blocks, plans and
+        moving obstacles (the description may differ; a missing block angle is 0, a missing plan heading 0, a
+        missing repeat ``once`` and delay 0, as on the testbed)."""
         data = other.to_json() if isinstance(other, Environment) else other
         try:
             return _geometry(self.to_json()) == _geometry(data)
@@ -140,7 +144,17 @@ class Environment(_FromJson):
             d["plans"] = [dataclasses.asdict(p) for p in self.plans]
         if self.description:
             d["description"] = self.description
+        if self.moving_obstacles:
+            d["moving_obstacles"] = [dict(o) for o in self.moving_obstacles]
         return d
+
+
+def _mover(o: dict[str, Any]) -> tuple[Any, ...]:
+    """A moving obstacle with the testbed's defaults filled, numbers as floats."""
+    walk = o.get("random_walk")
+    track = (tuple((float(x), float(y)) for x, y in o["waypoints"]) if walk is None else
+             (int(walk["seed"]), tuple(float(v) for v in walk["start"]), int(walk["steps"]), float(walk["step_m"])))
+    return (float(o["radius"]), float(o["speed"]), o.get("repeat", "once"), float(o.get("delay_s", 0.0)), track)
 
 
 def _geometry(env: dict[str, Any]) -> tuple[Any, ...]:
@@ -153,7 +167,8 @@ def _geometry(env: dict[str, Any]) -> tuple[Any, ...]:
                    for b in env.get("blocks", []))
     plans = tuple((p.get("name", str(i + 1)), pose(p["start"]), pose(p["goal"]))
                   for i, p in enumerate(env.get("plans", [])))
-    return str(env["name"]).strip(), tuple(float(v) for v in env["size"]), blocks, plans
+    movers = tuple(_mover(o) for o in env.get("moving_obstacles", []))
+    return str(env["name"]).strip(), tuple(float(v) for v in env["size"]), blocks, plans, movers
 
 
 @dataclass

@@ -4,20 +4,21 @@ An environment file is JSON::
 
     {"name": "room", "size": [1.8, 1.8],
      "blocks": [{"x": 0.9, "y": 0.45, "w": 0.06, "h": 0.9, "angle": 0.0}, ...],
-     "plans": [{"name": "A", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.57]}]}
+     "plans": [{"name": "A", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.57]}],
+     "moving_obstacles": [{"radius": 0.04, "waypoints": [[0.2, 1.2], [0.8, 1.2]], "speed": 0.05}]}
 
 Blocks are rectangles given by centre (``x``, ``y``), size (``w`` along the
 block's own x axis, ``h`` along its y axis) and rotation ``angle`` (radians,
 counter-clockwise), all in metres in the field frame whose origin is the
 lower-left corner.  The field boundary counts as an obstacle.  ``plans`` and
-``description`` are optional extensions; any other key is refused so typos are
+``description`` are optional extensions, and so are ``moving_obstacles``
+(discs moving in experiment time, :mod:`planners.moving`); any other key is refused so typos are
 caught early.
 """
 
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -26,6 +27,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import InvalidEnvironment
+from .fields import check_keys as _check_keys
+from .fields import number as _number
+from .moving import MovingObstacle, parse_moving_obstacles
 
 __all__ = [
     "BLOCK_TOLERANCE_M",
@@ -42,7 +46,7 @@ MAX_BLOCKS = 1000
 #: how far (m) a block may reach beyond the field (rounding on the wire); robots refuse more too
 BLOCK_TOLERANCE_M = 0.001
 MAX_FIELD_SIZE_M = 100.0
-_TOP_KEYS = {"name", "size", "blocks", "plans", "description"}
+_TOP_KEYS = {"name", "size", "blocks", "plans", "description", "moving_obstacles"}
 _BLOCK_KEYS = {"x", "y", "w", "h", "angle"}
 
 
@@ -81,6 +85,8 @@ class Environment:
     blocks: tuple[Block, ...] = ()
     plans: tuple[Plan, ...] = ()
     description: str = field(default="", compare=False)
+    #: discs moving in experiment time (:mod:`planners.moving`); not in the static occupancy grid
+    moving_obstacles: tuple[MovingObstacle, ...] = ()
 
     @property
     def width(self) -> float:
@@ -109,17 +115,9 @@ class Environment:
             out["plans"] = [p.to_dict() for p in self.plans]
         if self.description:
             out["description"] = self.description
+        if self.moving_obstacles:
+            out["moving_obstacles"] = [o.to_dict() for o in self.moving_obstacles]
         return out
-
-
-def _number(value: Any, where: str) -> float:
-    # bool is an int subclass; "true" as a coordinate is a mistake, not 1.0
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InvalidEnvironment(f"{where} must be a number, got {value!r}")
-    out = float(value)
-    if not math.isfinite(out):
-        raise InvalidEnvironment(f"{where} must be finite, got {value!r}")
-    return out
 
 
 def _pose(value: Any, where: str) -> tuple[float, float, float]:
@@ -127,14 +125,6 @@ def _pose(value: Any, where: str) -> tuple[float, float, float]:
         raise InvalidEnvironment(f"{where} must be [x, y] or [x, y, theta], got {value!r}")
     nums = [_number(v, f"{where}[{i}]") for i, v in enumerate(value)]
     return (nums[0], nums[1], nums[2] if len(nums) == 3 else 0.0)
-
-
-def _check_keys(obj: Mapping[str, Any], allowed: set[str], where: str) -> None:
-    unknown = sorted(set(obj) - allowed)
-    if unknown:
-        raise InvalidEnvironment(
-            f"{where} has unknown key {unknown[0]!r} (allowed: {', '.join(sorted(allowed))})"
-        )
 
 
 def _block(obj: Any, i: int, size: tuple[float, float]) -> Block:
@@ -216,7 +206,8 @@ def parse_environment(data: Mapping[str, Any]) -> Environment:
     description = data.get("description", "")
     if not isinstance(description, str):
         raise InvalidEnvironment("description must be a string")
-    return Environment(name.strip(), size, blocks, tuple(plans), description)
+    moving = parse_moving_obstacles(data.get("moving_obstacles", []), size)
+    return Environment(name.strip(), size, blocks, tuple(plans), description, moving)
 
 
 def builtin_names() -> list[str]:

@@ -46,13 +46,16 @@ from scipy.spatial import cKDTree
 
 from .environment import Environment
 from .geometry import distance_to_obstacles, polyline_min_clearance
+from .moving import positions
 
 __all__ = [
     "COMPARISON_KEYS",
     "DEFAULT_GOAL_TOLERANCE",
     "DEFAULT_SAMPLES",
     "DEFAULT_SEGMENT_LENGTH",
+    "DEFAULT_OBSTACLE_SAFETY",
     "MetricSettings",
+    "OBSTACLE_KEYS",
     "PATH_KEYS",
     "RATIO_KEYS",
     "angle_over_length",
@@ -69,6 +72,8 @@ __all__ = [
     "hausdorff_distance",
     "max_curvature",
     "min_clearance",
+    "obstacle_gaps",
+    "obstacle_metrics",
     "path_length",
     "path_metrics",
     "point_to_polyline_distance",
@@ -86,6 +91,8 @@ DEFAULT_SAMPLES = 200
 DEFAULT_SEGMENT_LENGTH = 0.05
 #: Largest distance (m) between the performed path's last point and the goal that counts as arrived.
 DEFAULT_GOAL_TOLERANCE = 0.05
+#: Safety radius (m) of ``obstacle_time_within_s``: time the robot's gap to a moving obstacle is below it.
+DEFAULT_OBSTACLE_SAFETY = 0.1
 #: Segments shorter than this (m) count as zero-length and are dropped before turning angles.
 ZERO_LENGTH = 1e-12
 
@@ -107,6 +114,8 @@ PATH_KEYS = (
     "average_speed_m_s",
     "goal_reached",
 )
+#: Keys of :func:`obstacle_metrics` (in :func:`run_metrics` when the environment has moving obstacles).
+OBSTACLE_KEYS = ("obstacle_distance_min_m", "obstacle_time_within_s")
 #: Keys of :func:`comparison_metrics`.
 COMPARISON_KEYS = ("deviation_mean_m", "deviation_max_m", "hausdorff_m", "frechet_m")
 #: Keys of :func:`ratio_metrics`, and the path metric each one divides.
@@ -612,6 +621,9 @@ class MetricSettings:
     goal_tolerance : float, m
         ``goal_reached`` is True when the last point is at most this far
         from the goal (default 0.05 m).
+    obstacle_safety : float, m
+        ``obstacle_time_within_s`` counts the time the gap to a moving
+        obstacle is below this (default 0.1 m).
     """
 
     samples: int = DEFAULT_SAMPLES
@@ -619,6 +631,7 @@ class MetricSettings:
     segment_length: float = DEFAULT_SEGMENT_LENGTH
     robot_radius: float = 0.0
     goal_tolerance: float = DEFAULT_GOAL_TOLERANCE
+    obstacle_safety: float = DEFAULT_OBSTACLE_SAFETY
 
     def __post_init__(self) -> None:
         _count_iv(self.samples, "samples", 2)
@@ -627,6 +640,7 @@ class MetricSettings:
         _positive_iv(self.segment_length, "segment_length")
         _positive_iv(self.robot_radius, "robot_radius", allow_zero=True)
         _positive_iv(self.goal_tolerance, "goal_tolerance", allow_zero=True)
+        _positive_iv(self.obstacle_safety, "obstacle_safety", allow_zero=True)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form, keys with units: ``samples``, ``segments``, ``segment_length_m``, ..."""
@@ -636,6 +650,7 @@ class MetricSettings:
             "segment_length_m": self.segment_length,
             "robot_radius_m": self.robot_radius,
             "goal_tolerance_m": self.goal_tolerance,
+            "obstacle_safety_m": self.obstacle_safety,
         }
 
 
@@ -700,6 +715,42 @@ def path_metrics(
     if goal is not None:
         out["goal_reached"] = goal_reached(p, goal, settings.goal_tolerance)
     return out
+
+
+def obstacle_gaps(env: Environment, path: np.ndarray, t: np.ndarray, robot_radius: float = 0.0) -> np.ndarray:
+    """Per point of ``path`` ``(N, 2+)`` (m) at obstacle times ``t`` ``(N,)`` (s from the path start), the gap
+    (m) between the robot's disc of ``robot_radius`` and the nearest moving obstacle's disc: centre distance
+    minus both radii, negative when they overlap; ``inf`` without moving obstacles."""
+    p = _path_iv(path, "path")
+    tt = _times_iv(t, len(p))
+    obs = env.moving_obstacles
+    if not obs:
+        return np.full(len(p), math.inf)
+    centres = positions(obs, tt)  # (M, N, 2)
+    radii = np.array([o.radius for o in obs])[:, None]
+    gaps = np.hypot(centres[..., 0] - p[:, 0], centres[..., 1] - p[:, 1]) - radii - robot_radius
+    return gaps.min(axis=0)
+
+
+def obstacle_metrics(env: Environment, path: np.ndarray, t: np.ndarray, *, start_time: float | None = None,
+                     settings: MetricSettings = MetricSettings()) -> dict[str, float | None]:
+    """``obstacle_distance_min_m`` and ``obstacle_time_within_s`` of a performed path ``(N, 2+)`` (m) logged at
+    experiment times ``t`` ``(N,)`` (s); obstacle time counts from ``start_time`` (the ``EV,START`` time; the
+    first sample's when None).
+
+    The distance is the smallest :func:`obstacle_gaps` value (robot disc of
+    ``settings.robot_radius`` to obstacle disc); the time sums the sample
+    intervals ``t[j+1] - t[j]`` whose first sample's gap is below
+    ``settings.obstacle_safety``.  Both None without moving obstacles.
+    """
+    if not env.moving_obstacles:
+        return {key: None for key in OBSTACLE_KEYS}
+    tt = _times_iv(t, len(path))
+    t0 = float(tt[0]) if start_time is None else float(start_time)
+    gaps = obstacle_gaps(env, path, tt - t0, settings.robot_radius)
+    within = gaps[:-1] < settings.obstacle_safety
+    return {"obstacle_distance_min_m": float(gaps.min()),
+            "obstacle_time_within_s": float(np.diff(tt)[within].sum())}
 
 
 def comparison_metrics(reference: np.ndarray, other: np.ndarray, *, samples: int = DEFAULT_SAMPLES) -> dict[str, float]:
@@ -770,15 +821,20 @@ def run_metrics(
     dict
         Flat :data:`PATH_KEYS` of Pr, :data:`COMPARISON_KEYS` (P0 against
         Pr), :data:`RATIO_KEYS`, ``planning_time_s``, and ``"planned"``: the
-        :data:`PATH_KEYS` of P0.
+        :data:`PATH_KEYS` of P0; with an ``env`` that has moving obstacles
+        and times ``t``, also :data:`OBSTACLE_KEYS` (:func:`obstacle_metrics`).
     """
     p0 = _path_iv(planned, "planned")
     pr = _path_iv(performed, "performed")
     goal = p0[-1] if goal is None else goal
     done = path_metrics(pr, env=env, t=t, start_time=start_time, done_time=done_time, goal=goal, settings=settings)
     plan = path_metrics(p0, env=env, goal=goal, settings=settings)
+    moving = {}
+    if env is not None and env.moving_obstacles and t is not None:
+        moving = obstacle_metrics(env, pr, t, start_time=start_time, settings=settings)
     return {
         **done,
+        **moving,
         **comparison_metrics(p0, pr, samples=settings.samples),
         **ratio_metrics(done, plan),
         "planning_time_s": None if planning_time_s is None else _finite_or_none(float(planning_time_s)),

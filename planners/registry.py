@@ -24,6 +24,7 @@ from .errors import UnknownPlanner
 from .fm2 import FM2Planner
 from .fmm import FMMPlanner
 from .prm import PRMPlanner
+from .st_astar import SpaceTimeAStar
 
 __all__ = ["ENTRY_POINT_GROUP", "RESTART_HINT", "PluginStatus", "available_planners", "get_planner", "plugin_report",
            "register_planner"]
@@ -37,6 +38,7 @@ _BUILTINS: dict[str, type[Planner]] = {
     "fm2": FM2Planner,
     "prm": PRMPlanner,
     "astar": AStarPlanner,
+    "st_astar": SpaceTimeAStar,
 }
 _instances: dict[str, Planner] = {}
 

@@ -1,10 +1,17 @@
-"""Collision geometry of one robot against walls, blocks and other robots (compiled).
+"""Collision geometry of one robot against walls, blocks, other robots and moving obstacles (compiled).
 
 Kernels for :class:`robot_agent.world.World` and the fused simulation loop
 (:mod:`robot_agent.stepper`).  Positions are world coordinates (m).  Blocks
 are stored per world, packed at the front of ``(W, Bmax, 2)`` tables of
 centres, half sizes and (cos, sin) of their angles; ``nblocks`` ``(W,)``
 says how many each world has.
+
+Moving obstacles belong to one robot each (their time is that robot's time
+since its path began, :mod:`planners.moving`): robot ``i``'s are rows
+``mo_first[i]`` to ``mo_first[i + 1]`` of ``mo_par`` ``(M, 4)`` (radius m,
+speed m/s, repeat code, delay s), ``mo_pts`` ``(M, K, 2)`` their tracks
+(world frame, a ``loop`` closed) with ``mo_cum`` ``(M, K)`` the arc length
+at each point and ``mo_n`` ``(M,)`` the points used.
 """
 
 from __future__ import annotations
@@ -15,7 +22,9 @@ import numpy as np
 
 from .compiled import kernel
 
-__all__ = ["block_distance", "collide", "robot_contacts", "wall_distance"]
+__all__ = ["block_distance", "collide", "obstacle_contact", "obstacle_position", "robot_contacts", "wall_distance"]
+
+ONCE, LOOP, PINGPONG = 0, 1, 2  #: repeat codes (planners.moving.REPEAT_MODES)
 
 
 @kernel
@@ -70,17 +79,61 @@ def robot_contacts(pose: np.ndarray, origin: np.ndarray, world_of: np.ndarray, s
 
 
 @kernel
-def collide(pose: np.ndarray, check: np.ndarray, step: int, hit: np.ndarray, origin: np.ndarray,
-            world_of: np.ndarray, sizes: np.ndarray, centre: np.ndarray, half: np.ndarray, cs: np.ndarray,
-            nblocks: np.ndarray, shared: np.ndarray, safe_until: np.ndarray, radius: float,
-            step_travel: float) -> None:
-    """``hit[i]`` for robots in ``check`` that touch a wall, a block or another robot of their world.
+def obstacle_position(m: int, t: float, mo_par: np.ndarray, mo_pts: np.ndarray, mo_cum: np.ndarray,
+                      mo_n: np.ndarray) -> tuple[float, float]:
+    """Centre (m, world frame) of moving obstacle ``m`` at its time ``t`` (s since the path start)."""
+    n = mo_n[m]
+    length = mo_cum[m, n - 1]
+    d = mo_par[m, 1] * max(t - mo_par[m, 3], 0.0)
+    mode = int(mo_par[m, 2])
+    if length <= 0.0:
+        d = 0.0
+    elif mode == LOOP:
+        d = d % length
+    elif mode == PINGPONG:
+        d = d % (2.0 * length)
+        if d > length:
+            d = 2.0 * length - d
+    else:
+        d = min(d, length)
+    j = 0
+    while j < n - 2 and mo_cum[m, j + 1] < d:
+        j += 1
+    if n < 2:
+        return mo_pts[m, 0, 0], mo_pts[m, 0, 1]
+    seg = mo_cum[m, j + 1] - mo_cum[m, j]
+    f = (d - mo_cum[m, j]) / seg if seg > 0.0 else 0.0
+    return (mo_pts[m, j, 0] + f * (mo_pts[m, j + 1, 0] - mo_pts[m, j, 0]),
+            mo_pts[m, j, 1] + f * (mo_pts[m, j + 1, 1] - mo_pts[m, j, 1]))
 
-    ``pose`` ``(N, 3)`` is in each robot's frame.  Broad phase: a robot at
-    distance d from every wall and block cannot touch one for
-    ``(d - radius) / step_travel`` steps, so it is checked again only after
-    that (``safe_until``, in simulation steps).
+
+@kernel
+def obstacle_contact(i: int, x: float, y: float, t: float, radius: float, mo_first: np.ndarray, mo_par: np.ndarray,
+                     mo_pts: np.ndarray, mo_cum: np.ndarray, mo_n: np.ndarray) -> int:
+    """Index (among robot ``i``'s) of the first moving obstacle closer than ``radius`` plus its own radius to
+    ``(x, y)`` (world, m) at obstacle time ``t`` (s), or -1."""
+    for m in range(mo_first[i], mo_first[i + 1]):
+        ox, oy = obstacle_position(m, t, mo_par, mo_pts, mo_cum, mo_n)
+        if math.hypot(x - ox, y - oy) < radius + mo_par[m, 0]:
+            return m - mo_first[i]
+    return -1
+
+
+@kernel
+def collide(pose: np.ndarray, check: np.ndarray, step: int, k: np.ndarray, hit: np.ndarray, world: tuple,
+            radius: float, step_travel: float, dt: float) -> None:
+    """``hit[i]`` for robots in ``check`` that touch a wall, a block, another robot of their world or one of
+    their moving obstacles; ``what[i]`` (in ``world``) says which obstacle (-1: none of those).
+
+    ``pose`` ``(N, 3)`` is in each robot's frame, after the step; robot
+    ``i``'s obstacles stand where they are ``k[i] + 1`` steps of ``dt`` (s)
+    after its path began.  Broad phase: a robot at distance d from every
+    wall and block cannot touch one for ``(d - radius) / step_travel``
+    steps, so it is checked again only after that (``safe_until``, in
+    simulation steps); moving obstacles are checked every step.
     """
+    (origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until, mo_first, mo_par, mo_pts, mo_cum,
+     mo_n, what) = world
     n = len(pose)
     hit[:] = False
     robot_contacts(pose, origin, world_of, shared, radius, hit)
@@ -88,12 +141,22 @@ def collide(pose: np.ndarray, check: np.ndarray, step: int, hit: np.ndarray, ori
         if not check[i]:
             hit[i] = False
             continue
+        if hit[i]:
+            what[i] = -1
+        x, y = pose[i, 0] + origin[i, 0], pose[i, 1] + origin[i, 1]
+        if mo_first[i + 1] > mo_first[i] and not hit[i]:
+            m = obstacle_contact(i, x, y, (k[i] + 1) * dt, radius, mo_first, mo_par, mo_pts, mo_cum, mo_n)
+            if m >= 0:
+                hit[i] = True
+                what[i] = m
+                continue
         if safe_until[i] > step:
             continue
-        x, y = pose[i, 0] + origin[i, 0], pose[i, 1] + origin[i, 1]
         w = world_of[i]
         d = min(wall_distance(x, y, sizes[w, 0], sizes[w, 1]), block_distance(x, y, w, centre, half, cs, nblocks))
         if d < radius:
+            if not hit[i]:
+                what[i] = -1
             hit[i] = True
         if step_travel > 0:
             safe_until[i] = step + int(math.floor((d - radius) / step_travel))

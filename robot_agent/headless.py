@@ -20,7 +20,8 @@ from .backends import make_backend
 from .frames import FIELD_SIZE, field_layout
 from .noise import path_key
 from .params import robot_params
-from .protocol import BuildCommand, PathCommand, PlaceCommand, encode_build, encode_path, encode_place, parse_command
+from .protocol import (BuildCommand, MovingCommand, PathCommand, PlaceCommand, encode_build, encode_moving, encode_path,
+                       encode_place, parse_command)
 from .robot_profile import DEFAULT_PROFILE
 from .sim import SimCore, SimEvent
 from .world import World
@@ -55,13 +56,20 @@ class HeadlessRun:
             return str(last.reason)
         return "TIMEOUT_SIM"
 
+    @property
+    def obstacle(self) -> int | None:
+        """The moving obstacle the robot collided with (its index in the environment), else None."""
+        last = self.events[-1] if self.events else None
+        return last.index if last is not None and last.kind == "FAIL" and last.reason == "COLLISION" else None
+
 
 def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[float], *, seed: int,
-                 blocks: Sequence[Sequence[float]] = (), backend: str = "ideal",
+                 blocks: Sequence[Sequence[float]] = (), moving: Sequence[tuple] = (), backend: str = "ideal",
                  profile: str | dict = DEFAULT_PROFILE, area: tuple[float, float] = FIELD_SIZE,
                  max_s: float = 3600.0, track_gains: tuple[float, float] | None = None) -> HeadlessRun:
     """Run ``path`` ``(N, 3)`` (m, m, rad) from ``start`` (x, y, theta) among ``blocks`` (cx, cy, w, h,
-    angle: m, rad) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
+    angle: m, rad) and ``moving`` obstacles (params, waypoints: as :func:`~robot_agent.protocol.encode_moving`
+    takes them) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
     ``max_s`` of experiment time passed.  ``track_gains`` (left, right; field backend) replaces the run's
     drawn track gains (calibration re-simulates runs with fitted ones).  Raises :class:`PlacementRefused`
     when the start is not free."""
@@ -73,8 +81,11 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
     built = parse_command(encode_build(blocks), field_size=size)
     placed = parse_command(encode_place(start), field_size=size)
     sent = parse_command(encode_path(path), field_size=size)
+    movers = parse_command(encode_moving(moving), field_size=size)
     assert isinstance(built, BuildCommand) and isinstance(placed, PlaceCommand) and isinstance(sent, PathCommand)
+    assert isinstance(movers, MovingCommand)
     world.set_blocks(0, built.blocks)
+    world.set_moving(0, list(movers.obstacles))
     why = world.place_conflict(0, placed.pose, core.backend.pose)
     if why:
         raise PlacementRefused(f"cannot place the robot: {why}")

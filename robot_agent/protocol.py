@@ -40,6 +40,8 @@ __all__ = [
     "ErrorCode",
     "Event",
     "LeaseCommand",
+    "MAX_MOVING",
+    "MovingCommand",
     "PathCommand",
     "PlaceCommand",
     "ProtocolError",
@@ -50,6 +52,7 @@ __all__ = [
     "check_secret",
     "decode_path",
     "encode_build",
+    "encode_moving",
     "encode_path",
     "encode_place",
     "format_error",
@@ -69,6 +72,8 @@ MAX_POINTS = 10_000
 MAX_BLOCKS = 1000
 MAX_NUMBER_CHARS = 32  # a number's characters, surrounding spaces not counted
 MIN_SECRET_CHARS, MAX_SECRET_CHARS = 16, 128
+MAX_MOVING = 8  #: moving obstacles of one robot (the tracker's robot budget; planners.moving)
+MAX_TRACK_POINTS = 1000  #: waypoints of one moving obstacle
 #: how far a block may reach beyond its robot's area (wire rounding); the same rule as environment files
 #: (planners.environment: not imported here, the codec stays light for the sandbox and the SDK)
 BLOCK_TOLERANCE_M = 0.001
@@ -167,7 +172,16 @@ class LeaseCommand:
     lease: str | None
 
 
-Command = PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
+@dataclass(frozen=True)
+class MovingCommand:
+    """``T,T,M``: the robot's moving obstacles, each ``(params, waypoints)``: params ``(4,)`` radius m,
+    speed m/s, repeat code (0 once, 1 loop, 2 pingpong), delay s; waypoints ``(K, 2)`` m; none clears."""
+
+    obstacles: tuple[tuple[np.ndarray, np.ndarray], ...]
+
+
+Command = (PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
+           | MovingCommand)
 
 # --------------------------------------------------------------------------- parsing
 #
@@ -237,7 +251,7 @@ def split_command(line: str | bytes) -> tuple[str, str | None]:
         raise ProtocolError(ErrorCode.SYNTAX, "empty line")
     head = text.split(",", 3)
     if len(head) < 3 or head[0].strip() != "T" or head[1].strip() != "T":
-        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|A|L>")
+        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|M|A|L>")
     return head[2].strip(), (head[3] if len(head) == 4 else None)
 
 
@@ -477,11 +491,39 @@ def parse_arguments(verb: str, rest: str | None, *, field_size: tuple[float, flo
         _check_range(out[:, :2], field_size, "block")
         _check_blocks_inside(out, field_size)
         return BuildCommand(out)
+    if verb == "M":
+        return _moving(rest, field_size)
     if verb == "A":
         return AuthCommand(_secret(rest, "A"))
     if verb == "L":
         return LeaseCommand(None if rest is None or not rest.strip() else _secret(rest, "L"))
     raise ProtocolError(ErrorCode.UNSUPPORTED, f"unknown command T,T,{verb[:10]}")
+
+
+def _moving(rest: str | None, field_size: tuple[float, float] | None) -> MovingCommand:
+    """``T,T,M`` arguments: per obstacle ``radius,speed,repeat,delay,x1,y1,...`` (mm, mm/s, code, s, mm)."""
+    if rest is None or not rest.strip():
+        return MovingCommand(())
+    items = rest.split(";")
+    if len(items) > MAX_MOVING:
+        raise ProtocolError(ErrorCode.RANGE, f"too many moving obstacles: {len(items)} > {MAX_MOVING}")
+    out = []
+    for i, item in enumerate(items):
+        width = item.count(",") + 1
+        if width < 6 or width % 2 or width > 4 + 2 * MAX_TRACK_POINTS:
+            raise ProtocolError(ErrorCode.SYNTAX, f"obstacle {i + 1}: expected radius,speed,repeat,delay and 1 to "
+                                                  f"{MAX_TRACK_POINTS} points x,y, got {width} fields")
+        try:
+            v = _parse_tuples(item, width, "obstacle", 1)[0]
+        except ProtocolError as exc:  # it counts one item: name the obstacle
+            raise ProtocolError(exc.code, f"obstacle {i + 1}{exc.message.partition(' 1')[2]}") from None
+        if v[0] <= 0 or v[1] <= 0 or v[3] < 0 or v[2] not in (0.0, 1.0, 2.0):
+            raise ProtocolError(ErrorCode.RANGE, f"obstacle {i + 1}: radius and speed must be > 0, delay >= 0 and "
+                                                 "repeat 0 (once), 1 (loop) or 2 (pingpong)")
+        pts = v[4:].reshape(-1, 2) / 1000.0
+        _check_range(pts, field_size, f"obstacle {i + 1} point")
+        out.append((np.array([v[0] / 1000.0, v[1] / 1000.0, v[2], v[3]]), pts))
+    return MovingCommand(tuple(out))
 
 
 def parse_command(line: str | bytes, *, field_size: tuple[float, float] | None = None) -> Command:
@@ -552,6 +594,18 @@ def encode_build(blocks: Iterable[Sequence[float]]) -> str:
     )
 
 
+def encode_moving(obstacles: Iterable[tuple[Sequence[float], Sequence[Sequence[float]]]]) -> str:
+    """``T,T,M`` line for moving obstacles given as (params, waypoints): params radius m, speed m/s, repeat
+    code, delay s; waypoints ``(K, 2)`` m; none clears."""
+    parts = []
+    for par, pts in obstacles:
+        p = _finite_2d([par], 4, "params")[0]
+        w = _finite_2d(pts, 2, "waypoints")
+        head = [_fmt(p[0] * 1000, 2), _fmt(p[1] * 1000, 2), str(int(p[2])), _fmt(p[3], 3)]
+        parts.append(",".join(head + [_fmt(v * 1000, 2) for v in w.ravel().tolist()]))
+    return "T,T,M," + ";".join(parts) if parts else "T,T,M"
+
+
 # --------------------------------------------------------------------------- replies
 
 
@@ -578,7 +632,8 @@ def format_status(state: RobotState | str, pose: Sequence[float], t: float) -> s
 
 
 def format_event(kind: Event | str, t: float, *, index: int | None = None, reason: str | None = None) -> str:
-    """``EV,START,t``, ``EV,WP,i,t``, ``EV,DONE,t`` or ``EV,FAIL,<reason>,t`` (t in seconds)."""
+    """``EV,START,t``, ``EV,WP,i,t``, ``EV,DONE,t`` or ``EV,FAIL,<reason>,t`` (t in seconds); a collision
+    with moving obstacle ``index`` is ``EV,FAIL,COLLISION,OBSTACLE,<index>,t``."""
     k = Event(kind)
     ts = _fmt(t, 3)
     if k is Event.WP:
@@ -588,6 +643,8 @@ def format_event(kind: Event | str, t: float, *, index: int | None = None, reaso
     if k is Event.FAIL:
         if reason not in FAIL_REASONS:
             raise ValueError(f"`reason` must be one of {', '.join(FAIL_REASONS)}")
+        if reason == "COLLISION" and index is not None:
+            return f"EV,FAIL,COLLISION,OBSTACLE,{int(index)},{ts}"
         return f"EV,FAIL,{reason},{ts}"
     return f"EV,{k.value},{ts}"
 

@@ -40,6 +40,7 @@ from .protocol import (
     Command,
     ErrorCode,
     LeaseCommand,
+    MovingCommand,
     PathCommand,
     PlaceCommand,
     ProtocolError,
@@ -63,7 +64,7 @@ __all__ = ["GUARDED_VERBS", "Robot"]
 
 log = logging.getLogger("robot_agent.robot")
 
-GUARDED_VERBS = frozenset("PSIB")  #: verbs that need an authenticated connection when there is a control key
+GUARDED_VERBS = frozenset("PSIBM")  #: verbs that need an authenticated connection when there is a control key
 
 
 class Robot:
@@ -140,6 +141,8 @@ class Robot:
             return await self.cmd_place(cmd)
         if isinstance(cmd, BuildCommand):
             return await self.cmd_build(cmd)
+        if isinstance(cmd, MovingCommand):
+            return self.cmd_moving(cmd)
         if isinstance(cmd, AuthCommand):
             return self.cmd_auth(conn, cmd)
         if isinstance(cmd, LeaseCommand):
@@ -277,6 +280,12 @@ class Robot:
         finally:
             self.gripper_busy = False
         return [format_ok("B", len(cmd.blocks))]
+
+    def cmd_moving(self, cmd: MovingCommand) -> list[str]:
+        """``T,T,M``: replace this robot's moving obstacles (their time starts with its next path)."""
+        self._check_gripper()
+        self.host.world.set_moving(self.index, list(cmd.obstacles))
+        return [format_ok("M", len(cmd.obstacles))]
 
     # ------------------------------------------------------------------ events
 

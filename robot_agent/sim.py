@@ -45,7 +45,9 @@ class SimEvent:
     """An event of robot ``robot`` at experiment time ``t`` (s).
 
     ``kind`` is START, WP, DONE or FAIL; ``index`` the path point of a WP
-    (0-based); ``reason`` the FAIL reason (COLLISION, TIMEOUT, STALLED, STOPPED).
+    (0-based), or of a ``FAIL,COLLISION`` the moving obstacle hit (None:
+    a block, a wall or a robot); ``reason`` the FAIL reason (COLLISION,
+    TIMEOUT, STALLED, STOPPED).
     """
 
     robot: int
@@ -228,7 +230,8 @@ class SimCore:
         control_fleet(np.ascontiguousarray(belief, dtype=float), moving, self._ctrl(), self.gains, flags, old)
         self.backend.actuate(self.cmd)
         still = moving & (flags & ENDED == 0)
-        collided = self.world.collisions(self.backend.pose, still | self.backend.in_motion(), self.step_count)
+        collided = self.world.collisions(self.backend.pose, still | self.backend.in_motion(), self.step_count, self.k,
+                                         self.dt)
         if collided.any():
             self.backend.halt(collided)
         n_ev = settle_fleet(self.step_count, collided, flags, old, self._ctrl(), self._events, 0)
@@ -249,8 +252,10 @@ class SimCore:
                 out.append(SimEvent(i, "DONE", t0))
             elif f & (STALLED | TIMED_OUT):
                 out.append(SimEvent(i, "FAIL", t0, reason="STALLED" if f & STALLED else "TIMEOUT"))
-            elif f & COLLIDED:
-                out.append(SimEvent(i, "FAIL", (step + 1) * self.dt, reason="COLLISION"))
+            elif f & COLLIDED:  # a robot collides once per path: what[i] is this collision's
+                what = int(self.world.what[i])
+                out.append(SimEvent(i, "FAIL", (step + 1) * self.dt, index=what if what >= 0 else None,
+                                    reason="COLLISION"))
         return out
 
 

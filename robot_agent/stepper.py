@@ -34,7 +34,7 @@ from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
 
 __all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "control_fleet", "run", "settle_fleet"]
 
-COLLIDED = 32  #: flag bit: the robot touched a wall, a block or a robot this step
+COLLIDED = 32  #: flag bit: the robot touched a wall, a block, a robot or a moving obstacle this step
 ENDED = DONE | STALLED | TIMED_OUT
 IDEAL, FIELD = 0, 1  #: the physics :func:`run` applies (``Emulated.kind``)
 
@@ -106,7 +106,6 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
     """
     state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
     pose, belief, ctl, tracks, gain, keys, ring, ring_ok, ring_pos, noise, odo, odo_ring, bias = phys
-    origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until = world
     events, pose_rows, pose_xyt, flags, old, moving, check, hit, meas = out
     n = len(state)
     n_ev = n_pose = 0
@@ -133,8 +132,7 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
             else:
                 ideal_actuate(i, cmd[i, 0], cmd[i, 1], pose, g.dt)
                 check[i] = moving[i] and not flags[i] & ENDED
-        collide(pose, check, step, hit, origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until,
-                radius, step_travel)
+        collide(pose, check, step, k, hit, world, radius, step_travel, g.dt)
         if kind == FIELD:
             for i in range(n):
                 if hit[i]:

@@ -13,13 +13,19 @@ that world.  The world's boundary is a wall.  A robot collides when a block,
 a wall or another robot of its world comes closer than the collision radius
 to its centre (robots: twice that radius between centres).  The geometry is
 compiled (:mod:`robot_agent.contact`).
+
+Moving obstacles (``T,T,M``, :mod:`planners.moving`) belong to the robot
+that was sent them: their time is that robot's time since its path began,
+so they collide with that robot only.  In a simulation they move exactly as
+the environment says; on the emulated field they stand for robots the
+testbed drives along the same tracks (docs/protocol.md).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .contact import block_distance, collide, wall_distance
+from .contact import LOOP, block_distance, collide, obstacle_contact, wall_distance
 
 __all__ = ["World"]
 
@@ -48,7 +54,11 @@ class World:
         #: broad phase: the step until which each robot cannot touch a wall or block
         self.safe_until = np.zeros(self.n, dtype=np.int64)
         self._hit = np.zeros(self.n, dtype=bool)
+        self._moving: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}  # owner -> [(params (4,), pts (K, 2))]
+        #: per robot, the moving obstacle (its index among the robot's) of its last collision, -1 for others
+        self.what = np.full(self.n, -1, dtype=np.int64)
         self._rebuild()
+        self._rebuild_moving()
 
     # ------------------------------------------------------------------ blocks
 
@@ -91,27 +101,73 @@ class World:
         else:
             self.safe_until[i] = 0
 
+    # ------------------------------------------------------------------ moving obstacles
+
+    def set_moving(self, owner: int, obstacles: list[tuple[np.ndarray, np.ndarray]]) -> int:
+        """Replace robot ``owner``'s moving obstacles with ``obstacles``: per obstacle its parameters
+        (radius m, speed m/s, repeat code, delay s) and waypoints ``(K, 2)`` in its frame (m); returns how
+        many it had."""
+        old = len(self._moving.pop(owner, []))
+        if obstacles:
+            self._moving[owner] = [(np.asarray(par, dtype=float).reshape(4).copy(),
+                                    np.asarray(pts, dtype=float).reshape(-1, 2) + self.origin[owner])
+                                   for par, pts in obstacles]
+        self._rebuild_moving()
+        return old
+
+    def moving_count(self, owner: int) -> int:
+        """How many moving obstacles robot ``owner`` has."""
+        return len(self._moving.get(owner, []))
+
+    def _rebuild_moving(self) -> None:
+        """Tables of every robot's obstacle tracks, robot by robot (see :mod:`robot_agent.contact`)."""
+        tracks: list[tuple[np.ndarray, np.ndarray]] = []
+        first = np.zeros(self.n + 1, dtype=np.int64)
+        for i in range(self.n):
+            for par, pts in self._moving.get(i, []):
+                if int(par[2]) == LOOP and len(pts) > 1:
+                    pts = np.vstack([pts, pts[:1]])
+                tracks.append((par, pts))
+            first[i + 1] = len(tracks)
+        k = max((len(p) for _, p in tracks), default=1)
+        self.mo_first = first
+        self.mo_par = np.zeros((max(len(tracks), 1), 4))
+        self.mo_pts = np.zeros((len(self.mo_par), k, 2))
+        self.mo_cum = np.zeros((len(self.mo_par), k))
+        self.mo_n = np.ones(len(self.mo_par), dtype=np.int64)
+        for m, (par, pts) in enumerate(tracks):
+            self.mo_par[m] = par
+            self.mo_pts[m, : len(pts)] = pts
+            self.mo_cum[m, 1 : len(pts)] = np.cumsum(np.hypot(*np.diff(pts, axis=0).T))
+            self.mo_n[m] = len(pts)
+
     # ------------------------------------------------------------------ geometry
 
     @property
     def arrays(self) -> tuple:
-        """``(origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until)`` for
-        :func:`robot_agent.contact.collide`, the arrays themselves."""
+        """``(origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until, mo_first, mo_par, mo_pts,
+        mo_cum, mo_n, what)`` for :func:`robot_agent.contact.collide`, the arrays themselves."""
         return (self.origin, self.world_of, self.sizes, self.centre, self.half, self.cs, self.nblocks,
-                self.shared, self.safe_until)
+                self.shared, self.safe_until, self.mo_first, self.mo_par, self.mo_pts, self.mo_cum, self.mo_n,
+                self.what)
 
     def to_world(self, pose_local: np.ndarray) -> np.ndarray:
         """World ``(N, 2)`` positions of local poses ``(N, 2+)``."""
         return pose_local[:, :2] + self.origin
 
-    def collisions(self, pose_local: np.ndarray, check: np.ndarray, step: int = 0) -> np.ndarray:
-        """Mask ``(N,)`` of robots in ``check`` that touch a block, a wall or another robot.
+    def collisions(self, pose_local: np.ndarray, check: np.ndarray, step: int = 0, k: np.ndarray | None = None,
+                   dt: float = 0.0) -> np.ndarray:
+        """Mask ``(N,)`` of robots in ``check`` that touch a block, a wall, another robot or a moving obstacle
+        (which one: :attr:`what`).
 
         ``step`` is the simulation step count, for the broad phase (robots far
-        from every obstacle are not checked again until they could reach one).
+        from every obstacle are not checked again until they could reach one);
+        ``k`` ``(N,)`` the steps of ``dt`` (s) since each robot's path began
+        before this one (its obstacles' time is ``(k + 1) dt``).
         """
-        collide(np.ascontiguousarray(pose_local, dtype=float), np.asarray(check, dtype=bool), int(step),
-                self._hit, *self.arrays, self.radius, self.step_travel)
+        kk = np.zeros(self.n, dtype=np.int64) if k is None else np.ascontiguousarray(k, dtype=np.int64)
+        collide(np.ascontiguousarray(pose_local, dtype=float), np.asarray(check, dtype=bool), int(step), kk,
+                self._hit, self.arrays, self.radius, self.step_travel, float(dt))
         return self._hit.copy()
 
     def place_conflict(self, i: int, pose_local: tuple[float, float, float], poses_local: np.ndarray) -> str | None:
@@ -123,6 +179,10 @@ class World:
             return "the robot would touch the field's wall there"
         if block_distance(x, y, w, self.centre, self.half, self.cs, self.nblocks) < self.radius:
             return "the robot would touch a block there"
+        m = obstacle_contact(i, x, y, 0.0, self.radius, self.mo_first, self.mo_par, self.mo_pts, self.mo_cum,
+                             self.mo_n)
+        if m >= 0:
+            return f"moving obstacle {m} stands there when the path starts"
         same = np.flatnonzero((self.world_of == w) & (np.arange(self.n) != i))
         if len(same):
             others = self.to_world(poses_local)[same]

@@ -131,6 +131,8 @@ class RunFailed(RunEnded):
         super().__init__(message)
         self.kind = kind
         self.whole_experiment = whole_experiment
+        #: the moving obstacle (its index in the environment) of a collision with one, else None
+        self.obstacle: int | None = None
 
 
 class ProgramFailed(RunFailed):

@@ -45,6 +45,8 @@ class FieldState:
         self.subfields: dict[int, SubfieldSlot] = {k: SubfieldSlot(k) for k in range(1, 5)}
         #: environment key built by each robot's gripper (None or absent: nothing)
         self.built: dict[str, Optional[str]] = {}
+        #: robots that may have moving obstacles set (T,T,M): the next build sets or clears them
+        self.moving: set[str] = set()
         #: each robot's control key, sent as T,T,A (None: the robot's port is open)
         self.keys: dict[str, Optional[str]] = {}
         #: why each offline robot is offline
@@ -144,6 +146,7 @@ class FieldState:
         """An offline robot answers again (its world is as it left it, unknown to us: rebuild)."""
         self.robots[robot_id].healthy = True
         self.built.pop(robot_id, None)
+        self.moving.add(robot_id)  # its world is unknown
         self.offline_reason.pop(robot_id, None)
         self._broker.publish({"type": "robot", "robot_id": robot_id})
 

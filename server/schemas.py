@@ -121,6 +121,10 @@ class EnvironmentCreate(Strict):
     blocks: list[BlockIn] = Field(default_factory=list, max_length=1000)
     plans: list[PlanIn] = Field(default_factory=list, max_length=100)
     description: str = Field(default="", max_length=10_000)
+    moving_obstacles: list[dict[str, Any]] = Field(
+        default_factory=list, max_length=8,
+        description="Discs moving in experiment time: radius (m), waypoints or random_walk, speed (m/s), repeat, "
+                    "delay_s (s); see docs/planners.md.")
 
     def to_data(self) -> dict[str, Any]:
         return self.model_dump()
@@ -132,6 +136,7 @@ class EnvironmentPublic(BaseModel):
     blocks: list[dict[str, float]]
     plans: list[dict[str, Any]] = []
     description: str = ""
+    moving_obstacles: list[dict[str, Any]] = []
     builtin: bool
     owner: Optional[str] = None
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from planners import Environment, PlanningError, check_query, get_planner, parse_environment
+from planners.moving import obstacle_at
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from .errors import PreflightError
@@ -67,6 +68,10 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
         note = (f" (the robot radius {robot_radius:g} m plus the testbed's planning margin {planning_margin:g} m)"
                 if radius != robot_radius else "")
         raise PreflightError(f"{exc}{note}") from None
+    taken = obstacle_at(env.moving_obstacles, s[:2], 0.0, robot_radius)
+    if taken is not None:
+        raise PreflightError(f"start ({s[0]:g}, {s[1]:g}) is closer than the robot radius {robot_radius:g} m to "
+                             f"moving obstacle {taken} (moving_obstacles[{taken}]) when the path starts")
     path = None
     if body.path is not None:
         pts = np.array([p[:2] for p in body.path], dtype=float)

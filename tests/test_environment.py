@@ -110,3 +110,72 @@ def test_environment_files_and_robots_agree_on_which_blocks_fit():
         assert file_ok == robot_ok, block
         agreed[file_ok] += 1
     assert agreed[True] > 50 and agreed[False] > 50  # both kinds were tried
+
+
+# ---------------------------------------------------------------- moving obstacles (issue 17)
+
+def crossing(**over):
+    ob = {"radius": 0.04, "waypoints": [[0.2, 1.2], [0.8, 1.2]], "speed": 0.05, "repeat": "once", "delay_s": 2}
+    ob.update(over)
+    return good(moving_obstacles=[ob])
+
+
+def test_moving_obstacles_round_trip_and_move_exactly_in_time(tmp_path):
+    import numpy as np
+
+    walk = {"radius": 0.03, "speed": 0.1, "repeat": "loop",
+            "random_walk": {"seed": 3, "start": [0.5, 0.5], "steps": 6, "step_m": 0.2}}
+    data = crossing()
+    data["moving_obstacles"].append(walk)
+    env = parse_environment(data)
+    path = tmp_path / "env.json"
+    path.write_text(json.dumps(env.to_dict()))
+    assert load_environment(path) == env and parse_environment(env.to_dict()) == env
+    assert env.to_dict()["moving_obstacles"][1]["random_walk"]["seed"] == 3  # the walk is kept, not its expansion
+    once = env.moving_obstacles[0]
+    # at rest until delay_s, then 0.05 m/s along x, then stays at the last waypoint
+    p = once.position(np.array([0.0, 2.0, 4.0, 14.0, 100.0]))
+    np.testing.assert_allclose(p, [[0.2, 1.2], [0.2, 1.2], [0.3, 1.2], [0.8, 1.2], [0.8, 1.2]], atol=1e-12)
+    pp = parse_environment(crossing(repeat="pingpong", delay_s=0)).moving_obstacles[0]
+    np.testing.assert_allclose(pp.position(np.array([12.0, 18.0, 24.0, 30.0])),
+                               [[0.8, 1.2], [0.5, 1.2], [0.2, 1.2], [0.5, 1.2]], atol=1e-12)
+    loop = parse_environment(crossing(repeat="loop", delay_s=0, waypoints=[[0.2, 0.2], [0.6, 0.2], [0.6, 0.6]]))
+    lp = loop.moving_obstacles[0]
+    perimeter = 0.4 + 0.4 + float(np.hypot(0.4, 0.4))
+    t = np.linspace(0, 60, 7)
+    np.testing.assert_allclose(lp.position(t), lp.position(t + perimeter / 0.05), atol=1e-9)  # periodic
+    # the walk stays inside the field by its radius, and the same seed gives the same walk
+    w = env.moving_obstacles[1]
+    assert w.waypoints == parse_environment(data).moving_obstacles[1].waypoints and len(w.waypoints) == 7
+    assert all(0.03 <= c <= 1.77 for pt in w.waypoints for c in pt)
+    other = dict(walk, random_walk={**walk["random_walk"], "seed": 4})
+    assert parse_environment(good(moving_obstacles=[other])).moving_obstacles[0].waypoints != w.waypoints
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        (good(moving_obstacles={}), "moving_obstacles must be a list"),
+        (crossing(radius=0), r"moving_obstacles\[0\]\.radius must be in \(0, 0.25\]"),
+        (crossing(radius=-0.1), r"moving_obstacles\[0\]\.radius must be in"),
+        (crossing(speed=0), r"moving_obstacles\[0\]\.speed must be in \(0, 0.3\] m/s"),
+        (crossing(speed=2.0), r"moving_obstacles\[0\]\.speed must be in \(0, 0.3\] m/s"),
+        (crossing(speed=float("nan")), r"moving_obstacles\[0\]\.speed must be finite"),
+        (crossing(waypoints=[[0.2, 1.2], [2.5, 1.2]]), r"moving_obstacles\[0\]\.waypoints\[1\] \(2.5, 1.2\) must lie inside"),
+        (crossing(waypoints=[[0.2, float("nan")]]), r"moving_obstacles\[0\]\.waypoints\[0\]\[1\] must be finite"),
+        (crossing(waypoints=[]), r"moving_obstacles\[0\]\.waypoints must be a list of 1"),
+        (crossing(repeat="bounce"), r"moving_obstacles\[0\]\.repeat must be one of once, loop, pingpong"),
+        (crossing(delay_s=-1), r"moving_obstacles\[0\]\.delay_s must be in \[0"),
+        (crossing(colour="red"), r"moving_obstacles\[0\] has unknown key 'colour'"),
+        (crossing(random_walk={"seed": 1, "start": [1, 1], "steps": 3, "step_m": 0.1}), "exactly one of waypoints"),
+        (good(moving_obstacles=[{"radius": 0.04, "speed": 0.1, "random_walk": {"seed": 1, "start": [1, 1],
+                                                                               "steps": 3}}]),
+         r"moving_obstacles\[0\]\.random_walk\.step_m is missing"),
+        (good(moving_obstacles=[{"radius": 0.04, "speed": 0.1}]), "exactly one of waypoints or random_walk"),
+        (good(moving_obstacles=[{"radius": 0.04, "waypoints": [[1, 1]]}]), r"moving_obstacles\[0\]\.speed is missing"),
+        (good(moving_obstacles=[crossing()["moving_obstacles"][0]] * 9), "at most 8 entries"),
+    ],
+)
+def test_invalid_moving_obstacles_name_the_bad_field(data, message):
+    with pytest.raises(InvalidEnvironment, match=message):
+        parse_environment(data)

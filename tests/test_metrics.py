@@ -464,3 +464,32 @@ def test_bad_arguments_are_refused_naming_the_parameter():
         goal_reached(SQUARE, [np.nan, 0])
     with pytest.raises(ValueError, match="`robot_radius` must be a finite number >= 0"):
         collided(env_with(), SQUARE * 0.5, robot_radius=-1)
+
+
+# ---------------------------------------------------------------- moving obstacles (issue 17)
+
+
+def test_obstacle_distance_and_time_within_a_safety_radius():
+    from planners import parse_environment
+    from planners.metrics import OBSTACLE_KEYS, obstacle_gaps, obstacle_metrics
+
+    # a disc of 0.05 m standing at (1.0, 0.5) until t = 10 s, then leaving upwards at 0.1 m/s
+    env = parse_environment({"name": "m", "size": [1.8, 1.8], "moving_obstacles": [
+        {"radius": 0.05, "waypoints": [[1.0, 0.5], [1.0, 1.5]], "speed": 0.1, "delay_s": 10.0}]})
+    t = np.arange(0.0, 20.01, 0.5)
+    path = np.column_stack([0.2 + 0.08 * t, np.full_like(t, 0.3)])  # along y = 0.3, at x = 1.0 at t = 10
+    gaps = obstacle_gaps(env, path, t, robot_radius=0.04)
+    centre = np.column_stack([np.full_like(t, 1.0), 0.5 + 0.1 * np.maximum(t - 10, 0)])
+    np.testing.assert_allclose(gaps, np.hypot(*(path - centre).T) - 0.09, atol=1e-12)
+    # obstacle time counts from the start time: the same samples logged 5 s later, with start_time 5
+    s = MetricSettings(robot_radius=0.04, obstacle_safety=0.15)
+    m = obstacle_metrics(env, path, t + 5.0, start_time=5.0, settings=s)
+    assert m["obstacle_distance_min_m"] == pytest.approx(gaps.min()) and gaps.min() == pytest.approx(0.2 - 0.09)
+    assert m["obstacle_time_within_s"] == pytest.approx(0.5 * (gaps[:-1] < 0.15).sum())
+    assert m["obstacle_time_within_s"] > 0
+    assert obstacle_metrics(env, path, t, settings=MetricSettings(obstacle_safety=0.0))["obstacle_time_within_s"] == 0
+    full = run_metrics(path, path, env=env, t=t, start_time=0.0, done_time=20.0, settings=s)
+    assert {k: full[k] for k in OBSTACLE_KEYS} == obstacle_metrics(env, path, t, start_time=0.0, settings=s)
+    static = parse_environment({"name": "s", "size": [1.8, 1.8]})
+    assert not set(OBSTACLE_KEYS) & set(run_metrics(path, path, env=static, t=t))
+    assert obstacle_metrics(static, path, t) == {k: None for k in OBSTACLE_KEYS}

@@ -43,7 +43,7 @@ def test_metrics_json_with_environment(twb, files):
     assert isinstance(doc["clearance_min_m"], float) and isinstance(doc["collided"], bool)
     assert doc["goal_reached"] is True and doc["planned"]["execution_time_s"] is None
     assert doc["parameters"] == {"samples": 200, "segments": None, "segment_length_m": 0.05,
-                                 "robot_radius_m": 0.045, "goal_tolerance_m": 0.05}
+                                 "robot_radius_m": 0.045, "goal_tolerance_m": 0.05, "obstacle_safety_m": 0.1}
 
 
 def test_metrics_without_environment_and_with_options(twb, files):

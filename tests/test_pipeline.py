@@ -204,14 +204,23 @@ async def test_start_pose_jitter_is_seeded_and_small(tmp_path):
             assert 1e-4 < math.hypot(x - 0.3, y - 0.3) < 0.05
 
 
-@pytest.mark.parametrize("through_block", [False, True])
-async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through_block):
+#: ONE_BLOCK with a disc crossing the straight way from (0.3, 0.3) to (1.5, 0.3) when the robot gets there
+MOVING = {**ONE_BLOCK, "name": "one-block-moving",
+          "moving_obstacles": [{"radius": 0.04, "waypoints": [[0.8, 0.05], [0.8, 0.6]], "speed": 0.1,
+                                "repeat": "pingpong", "delay_s": 0.5}]}
+
+
+@pytest.mark.parametrize("through", ["", "block", "obstacle"])
+async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through):
     """The same run on the agent's robot and as one compute task (the Ray pool's code path, here on the
     worker processes): the same outcome, where it stopped, poses (bit for bit) and metrics (1e-9)."""
     async with running(tmp_path) as tb:
         tb.field.add_engine_slots("engine", 1)
+        through_block = bool(through)
         kw = dict(start=(0.3, 0.9, 0.0), goal=(1.5, 0.9, 0.0), planner=None,
-                  planned_path=[[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]) if through_block else \
+                  planned_path=[[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]) if through == "block" else \
+            dict(env=MOVING, start=(0.3, 0.3, 0.0), goal=(1.5, 0.3, 0.0), planner=None,
+                 planned_path=[[0.3, 0.3, 0.0], [0.9, 0.3, 0.0], [1.5, 0.3, 0.0]]) if through == "obstacle" else \
             dict(jitter={"xy_m": 0.01, "theta_rad": 0.05})
         found = []
         for robot in ("sim-1", "engine-1"):
@@ -237,3 +246,38 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
                 assert math.isclose(ma[k], mb[k], rel_tol=1e-9, abs_tol=1e-12), k
             elif k != "planning_time_s":
                 assert ma[k] == mb[k], k
+        assert (ma["collisions_block"], ma["collisions_obstacle"]) == {
+            "": (0, 0), "block": (1, 0), "obstacle": (0, 1)}[through]
+        assert ("obstacle_distance_min_m" in ma) == (through == "obstacle")
+        if through == "obstacle":  # it touched the disc: the gap of its chassis (0.045 m) is about zero
+            assert -0.01 < ma["obstacle_distance_min_m"] < 0.01 and ma["obstacle_time_within_s"] > 0
+            assert ea.error == "collision: the robot hit moving obstacle 0 (the environment's moving_obstacles[0])"
+
+
+@pytest.mark.parametrize("planner", ["fmm", "st_astar"])
+async def test_the_crossing_disc_fails_an_uncoordinated_run_and_not_a_space_time_one(tmp_path, planner):
+    """Issue 17: plan A of the built-in `crossing` on the agent's robot, planned by the testbed; fmm's path
+    meets the disc that crosses it (a collision naming it, counted as one), st_astar's does not."""
+    from planners import load_environment
+
+    crossing = load_environment("crossing").to_dict()
+    async with running(tmp_path) as tb:
+        _, run_id = add_experiment(tb, env=crossing, start=(0.3, 0.3, 0.0), goal=(1.5, 1.5, 1.5708),
+                                   planner=planner, mode="sim")
+        end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
+        run, poses, _ = run_row(tb, run_id)
+        if planner == "fmm":
+            assert end.status is RunStatus.FAILED and end.failure is FailureKind.COLLISION, end
+            assert end.error == "collision: the robot hit moving obstacle 0 (the environment's moving_obstacles[0])"
+            assert (run.metrics["collisions_obstacle"], run.metrics["collisions_block"]) == (1, 0)
+        else:
+            assert end.status is RunStatus.COMPLETED, end
+            assert (run.metrics["collisions_obstacle"], run.metrics["collisions_block"]) == (0, 0)
+            assert run.metrics["goal_reached"] and run.metrics["obstacle_distance_min_m"] > 0.02
+        assert "sim-1" in tb.field.moving  # the agent's world has the discs until an environment clears them
+        _, later = add_experiment(tb, mode="sim")  # one-block: no discs; building it clears them
+        end = await run_and_store(tb, assignment(tb, later, "sim"), stopping=lambda: False)
+        assert end.status is RunStatus.COMPLETED and "sim-1" not in tb.field.moving
+        with tb.sessions() as s:
+            sent = s.scalars(select(Message.line).where(Message.run_id == later, Message.direction == ">")).all()
+        assert "T,T,M" in sent

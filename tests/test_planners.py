@@ -18,7 +18,7 @@ from planners import (
 )
 from planners.prm import PRMPlanner
 
-PLANNERS = ["fmm", "fm2", "prm", "astar"]
+PLANNERS = ["fmm", "fm2", "prm", "astar", "st_astar"]
 CASES = [(env, plan) for env in ("room", "blocks") for plan in ("A", "B")]
 
 

@@ -355,3 +355,26 @@ def test_builtin_environments_fit_their_area(name):
     env = load_environment(name)
     line = encode_build([(b.x, b.y, b.w, b.h, b.angle) for b in env.blocks])
     assert len(parse_command(line, field_size=env.size).blocks) == len(env.blocks)
+
+
+def test_moving_obstacles_line():
+    from robot_agent.protocol import MovingCommand, encode_moving
+
+    line = encode_moving([((0.04, 0.05, 2, 1.5), [(0.2, 1.2), (0.8, 1.2)]), ((0.03, 0.1, 0, 0), [(0.5, 0.5)])])
+    assert line == "T,T,M,40,50,2,1.5,200,1200,800,1200;30,100,0,0,500,500"
+    cmd = parse_command(line, field_size=(1.8, 1.8))
+    assert isinstance(cmd, MovingCommand) and len(cmd.obstacles) == 2
+    np.testing.assert_allclose(cmd.obstacles[0][0], [0.04, 0.05, 2, 1.5])
+    np.testing.assert_allclose(cmd.obstacles[0][1], [[0.2, 1.2], [0.8, 1.2]])
+    assert parse_command("T,T,M") == MovingCommand(()) and encode_moving([]) == "T,T,M"
+    for bad, code, message in (
+        ("T,T,M,40,50,2,1.5,200", "SYNTAX", "obstacle 1: expected radius,speed,repeat,delay and 1 to 1000 points"),
+        ("T,T,M,40,50,2,1.5,200,1200;0,50,2,1.5,200,1200", "RANGE", "obstacle 2: radius and speed must be > 0"),
+        ("T,T,M,40,50,5,1.5,200,1200", "RANGE", "obstacle 1: radius and speed must be > 0, delay >= 0 and repeat 0"),
+        ("T,T,M,40,50,2,1.5,200,nan", "SYNTAX", "obstacle 1: 'nan' is not finite number"),
+        ("T,T,M,40,50,2,1.5,200,2000", "RANGE", "obstacle 1 point 1 (200, 2000) mm is outside the field"),
+        ("T,T,M," + ";".join(["40,50,0,0,100,100"] * 9), "RANGE", "too many moving obstacles: 9 > 8"),
+    ):
+        with pytest.raises(ProtocolError) as exc:
+            parse_command(bad, field_size=(1.8, 1.8))
+        assert exc.value.code.value == code and exc.value.message.startswith(message), exc.value.message

@@ -81,6 +81,16 @@ def test_ensure_environment_creates_uses_or_refuses():
         moved = {**ROOM, "blocks": ROOM["blocks"][:-1]}
         with pytest.raises(Conflict, match="already has a different environment named 'room'.*another name"):
             c.ensure_environment(moved)
+        # moving obstacles are part of the field: kept by the model, defaults filled, differences refused
+        disc = {"radius": 0.04, "waypoints": [[0.2, 1.2], [0.8, 1.2]], "speed": 0.05}
+        env, created = c.ensure_environment({**MINE, "name": "moving", "moving_obstacles": [disc]})
+        assert created and env.moving_obstacles == [disc] and env.to_json()["moving_obstacles"] == [disc]
+        server.visible["moving"]["moving_obstacles"] = [{**disc, "repeat": "once", "delay_s": 0.0}]  # as stored
+        assert c.ensure_environment({**MINE, "name": "moving", "moving_obstacles": [disc]})[1] is False
+        with pytest.raises(Conflict, match="different environment named 'moving'"):
+            c.ensure_environment({**MINE, "name": "moving", "moving_obstacles": [{**disc, "speed": 0.1}]})
+        with pytest.raises(Conflict, match="different environment named 'moving'"):
+            c.ensure_environment({**MINE, "name": "moving"})
 
 
 def test_ensure_environment_says_when_the_name_is_taken_by_an_invisible_one():

@@ -240,3 +240,29 @@ def test_twb_users_commands(server, twb):
     assert again.returncode == 2 and "already exists" in again.stderr
     refused = twb("users", "list", env={"TWB_URL": server.url, "TWB_TOKEN": token})
     assert refused.returncode == 2 and "Admin only" in refused.stderr
+
+
+def test_environments_with_moving_obstacles_round_trip_and_bad_ones_are_422(alice):
+    ob = {"radius": 0.04, "waypoints": [[0.2, 1.2], [0.8, 1.2]], "speed": 0.05, "repeat": "pingpong", "delay_s": 1.5}
+    walk = {"radius": 0.03, "speed": 0.1, "repeat": "loop",
+            "random_walk": {"seed": 7, "start": [0.5, 0.5], "steps": 4, "step_m": 0.2}}
+    env = {"name": "alice-moving", "size": [1.8, 1.8], "blocks": [], "moving_obstacles": [ob, walk]}
+    r = alice.post("/api/v1/environments", json=env)
+    assert r.status_code == 201, r.text
+    got = alice.get("/api/v1/environments/alice-moving").json()
+    assert got["moving_obstacles"] == [ob, {**walk, "delay_s": 0.0}]  # stored normalised: defaults spelt out
+    for bad, detail in (({**ob, "speed": 5.0}, "moving_obstacles[0].speed must be in (0, 0.3] m/s"),
+                        ({**ob, "waypoints": [[0.2, 1.2], [1.9, 1.2]]}, "moving_obstacles[0].waypoints[1]"),
+                        ({**ob, "radius": 0}, "moving_obstacles[0].radius must be in (0, 0.25] m"),
+                        ({**ob, "colour": "red"}, "moving_obstacles[0] has unknown key 'colour'")):
+        r = alice.post("/api/v1/environments", json={**env, "name": "alice-bad", "moving_obstacles": [bad]})
+        assert r.status_code == 422 and r.json()["detail"].startswith(detail), r.text
+    assert alice.get("/api/v1/environments/room").json()["moving_obstacles"] == []
+    crossing = alice.get("/api/v1/environments/crossing").json()
+    assert crossing["builtin"] and len(crossing["moving_obstacles"]) == 2
+    # a start where a disc stands when the path begins is the job's mistake, refused before any run
+    r = alice.post("/api/v1/experiments", json={**JOB, "environment": "crossing", "start": [0.22, 1.2],
+                                               "goal": [1.5, 1.5], "planner": "st_astar"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == ("start (0.22, 1.2) is closer than the robot radius 0.045 m to moving obstacle 0 "
+                                  "(moving_obstacles[0]) when the path starts")

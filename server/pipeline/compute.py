@@ -12,7 +12,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["TooFewPoses", "block_tuples", "compare_runs", "expected_duration_s", "explicit_path", "jittered", "measure_run",
+__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "moving_tuples", "compare_runs", "expected_duration_s", "explicit_path", "jittered", "measure_run",
            "plan_job", "simulate_job", "warm_up"]
 
 
@@ -101,6 +101,26 @@ def block_tuples(env_data: dict[str, Any]) -> list[tuple[float, float, float, fl
     return [(b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)) for b in env_data.get("blocks", [])]
 
 
+def moving_tuples(env_data: dict[str, Any]) -> list[tuple[list[float], list[list[float]]]]:
+    """The environment's moving obstacles as ``T,T,M`` takes them: per obstacle (radius m, speed m/s, repeat
+    code, delay s) and its waypoints (m; a random walk expanded with its seed)."""
+    if not env_data.get("moving_obstacles"):
+        return []
+    from planners import parse_environment
+    from planners.moving import REPEAT_MODES
+
+    env = parse_environment(env_data)
+    return [([o.radius, o.speed, float(REPEAT_MODES[o.repeat]), o.delay_s], [list(p) for p in o.waypoints])
+            for o in env.moving_obstacles]
+
+
+def collision_counts(collided: bool, obstacle: Optional[int]) -> dict[str, int]:
+    """A run's collisions by kind (docs/metrics.md): ``collisions_obstacle`` (a moving obstacle) and
+    ``collisions_block`` (a block, the wall or another robot); a collision ends a run, so each is 0 or 1."""
+    hit_obstacle = collided and obstacle is not None
+    return {"collisions_obstacle": int(hit_obstacle), "collisions_block": int(collided and not hit_obstacle)}
+
+
 def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list[list[float]], seed: int,
                  max_s: float, goal: list[float], robot_radius: float,
                  planning_time_s: Optional[float], backend: str = "ideal", platform: str = "BeBot",
@@ -109,13 +129,14 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     """One run without a robot agent (a Ray or worker-process task): the ``backend`` robot (``ideal``; or
     ``field``, the emulated field robot of ``platform``'s profile with the field parameters ``overrides``)
     follows ``path`` from the first free pose of ``starts`` (x, y, theta; m, rad: the jittered start, then
-    the start itself) among the environment's blocks in a world of ``area`` (m; default the whole field) for at most ``max_s``
+    the start itself) among the environment's blocks and moving obstacles in a world of ``area`` (m; default the whole field) for at most ``max_s``
     experiment seconds, as an agent's robot would (:func:`robot_agent.headless.simulate_run`), then is
     measured.
 
     Returns ``{"poses"`` ``(N, 4)`` t s, x m, y m, theta rad (field frame), ``"lines"`` the protocol
     lines an agent would have exchanged (``[direction, line, t]``), ``"t_start"``, ``"t_end"``,
-    ``"outcome"`` (``DONE``, a ``FAIL`` reason or ``TIMEOUT_SIM``), ``"metrics"`` (None with
+    ``"outcome"`` (``DONE``, a ``FAIL`` reason or ``TIMEOUT_SIM``), ``"obstacle"`` (the moving obstacle of a
+    collision, else None), ``"metrics"`` (None with
     ``"metrics_error"`` when too few poses were logged)``}``; or ``{"placement_error": why, "lines"}`` when no
     pose of ``starts`` is free.
     """
@@ -124,7 +145,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
 
     from robot_agent.headless import PlacementRefused, simulate_run
     from robot_agent.overrides import apply_overrides
-    from robot_agent.protocol import encode_build, encode_path, encode_place, format_event
+    from robot_agent.protocol import encode_build, encode_moving, encode_path, encode_place, format_event
     from robot_agent.robot_profile import load_profile, profile_for_platform
 
     pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
@@ -132,12 +153,15 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
         time.sleep(pause)
     blocks = block_tuples(env_data)
     profile = apply_overrides(load_profile(profile_for_platform(platform)), overrides)
+    moving = moving_tuples(env_data)
     lines: list[list[Any]] = [[">", encode_build(blocks), None]]
+    if moving:
+        lines.append([">", encode_moving(moving), None])
     run = None
     for i, start in enumerate(starts):
         lines.append([">", encode_place(start), None])
         try:
-            run = simulate_run(path, start, seed=seed, blocks=blocks, max_s=max_s, backend=backend,
+            run = simulate_run(path, start, seed=seed, blocks=blocks, moving=moving, max_s=max_s, backend=backend,
                                profile=profile, **({} if area is None else {"area": tuple(area)}))
             break
         except PlacementRefused as exc:
@@ -149,7 +173,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     lines.append([">", encode_path(path), run.t_start])
     lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
     out: dict[str, Any] = {"poses": run.poses, "lines": lines, "t_start": run.t_start, "t_end": run.t_end,
-                           "outcome": run.outcome, "metrics": None, "metrics_error": None}
+                           "outcome": run.outcome, "obstacle": run.obstacle, "metrics": None, "metrics_error": None}
     t_end = run.t_end if run.t_end is not None else (float(run.poses[-1, 0]) if len(run.poses) else None)
     try:
         out["metrics"] = measure_run(env_data, path, run.poses, run.t_start, t_end, goal, robot_radius,

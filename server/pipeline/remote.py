@@ -89,7 +89,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: Optional[RunJob]
         failure = RunFailed(f"timeout: the robot did not finish within {timeout_s:.0f} s "
                             "of experiment time", FailureKind.TIMEOUT)
     elif outcome != "DONE":
-        failure = steps.failure_of(outcome)
+        failure = steps.failure_of(outcome, out.get("obstacle"))
     if isinstance(failure, TestbedFault):
         raise failure
     fields = ctx.end_fields
@@ -97,6 +97,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: Optional[RunJob]
     if out["metrics"] is not None:
         metrics = dict(out["metrics"])
         metrics["collided"] = failure is not None and failure.kind is FailureKind.COLLISION
+        metrics.update(compute.collision_counts(metrics["collided"], out.get("obstacle")))
         fields["metrics"] = metrics
         if failure is not None and len(poses):
             fields["stopped_at"] = [round(float(poses[-1, 1]), 4), round(float(poses[-1, 2]), 4)]

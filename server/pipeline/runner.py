@@ -186,7 +186,7 @@ async def _steps(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     # then is data; its `collided` is the robot's own verdict, as for completed runs
     try:
         await steps.analyze(ctx, svc, job, plan, collided=failure is not None and failure.kind is FailureKind.COLLISION,
-                            failed=failure is not None)
+                            failed=failure is not None, obstacle=getattr(failure, "obstacle", None))
     except TestbedFault:
         if failure is None:
             raise

@@ -6,7 +6,7 @@ import asyncio
 import math
 from typing import Optional
 
-from robot_agent.protocol import encode_build, encode_path, encode_place
+from robot_agent.protocol import encode_build, encode_moving, encode_path, encode_place
 
 from ..agent_link import AgentLink
 from ..errors import AgentRefused, AgentUnavailable, AgentUnreachable, FailureKind, RunFailed, TestbedFault
@@ -16,7 +16,7 @@ from . import compute
 from .context import RunContext, RunServices
 from .paths import Plan
 
-__all__ = ["PARK", "analyze", "build", "connect", "drive", "failure_of", "place", "run_timeout_s", "start_pose"]
+__all__ = ["PARK", "analyze", "build", "connect", "drive", "fail_fields", "failure_of", "place", "run_timeout_s", "start_pose"]
 
 #: park positions (robot frame) of sub-field robots 2-4 during full-field runs: their outer corners
 PARK = {2: (1.7, 0.1, 0.0), 3: (0.1, 1.7, 0.0), 4: (1.7, 1.7, 0.0)}
@@ -29,13 +29,26 @@ _FAILURES = {
 }
 
 
-def failure_of(reason: str) -> RunFailed | TestbedFault:
+def failure_of(reason: str, obstacle: Optional[int] = None) -> RunFailed | TestbedFault:
     """What the robot's ``EV,FAIL,<reason>`` means for the run: the job's failure, or the testbed's fault
-    (``STOPPED``: someone else stopped the robot)."""
+    (``STOPPED``: someone else stopped the robot); ``obstacle``: the moving obstacle of a collision
+    (``EV,FAIL,COLLISION,OBSTACLE,<k>``), kept on the failure as ``obstacle``."""
     if reason == "STOPPED":
         return TestbedFault("the robot was stopped by someone else during the run")
     fkind, message = _FAILURES.get(reason, (FailureKind.OTHER, reason.lower()))
-    return RunFailed(message, fkind)
+    if reason == "COLLISION" and obstacle is not None:
+        message = f"collision: the robot hit moving obstacle {obstacle} (the environment's moving_obstacles[{obstacle}])"
+    failure = RunFailed(message, fkind)
+    failure.obstacle = obstacle if reason == "COLLISION" else None
+    return failure
+
+
+def fail_fields(fields: tuple[str, ...]) -> tuple[str, Optional[int]]:
+    """The reason and the moving obstacle (or None) of an ``EV,FAIL`` line's fields (time last)."""
+    reason = fields[1] if len(fields) > 1 else "UNKNOWN"
+    if len(fields) == 5 and fields[2] == "OBSTACLE" and fields[3].isdigit():
+        return reason, int(fields[3])
+    return reason, None
 
 
 def run_timeout_s(svc: RunServices, path: list[list[float]]) -> float:
@@ -87,6 +100,14 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
     for k in ctx.subfields:
         await field.set_subfield(k, state=SubfieldState.BUILDING)
     await link.request(encode_build(blocks), ctx.wall(60 * (len(blocks) + 10)))
+    rid = ctx.robot.robot_id
+    if job.environment_data.get("moving_obstacles") or rid in field.moving:  # set them, or clear the last ones
+        moving = await svc.pool.run(compute.moving_tuples, job.environment_data)
+        await link.request(encode_moving(moving), ctx.wall(0))
+        if moving:
+            field.moving.add(rid)
+        else:
+            field.moving.discard(rid)
     field.built[ctx.robot.robot_id] = key
     shown = job.environment if len(ctx.subfields) == 1 else f"{job.environment} (full)"
     for k in ctx.subfields:
@@ -174,7 +195,7 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
             await _collect_poses(svc, robot_id, ev.time or 0.0)
             if kind == "DONE":
                 return
-            raise failure_of(ev.fields[1] if len(ev.fields) > 1 else "UNKNOWN")
+            raise failure_of(*fail_fields(ev.fields))
 
 
 async def _collect_poses(svc: RunServices, robot_id: str, t_end: float) -> None:
@@ -188,7 +209,7 @@ async def _collect_poses(svc: RunServices, robot_id: str, t_end: float) -> None:
 
 
 async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *, collided: bool,
-                  failed: bool = False) -> None:
+                  failed: bool = False, obstacle: Optional[int] = None) -> None:
     """The run's metrics (docs/metrics.md), in a worker process.
 
     ``collided`` is what the robot itself detected (it stops with
@@ -196,7 +217,8 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
     ``clearance_min_m``, which can dip below the robot radius by the
     tracker's noise without a contact.  Too few logged poses is the
     testbed's fault (:class:`TestbedFault`).  A ``failed`` run also records
-    where it stopped (its last logged pose).
+    where it stopped (its last logged pose); ``obstacle`` the moving
+    obstacle a collision was with (None: a block, the wall or a robot).
     """
     rec = svc.recorder
     poses, t0, t1 = await rec.driven(ctx.run_id)
@@ -206,6 +228,7 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
     except compute.TooFewPoses as exc:
         raise TestbedFault(f"cannot compute metrics: {exc}") from None
     metrics["collided"] = collided
+    metrics.update(compute.collision_counts(collided, obstacle))
     ctx.end_fields["metrics"] = metrics  # stored with the run's end
     if failed and poses:
         ctx.end_fields["stopped_at"] = [round(poses[-1][1], 4), round(poses[-1][2], 4)]

@@ -23,7 +23,7 @@ def _public(row: Environment, owner: str | None) -> EnvironmentPublic:
     d = row.data
     return EnvironmentPublic(
         name=row.name, size=d["size"], blocks=d.get("blocks", []), plans=d.get("plans", []),
-        description=d.get("description", ""), builtin=row.builtin, owner=owner,
+        description=d.get("description", ""), moving_obstacles=d.get("moving_obstacles", []), builtin=row.builtin, owner=owner,
     )
 
 

@@ -1,0 +1,110 @@
+"""Prioritized planning for several robots in space-time (issue 17, multi-robot: the pure planner).
+
+Robots are planned one after the other, in the order given (robot 0 first,
+the highest priority), each with the space-time A* of :mod:`planners.st_astar`
+(waits allowed: these plans are for robots that can be timed, see
+docs/planners.md): every robot avoids the environment's moving obstacles and
+the robots planned before it, which follow their timed paths and then stand
+at their goals for good.  A robot's goal must stay clear of the robots
+planned before it for the rest of the horizon, since it stands there after
+arriving.  The conflict table of the robots planned so far grows by one
+robot at a time (vectorised, :func:`planners.st_astar.movers_table`).
+
+Like every prioritized planner it is incomplete: a robot may find no path
+around the ones that go before it (:class:`~planners.errors.NoPathFound`
+names it), where another order would have worked.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .api import DEFAULT_ROBOT_RADIUS, check_query
+from .environment import Environment, load_environment
+from .errors import NoPathFound, PlanningError
+from .st_astar import SpaceTimeAStar, TimedPath, movers_table, plan_timed
+
+__all__ = ["MultiPlan", "min_separation", "plan_prioritized"]
+
+#: the space-time defaults for fleets: waits allowed, a smaller time margin (robots that can be timed)
+FLEET_DEFAULTS = {"wait": True, "time_margin_s": 0.5, "clearance": 0.0}
+
+
+@dataclass
+class MultiPlan:
+    """Timed ``paths`` (one :class:`TimedPath` per robot, in the robots' order; m, s), ``makespan_s`` (s, the
+    last arrival), ``planning_time_s`` (s) and per-robot ``info``."""
+
+    paths: list[TimedPath]
+    makespan_s: float
+    planning_time_s: float
+    info: list[dict[str, Any]] = field(default_factory=list)
+
+
+def min_separation(paths: Sequence[TimedPath], dt: float = 0.05) -> float:
+    """The smallest centre distance (m) between any two of ``paths``, sampled every ``dt`` (s) until the last
+    arrival (robots stand at their goals afterwards); ``inf`` for fewer than two."""
+    if len(paths) < 2:
+        return math.inf
+    end = max(float(p.times[-1]) for p in paths)
+    t = np.arange(0.0, end + dt, dt)
+    xy = np.stack([p.position(t) for p in paths])  # (R, T, 2)
+    d = np.hypot(xy[:, None, :, 0] - xy[None, :, :, 0], xy[:, None, :, 1] - xy[None, :, :, 1])  # (R, R, T)
+    d[np.arange(len(paths)), np.arange(len(paths))] = np.inf
+    return float(d.min())
+
+
+def _poses(env: Environment, points: Sequence[Sequence[float]], what: str) -> np.ndarray:
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] not in (2, 3) or len(p) < 1:
+        raise PlanningError(f"{what} must be a list of [x, y] poses, got shape {p.shape}")
+    return p[:, :2]
+
+
+def plan_prioritized(env: Environment | str, starts: Sequence[Sequence[float]], goals: Sequence[Sequence[float]], *,
+                     robot_radius: float = DEFAULT_ROBOT_RADIUS, planning_margin: float = 0.0,
+                     resolution: float = 0.01, params: Mapping[str, Any] | None = None) -> MultiPlan:
+    """Timed paths for robots from ``starts`` to ``goals`` (``(R, 2+)``, m) that keep ``robot_radius +
+    planning_margin`` (m) from the blocks, the moving obstacles and each other (centre distance at least
+    twice that, plus the lattice's inflation), robot 0 first.  ``params``: :class:`SpaceTimeAStar`'s, with
+    :data:`FLEET_DEFAULTS`.  Raises :class:`PlanningError` (a start or goal not free, two robots sharing one)
+    or :class:`NoPathFound` naming the robot that found no way."""
+    env = load_environment(env)
+    t_begin = time.perf_counter()
+    s_xy, g_xy = _poses(env, starts, "starts"), _poses(env, goals, "goals")
+    if len(s_xy) != len(g_xy):
+        raise PlanningError(f"{len(s_xy)} starts but {len(g_xy)} goals")
+    checked = SpaceTimeAStar().validate_params({**FLEET_DEFAULTS, **dict(params or {})})
+    radius = robot_radius + planning_margin
+    for what, pts in (("start", s_xy), ("goal", g_xy)):
+        d = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
+        d[np.diag_indices(len(pts))] = np.inf
+        if len(pts) > 1 and d.min() < 2 * radius:
+            a, b = np.unravel_index(int(np.argmin(d)), d.shape)
+            raise PlanningError(f"robots {a} and {b} have {what}s {d[a, b]:.3f} m apart, closer than two robot "
+                                f"radii with the planning margin ({2 * radius:.3f} m)")
+    spaces = [check_query(env, s, g, robot_radius=robot_radius, resolution=resolution,
+                          planning_margin=planning_margin)[0] for s, g in zip(s_xy, g_xy)]
+    space = spaces[0]
+    speed = float(checked["speed"])
+    span = float(np.hypot(*(g_xy - s_xy).T).max()) + env.width + env.height  # generous: detours and waits
+    horizon = float(checked["horizon_s"]) or (3.0 * span / speed + 20.0 + max(
+        [o.delay_s for o in env.moving_obstacles] + [0.0]))
+    run = {**checked, "horizon_s": horizon, "arrive_s": horizon}  # a robot stands at its goal for good
+    table = movers_table(space, run, horizon, env.moving_obstacles)
+    paths, infos = [], []
+    for r, (s, g) in enumerate(zip(s_xy, g_xy)):
+        try:
+            timed, info = plan_timed(space, s, g, run, table=table)
+        except NoPathFound as exc:
+            raise NoPathFound(f"robot {r} (of {len(s_xy)}, planned in order): {exc}") from None
+        paths.append(timed)
+        infos.append(info)
+        if r + 1 < len(s_xy):
+            table |= movers_table(space, run, horizon, others=[timed])
+    return MultiPlan(paths, max(float(p.times[-1]) for p in paths), time.perf_counter() - t_begin, infos)
