@@ -321,8 +321,10 @@ def test_figures_show_the_crashed_path_and_no_completed_run(overshoot_dir):
     figs = make_figures(load_study(overshoot_dir))
     fig8 = figs["fig8_paths"]
     crashed = [ln for ax in fig8.axes for ln in ax.get_lines() if ln.get_color() == "#ff7f0e"]
-    crosses = [ln for ln in crashed if ln.get_marker() == "x"]
-    assert len(crosses) == 5 and all(0.75 < ln.get_xdata()[0] < 1.06 for ln in crosses)  # stopped_at, or the last pose
+    crosses = [x for ln in crashed if ln.get_marker() == "x" for x in ln.get_xdata()]  # one marker line a panel
+    assert len(crosses) == 5 and all(0.75 < x < 1.06 for x in crosses)  # stopped_at, or the last pose
+    paths = [c for ax in fig8.axes for c in ax.collections if c.get_label().startswith("failed run")]
+    assert sum(len(c.get_segments()) for c in paths) == 5  # the five crashed paths, up to where they stopped
     assert all("failed" not in t.get_text() for ax in fig8.axes for t in ax.texts if t.get_text() == "failed")
     assert any("T: collision 5/5" in t.get_text() for ax in fig8.axes for t in ax.texts)
     fig6_texts = [t.get_text() for ax in figs["fig6_metrics"].axes for t in ax.texts]

@@ -60,15 +60,16 @@ class StudyData:
     _poses: dict[int, np.ndarray] = _field(default_factory=dict, repr=False)
 
     def poses(self, run_id: int) -> np.ndarray:
-        """``(N, 4)`` t, x, y, theta of a run (s, m, m, rad), from memory or ``poses/run-<id>.csv``."""
-        if run_id not in self._poses:
-            if self.directory is None:
-                raise KeyError(f"no poses for run {run_id}")
-            path = self.directory / "poses" / f"run-{run_id}.csv"
-            if not path.exists():
-                return np.empty((0, 4))
-            self._poses[run_id] = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2).reshape(-1, 4)
-        return self._poses[run_id]
+        """``(N, 4)`` t, x, y, theta of a run (s, m, m, rad), from memory or ``poses/run-<id>.csv`` (read each
+        time, not kept: a study of thousands of runs would not fit)."""
+        if run_id in self._poses:
+            return self._poses[run_id]
+        if self.directory is None:
+            raise KeyError(f"no poses for run {run_id}")
+        path = self.directory / "poses" / f"run-{run_id}.csv"
+        if not path.exists():
+            return np.empty((0, 4))
+        return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2).reshape(-1, 4)
 
     def add_poses(self, run_id: int, poses: np.ndarray) -> None:
         self._poses[run_id] = np.asarray(poses, dtype=float).reshape(-1, 4)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ._data import StudyData
 
-__all__ = ["FIG6_METRICS", "FIG7_RATIOS", "OUTCOME_COLORS", "figure_metrics", "figure_outcomes", "figure_paths",
+__all__ = ["FIG6_METRICS", "FIG7_RATIOS", "MAX_PATH_ROWS", "OUTCOME_COLORS", "figure_metrics", "figure_outcomes", "figure_paths",
            "figure_ratios", "make_figures", "mean_std", "save_figures"]
 
 #: Fig. 6 panels: (metric, label); the planned path's value is shown where it has one
@@ -208,16 +208,22 @@ def draw_environment(ax, env: dict[str, Any]) -> None:  # type: ignore[no-untype
         spine.set_visible(False)
 
 
-def figure_paths(data: StudyData):  # type: ignore[no-untyped-def]
-    """Fig. 8: computed, simulated and field paths over each environment; rows: problems, columns: planners."""
+#: Fig. 8 draws at most this many problems (rows); a larger study says so in the title (every path is in poses/)
+MAX_PATH_ROWS = 12
+
+
+def figure_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # type: ignore[no-untyped-def]
+    """Fig. 8: computed, simulated and field paths over each environment; rows: problems (the first
+    ``max_rows``), columns: configurations.  Each panel's runs are drawn as one collection per kind."""
     from matplotlib.figure import Figure
 
     problems, planners = data.problems, data.configurations
-    fig = Figure(figsize=(3.1 * len(planners), 3.2 * len(problems) + 0.6), layout="constrained")
-    axes = np.asarray(fig.subplots(len(problems), len(planners), squeeze=False))
+    shown = problems[:max_rows]
+    fig = Figure(figsize=(3.1 * len(planners), 3.2 * len(shown) + 0.6), layout="constrained")
+    axes = np.asarray(fig.subplots(len(shown), len(planners), squeeze=False))
     by_key = {(e["environment"], e["plan"], e["configuration"]): e for e in data.experiments}
     runs = {r["run_id"]: r for r in data.rows}
-    for i, (env_name, plan) in enumerate(problems):
+    for i, (env_name, plan) in enumerate(shown):
         for j, planner in enumerate(planners):
             ax = axes[i, j]
             draw_environment(ax, data.environments[env_name])
@@ -225,11 +231,8 @@ def figure_paths(data: StudyData):  # type: ignore[no-untyped-def]
             ax.set_title(f"{env_name} {plan} · {planner}", fontsize=9)
             if exp is None:
                 continue
-            for rid in exp["runs"]:
-                r = runs.get(rid)
-                if r is None or r.get("status") not in ("completed", "failed"):
-                    continue
-                _draw_run(ax, data, r)
+            _draw_runs(ax, data, [runs[rid] for rid in exp["runs"] if rid in runs
+                                  and runs[rid].get("status") in ("completed", "failed")])
             if exp.get("planned_path"):
                 pp = np.asarray(exp["planned_path"])
                 ax.plot(pp[:, 0], pp[:, 1], color="k", ls="--", lw=1.0, label=LABELS["computed"])
@@ -237,24 +240,38 @@ def figure_paths(data: StudyData):  # type: ignore[no-untyped-def]
             ax.plot(*exp["goal"][:2], "*", color="g", ms=9, label="goal")
             _outcome_note(ax, exp, runs)
     handles = {lab: h for ax in axes.ravel() for h, lab in zip(*ax.get_legend_handles_labels())}
-    legend_and_title(fig, handles, f"Study {data.spec.name}: computed (dashed), simulated and field paths")
+    more = f" (the first {len(shown)} of {len(problems)} problems; every path is in poses/)" \
+        if len(shown) < len(problems) else ""
+    legend_and_title(fig, handles, f"Study {data.spec.name}: computed (dashed), simulated and field paths{more}")
     return fig
 
 
-def _draw_run(ax, data: StudyData, r: dict[str, Any]) -> None:  # type: ignore[no-untyped-def]
-    """A run's driven path: completed in its mode's colour; failed in orange, up to where it stopped, with a ✕."""
-    p = data.poses(r["run_id"])
-    if r.get("status") == "completed":
+def _draw_runs(ax, data: StudyData, rows: list[dict[str, Any]]) -> None:  # type: ignore[no-untyped-def]
+    """Runs' driven paths: completed in their mode's colour; failed in orange, up to where they stopped, with
+    a ✕ (one line collection per kind: a panel of hundreds of runs stays one artist each)."""
+    from matplotlib.collections import LineCollection
+
+    lines: dict[str, list[np.ndarray]] = {}
+    crosses = []
+    for r in rows:
+        p = data.poses(r["run_id"])
+        kind = r["mode"] if r.get("status") == "completed" else "failed"
         if len(p):
-            ax.plot(p[:, 1], p[:, 2], color=COLORS[r["mode"]], lw=1.0, alpha=0.8, label=LABELS[r["mode"]])
-        return
-    if len(p):
-        ax.plot(p[:, 1], p[:, 2], color=COLORS["failed"], lw=1.4, label=LABELS["failed"])
-    x, y = r.get("stopped_at_x"), r.get("stopped_at_y")
-    if not (isinstance(x, (int, float)) and isinstance(y, (int, float))) and len(p):
-        x, y = p[-1, 1], p[-1, 2]
-    if isinstance(x, (int, float)) and isinstance(y, (int, float)):
-        ax.plot([x], [y], marker="x", ms=9, mew=2.4, color=COLORS["failed"], ls="none", label=LABELS["failed"])
+            lines.setdefault(kind, []).append(p[:, 1:3])
+        if kind != "failed":
+            continue
+        x, y = r.get("stopped_at_x"), r.get("stopped_at_y")
+        if not (isinstance(x, (int, float)) and isinstance(y, (int, float))) and len(p):
+            x, y = p[-1, 1], p[-1, 2]
+        if isinstance(x, (int, float)) and isinstance(y, (int, float)):
+            crosses.append((x, y))
+    for kind, segs in lines.items():
+        failed = kind == "failed"
+        ax.add_collection(LineCollection(segs, colors=COLORS[kind], linewidths=1.4 if failed else 1.0,
+                                         alpha=1.0 if failed else 0.8, label=LABELS[kind]))
+    if crosses:
+        xs, ys = zip(*crosses)
+        ax.plot(xs, ys, marker="x", ms=9, mew=2.4, color=COLORS["failed"], ls="none", label=LABELS["failed"])
 
 
 def _outcome_note(ax, exp: dict[str, Any], runs: dict[int, dict[str, Any]]) -> None:  # type: ignore[no-untyped-def]
