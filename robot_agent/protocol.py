@@ -37,6 +37,7 @@ __all__ = [
     "AuthCommand",
     "BuildCommand",
     "Command",
+    "ControllerCommand",
     "ErrorCode",
     "Event",
     "LeaseCommand",
@@ -50,6 +51,7 @@ __all__ = [
     "check_secret",
     "decode_path",
     "encode_build",
+    "encode_controller",
     "encode_path",
     "encode_place",
     "format_error",
@@ -69,6 +71,9 @@ MAX_POINTS = 10_000
 MAX_BLOCKS = 1000
 MAX_NUMBER_CHARS = 32  # a number's characters, surrounding spaces not counted
 MIN_SECRET_CHARS, MAX_SECRET_CHARS = 16, 128
+MAX_NAME_CHARS = 64  #: a controller's or parameter's name in ``T,T,C``
+MAX_CONTROLLER_PARAMS = 16
+_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyz0123456789_")
 #: how far a block may reach beyond its robot's area (wire rounding); the same rule as environment files
 #: (planners.environment: not imported here, the codec stays light for the sandbox and the SDK)
 BLOCK_TOLERANCE_M = 0.001
@@ -167,7 +172,17 @@ class LeaseCommand:
     lease: str | None
 
 
-Command = PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
+@dataclass(frozen=True)
+class ControllerCommand:
+    """``T,T,C``: the controller of the paths this connection sends from now on: ``name`` (None: the
+    default, the motor schema) with ``params`` (each in its own unit, SI, as its name says)."""
+
+    name: str | None
+    params: dict[str, float]
+
+
+Command = (PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
+           | ControllerCommand)
 
 # --------------------------------------------------------------------------- parsing
 #
@@ -237,7 +252,7 @@ def split_command(line: str | bytes) -> tuple[str, str | None]:
         raise ProtocolError(ErrorCode.SYNTAX, "empty line")
     head = text.split(",", 3)
     if len(head) < 3 or head[0].strip() != "T" or head[1].strip() != "T":
-        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|A|L>")
+        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|C|A|L>")
     return head[2].strip(), (head[3] if len(head) == 4 else None)
 
 
@@ -477,11 +492,45 @@ def parse_arguments(verb: str, rest: str | None, *, field_size: tuple[float, flo
         _check_range(out[:, :2], field_size, "block")
         _check_blocks_inside(out, field_size)
         return BuildCommand(out)
+    if verb == "C":
+        return _controller(rest)
     if verb == "A":
         return AuthCommand(_secret(rest, "A"))
     if verb == "L":
         return LeaseCommand(None if rest is None or not rest.strip() else _secret(rest, "L"))
     raise ProtocolError(ErrorCode.UNSUPPORTED, f"unknown command T,T,{verb[:10]}")
+
+
+def _name_error(name: str, what: str) -> str | None:
+    if not name or len(name) > MAX_NAME_CHARS or not set(name) <= _NAME_CHARS:
+        return f"{what} {name[:20]!r} is not a name (1 to {MAX_NAME_CHARS} of a-z, 0-9, _)"
+    return None
+
+
+def _controller(rest: str | None) -> ControllerCommand:
+    """``T,T,C[,<name>[,k=v,...]]``; names are checked here, the controller and its values by the robot."""
+    fields = [] if rest is None or not rest.strip() else [f.strip() for f in rest.split(",")]
+    if not fields:
+        return ControllerCommand(None, {})
+    if len(fields) > MAX_CONTROLLER_PARAMS + 1:
+        raise ProtocolError(ErrorCode.SYNTAX, f"T,T,C takes at most {MAX_CONTROLLER_PARAMS} parameters")
+    why = _name_error(fields[0], "controller")
+    if why:
+        raise ProtocolError(ErrorCode.SYNTAX, why)
+    params: dict[str, float] = {}
+    for f in fields[1:]:
+        key, eq, value = f.partition("=")
+        key = key.strip()
+        why = _name_error(key, "parameter") or (None if eq else f"parameter {key!r} needs a value: {key}=<number>")
+        why = why or _number_error(value)
+        if why is None and key in params:
+            why = f"parameter {key!r} given twice"
+        if why is None and not math.isfinite(float(value)):
+            why = "numbers must be finite"
+        if why:
+            raise ProtocolError(ErrorCode.SYNTAX, why)
+        params[key] = float(value)
+    return ControllerCommand(fields[0], params)
 
 
 def parse_command(line: str | bytes, *, field_size: tuple[float, float] | None = None) -> Command:
@@ -533,6 +582,13 @@ def decode_path(line: str | bytes) -> np.ndarray:
     if not isinstance(cmd, PathCommand):
         raise ProtocolError(ErrorCode.SYNTAX, "not a T,T,P line")
     return cmd.points
+
+
+def encode_controller(name: str | None, params: dict[str, float] | None = None) -> str:
+    """The ``T,T,C`` line choosing controller ``name`` (None: the default) with ``params`` (their own units)."""
+    if name is None:
+        return "T,T,C"
+    return ",".join(["T,T,C", name, *(f"{k}={float(v)!r}" for k, v in sorted((params or {}).items()))])
 
 
 def encode_place(pose: Sequence[float]) -> str:

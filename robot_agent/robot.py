@@ -33,11 +33,13 @@ import logging
 from typing import TYPE_CHECKING
 
 from .connection import MAX_AUTH_FAILURES
+from .controller_specs import ControllerError, select
 from .noise import path_key
 from .protocol import (
     AuthCommand,
     BuildCommand,
     Command,
+    ControllerCommand,
     ErrorCode,
     LeaseCommand,
     PathCommand,
@@ -144,6 +146,8 @@ class Robot:
             return self.cmd_auth(conn, cmd)
         if isinstance(cmd, LeaseCommand):
             return self.cmd_lease(conn, cmd)
+        if isinstance(cmd, ControllerCommand):
+            return self.cmd_controller(conn, cmd)
         raise ProtocolError(ErrorCode.UNSUPPORTED, "unsupported command")
 
     # ------------------------------------------------------------------ authentication
@@ -215,7 +219,7 @@ class Robot:
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
         self.host.sync_clock()
-        replaced = self.host.core.set_path(self.index, cmd.points, self._noise_key())
+        replaced = self.host.core.set_path(self.index, cmd.points, self._noise_key(), conn.controller)
         self.path_count += 1
         if replaced is not None:
             self._deliver(replaced)
@@ -223,6 +227,16 @@ class Robot:
         self.host.wake()
         log.info("%s: path of %d points from %s", self.robot_id, len(cmd.points), conn.peer)
         return [format_ok("P", len(cmd.points))]
+
+    def cmd_controller(self, conn: "Connection", cmd: ControllerCommand) -> list[str]:
+        """``T,T,C``: the controller of the paths this connection sends from now on (alone: the default)."""
+        try:
+            chosen = select(cmd.name, cmd.params)
+        except ControllerError as exc:
+            code = ErrorCode.UNSUPPORTED if exc.field == "controller" else ErrorCode.RANGE
+            raise ProtocolError(code, str(exc)) from None
+        conn.controller = None if cmd.name is None else chosen
+        return [format_ok("C")]
 
     def cmd_stop(self) -> list[str]:
         """``T,T,S``: stop now."""

@@ -135,6 +135,9 @@ class Experiment(Base):
     planning_info: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     #: start-pose jitter of every run, ``{"xy_m", "theta_rad"}`` (standard deviations), or None
     jitter: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, nullable=True)
+    #: the robots' path-tracking controller (docs/controllers.md) and its parameters, defaults filled in (SI)
+    controller: Mapped[str] = mapped_column(String(64), default="schema", server_default="schema")
+    controller_params: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, default=dict, nullable=True)
     error: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)

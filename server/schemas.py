@@ -183,6 +183,10 @@ class ExperimentCreate(Strict):
     jitter: Optional[Jitter] = Field(default=None, description=(
         "Seeded start-pose jitter for every run, both modes: repetitions then start a little apart, as on a "
         "real field (the ideal simulation is otherwise deterministic)."))
+    controller: str = Field(default="schema", min_length=1, max_length=64, description=(
+        "The robots' path-tracking controller (`GET /api/v1/controllers`; docs/controllers.md)."))
+    controller_params: dict[str, float] = Field(default_factory=dict, max_length=16, description=(
+        "The controller's parameters (SI units, as each name says); the others keep their defaults."))
 
     @field_validator("start", "goal")
     @classmethod
@@ -274,6 +278,7 @@ class ExperimentSummary(FromRow):
     modes: list[str]
     repetitions: int
     field: str
+    controller: str = "schema"
     error: str
     created_at: UTCDateTime
     finished_at: Optional[UTCDateTime]
@@ -293,10 +298,12 @@ class ExperimentPublic(ExperimentSummary):
     planning_time_s: Optional[float]
     planning_info: dict[str, Any]
     jitter: Optional[dict[str, float]] = None
+    controller_params: dict[str, float] = Field(default_factory=dict, description=(
+        "The controller's parameters, defaults filled in (SI units)."))
     started_at: Optional[UTCDateTime]
     runs: list[RunPublic]
 
-    @field_validator("planner_params", "planning_info", mode="before")
+    @field_validator("planner_params", "planning_info", "controller_params", mode="before")
     @classmethod
     def _dicts(cls, v: Any) -> Any:
         return v or {}

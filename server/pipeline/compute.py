@@ -103,11 +103,13 @@ def block_tuples(env_data: dict[str, Any]) -> list[tuple[float, float, float, fl
 
 def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list[list[float]], seed: int,
                  max_s: float, goal: list[float], robot_radius: float,
-                 planning_time_s: Optional[float]) -> dict[str, Any]:
+                 planning_time_s: Optional[float], controller: str = "schema",
+                 controller_params: Optional[dict[str, float]] = None) -> dict[str, Any]:
     """One simulation-mode run without a robot agent (a Ray task): the ideal robot follows ``path`` from the
     first free pose of ``starts`` (x, y, theta; m, rad: the jittered start, then the start itself) among the
-    environment's blocks for at most ``max_s`` experiment seconds, as an agent's simulation robot would
-    (:func:`robot_agent.headless.simulate_run`), then is measured.
+    environment's blocks for at most ``max_s`` experiment seconds with ``controller`` and its
+    ``controller_params``, as an agent's simulation robot would (:func:`robot_agent.headless.simulate_run`),
+    then is measured.
 
     Returns ``{"poses"`` ``(N, 4)`` t s, x m, y m, theta rad (field frame), ``"lines"`` the protocol
     lines an agent would have exchanged (``[direction, line, t]``), ``"t_start"``, ``"t_end"``,
@@ -119,7 +121,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     import time
 
     from robot_agent.headless import PlacementRefused, simulate_run
-    from robot_agent.protocol import encode_build, encode_path, encode_place, format_event
+    from robot_agent.protocol import encode_build, encode_controller, encode_path, encode_place, format_event
 
     pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
     if pause > 0:
@@ -130,7 +132,8 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     for i, start in enumerate(starts):
         lines.append([">", encode_place(start), None])
         try:
-            run = simulate_run(path, start, seed=seed, blocks=blocks, max_s=max_s)
+            run = simulate_run(path, start, seed=seed, blocks=blocks, max_s=max_s, controller=controller,
+                               controller_params=controller_params)
             break
         except PlacementRefused as exc:
             lines.append(["<", f"ERR,RANGE,{exc}", None])
@@ -138,6 +141,8 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
                 return {"placement_error": str(exc), "lines": lines}
             lines.append(["s", f"the jittered start is not free ({exc}); placing at the start itself", None])
     assert run is not None
+    if controller != "schema":
+        lines.append([">", encode_controller(controller, controller_params), None])
     lines.append([">", encode_path(path), run.t_start])
     lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
     out: dict[str, Any] = {"poses": run.poses, "lines": lines, "t_start": run.t_start, "t_end": run.t_end,

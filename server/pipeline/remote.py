@@ -46,7 +46,8 @@ async def run_on_engine(ctx: RunContext, svc: RunServices) -> None:
     timeout_s = steps.run_timeout_s(svc, plan.path)
     out: dict[str, Any] = await svc.pool.run(compute.simulate_job, job.environment_data, plan.path, starts,
                                              job.seed, timeout_s, job.goal,
-                                             job.robot_radius, plan.planning_time_s)
+                                             job.robot_radius, plan.planning_time_s, job.controller,
+                                             job.controller_params)
     for direction, line, t in out["lines"]:
         ctx.on_line(direction, line, t, False)
     if "placement_error" in out:

@@ -57,6 +57,8 @@ def create_experiment(
         robot_radius=robot_radius,
         planning_margin=planning_margin if body.path is None else 0.0,
         jitter=body.jitter.model_dump() if body.jitter is not None else None,
+        controller=body.controller,
+        controller_params=checked.controller_params,
     )
     session.add(exp)
     session.flush()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from dataclasses import field as dc_field
 from typing import Any, Iterable, Optional
 
 from sqlalchemy import delete, insert, select
@@ -32,6 +33,8 @@ class RunJob:
     field: str
     robot_radius: float
     jitter: Optional[dict[str, float]] = None
+    controller: str = "schema"
+    controller_params: dict[str, float] = dc_field(default_factory=dict)
 
 
 def load_job(session: Session, run_id: int) -> RunJob:
@@ -39,7 +42,8 @@ def load_job(session: Session, run_id: int) -> RunJob:
     run = session.get(Run, run_id)
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
-                  list(e.goal), e.field, e.robot_radius, e.jitter)
+                  list(e.goal), e.field, e.robot_radius, e.jitter, e.controller or "schema",
+                  dict(e.controller_params or {}))
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:
