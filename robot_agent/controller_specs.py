@@ -222,8 +222,9 @@ def select(name: Optional[str] = None, params: Optional[Mapping[str, Any]] = Non
     unknown = sorted(set(given) - set(known))
     if unknown:
         allowed = ", ".join(known) or "none"
-        raise ControllerError(f"controller_params.{unknown[0]}", f"controller {spec.name!r} has no parameter "
-                                                                 f"{unknown[0]!r} (its parameters: {allowed})")
+        raise ControllerError(f"controller_params.{unknown[0]}", f"controller_params.{unknown[0]}: controller "
+                                                                 f"{spec.name!r} has no parameter {unknown[0]!r} "
+                                                                 f"(its parameters: {allowed})")
     out: dict[str, float] = {}
     for p in spec.params:
         v = given.get(p.name, p.default)
