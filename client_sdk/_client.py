@@ -176,6 +176,11 @@ class Client(BaseClient):
         """Whether uploads are enabled, the interpreters, limits and isolation of the testbed's sandbox."""
         return self._send(self._sandbox_info())
 
+    def list_controllers(self) -> list[dict[str, Any]]:
+        """The robots' path-tracking controllers: name, description, source, whether compiled, and parameters
+        (name, unit, default, range; SI units)."""
+        return self._send(self._list_controllers())
+
     # ------------------------------------------------------------------ experiments
 
     def submit(self, environment: str | Mapping[str, Any], start: Optional[Pose] = None, goal: Optional[Pose] = None,
@@ -183,7 +188,8 @@ class Client(BaseClient):
                planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                repetitions: Optional[int] = None, seed: Optional[int] = None,
                field: Optional[str] = None, program: Optional[int] = None,
-               jitter: Optional[Mapping[str, float]] = None) -> Experiment:
+               jitter: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
+               controller_params: Optional[Mapping[str, float]] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
@@ -194,13 +200,16 @@ class Client(BaseClient):
         the server's defaults (modes sim and twb, 1 repetition, seed 0,
         ``field="sub"``).  ``jitter`` (``{"xy_m", "theta_rad"}``, standard
         deviations) starts every run a seeded little way off the start.
+        ``controller`` chooses the robots' path-tracking controller (default
+        ``schema``; :meth:`list_controllers`) and ``controller_params`` its
+        parameters (SI units, as their names say).
         :class:`ValidationError` carries the server's reason when the job
         cannot run.
         """
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program, jitter=jitter)
+                      program=program, jitter=jitter, controller=controller, controller_params=controller_params)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -352,12 +361,13 @@ class AsyncClient(BaseClient):
                      planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                      repetitions: Optional[int] = None, seed: Optional[int] = None,
                      field: Optional[str] = None, program: Optional[int] = None,
-                     jitter: Optional[Mapping[str, float]] = None) -> Experiment:
+                     jitter: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
+                     controller_params: Optional[Mapping[str, float]] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program, jitter=jitter)
+                      program=program, jitter=jitter, controller=controller, controller_params=controller_params)
         return await self._send(self._submit(job, fields))
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
@@ -377,6 +387,10 @@ class AsyncClient(BaseClient):
     async def sandbox_info(self) -> dict[str, Any]:
         """See :meth:`Client.sandbox_info`."""
         return await self._send(self._sandbox_info())
+
+    async def list_controllers(self) -> list[dict[str, Any]]:
+        """See :meth:`Client.list_controllers`."""
+        return await self._send(self._list_controllers())
 
     async def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
                                limit: int = 50) -> Page[ExperimentSummary]:

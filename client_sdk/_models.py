@@ -210,6 +210,7 @@ class ExperimentSummary(_FromJson):
     modes: list[str] = _field(default_factory=list)
     repetitions: int = 1
     field: str = "sub"
+    controller: str = "schema"
     error: str = ""
     created_at: Optional[datetime] = None
     finished_at: Optional[datetime] = None
@@ -237,6 +238,7 @@ class Experiment(ExperimentSummary):
     planning_time_s: Optional[float] = None
     planning_info: dict[str, Any] = _field(default_factory=dict)
     jitter: Optional[dict[str, float]] = None
+    controller_params: dict[str, float] = _field(default_factory=dict)
     started_at: Optional[datetime] = None
     runs: list[Run] = _field(default_factory=list)
 
