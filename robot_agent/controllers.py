@@ -54,7 +54,8 @@ def project(x: float, y: float, path: np.ndarray, seg: int, frac: float) -> tupl
         ll = dx * dx + dy * dy
         t = ((x - ax) * dx + (y - ay) * dy) / ll if ll > 0.0 else 0.0
         t = min(max(t, frac if j == seg else 0.0), 1.0)
-        d = math.hypot(ax + t * dx - x, ay + t * dy - y)
+        ex, ey = ax + t * dx - x, ay + t * dy - y
+        d = ex * ex + ey * ey  # squared: only compared
         if d < best_d:
             best_d, best_j, best_t = d, j, t
         walked += math.sqrt(ll) * ((1.0 - frac) if j == seg else 1.0)
