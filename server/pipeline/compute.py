@@ -72,12 +72,15 @@ def expected_duration_s(path_length_m: float, n_blocks: int, *, speed_m_s: float
 def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: list[list[float]],
                 t_start: Optional[float], t_done: Optional[float], goal: list[float], robot_radius: float,
                 planning_time_s: Optional[float]) -> dict[str, Any]:
-    """The metrics of one run (docs/metrics.md) from its planned path and logged poses ``[t, x, y, theta]``.
+    """The metrics of one run (docs/metrics.md), the controller's too, from its planned path and logged poses
+    ``[t, x, y, theta]``.
 
     Raises :class:`TooFewPoses` when fewer than two poses lie in the run.
     """
     from planners import parse_environment
+    from planners.control_metrics import ControlSettings, control_metrics
     from planners.metrics import MetricSettings, run_metrics
+    from robot_agent.params import robot_params
 
     env = parse_environment(env_data)
     pr = np.asarray(poses, dtype=float).reshape(-1, 4)
@@ -91,8 +94,13 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
     g = np.asarray(goal[:2], dtype=float)
     out = run_metrics(np.asarray(planned, dtype=float), pr[:, 1:4], env=env, t=pr[:, 0], start_time=t_start,
                       done_time=t_done, goal=g, planning_time_s=planning_time_s, settings=settings)
+    profile = robot_params()  # the testbed's robots: a collision is what their own check counts
+    control = ControlSettings(collision_radius=profile.collision_radius_m, goal_tolerance=settings.goal_tolerance,
+                              max_speed=profile.max_speed_m_s)
+    out.update(control_metrics(planned, pr[:, 1:4], pr[:, 0], goal=g, env=env, performed_length_m=out["length_m"],
+                               execution_time_s=out["execution_time_s"], settings=control))
     out["poses"] = int(len(pr))
-    out["settings"] = settings.to_dict()
+    out["settings"] = {**settings.to_dict(), **control.to_dict()}
     return _clean(out)
 
 
