@@ -25,7 +25,8 @@ from ._findings import FINDINGS, Finding, findings_json, findings_markdown, pape
 from ._ompl import export_ompl
 from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
-from ._spec import PAPER, PlannerSpec, PlanSpec, StudySpec, StudySpecError, load_spec, paper_spec
+from ._spec import (CONTROLLERS, PAPER, ControllerChoice, PlannerSpec, PlanSpec, StudySpec, StudySpecError,
+                    controllers_spec, load_spec, paper_spec)
 from ._verdict import Answer, which_is_better
 
 __all__ = sorted(
@@ -38,6 +39,9 @@ __all__ = sorted(
         "FINDINGS",
         "Finding",
         "PAPER",
+        "CONTROLLERS",
+        "ControllerChoice",
+        "controllers_spec",
         "PlanSpec",
         "PlannerSpec",
         "StudyData",

@@ -13,7 +13,7 @@ from .._exceptions import Conflict, NotFound, RateLimited, TwbError, ValidationE
 from .._models import Environment, Experiment, ExperimentMetrics
 from ._data import StudyData
 from ._limits import StudyRefused, check_study, refusal
-from ._spec import PlannerSpec, PlanSpec, StudySpec, StudySpecError
+from ._spec import ControllerChoice, PlannerSpec, PlanSpec, StudySpec, StudySpecError
 
 __all__ = ["StudyJob", "StudyRefused", "flat_metrics", "plan_jobs", "run_study"]
 
@@ -22,7 +22,8 @@ class StudyJob(dict):
     """One experiment of a study: environment, plan, planner, configuration and the job body sent to the server."""
 
 
-def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, spec: StudySpec) -> dict[str, Any]:
+def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, controller: Optional[ControllerChoice],
+          spec: StudySpec) -> dict[str, Any]:
     """The job sent to the server for one problem and configuration (an explicit path: start, waypoints, goal)."""
     body: dict[str, Any] = {"environment": name, "start": list(start), "goal": list(goal)}
     if planner.waypoints is not None:
@@ -32,6 +33,8 @@ def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec
     body.update(modes=list(spec.modes), repetitions=spec.repetitions, seed=spec.seed, field=spec.field)
     if spec.jitter is not None:
         body["jitter"] = dict(spec.jitter)
+    if controller is not None:
+        body.update(controller=controller.name, controller_params=dict(controller.params))
     return body
 
 
@@ -51,7 +54,7 @@ def _environments(client: Client, spec: StudySpec) -> dict[str, Environment]:
 
 
 def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[StudyJob]:
-    """The experiments of the study, environment x plan x planner, in that order."""
+    """The experiments of the study, environment x plan x planner (x controller), in that order."""
     jobs = []
     for name in spec.environment_names():
         env = environments[name]
@@ -67,11 +70,12 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
                 start, goal = p.start, p.goal
             else:
                 start, goal = plan.start, plan.goal
-            for planner in spec.planners:
+            for planner, controller, configuration in spec.configurations():
                 jobs.append(StudyJob(environment=name, plan=plan.name,
                                      planner=planner.name if planner.waypoints is None else "path",
-                                     configuration=planner.configuration,
-                                     body=_body(name, start, goal, planner, spec)))
+                                     controller=controller.name if controller is not None else "schema",
+                                     configuration=configuration,
+                                     body=_body(name, start, goal, planner, controller, spec)))
     return jobs
 
 
@@ -207,6 +211,7 @@ def _assemble(spec: StudySpec, envs: dict[str, Environment], jobs: list[StudyJob
         body = job["body"]
         experiments.append({
             "experiment_id": eid, "environment": job["environment"], "plan": job["plan"], "planner": job["planner"],
+            "controller": job["controller"], "controller_params": body.get("controller_params", {}),
             "configuration": job["configuration"], "planner_params": body.get("planner_params", {}),
             "path": body.get("path"), "start": body["start"], "goal": body["goal"],
             "repetitions": body["repetitions"], "modes": body["modes"],
@@ -219,7 +224,7 @@ def _assemble(spec: StudySpec, envs: dict[str, Environment], jobs: list[StudyJob
             continue
         st = {d.repetition: d for d in metrics[exp.id].direct}
         ident = {"study": spec.name, "experiment_id": exp.id, "environment": job["environment"], "plan": job["plan"],
-                 "planner": job["planner"], "configuration": job["configuration"]}
+                 "planner": job["planner"], "controller": job["controller"], "configuration": job["configuration"]}
         for run in exp.runs:
             stop = run.stopped_at or [None, None]
             row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,
