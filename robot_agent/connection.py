@@ -123,6 +123,7 @@ class Connection:
         self.lease_grant = 0
         self.auth_failures = 0
         self.controller: Selection | None = None  #: the controller of this connection's paths (``T,T,C``)
+        self.localisation = False  #: whether this connection gets ``PO`` lines (``T,T,O``)
         self.opened = asyncio.get_running_loop().time()
         self._last_accepted = self.opened
         self._queue: asyncio.Queue[str | None] = asyncio.Queue()

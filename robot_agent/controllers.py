@@ -24,10 +24,11 @@ import numpy as np
 from .compiled import kernel
 from .kinematics import wrap_angle
 
-__all__ = ["KANAYAMA", "MEMORY", "PARAM_SLOTS", "PLUGIN", "PURE_PURSUIT", "RPP", "SCHEMA", "along", "kanayama",
+__all__ = ["DIRECT", "KANAYAMA", "MEMORY", "PARAM_SLOTS", "PLUGIN", "PURE_PURSUIT", "RPP", "SCHEMA", "along", "kanayama",
            "project", "pure_pursuit", "regulated_pure_pursuit", "rotate_to", "steer"]
 
 SCHEMA, PURE_PURSUIT, RPP, KANAYAMA = 0, 1, 2, 3  #: ids of the built-in controllers
+DIRECT = 4  #: a client's body velocities (``T,T,V``, held in ``want``): no path, a watchdog instead of arrival
 PLUGIN = 100  #: the id of a plug-in controller: its commands come from Python (``want``)
 PARAM_SLOTS = 8  #: columns of the parameter table
 MEMORY = 4  #: columns of the controller memory: projection segment, fraction; reference segment, fraction

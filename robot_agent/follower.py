@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .compiled import kernel
-from .controllers import SCHEMA, project, steer
+from .controllers import DIRECT, SCHEMA, project, steer
 from .kinematics import wrap_angle
 from .params import RobotParams
 
@@ -176,7 +176,8 @@ def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset
     distance from the robot's edge to the nearest obstacle (regulated pure
     pursuit's proximity term; ``inf`` when no controller needs it).  Other
     controllers pass waypoints when the robot's projection on the path has
-    passed them, too.
+    passed them, too.  A ``DIRECT`` robot (``T,T,V``) drives by ``want`` and
+    never arrives or stalls; its ``timeout`` is the watchdog.
     """
     flags = 0
     if k[i] == 0:
@@ -184,7 +185,7 @@ def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset
         anchor[i, 0], anchor[i, 1], anchor[i, 2] = bx, by, bth
         anchor_k[i] = 0
     path = points[offset[i]:offset[i] + count[i]]
-    if not aligning[i] and count[i] > 0:
+    if not aligning[i] and count[i] > 0 and cid[i] != DIRECT:
         if cid[i] != SCHEMA:
             seg, frac = project(bx, by, path, int(cmem[i, 0]), cmem[i, 1])
             cmem[i, 0], cmem[i, 1] = seg, frac
@@ -203,6 +204,9 @@ def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset
         vx, vy = move_to_waypoint(bx, by, tx, ty, speed)
         v, w = heading_control(bth, vx, vy, g)
         aligned = False
+    elif cid[i] == DIRECT:
+        v, w = want[i, 0], want[i, 1]
+        aligned = False
     else:
         v, w = steer(cid[i], bx, by, bth, cmd[i, 0], clearance, path, cmem[i], cpar[i], want[i], g.max_speed,
                      g.max_turn, g.arrive_gain, g.min_speed, g.heading_gain, g.min_turn_rate, g.dt)
@@ -214,7 +218,7 @@ def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset
         anchor[i, 0], anchor[i, 1], anchor[i, 2] = bx, by, bth
         anchor_k[i] = k[i]
     if not aligned:
-        if (k[i] - anchor_k[i]) * g.dt > g.stall_time:
+        if (k[i] - anchor_k[i]) * g.dt > g.stall_time and cid[i] != DIRECT:
             flags |= STALLED
         elif k[i] >= timeout[i]:
             flags |= TIMED_OUT

@@ -38,6 +38,8 @@ __all__ = [
     "BuildCommand",
     "Command",
     "ControllerCommand",
+    "LocalisationCommand",
+    "VelocityCommand",
     "ErrorCode",
     "Event",
     "LeaseCommand",
@@ -57,6 +59,7 @@ __all__ = [
     "format_error",
     "format_event",
     "format_hello",
+    "format_localisation",
     "format_ok",
     "format_status",
     "parse_arguments",
@@ -108,7 +111,7 @@ class Event(str, Enum):
     FAIL = "FAIL"
 
 
-FAIL_REASONS = ("COLLISION", "TIMEOUT", "STALLED", "STOPPED")
+FAIL_REASONS = ("COLLISION", "TIMEOUT", "STALLED", "STOPPED", "WATCHDOG")
 
 
 class ProtocolError(ValueError):
@@ -181,8 +184,23 @@ class ControllerCommand:
     params: dict[str, float]
 
 
+@dataclass(frozen=True)
+class LocalisationCommand:
+    """``T,T,O,1`` / ``T,T,O,0``: send (or stop sending) this connection ``PO`` localisation lines."""
+
+    on: bool
+
+
+@dataclass(frozen=True)
+class VelocityCommand:
+    """``T,T,V,<v>,<w>``: drive with body velocities ``v`` (m/s) and ``w`` (rad/s) until the next one."""
+
+    v: float
+    w: float
+
+
 Command = (PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
-           | ControllerCommand)
+           | ControllerCommand | LocalisationCommand | VelocityCommand)
 
 # --------------------------------------------------------------------------- parsing
 #
@@ -252,7 +270,7 @@ def split_command(line: str | bytes) -> tuple[str, str | None]:
         raise ProtocolError(ErrorCode.SYNTAX, "empty line")
     head = text.split(",", 3)
     if len(head) < 3 or head[0].strip() != "T" or head[1].strip() != "T":
-        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|C|A|L>")
+        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|C|O|V|A|L>")
     return head[2].strip(), (head[3] if len(head) == 4 else None)
 
 
@@ -494,6 +512,16 @@ def parse_arguments(verb: str, rest: str | None, *, field_size: tuple[float, flo
         return BuildCommand(out)
     if verb == "C":
         return _controller(rest)
+    if verb == "O":
+        flag = "" if rest is None else rest.strip()
+        if flag not in ("0", "1"):
+            raise ProtocolError(ErrorCode.SYNTAX, "T,T,O takes 1 (send PO lines) or 0 (stop)")
+        return LocalisationCommand(flag == "1")
+    if verb == "V":
+        if rest is None or ";" in rest:
+            raise ProtocolError(ErrorCode.SYNTAX, "T,T,V takes v,w (mm/s, deg/s)")
+        v, w = _parse_tuples(rest, 2, "velocity", 1)[0]
+        return VelocityCommand(float(v) / 1000.0, math.radians(float(w)))
     if verb == "A":
         return AuthCommand(_secret(rest, "A"))
     if verb == "L":
@@ -648,6 +676,12 @@ def format_event(kind: Event | str, t: float, *, index: int | None = None, reaso
     return f"EV,{k.value},{ts}"
 
 
+def format_localisation(pose: Sequence[float], t: float) -> str:
+    """``PO,<x>,<y>,<a>,<t>`` (mm, mm, deg, s) from a pose in metres/radians measured at ``t`` seconds."""
+    x, y, a = pose
+    return f"PO,{_fmt(x * 1000, 2)},{_fmt(y * 1000, 2)},{_fmt(math.degrees(float(_wrap(a))), 3)},{_fmt(t, 3)}"
+
+
 def format_error(code: ErrorCode | str, message: str) -> str:
     """``ERR,<code>,<message>``; the message is made single-line ASCII and capped at 200 chars."""
     clean = message.encode("ascii", "replace").decode().replace("\r", " ").replace("\n", " ")
@@ -663,8 +697,8 @@ class Reply:
 
     @property
     def time(self) -> float | None:
-        """Experiment time (s) of ST and EV lines, else None."""
-        if self.kind in ("ST", "EV") and self.fields:
+        """Experiment time (s) of ST, EV and PO lines, else None."""
+        if self.kind in ("ST", "EV", "PO") and self.fields:
             try:
                 return float(self.fields[-1])
             except ValueError:
@@ -672,7 +706,7 @@ class Reply:
         return None
 
 
-_REPLY_KINDS = {"HELLO", "OK", "ST", "EV", "ERR"}
+_REPLY_KINDS = {"HELLO", "OK", "ST", "EV", "ERR", "PO"}
 
 
 def parse_reply(line: str | bytes) -> Reply:

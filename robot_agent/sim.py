@@ -28,12 +28,13 @@ since the path began.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from .backends import Backend, Emulated
 from .controller_specs import Selection
-from .controllers import MEMORY, PARAM_SLOTS, SCHEMA
+from .controllers import DIRECT, MEMORY, PARAM_SLOTS, SCHEMA
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .params import RobotParams
 from .stepper import COLLIDED, ENDED, State, control_fleet, run, settle_fleet
@@ -63,11 +64,15 @@ class PoseLog:
     def __init__(self) -> None:
         self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.count = 0
+        #: called with every batch as it is recorded (the host's localisation lines, ``T,T,O``)
+        self.listener: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None
 
     def add(self, t: np.ndarray, robots: np.ndarray, poses: np.ndarray) -> None:
         """Record poses ``(K, 3)`` of robot indices ``robots`` ``(K,)`` at times ``t`` ``(K,)`` (s)."""
         self._chunks.append((t, robots, poses))
         self.count += len(robots)
+        if self.listener is not None:
+            self.listener(t, robots, poses)
 
     def drain(self) -> dict[int, np.ndarray]:
         """All poses recorded since the last drain, per robot index, in time order."""
@@ -169,6 +174,26 @@ class SimCore:
         self.backend.begin_path(mask, self.keys, from_rest)
         self.timeout[i] = timeout_steps(self._paths[i], self.belief(i), self.params)
         return replaced
+
+    def drive(self, i: int, v: float, w: float, key: int, watchdog_s: float) -> SimEvent | None:
+        """Robot ``i`` drives with body velocities ``(v, w)`` (m/s, rad/s; clipped to the profile's top speeds)
+        until the next call, :meth:`stop` or ``watchdog_s`` of experiment time without a call (then
+        ``FAIL,WATCHDOG``).  The first call starts velocity mode (a ``START``); returns the ``FAIL,STOPPED`` of
+        a path it replaces, if any."""
+        replaced = None
+        if not self.driving(i):
+            pose = self.belief(i)
+            replaced = self.set_path(i, pose[None, :], key)
+            self.cid[i] = DIRECT
+        p = self.params
+        self.want[i] = (float(np.clip(v, -p.max_speed_m_s, p.max_speed_m_s)),
+                        float(np.clip(w, -p.max_angular_speed_rad_s, p.max_angular_speed_rad_s)))
+        self.timeout[i] = self.k[i] + max(1, int(round(watchdog_s / self.dt)))
+        return replaced
+
+    def driving(self, i: int) -> bool:
+        """Whether robot ``i`` is in velocity mode (:meth:`drive`)."""
+        return bool(self.state[i] == State.MOVING and self.cid[i] == DIRECT)
 
     def stop(self, i: int) -> SimEvent | None:
         """Stop robot ``i``'s path now; returns its ``FAIL,STOPPED`` event if it was moving."""
@@ -279,7 +304,8 @@ class SimCore:
             if f & DONE:
                 out.append(SimEvent(i, "DONE", t0))
             elif f & (STALLED | TIMED_OUT):
-                out.append(SimEvent(i, "FAIL", t0, reason="STALLED" if f & STALLED else "TIMEOUT"))
+                why = "STALLED" if f & STALLED else "WATCHDOG" if self.cid[i] == DIRECT else "TIMEOUT"
+                out.append(SimEvent(i, "FAIL", t0, reason=why))
             elif f & COLLIDED:
                 out.append(SimEvent(i, "FAIL", (step + 1) * self.dt, reason="COLLISION"))
         return out
