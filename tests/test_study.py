@@ -174,7 +174,7 @@ def test_the_controller_study_crosses_every_builtin_with_one_planner():
     envs = {n: Environment(n, [1.8, 1.8], [], [Plan("A", [0.1, 0.1], [1, 1]), Plan("B", [0.2, 0.2], [1, 1])])
             for n in ("room", "blocks")}
     jobs = plan_jobs(spec, envs)
-    assert len(jobs) == 8 and len(jobs) * spec.runs_per_experiment == 16
+    assert len(jobs) == 16 and len(jobs) * spec.runs_per_experiment == 64 and spec.jitter is not None
     assert [j["configuration"] for j in jobs[:4]] == ["fmm/schema", "fmm/pure_pursuit", "fmm/regulated_pure_pursuit",
                                                        "fmm/kanayama"]
     assert jobs[1]["body"]["controller"] == "pure_pursuit" and jobs[1]["controller"] == "pure_pursuit"
@@ -197,14 +197,17 @@ def test_twb_study_controllers_groups_by_controller(testbed, tmp_path):
                         testbed.token, "--no-progress"], capture_output=True, text=True, timeout=600,
                        env={k: v for k, v in os.environ.items() if k != "TWB_DEBUG"})
     assert r.returncode == 0, r.stderr
-    assert "study controllers: 16/16 runs completed" in r.stdout
+    assert "study controllers: 64/64 runs completed" in r.stdout
     rows = list(csv.DictReader((out / "runs.csv").open()))
     assert {row["controller"] for row in rows} == {"schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama"}
     assert {row["configuration"] for row in rows} == {"fmm/schema", "fmm/pure_pursuit", "fmm/regulated_pure_pursuit",
                                                       "fmm/kanayama"}
     assert all(float(row["spl"]) > 0.9 and row["stop_count"] == "0" for row in rows)
     summary = (out / "summary.md").read_text()
-    assert "fmm/regulated_pure_pursuit" in summary and "fmm/kanayama" in summary
+    assert "## Which configuration is better?" in summary and "fmm/kanayama" in summary
+    assert "mean cross-track error" in summary  # the controller metrics are compared too
+    comparisons = {row["metric"] for row in csv.DictReader((out / "comparisons.csv").open())}
+    assert {"cross_track_error_mean_m", "heading_error_rms_rad", "time_to_goal_s", "jerk_linear_rms_m_s3"} <= comparisons
 
 
 @pytest.mark.parametrize("content,message", [

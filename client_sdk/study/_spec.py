@@ -319,25 +319,27 @@ def paper_spec() -> StudySpec:
     return StudySpec.from_json(PAPER, "paper")
 
 
-#: The ready controller study: one planner x every built-in controller x both paper environments x their plan A
-#: x sim and field, one repetition each (16 runs; a few minutes on 2 cores under `twb up --time-scale max`).
+#: The ready controller study: one planner x every built-in controller x both paper environments x plans A, B
+#: x 2 repetitions with start-pose jitter x sim and field (64 runs; about a minute on 2 cores under
+#: `twb study controllers --embedded`).
 CONTROLLERS: dict[str, Any] = {
     "name": "controllers",
     "description": "Controllers as a benchmark dimension: FMM paths tracked by the motor schema, pure pursuit, "
-                   "regulated pure pursuit and Kanayama's controller, both paper environments (plan A), "
-                   "simulation and emulated field (16 runs)",
+                   "regulated pure pursuit and Kanayama's controller, both paper environments, plans A and B, "
+                   "2 repetitions with start-pose jitter, simulation and emulated field (64 runs)",
     "environments": ["room", "blocks"],
-    "plans": ["A"],
+    "plans": ["A", "B"],
     "planners": ["fmm"],
     "controllers": ["schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama"],
-    "repetitions": 1,
+    "repetitions": 2,
     "modes": ["sim", "twb"],
     "seed": 0,
+    "jitter": {"xy_m": 0.005, "theta_rad": 0.05},
 }
 
 
 def controllers_spec() -> StudySpec:
-    """The ready controller study (16 runs)."""
+    """The ready controller study (64 runs)."""
     return StudySpec.from_json(CONTROLLERS, "controllers")
 
 
