@@ -31,7 +31,8 @@ from typing import Any, Mapping, Optional, Protocol, Sequence
 import numpy as np
 
 __all__ = ["BUILTINS", "DEFAULT_CONTROLLER", "ENTRY_POINT_GROUP", "ControllerError", "ControllerSpec", "Param",
-           "PluginController", "Selection", "available_controllers", "controller_spec", "select"]
+           "PluginController", "Selection", "available_controllers", "controller_report", "controller_spec",
+           "register_controller", "select"]
 
 ENTRY_POINT_GROUP = "teleworkbench.controllers"
 DEFAULT_CONTROLLER = "schema"
@@ -190,6 +191,18 @@ def controller_spec(name: str) -> ControllerSpec:
                                             f"{', '.join(available_controllers())})")
     _plugins[name] = _load(name, eps[name])
     return _plugins[name]
+
+
+def controller_report() -> list[tuple[str, str, str]]:
+    """Every installed plug-in controller, loaded now (or tried): ``(name, module:object, error or "")``."""
+    out = []
+    for name, ep in sorted(_plugin_entry_points().items()):
+        try:
+            controller_spec(name)
+            out.append((name, ep.value, ""))
+        except ControllerError as exc:
+            out.append((name, ep.value, str(exc).split(" failed to load: ", 1)[-1]))
+    return out
 
 
 def available_controllers() -> list[str]:
