@@ -275,6 +275,9 @@ class BaseClient:
     def _sandbox_info(self) -> Call:
         return Call("GET", f"{API_PREFIX}/programs/sandbox", _json)
 
+    def _list_controllers(self) -> Call:
+        return Call("GET", f"{API_PREFIX}/controllers", lambda body: list(_json(body)["data"]))
+
     def _me(self) -> Call:
         return Call("GET", f"{API_PREFIX}/users/me", _one(User.from_json))
 

@@ -176,6 +176,11 @@ class Client(BaseClient):
         """Whether uploads are enabled, the interpreters, limits and isolation of the testbed's sandbox."""
         return self._send(self._sandbox_info())
 
+    def list_controllers(self) -> list[dict[str, Any]]:
+        """The robots' path-tracking controllers: name, description, source, whether compiled, and parameters
+        (name, unit, default, range; SI units)."""
+        return self._send(self._list_controllers())
+
     # ------------------------------------------------------------------ experiments
 
     def submit(self, environment: str | Mapping[str, Any], start: Optional[Pose] = None, goal: Optional[Pose] = None,
@@ -184,7 +189,8 @@ class Client(BaseClient):
                repetitions: Optional[int] = None, seed: Optional[int] = None,
                field: Optional[str] = None, program: Optional[int] = None,
                jitter: Optional[Mapping[str, float]] = None,
-               profile_overrides: Optional[Mapping[str, float]] = None) -> Experiment:
+               profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
+               controller_params: Optional[Mapping[str, float]] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
@@ -198,13 +204,17 @@ class Client(BaseClient):
         ``profile_overrides`` (``{"tracker_noise_xy_m": 0.003}``, SI units)
         gives the job's field runs other field parameters of the robot
         profile (docs/fidelity.md, "Noise studies").
+        ``controller`` chooses the robots' path-tracking controller (default
+        ``schema``; :meth:`list_controllers`) and ``controller_params`` its
+        parameters (SI units, as their names say).
         :class:`ValidationError` carries the server's reason when the job
         cannot run.
         """
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program, jitter=jitter, profile_overrides=profile_overrides)
+                      program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
+                      controller_params=controller_params)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -357,12 +367,14 @@ class AsyncClient(BaseClient):
                      repetitions: Optional[int] = None, seed: Optional[int] = None,
                      field: Optional[str] = None, program: Optional[int] = None,
                      jitter: Optional[Mapping[str, float]] = None,
-                     profile_overrides: Optional[Mapping[str, float]] = None) -> Experiment:
+                     profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
+                     controller_params: Optional[Mapping[str, float]] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
-                      program=program, jitter=jitter, profile_overrides=profile_overrides)
+                      program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
+                      controller_params=controller_params)
         return await self._send(self._submit(job, fields))
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
@@ -382,6 +394,10 @@ class AsyncClient(BaseClient):
     async def sandbox_info(self) -> dict[str, Any]:
         """See :meth:`Client.sandbox_info`."""
         return await self._send(self._sandbox_info())
+
+    async def list_controllers(self) -> list[dict[str, Any]]:
+        """See :meth:`Client.list_controllers`."""
+        return await self._send(self._list_controllers())
 
     async def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
                                limit: int = 50) -> Page[ExperimentSummary]:

@@ -225,6 +225,7 @@ class ExperimentSummary(_FromJson):
     modes: list[str] = _field(default_factory=list)
     repetitions: int = 1
     field: str = "sub"
+    controller: str = "schema"
     error: str = ""
     created_at: Optional[datetime] = None
     finished_at: Optional[datetime] = None
@@ -253,6 +254,7 @@ class Experiment(ExperimentSummary):
     planning_info: dict[str, Any] = _field(default_factory=dict)
     jitter: Optional[dict[str, float]] = None
     profile_overrides: Optional[dict[str, float]] = None
+    controller_params: dict[str, float] = _field(default_factory=dict)
     started_at: Optional[datetime] = None
     runs: list[Run] = _field(default_factory=list)
 

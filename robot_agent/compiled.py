@@ -22,7 +22,7 @@ from numba import njit
 __all__ = ["KERNEL_SOURCES", "cache_dir", "kernel"]
 
 #: the modules whose compiled code depends on each other
-KERNEL_SOURCES = ("compiled.py", "noise.py", "kinematics.py", "follower.py", "physics.py", "contact.py",
+KERNEL_SOURCES = ("compiled.py", "noise.py", "kinematics.py", "controllers.py", "follower.py", "physics.py", "contact.py",
                   "stepper.py", "backends.py")
 
 

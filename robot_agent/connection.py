@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Awaitable, Callable, TypeVar
 from .protocol import MAX_LINE_BYTES, ErrorCode, RobotState, format_error
 
 if TYPE_CHECKING:
+    from .controller_specs import Selection
     from .robot import Robot
 
 __all__ = ["MAX_AUTH_FAILURES", "TOOLONG", "TOO_MANY", "Connection", "Limits"]
@@ -121,6 +122,8 @@ class Connection:
         self.auth: str | None = None
         self.lease_grant = 0
         self.auth_failures = 0
+        self.controller: Selection | None = None  #: the controller of this connection's paths (``T,T,C``)
+        self.localisation = False  #: whether this connection gets ``PO`` lines (``T,T,O``)
         self.opened = asyncio.get_running_loop().time()
         self._last_accepted = self.opened
         self._queue: asyncio.Queue[str | None] = asyncio.Queue()

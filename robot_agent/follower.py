@@ -34,6 +34,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .compiled import kernel
+from .controllers import DIRECT, SCHEMA, project, steer
 from .kinematics import wrap_angle
 from .params import RobotParams
 
@@ -160,22 +161,36 @@ def advance_waypoint(x: float, y: float, path: np.ndarray, wp: int, g: Gains) ->
 @kernel
 def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset: np.ndarray,
             count: np.ndarray, wp: np.ndarray, aligning: np.ndarray, cmd: np.ndarray, anchor: np.ndarray,
-            anchor_k: np.ndarray, k: np.ndarray, timeout: np.ndarray, g: Gains) -> int:
+            anchor_k: np.ndarray, k: np.ndarray, timeout: np.ndarray, g: Gains, cid: np.ndarray,
+            cpar: np.ndarray, cmem: np.ndarray, want: np.ndarray, clearance: float) -> int:
     """One control step of moving robot ``i`` believed at ``(bx, by, bth)``; returns its flags.
 
     Updates in place the fleet arrays at ``i``: waypoint ``wp``, ``aligning``,
     commands ``cmd`` ``(N, 2)`` (zero once the path ended) and the stall
     anchor (``anchor`` ``(N, 3)``, ``anchor_k``).  ``points``, ``offset`` and
     ``count`` hold every robot's path back to back; ``k`` counts control
-    steps since the path began, ``timeout`` is its limit.
+    steps since the path began, ``timeout`` is its limit.  ``cid[i]`` is the
+    robot's controller (:mod:`robot_agent.controllers`; the schema's steps
+    are 1-5 above), ``cpar[i]`` its parameters, ``cmem[i]`` its memory,
+    ``want[i]`` a plug-in's commands and ``clearance`` (m) the believed
+    distance from the robot's edge to the nearest obstacle (regulated pure
+    pursuit's proximity term; ``inf`` when no controller needs it).  Other
+    controllers pass waypoints when the robot's projection on the path has
+    passed them, too.  A ``DIRECT`` robot (``T,T,V``) drives by ``want`` and
+    never arrives or stalls; its ``timeout`` is the watchdog.
     """
     flags = 0
     if k[i] == 0:
         flags |= STARTED
         anchor[i, 0], anchor[i, 1], anchor[i, 2] = bx, by, bth
         anchor_k[i] = 0
-    if not aligning[i] and count[i] > 0:
-        wp[i], arrived = advance_waypoint(bx, by, points[offset[i]:offset[i] + count[i]], wp[i], g)
+    path = points[offset[i]:offset[i] + count[i]]
+    if not aligning[i] and count[i] > 0 and cid[i] != DIRECT:
+        if cid[i] != SCHEMA:
+            seg, frac = project(bx, by, path, int(cmem[i, 0]), cmem[i, 1])
+            cmem[i, 0], cmem[i, 1] = seg, frac
+            wp[i] = max(wp[i], min(seg + (1 if frac > 0.0 else 0), count[i] - 1))
+        wp[i], arrived = advance_waypoint(bx, by, path, wp[i], g)
         if arrived:
             flags |= ARRIVED
             aligning[i] = True
@@ -184,10 +199,17 @@ def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset
     if aligning[i]:
         v = 0.0
         w, aligned = align_control(bth, tth, g)
-    else:
+    elif cid[i] == SCHEMA:
         speed = approach_speed(math.hypot(tx - bx, ty - by), wp[i] == count[i] - 1, g)
         vx, vy = move_to_waypoint(bx, by, tx, ty, speed)
         v, w = heading_control(bth, vx, vy, g)
+        aligned = False
+    elif cid[i] == DIRECT:
+        v, w = want[i, 0], want[i, 1]
+        aligned = False
+    else:
+        v, w = steer(cid[i], bx, by, bth, cmd[i, 0], clearance, path, cmem[i], cpar[i], want[i], g.max_speed,
+                     g.max_turn, g.arrive_gain, g.min_speed, g.heading_gain, g.min_turn_rate, g.dt)
         aligned = False
     if aligned:
         flags |= DONE
@@ -196,7 +218,7 @@ def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset
         anchor[i, 0], anchor[i, 1], anchor[i, 2] = bx, by, bth
         anchor_k[i] = k[i]
     if not aligned:
-        if (k[i] - anchor_k[i]) * g.dt > g.stall_time:
+        if (k[i] - anchor_k[i]) * g.dt > g.stall_time and cid[i] != DIRECT:
             flags |= STALLED
         elif k[i] >= timeout[i]:
             flags |= TIMED_OUT

@@ -17,6 +17,7 @@ from typing import Sequence
 import numpy as np
 
 from .backends import make_backend
+from .controller_specs import select
 from .frames import FIELD_SIZE, field_layout
 from .noise import path_key
 from .params import robot_params
@@ -66,13 +67,18 @@ class HeadlessRun:
 def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[float], *, seed: int,
                  blocks: Sequence[Sequence[float]] = (), moving: Sequence[tuple] = (), backend: str = "ideal",
                  profile: str | dict = DEFAULT_PROFILE, area: tuple[float, float] = FIELD_SIZE,
-                 max_s: float = 3600.0, track_gains: tuple[float, float] | None = None) -> HeadlessRun:
+                 max_s: float = 3600.0, track_gains: tuple[float, float] | None = None, controller: str | None = None,
+                 controller_params: dict[str, float] | None = None) -> HeadlessRun:
     """Run ``path`` ``(N, 3)`` (m, m, rad) from ``start`` (x, y, theta) among ``blocks`` (cx, cy, w, h,
     angle: m, rad) and ``moving`` obstacles (params, waypoints: as :func:`~robot_agent.protocol.encode_moving`
     takes them) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
-    ``max_s`` of experiment time passed.  ``track_gains`` (left, right; field backend) replaces the run's
-    drawn track gains (calibration re-simulates runs with fitted ones).  Raises :class:`PlacementRefused`
-    when the start is not free."""
+    ``max_s`` of experiment time passed, with ``controller`` (a name of
+    :mod:`robot_agent.controller_specs`, default the motor schema) and its ``controller_params`` (SI
+    units; defaults filled in).  ``track_gains`` (left, right; field backend) replaces the run's drawn
+    track gains (calibration re-simulates runs with fitted ones).  Raises :class:`PlacementRefused`
+    when the start is not free and :class:`~robot_agent.controller_specs.ControllerError` for a bad
+    controller choice."""
+    chosen = select(controller, controller_params)
     params = robot_params(profile)
     sizes, world_of, origin, areas = field_layout(1, "separate", area)
     world = World(sizes, world_of, origin, areas, params.collision_radius_m)
@@ -91,7 +97,7 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
         raise PlacementRefused(f"cannot place the robot: {why}")
     core.place(0, placed.pose)
     core.poses.drain()
-    core.set_path(0, sent.points, path_key(seed))
+    core.set_path(0, sent.points, path_key(seed), chosen)
     if track_gains is not None:
         core.backend.gain[0] = track_gains
     events: list[SimEvent] = []

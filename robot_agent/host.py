@@ -38,13 +38,16 @@ import logging
 import math
 import socket
 import time
+from collections import deque
 from typing import Callable
+
+import numpy as np
 
 from . import auth
 from .backends import make_backend
 from .connection import TOO_MANY, Connection, Limits
 from .params import RobotParams, robot_params
-from .protocol import MAX_LINE_BYTES, ErrorCode, check_secret, format_error
+from .protocol import MAX_LINE_BYTES, ErrorCode, check_secret, format_error, format_localisation
 from .robot import Robot
 from .robot_profile import DEFAULT_PROFILE
 from .server_link import ServerLink
@@ -139,6 +142,11 @@ class AgentHost:
         self.core = SimCore(self.params, make_backend(backend, robots, self.params), self.world,
                             log_poses=self.sink is not None)
         self._chunk = max(1, _CHUNK_ROBOT_STEPS // robots)  # steps per compiled call when running ahead
+        # localisation lines (T,T,O): the tracker's poses, due after the mode's latency
+        self._po_queue: deque[tuple[float, int, str]] = deque()
+        self._po_robots: set[int] = set()
+        self._po_latency = self.params.field.tracker_latency_s if backend == "field" else 0.0
+        self.core.poses.listener = self._on_poses
         if robot_ids is None:
             base = robot_id or "robot"
             robot_ids = [robot_id] if (robot_id and robots == 1) else [f"{base}-{i + 1}" for i in range(robots)]
@@ -306,6 +314,8 @@ class AgentHost:
             target = int(due)
         if target > self.core.step_count:
             self.core.skip(target - self.core.step_count)
+        if self._po_queue:
+            self._send_localisation()
         self._fire_timers()
 
     def _fire_timers(self) -> None:
@@ -363,6 +373,8 @@ class AgentHost:
                 if self._timers:
                     steps = min(steps, self._timers[0][0] - core.step_count)
                 events = core.advance(max(int(steps), 1))
+                if self._po_queue:
+                    self._send_localisation()
                 if events:
                     self._dispatch(events)
                 if self._timers and self._timers[0][0] <= core.step_count:
@@ -373,6 +385,31 @@ class AgentHost:
                 await asyncio.sleep(0)
             else:
                 await self._wait((core.step_count + 1 - self._due()) / steps_per_s)
+
+    def localisation_changed(self) -> None:
+        """A connection subscribed to ``PO`` lines or left: which robots have subscribers now."""
+        self._po_robots = {r.index for r in self.robots if any(c.localisation for c in r.connections)}
+        if self._po_robots:
+            self.core.log_poses = True  # a host without a tracker sink logs poses for its subscribers
+
+    def _on_poses(self, t: np.ndarray, robots: np.ndarray, poses: np.ndarray) -> None:
+        """Tracker poses just logged: queue a ``PO`` line of each subscribed robot's, due after the latency."""
+        if not self._po_robots:
+            return
+        for tt, i, pose in zip(t.tolist(), robots.tolist(), poses.tolist()):
+            if i in self._po_robots:
+                self._po_queue.append((tt + self._po_latency, i, format_localisation(pose, tt)))
+
+    def _send_localisation(self) -> None:
+        """Send the ``PO`` lines that are due by now to their robot's subscribed connections."""
+        now = self.core.t + 1e-9
+        while self._po_queue and self._po_queue[0][0] <= now:
+            _, i, line = self._po_queue.popleft()
+            for conn in self.robots[i].connections:
+                if conn.localisation:
+                    conn.send(line)
+        if self.sink is None and self.core.poses.count:
+            self.core.poses.drain()  # nobody else wants them
 
     def _dispatch(self, events: list[SimEvent]) -> None:
         for ev in events:

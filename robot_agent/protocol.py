@@ -37,6 +37,9 @@ __all__ = [
     "AuthCommand",
     "BuildCommand",
     "Command",
+    "ControllerCommand",
+    "LocalisationCommand",
+    "VelocityCommand",
     "ErrorCode",
     "Event",
     "LeaseCommand",
@@ -53,11 +56,13 @@ __all__ = [
     "decode_path",
     "encode_build",
     "encode_moving",
+    "encode_controller",
     "encode_path",
     "encode_place",
     "format_error",
     "format_event",
     "format_hello",
+    "format_localisation",
     "format_ok",
     "format_status",
     "parse_arguments",
@@ -74,6 +79,9 @@ MAX_NUMBER_CHARS = 32  # a number's characters, surrounding spaces not counted
 MIN_SECRET_CHARS, MAX_SECRET_CHARS = 16, 128
 MAX_MOVING = 8  #: moving obstacles of one robot (the tracker's robot budget; planners.moving)
 MAX_TRACK_POINTS = 1000  #: waypoints of one moving obstacle
+MAX_NAME_CHARS = 64  #: a controller's or parameter's name in ``T,T,C``
+MAX_CONTROLLER_PARAMS = 16
+_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyz0123456789_")
 #: how far a block may reach beyond its robot's area (wire rounding); the same rule as environment files
 #: (planners.environment: not imported here, the codec stays light for the sandbox and the SDK)
 BLOCK_TOLERANCE_M = 0.001
@@ -108,7 +116,7 @@ class Event(str, Enum):
     FAIL = "FAIL"
 
 
-FAIL_REASONS = ("COLLISION", "TIMEOUT", "STALLED", "STOPPED")
+FAIL_REASONS = ("COLLISION", "TIMEOUT", "STALLED", "STOPPED", "WATCHDOG")
 
 
 class ProtocolError(ValueError):
@@ -180,8 +188,32 @@ class MovingCommand:
     obstacles: tuple[tuple[np.ndarray, np.ndarray], ...]
 
 
+@dataclass(frozen=True)
+class ControllerCommand:
+    """``T,T,C``: the controller of the paths this connection sends from now on: ``name`` (None: the
+    default, the motor schema) with ``params`` (each in its own unit, SI, as its name says)."""
+
+    name: str | None
+    params: dict[str, float]
+
+
+@dataclass(frozen=True)
+class LocalisationCommand:
+    """``T,T,O,1`` / ``T,T,O,0``: send (or stop sending) this connection ``PO`` localisation lines."""
+
+    on: bool
+
+
+@dataclass(frozen=True)
+class VelocityCommand:
+    """``T,T,V,<v>,<w>``: drive with body velocities ``v`` (m/s) and ``w`` (rad/s) until the next one."""
+
+    v: float
+    w: float
+
+
 Command = (PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
-           | MovingCommand)
+           | MovingCommand | ControllerCommand | LocalisationCommand | VelocityCommand)
 
 # --------------------------------------------------------------------------- parsing
 #
@@ -251,7 +283,7 @@ def split_command(line: str | bytes) -> tuple[str, str | None]:
         raise ProtocolError(ErrorCode.SYNTAX, "empty line")
     head = text.split(",", 3)
     if len(head) < 3 or head[0].strip() != "T" or head[1].strip() != "T":
-        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|M|A|L>")
+        raise ProtocolError(ErrorCode.SYNTAX, "commands start with T,T,<P|S|Q|I|B|M|C|O|V|A|L>")
     return head[2].strip(), (head[3] if len(head) == 4 else None)
 
 
@@ -493,6 +525,18 @@ def parse_arguments(verb: str, rest: str | None, *, field_size: tuple[float, flo
         return BuildCommand(out)
     if verb == "M":
         return _moving(rest, field_size)
+    if verb == "C":
+        return _controller(rest)
+    if verb == "O":
+        flag = "" if rest is None else rest.strip()
+        if flag not in ("0", "1"):
+            raise ProtocolError(ErrorCode.SYNTAX, "T,T,O takes 1 (send PO lines) or 0 (stop)")
+        return LocalisationCommand(flag == "1")
+    if verb == "V":
+        if rest is None or ";" in rest:
+            raise ProtocolError(ErrorCode.SYNTAX, "T,T,V takes v,w (mm/s, deg/s)")
+        v, w = _parse_tuples(rest, 2, "velocity", 1)[0]
+        return VelocityCommand(float(v) / 1000.0, math.radians(float(w)))
     if verb == "A":
         return AuthCommand(_secret(rest, "A"))
     if verb == "L":
@@ -524,6 +568,38 @@ def _moving(rest: str | None, field_size: tuple[float, float] | None) -> MovingC
         _check_range(pts, field_size, f"obstacle {i + 1} point")
         out.append((np.array([v[0] / 1000.0, v[1] / 1000.0, v[2], v[3]]), pts))
     return MovingCommand(tuple(out))
+
+
+def _name_error(name: str, what: str) -> str | None:
+    if not name or len(name) > MAX_NAME_CHARS or not set(name) <= _NAME_CHARS:
+        return f"{what} {name[:20]!r} is not a name (1 to {MAX_NAME_CHARS} of a-z, 0-9, _)"
+    return None
+
+
+def _controller(rest: str | None) -> ControllerCommand:
+    """``T,T,C[,<name>[,k=v,...]]``; names are checked here, the controller and its values by the robot."""
+    fields = [] if rest is None or not rest.strip() else [f.strip() for f in rest.split(",")]
+    if not fields:
+        return ControllerCommand(None, {})
+    if len(fields) > MAX_CONTROLLER_PARAMS + 1:
+        raise ProtocolError(ErrorCode.SYNTAX, f"T,T,C takes at most {MAX_CONTROLLER_PARAMS} parameters")
+    why = _name_error(fields[0], "controller")
+    if why:
+        raise ProtocolError(ErrorCode.SYNTAX, why)
+    params: dict[str, float] = {}
+    for f in fields[1:]:
+        key, eq, value = f.partition("=")
+        key = key.strip()
+        why = _name_error(key, "parameter") or (None if eq else f"parameter {key!r} needs a value: {key}=<number>")
+        why = why or _number_error(value)
+        if why is None and key in params:
+            why = f"parameter {key!r} given twice"
+        if why is None and not math.isfinite(float(value)):
+            why = "numbers must be finite"
+        if why:
+            raise ProtocolError(ErrorCode.SYNTAX, why)
+        params[key] = float(value)
+    return ControllerCommand(fields[0], params)
 
 
 def parse_command(line: str | bytes, *, field_size: tuple[float, float] | None = None) -> Command:
@@ -575,6 +651,13 @@ def decode_path(line: str | bytes) -> np.ndarray:
     if not isinstance(cmd, PathCommand):
         raise ProtocolError(ErrorCode.SYNTAX, "not a T,T,P line")
     return cmd.points
+
+
+def encode_controller(name: str | None, params: dict[str, float] | None = None) -> str:
+    """The ``T,T,C`` line choosing controller ``name`` (None: the default) with ``params`` (their own units)."""
+    if name is None:
+        return "T,T,C"
+    return ",".join(["T,T,C", name, *(f"{k}={float(v)!r}" for k, v in sorted((params or {}).items()))])
 
 
 def encode_place(pose: Sequence[float]) -> str:
@@ -649,6 +732,12 @@ def format_event(kind: Event | str, t: float, *, index: int | None = None, reaso
     return f"EV,{k.value},{ts}"
 
 
+def format_localisation(pose: Sequence[float], t: float) -> str:
+    """``PO,<x>,<y>,<a>,<t>`` (mm, mm, deg, s) from a pose in metres/radians measured at ``t`` seconds."""
+    x, y, a = pose
+    return f"PO,{_fmt(x * 1000, 2)},{_fmt(y * 1000, 2)},{_fmt(math.degrees(float(_wrap(a))), 3)},{_fmt(t, 3)}"
+
+
 def format_error(code: ErrorCode | str, message: str) -> str:
     """``ERR,<code>,<message>``; the message is made single-line ASCII and capped at 200 chars."""
     clean = message.encode("ascii", "replace").decode().replace("\r", " ").replace("\n", " ")
@@ -664,8 +753,8 @@ class Reply:
 
     @property
     def time(self) -> float | None:
-        """Experiment time (s) of ST and EV lines, else None."""
-        if self.kind in ("ST", "EV") and self.fields:
+        """Experiment time (s) of ST, EV and PO lines, else None."""
+        if self.kind in ("ST", "EV", "PO") and self.fields:
             try:
                 return float(self.fields[-1])
             except ValueError:
@@ -673,7 +762,7 @@ class Reply:
         return None
 
 
-_REPLY_KINDS = {"HELLO", "OK", "ST", "EV", "ERR"}
+_REPLY_KINDS = {"HELLO", "OK", "ST", "EV", "ERR", "PO"}
 
 
 def parse_reply(line: str | bytes) -> Reply:

@@ -33,12 +33,16 @@ import logging
 from typing import TYPE_CHECKING
 
 from .connection import MAX_AUTH_FAILURES
+from .controller_specs import ControllerError, select
 from .noise import path_key
 from .protocol import (
     AuthCommand,
     BuildCommand,
     Command,
+    ControllerCommand,
     ErrorCode,
+    LocalisationCommand,
+    VelocityCommand,
     LeaseCommand,
     MovingCommand,
     PathCommand,
@@ -64,7 +68,8 @@ __all__ = ["GUARDED_VERBS", "Robot"]
 
 log = logging.getLogger("robot_agent.robot")
 
-GUARDED_VERBS = frozenset("PSIBM")  #: verbs that need an authenticated connection when there is a control key
+GUARDED_VERBS = frozenset("PSIBMV")  #: verbs that need an authenticated connection when there is a control key
+WATCHDOG_S = 0.5  #: experiment seconds a robot in velocity mode drives on without a new T,T,V
 
 
 class Robot:
@@ -147,6 +152,14 @@ class Robot:
             return self.cmd_auth(conn, cmd)
         if isinstance(cmd, LeaseCommand):
             return self.cmd_lease(conn, cmd)
+        if isinstance(cmd, ControllerCommand):
+            return self.cmd_controller(conn, cmd)
+        if isinstance(cmd, VelocityCommand):
+            return self.cmd_velocity(conn, cmd)
+        if isinstance(cmd, LocalisationCommand):
+            conn.localisation = cmd.on
+            self.host.localisation_changed()
+            return [format_ok("O")]
         raise ProtocolError(ErrorCode.UNSUPPORTED, "unsupported command")
 
     # ------------------------------------------------------------------ authentication
@@ -218,7 +231,7 @@ class Robot:
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
         self.host.sync_clock()
-        replaced = self.host.core.set_path(self.index, cmd.points, self._noise_key())
+        replaced = self.host.core.set_path(self.index, cmd.points, self._noise_key(), conn.controller)
         self.path_count += 1
         if replaced is not None:
             self._deliver(replaced)
@@ -226,6 +239,35 @@ class Robot:
         self.host.wake()
         log.info("%s: path of %d points from %s", self.robot_id, len(cmd.points), conn.peer)
         return [format_ok("P", len(cmd.points))]
+
+    def cmd_controller(self, conn: "Connection", cmd: ControllerCommand) -> list[str]:
+        """``T,T,C``: the controller of the paths this connection sends from now on (alone: the default)."""
+        try:
+            chosen = select(cmd.name, cmd.params)
+        except ControllerError as exc:
+            code = ErrorCode.UNSUPPORTED if exc.field == "controller" else ErrorCode.RANGE
+            raise ProtocolError(code, str(exc)) from None
+        conn.controller = None if cmd.name is None else chosen
+        return [format_ok("C")]
+
+    def cmd_velocity(self, conn: "Connection", cmd: VelocityCommand) -> list[str]:
+        """``T,T,V``: drive with body velocities until the next one, ``T,T,S`` or the watchdog (no path)."""
+        core = self.host.core
+        if self.gripper_busy:
+            raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
+        self.host.sync_clock()
+        if core.state[self.index] == State.MOVING and not core.driving(self.index):
+            raise ProtocolError(ErrorCode.STATE, "a path is in progress: T,T,V drives a robot without one (T,T,S first)")
+        started = not core.driving(self.index)
+        if not started and self.owner is not conn:
+            raise ProtocolError(ErrorCode.STATE, "another connection drives this robot")
+        core.drive(self.index, cmd.v, cmd.w, self._noise_key() if started else 0, WATCHDOG_S)
+        if started:
+            self.path_count += 1
+            self.owner = conn
+            self.host.wake()
+            log.info("%s: velocity mode from %s", self.robot_id, conn.peer)
+        return [format_ok("V")]
 
     def cmd_stop(self) -> list[str]:
         """``T,T,S``: stop now."""
@@ -312,6 +354,9 @@ class Robot:
     def disconnected(self, conn: "Connection") -> None:
         """The disconnect rule: the path of a closing sender stops at once; its lease ends."""
         self.connections.discard(conn)
+        if conn.localisation:
+            conn.localisation = False
+            self.host.localisation_changed()
         if self.lease_holder is conn:
             self.revoke_lease()
         if self.owner is conn:

@@ -28,10 +28,13 @@ since the path began.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from .backends import Backend, Emulated
+from .controller_specs import Selection
+from .controllers import DIRECT, MEMORY, PARAM_SLOTS, SCHEMA
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .params import RobotParams
 from .stepper import COLLIDED, ENDED, State, control_fleet, run, settle_fleet
@@ -63,11 +66,15 @@ class PoseLog:
     def __init__(self) -> None:
         self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.count = 0
+        #: called with every batch as it is recorded (the host's localisation lines, ``T,T,O``)
+        self.listener: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None
 
     def add(self, t: np.ndarray, robots: np.ndarray, poses: np.ndarray) -> None:
         """Record poses ``(K, 3)`` of robot indices ``robots`` ``(K,)`` at times ``t`` ``(K,)`` (s)."""
         self._chunks.append((t, robots, poses))
         self.count += len(robots)
+        if self.listener is not None:
+            self.listener(t, robots, poses)
 
     def drain(self) -> dict[int, np.ndarray]:
         """All poses recorded since the last drain, per robot index, in time order."""
@@ -103,6 +110,11 @@ class SimCore:
         self.anchor = np.zeros((n, 3))
         self.anchor_k = np.zeros(n, dtype=np.int64)
         self.keys = np.zeros(n, dtype=np.uint64)
+        self.cid = np.full(n, SCHEMA, dtype=np.int64)  # each robot's controller (robot_agent.controllers)
+        self.cpar = np.zeros((n, PARAM_SLOTS))
+        self.cmem = np.zeros((n, MEMORY))
+        self.want = np.zeros((n, 2))  # a plug-in controller's commands of this step
+        self._plugins: dict[int, Selection] = {}  # robots whose controller runs in Python
         self._paths: list[np.ndarray] = [np.zeros((0, 3)) for _ in range(n)]
         # output buffers of the compiled loop; it stops when another step might not fit
         self._events = np.zeros((4 * n + 1024, 5), dtype=np.int64)
@@ -134,8 +146,9 @@ class SimCore:
         """Robot ``i``'s believed pose (its own frame)."""
         return self.backend.belief[i].copy()
 
-    def set_path(self, i: int, points: np.ndarray, key: int) -> SimEvent | None:
-        """Robot ``i`` follows ``points`` ``(P, 3)`` (its frame, m/rad) from the next step.
+    def set_path(self, i: int, points: np.ndarray, key: int, controller: Selection | None = None) -> SimEvent | None:
+        """Robot ``i`` follows ``points`` ``(P, 3)`` (its frame, m/rad) from the next step with ``controller``
+        (:func:`robot_agent.controller_specs.select`; None: the motor schema).
 
         Returns the ``FAIL,STOPPED`` event of a path it replaces, if any.
         """
@@ -151,11 +164,38 @@ class SimCore:
         if replaced is None:
             self.cmd[i] = 0.0
         self.keys[i] = np.uint64(key)
+        self.cid[i] = SCHEMA if controller is None else controller.spec.cid
+        self.cpar[i] = 0.0 if controller is None else controller.row
+        self.cmem[i] = 0.0
+        self.want[i] = 0.0
+        self._plugins.pop(i, None)
+        if controller is not None and not controller.spec.compiled:
+            self._plugins[i] = controller
         mask = np.zeros(self.n, dtype=bool)
         mask[i] = True
         self.backend.begin_path(mask, self.keys, from_rest)
         self.timeout[i] = timeout_steps(self._paths[i], self.belief(i), self.params)
         return replaced
+
+    def drive(self, i: int, v: float, w: float, key: int, watchdog_s: float) -> SimEvent | None:
+        """Robot ``i`` drives with body velocities ``(v, w)`` (m/s, rad/s; clipped to the profile's top speeds)
+        until the next call, :meth:`stop` or ``watchdog_s`` of experiment time without a call (then
+        ``FAIL,WATCHDOG``).  The first call starts velocity mode (a ``START``); returns the ``FAIL,STOPPED`` of
+        a path it replaces, if any."""
+        replaced = None
+        if not self.driving(i):
+            pose = self.belief(i)
+            replaced = self.set_path(i, pose[None, :], key)
+            self.cid[i] = DIRECT
+        p = self.params
+        self.want[i] = (float(np.clip(v, -p.max_speed_m_s, p.max_speed_m_s)),
+                        float(np.clip(w, -p.max_angular_speed_rad_s, p.max_angular_speed_rad_s)))
+        self.timeout[i] = self.k[i] + max(1, int(round(watchdog_s / self.dt)))
+        return replaced
+
+    def driving(self, i: int) -> bool:
+        """Whether robot ``i`` is in velocity mode (:meth:`drive`)."""
+        return bool(self.state[i] == State.MOVING and self.cid[i] == DIRECT)
 
     def stop(self, i: int) -> SimEvent | None:
         """Stop robot ``i``'s path now; returns its ``FAIL,STOPPED`` event if it was moving."""
@@ -198,7 +238,7 @@ class SimCore:
         events: list[SimEvent] = []
         left = int(max_steps)
         while left > 0 and self.busy():
-            if isinstance(self.backend, Emulated):
+            if isinstance(self.backend, Emulated) and not self._plugin_moving():
                 steps, n_ev, n_pose = run(
                     self.backend.kind, left, self.step_count, self.log_poses, self._ctrl(), self.backend.arrays,
                     self.world.arrays, self.world.radius, self.world.step_travel,
@@ -217,7 +257,21 @@ class SimCore:
 
     def _ctrl(self) -> tuple:
         return (self.state, self.aligning, self.wp, self.k, self.timeout, self.cmd, self.anchor, self.anchor_k,
-                self.points, self.offset, self.count)
+                self.points, self.offset, self.count, self.cid, self.cpar, self.cmem, self.want)
+
+    def _plugin_moving(self) -> bool:
+        """Whether a robot with a Python (plug-in) controller follows a path: then every step goes through
+        Python (:meth:`_python_step`), for the whole fleet."""
+        return any(self.state[i] == State.MOVING for i in self._plugins)
+
+    def _plugin_commands(self, belief: np.ndarray) -> None:
+        """Each moving plug-in robot's commands for this step into ``want``."""
+        for i, sel in self._plugins.items():
+            if self.state[i] == State.MOVING and self.count[i] > 0:
+                path = self.points[self.offset[i]:self.offset[i] + self.count[i]]
+                v, w = sel.spec.plugin.command(belief[i].copy(), path, (int(self.cmem[i, 0]), float(self.cmem[i, 1])),
+                                               dict(sel.params), self.dt)
+                self.want[i] = float(v), float(w)
 
     def _python_step(self) -> np.ndarray:
         """One step through the backend's Python methods; returns its event rows (see stepper)."""
@@ -227,7 +281,9 @@ class SimCore:
             idx = np.flatnonzero(logged)
             self.poses.add(np.full(len(idx), self.t), idx, np.array(logged_pose[idx], dtype=float))
         flags, old = self._scratch[0], self._scratch[1]
-        control_fleet(np.ascontiguousarray(belief, dtype=float), moving, self._ctrl(), self.gains, flags, old)
+        belief = np.ascontiguousarray(belief, dtype=float)
+        self._plugin_commands(belief)
+        control_fleet(belief, moving, self._ctrl(), self.gains, flags, old, self.world.arrays, self.world.radius)
         self.backend.actuate(self.cmd)
         still = moving & (flags & ENDED == 0)
         collided = self.world.collisions(self.backend.pose, still | self.backend.in_motion(), self.step_count, self.k,
@@ -251,7 +307,8 @@ class SimCore:
             if f & DONE:
                 out.append(SimEvent(i, "DONE", t0))
             elif f & (STALLED | TIMED_OUT):
-                out.append(SimEvent(i, "FAIL", t0, reason="STALLED" if f & STALLED else "TIMEOUT"))
+                why = "STALLED" if f & STALLED else "WATCHDOG" if self.cid[i] == DIRECT else "TIMEOUT"
+                out.append(SimEvent(i, "FAIL", t0, reason=why))
             elif f & COLLIDED:  # a robot collides once per path: what[i] is this collision's
                 what = int(self.world.what[i])
                 out.append(SimEvent(i, "FAIL", (step + 1) * self.dt, index=what if what >= 0 else None,

@@ -14,7 +14,9 @@ around their own methods.
 Array groups (each passed as a tuple, modified in place):
 
 - ``ctrl`` = ``(state, aligning, wp, k, timeout, cmd, anchor, anchor_k,
-  points, offset, count)``: the path follower's state (see ``SimCore``);
+  points, offset, count, cid, cpar, cmem, want)``: the path follower's state
+  and each robot's controller (id, parameters, memory, a plug-in's
+  commands; see ``SimCore`` and :mod:`robot_agent.controllers`);
 - ``phys`` = :attr:`Emulated.arrays`; ``world`` = :attr:`World.arrays`;
 - ``out`` = ``(events (E, 5) int64: step, robot, old wp, new wp, flags;
   pose_rows (P, 2) int64: step, robot; pose_xyt (P, 3); and per-robot
@@ -28,11 +30,12 @@ from enum import IntEnum
 import numpy as np
 
 from .compiled import kernel
-from .contact import collide
+from .contact import block_distance, collide, wall_distance
+from .controllers import RPP
 from .follower import DONE, STALLED, TIMED_OUT, Gains, control
 from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
 
-__all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "control_fleet", "run", "settle_fleet"]
+__all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "clearance", "control_fleet", "run", "settle_fleet"]
 
 COLLIDED = 32  #: flag bit: the robot touched a wall, a block, a robot or a moving obstacle this step
 ENDED = DONE | STALLED | TIMED_OUT
@@ -49,16 +52,30 @@ class State(IntEnum):
 
 
 @kernel
+def clearance(i: int, x: float, y: float, world: tuple, radius: float) -> float:
+    """Distance (m) from the edge of robot ``i`` believed at ``(x, y)`` (its frame) to the nearest wall or
+    block of its world (``radius`` the robot's collision radius); moving obstacles do not count."""
+    origin, world_of, sizes, centre, half, cs, nblocks = world[0], world[1], world[2], world[3], world[4], world[5], \
+        world[6]
+    wx, wy = x + origin[i, 0], y + origin[i, 1]
+    w = world_of[i]
+    d = min(wall_distance(wx, wy, sizes[w, 0], sizes[w, 1]), block_distance(wx, wy, w, centre, half, cs, nblocks))
+    return d - radius
+
+
+@kernel
 def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains, flags: np.ndarray,
-                  old: np.ndarray) -> None:
+                  old: np.ndarray, world: tuple, radius: float) -> None:
     """The follower's step for every robot: its flags, its waypoint before the step in ``old``;
-    robots not ``moving`` get zero commands."""
-    state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
+    robots not ``moving`` get zero commands.  ``world`` (:attr:`World.arrays`) and the collision
+    ``radius`` (m) give the clearance that regulated pure pursuit slows down by."""
+    state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count, cid, cpar, cmem, want = ctrl
     for i in range(len(belief)):
         old[i] = wp[i]
         if moving[i]:
+            near = clearance(i, belief[i, 0], belief[i, 1], world, radius) if cid[i] == RPP else np.inf
             flags[i] = control(i, belief[i, 0], belief[i, 1], belief[i, 2], points, offset, count, wp, aligning,
-                               cmd, anchor, anchor_k, k, timeout, g)
+                               cmd, anchor, anchor_k, k, timeout, g, cid, cpar, cmem, want, near)
         else:
             flags[i] = 0
             cmd[i, 0] = cmd[i, 1] = 0.0
@@ -70,7 +87,7 @@ def settle_fleet(step: int, hit: np.ndarray, flags: np.ndarray, old: np.ndarray,
     """End every robot's step after the collision check: a hit stops its commands (and fails its
     path), its path state follows its flags, and an event row goes to ``events`` from row
     ``n_ev`` on when anything happened; returns the new row count."""
-    state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
+    state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count, _, _, _, _ = ctrl
     for i in range(len(hit)):
         if hit[i]:
             cmd[i, 0] = cmd[i, 1] = 0.0
@@ -104,7 +121,7 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
 
     Returns ``(steps done, event rows, pose rows)``.
     """
-    state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count = ctrl
+    state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count, _, _, _, _ = ctrl
     pose, belief, ctl, tracks, gain, keys, ring, ring_ok, ring_pos, noise, odo, odo_ring, bias = phys
     events, pose_rows, pose_xyt, flags, old, moving, check, hit, meas = out
     n = len(state)
@@ -124,7 +141,7 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
                 pose_rows[n_pose, 0], pose_rows[n_pose, 1] = step, i
                 pose_xyt[n_pose, :] = meas
                 n_pose += 1
-        control_fleet(ctl, moving, ctrl, g, flags, old)
+        control_fleet(ctl, moving, ctrl, g, flags, old, world, radius)
         for i in range(n):
             if kind == FIELD:
                 field_actuate(i, cmd[i, 0], cmd[i, 1], pose, tracks, gain, noise, ring_pos, odo, odo_ring, fg)

@@ -137,6 +137,9 @@ class Experiment(Base):
     jitter: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, nullable=True)
     #: field parameters of the robot profile for the field runs, ``{"tracker_noise_xy_m": 0.003}`` (SI), or None
     profile_overrides: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, nullable=True)
+    #: the robots' path-tracking controller (docs/controllers.md) and its parameters, defaults filled in (SI)
+    controller: Mapped[str] = mapped_column(String(64), default="schema", server_default="schema")
+    controller_params: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, default=dict, nullable=True)
     error: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)

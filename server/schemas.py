@@ -200,6 +200,11 @@ class ExperimentCreate(Strict):
 
         return check_overrides(v) or None if v is not None else None
 
+    controller: str = Field(default="schema", min_length=1, max_length=64, description=(
+        "The robots' path-tracking controller (`GET /api/v1/controllers`; docs/controllers.md)."))
+    controller_params: dict[str, float] = Field(default_factory=dict, max_length=16, description=(
+        "The controller's parameters (SI units, as each name says); the others keep their defaults."))
+
     @field_validator("start", "goal")
     @classmethod
     def _pose(cls, v: Optional[Pose]) -> Optional[Pose]:
@@ -292,6 +297,7 @@ class ExperimentSummary(FromRow):
     modes: list[str]
     repetitions: int
     field: str
+    controller: str = "schema"
     error: str
     created_at: UTCDateTime
     finished_at: Optional[UTCDateTime]
@@ -313,10 +319,12 @@ class ExperimentPublic(ExperimentSummary):
     jitter: Optional[dict[str, float]] = None
     profile_overrides: Optional[dict[str, float]] = Field(default=None, description=(
         "The field parameters this job's field runs had instead of the robot profile's (None: the profile's)."))
+    controller_params: dict[str, float] = Field(default_factory=dict, description=(
+        "The controller's parameters, defaults filled in (SI units)."))
     started_at: Optional[UTCDateTime]
     runs: list[RunPublic]
 
-    @field_validator("planner_params", "planning_info", mode="before")
+    @field_validator("planner_params", "planning_info", "controller_params", mode="before")
     @classmethod
     def _dicts(cls, v: Any) -> Any:
         return v or {}

@@ -10,13 +10,15 @@ computation on the planners' model; no database, no robots.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from planners import Environment, PlanningError, check_query, get_planner, parse_environment
 from planners.moving import obstacle_at
+from robot_agent.controller_specs import ControllerError
+from robot_agent.controller_specs import select as select_controller
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from .errors import PreflightError
@@ -34,6 +36,7 @@ class Preflight:
     goal: list[float]
     planner_params: dict[str, Any]
     path: list[list[float]] | None
+    controller_params: dict[str, float] = field(default_factory=dict)
 
 
 def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: float,
@@ -55,6 +58,10 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
             f"environment {env.name!r} is {env.width:g} x {env.height:g} m; a {body.field}-field job "
             f"allows at most {limit[0]:g} x {limit[1]:g} m" + (' (use "field": "full")' if body.field == "sub" else "")
         )
+    try:
+        controller = select_controller(body.controller, body.controller_params)
+    except ControllerError as exc:
+        raise PreflightError(f"{exc.field}: {exc}" if exc.field == "controller" else str(exc)) from None
     params: dict[str, Any] = {}
     if body.planner is not None:
         try:
@@ -79,7 +86,7 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
             raise PreflightError("`path` must begin at `start` and end at `goal` (within 1 mm)")
         _check_clear(space, pts, robot_radius)
         path = [list(map(float, p)) for p in body.path]
-    return Preflight(env, _pose(s), _pose(g), params, path)
+    return Preflight(env, _pose(s), _pose(g), params, path, controller.params)
 
 
 def _check_clear(space: Any, pts: np.ndarray, robot_radius: float) -> None:

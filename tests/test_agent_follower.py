@@ -98,12 +98,14 @@ def _fleet(n: int, path: np.ndarray) -> dict:
     return {"points": np.vstack([path] * n), "offset": np.arange(n) * len(path), "count": np.full(n, len(path)),
             "wp": np.zeros(n, dtype=np.int64), "aligning": np.zeros(n, dtype=bool), "cmd": np.zeros((n, 2)),
             "anchor": np.zeros((n, 3)), "anchor_k": np.zeros(n, dtype=np.int64), "k": np.zeros(n, dtype=np.int64),
-            "timeout": np.full(n, 10**6)}
+            "timeout": np.full(n, 10**6), "cid": np.zeros(n, dtype=np.int64), "cpar": np.zeros((n, 8)),
+            "cmem": np.zeros((n, 4)), "want": np.zeros((n, 2))}
 
 
 def _control(f: dict, i: int, belief: tuple[float, float, float]) -> int:
     return fl.control(i, *belief, f["points"], f["offset"], f["count"], f["wp"], f["aligning"], f["cmd"],
-                      f["anchor"], f["anchor_k"], f["k"], f["timeout"], G)
+                      f["anchor"], f["anchor_k"], f["k"], f["timeout"], G, f["cid"], f["cpar"], f["cmem"], f["want"],
+                      np.inf)
 
 
 def test_control_starts_accelerates_limited_and_flags_the_end():

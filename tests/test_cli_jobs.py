@@ -261,3 +261,18 @@ def test_the_sdk_says_where_it_looked_for_a_token(testbed, tmp_path):
                          env={**env, "TWB_URL": testbed.url}).stdout
     assert out.startswith("401 Unauthorized: Missing bearer token (no token found"), out
     assert str(tmp_path / "twb-data" / "token") in out and "TWB_TOKEN" in out and "token=" in out
+
+
+def test_submit_with_a_controller_runs_it_in_both_modes(run):
+    r = run("submit", "--env", "blocks", "--plan", "B", "--controller", "pure_pursuit",
+            "--controller-param", "lookahead_m=0.05", "--wait")
+    assert r.returncode == 0, r.stderr
+    assert "completed (2/2 runs completed)" in r.stderr
+    doc = json.loads(run("status", r.stdout.strip(), "--json").stdout)
+    assert doc["controller"] == "pure_pursuit" and doc["controller_params"]["lookahead_m"] == 0.05
+    r = run("submit", "--env", "room", "--plan", "A", "--controller", "mpc")
+    assert r.returncode != 0 and "unknown controller 'mpc'" in r.stderr and "Traceback" not in r.stderr
+    r = run("submit", "--env", "room", "--plan", "A", "--controller", "kanayama", "--controller-param", "k_x_1_s")
+    assert r.returncode != 0 and "--controller-param must be NAME=VALUE" in r.stderr
+    r = run("submit", "--env", "room", "--plan", "A", "--controller", "kanayama", "--controller-param", "k_x_1_s=-1")
+    assert r.returncode != 0 and "controller_params.k_x_1_s must be a number in [0, 50] (1/s)" in r.stderr

@@ -238,11 +238,15 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     assert float(page.input_value("#f-goal-y")) == pytest.approx(1.5, abs=0.01)
     assert float(page.input_value("#f-goal-a")) == pytest.approx(math.pi / 2, abs=0.02)
     page.select_option("#f-planner", "fm2")
+    expect(page.locator("#f-controller option")).to_have_count(4)  # the built-ins, schema first
+    page.select_option("#f-controller", "pure_pursuit")
     page.fill("#f-repetitions", "2")
     page.fill("#f-seed", "3")
     page.screenshot(path=OUTPUT / "submit.png")
     exp = submit_and_wait(page, testbed)
     exp_id = exp["id"]
+    assert exp["controller"] == "pure_pursuit" and exp["controller_params"]["lookahead_m"] == 0.06
+    expect(page.locator("dl.facts").first).to_contain_text("Controllerpure_pursuit")
     assert exp["start"][:2] == pytest.approx([0.3, 0.3], abs=0.01) and exp["planner"] == "fm2"
     assert exp["goal"][2] == pytest.approx(math.pi / 2, abs=0.02) and exp["repetitions"] == 2 and exp["seed"] == 3
 

@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from planners.control_metrics import CONTROL_KEYS
 from planners.metrics import COMPARISON_KEYS, PATH_KEYS, RATIO_KEYS
 
 PLANNED = "t,x,y,theta\n,0.2,0.2,0\n,1.6,0.2,1.57\n,1.6,1.6,1.57\n"
@@ -30,7 +31,7 @@ def test_metrics_json_with_environment(twb, files):
     r = twb("metrics", "--planned", files.planned, "--executed", files.executed, "--env", "room")
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
-    keys = set(PATH_KEYS) | set(COMPARISON_KEYS) | set(RATIO_KEYS)
+    keys = set(PATH_KEYS) | set(COMPARISON_KEYS) | set(RATIO_KEYS) | set(CONTROL_KEYS)  # t and theta: a controller's
     assert keys | {"environment", "planning_time_s", "planned", "parameters"} == set(doc)
     assert set(doc["planned"]) == set(PATH_KEYS)
     assert doc["environment"] == "room"
@@ -43,7 +44,11 @@ def test_metrics_json_with_environment(twb, files):
     assert isinstance(doc["clearance_min_m"], float) and isinstance(doc["collided"], bool)
     assert doc["goal_reached"] is True and doc["planned"]["execution_time_s"] is None
     assert doc["parameters"] == {"samples": 200, "segments": None, "segment_length_m": 0.05,
-                                 "robot_radius_m": 0.045, "goal_tolerance_m": 0.05, "obstacle_safety_m": 0.1}
+                                 "robot_radius_m": 0.045, "goal_tolerance_m": 0.05, "obstacle_safety_m": 0.1,
+                                 "collision_radius_m": 0.04, "max_speed_m_s": 0.2, "rate_hz": 10.0,
+                                 "stop_speed_m_s": 0.01, "stop_turn_rate_rad_s": 0.05}
+    assert doc["collision_count"] == 0 and doc["cross_track_error_max_m"] <= doc["deviation_max_m"] + 0.05
+    assert doc["spl"] == 1.0 and doc["time_to_goal_s"] is not None  # performed shorter than planned: SPL 1
 
 
 def test_metrics_without_environment_and_with_options(twb, files):

@@ -26,6 +26,7 @@ from server.testbed import Testbed
 from server.validation import Preflight
 
 from planners import parse_environment
+from robot_agent.controller_specs import select as select_controller
 
 ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
 
@@ -46,13 +47,16 @@ async def running(tmp_path: Path, *, time_scale: float = math.inf, robots_time_s
 
 def add_experiment(tb: Testbed, *, env: dict = ONE_BLOCK, start=(0.3, 0.3, 0.0), goal=(1.5, 1.5, 0.0),
                    planner: str | None = "fmm", params: dict | None = None, mode: str = "twb",
-                   planned_path: list | None = None, jitter: dict | None = None, seed: int = 3) -> tuple[int, int]:
+                   planned_path: list | None = None, jitter: dict | None = None, seed: int = 3,
+                   controller: str = "schema", controller_params: dict | None = None) -> tuple[int, int]:
     """An experiment with one run of ``mode`` straight into the store (no pre-flight: tests choose the fault)."""
     with tb.sessions.begin() as s:
         admin = s.scalar(select(User).where(User.name == "admin"))
         body = ExperimentCreate(environment=env["name"], start=list(start), goal=list(goal), planner=planner,
-                                planner_params=params or {}, modes=[mode], repetitions=1, seed=seed, jitter=jitter)
-        checked = Preflight(parse_environment(env), list(start), list(goal), params or {}, None)
+                                planner_params=params or {}, modes=[mode], repetitions=1, seed=seed, jitter=jitter,
+                                controller=controller)
+        checked = Preflight(parse_environment(env), list(start), list(goal), params or {}, None,
+                            select_controller(controller, controller_params).params)
         exp = create_experiment(s, owner=admin, body=body, checked=checked, robot_radius=0.045,
                                 planning_margin=0.02)
         exp.planned_path = planned_path
@@ -210,10 +214,12 @@ MOVING = {**ONE_BLOCK, "name": "one-block-moving",
                                 "repeat": "pingpong", "delay_s": 0.5}]}
 
 
-@pytest.mark.parametrize("through", ["", "block", "obstacle"])
-async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through):
+@pytest.mark.parametrize("through, controller", [("", "schema"), ("block", "schema"), ("obstacle", "schema"),
+                                                ("", "kanayama"), ("", "regulated_pure_pursuit")])
+async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through, controller):
     """The same run on the agent's robot and as one compute task (the Ray pool's code path, here on the
-    worker processes): the same outcome, where it stopped, poses (bit for bit) and metrics (1e-9)."""
+    worker processes): the same outcome, where it stopped, poses (bit for bit) and metrics (1e-9); with any
+    controller (which reaches the agent as a T,T,C line)."""
     async with running(tmp_path) as tb:
         tb.field.add_engine_slots("engine", 1)
         through_block = bool(through)
@@ -221,7 +227,7 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
                   planned_path=[[0.3, 0.9, 0.0], [0.9, 0.9, 0.0], [1.5, 0.9, 0.0]]) if through == "block" else \
             dict(env=MOVING, start=(0.3, 0.3, 0.0), goal=(1.5, 0.3, 0.0), planner=None,
                  planned_path=[[0.3, 0.3, 0.0], [0.9, 0.3, 0.0], [1.5, 0.3, 0.0]]) if through == "obstacle" else \
-            dict(jitter={"xy_m": 0.01, "theta_rad": 0.05})
+            dict(jitter={"xy_m": 0.01, "theta_rad": 0.05}, controller=controller)
         found = []
         for robot in ("sim-1", "engine-1"):
             _, run_id = add_experiment(tb, mode="sim", **kw)
@@ -240,6 +246,11 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
         pa = pa[pa[:, 0] >= t0a - 1e-9]
         assert pa.shape == pb.shape and np.array_equal(pa[:, 1:], pb[:, 1:])
         assert math.isclose(t1a - t0a, t1b - t0b, abs_tol=1e-9)
+        with tb.sessions() as s:
+            sent = [m.line for m in s.scalars(select(Message).where(Message.direction == ">"))]
+        chosen = [line for line in sent if line.startswith("T,T,C")]
+        assert len(chosen) == (0 if controller == "schema" else 2)  # the agent's run and the task's log
+        assert all(line.startswith(f"T,T,C,{controller},") for line in chosen)
         assert ma.keys() == mb.keys()
         for k in ma:
             if isinstance(ma[k], float) and k != "planning_time_s":

@@ -11,6 +11,7 @@ import pytest
 
 from planners import PlanningError, UnknownPlanner, available_planners, get_planner, plan_path, register_planner
 from planners import registry
+from robot_agent import controller_specs
 
 PLUGIN = textwrap.dedent(
     '''
@@ -35,6 +36,23 @@ PLUGIN = textwrap.dedent(
 
     def broken_import():
         raise RuntimeError("never called")
+
+    class Creep:
+        """A controller plug-in: towards the next waypoint at a crawl."""
+
+        description = "creeps along"
+
+        def __init__(self):
+            from robot_agent.controller_specs import Param
+
+            self.params = (Param("speed_m_s", "m/s", 0.08, 0.01, 0.2),)
+
+        def command(self, pose, path, progress, params, dt):
+            import math
+
+            j = min(progress[0] + 1, len(path) - 1)
+            err = math.remainder(math.atan2(path[j, 1] - pose[1], path[j, 0] - pose[0]) - pose[2], math.tau)
+            return params["speed_m_s"] * max(math.cos(err), 0.0), 3.0 * err
     '''
 )
 
@@ -51,12 +69,25 @@ def plugin_dist(tmp_path, monkeypatch):
         "straight = twb_test_plugin:StraightLine\n"
         "through_walls = twb_test_plugin:through_walls\n"
         "broken = twb_test_plugin_missing:thing\n"
+        "[teleworkbench.controllers]\n"
+        "creep = twb_test_plugin:Creep\n"
     )
     monkeypatch.syspath_prepend(str(tmp_path))
     yield tmp_path
     for name in ("straight", "through_walls", "broken"):
         registry._instances.pop(name, None)
+    controller_specs._plugins.pop("creep", None)
     sys.modules.pop("twb_test_plugin", None)
+
+
+def test_entry_point_controller_runs_in_python_like_a_builtin(plugin_dist):
+    from robot_agent.headless import simulate_run
+
+    assert "creep" in controller_specs.available_controllers()
+    spec = controller_specs.select("creep").spec
+    assert not spec.compiled and spec.to_dict()["parameters"][0]["default"] == 0.08
+    run = simulate_run([[0.3, 0.3, 0.0], [0.6, 0.3, 0.0]], (0.3, 0.3, 0.0), seed=1, controller="creep")
+    assert run.outcome == "DONE" and run.t_end > 0.28 / 0.08  # its crawl, to the goal tolerance
 
 
 def test_entry_point_planner_is_selected_by_name_like_a_builtin(plugin_dist):
@@ -168,6 +199,7 @@ def test_plugins_list_names_the_ones_that_fail_and_says_to_restart(plugin_dist, 
     broken = next(line for line in r.stdout.splitlines() if line.strip().startswith("broken"))
     assert "FAILED to load: No module named 'twb_test_plugin_missing'" in broken
     assert "restart the testbed" in broken
+    assert re.search(r"creep +twb_test_plugin:Creep +ok", r.stdout), r.stdout
 
 
 def test_a_plugin_that_fails_to_load_says_to_restart_the_testbed(plugin_dist):

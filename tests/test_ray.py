@@ -27,7 +27,7 @@ JOBS = [
     {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fmm",
      "modes": ["sim"], "repetitions": 2, "seed": 42, "jitter": {"xy_m": 0.01, "theta_rad": 0.05}},
     {"environment": "blocks", "start": [0.2, 1.6, 0.0], "goal": [1.6, 0.2, 0.0], "planner": "fm2",
-     "modes": ["sim"], "repetitions": 1, "seed": 7},
+     "modes": ["sim"], "repetitions": 1, "seed": 7, "controller": "regulated_pure_pursuit"},
     # a field-robot variant (noise study): a task in the worker pool there, on Ray here
     {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fmm",
      "modes": ["twb"], "repetitions": 1, "seed": 5, "profile_overrides": {"tracker_noise_xy_m": 0.002}},

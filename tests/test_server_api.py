@@ -148,6 +148,10 @@ def test_submit_returns_202_with_runs_and_others_get_404(alice, bob):
         ({"field": "half"}, 422, "field"),
         ({"start": [0.3]}, 422, r"must be \[x, y\] or \[x, y, theta\]"),
         ({"extra": 1}, 422, "extra"),
+        ({"controller": "mpc"}, 422, "controller: unknown controller 'mpc'"),
+        ({"controller": "pure_pursuit", "controller_params": {"lookahead_m": 9}}, 422,
+         r"controller_params.lookahead_m must be a number in \[0.02, 1\] \(m\)"),
+        ({"controller_params": {"gain": 1}}, 422, "controller_params.gain: controller 'schema' has no parameter"),
     ],
 )
 def test_preflight_refuses_bad_jobs_with_a_reason(alice, change, status, message):
@@ -157,6 +161,28 @@ def test_preflight_refuses_bad_jobs_with_a_reason(alice, change, status, message
     assert r.status_code == status, r.text
     if message:
         assert re.search(message, r.json()["detail"]), r.json()["detail"]
+
+
+def test_controllers_are_listed_chosen_stored_and_shown(alice):
+    listed = alice.get("/api/v1/controllers").json()
+    names = [c["name"] for c in listed["data"]]
+    assert names[:4] == ["schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama"]
+    pp = listed["data"][1]
+    assert pp["compiled"] and pp["parameters"][0] == {
+        "name": "lookahead_m", "unit": "m", "default": 0.06, "range": [0.02, 1.0],
+        "description": pp["parameters"][0]["description"]}
+    r = alice.post("/api/v1/experiments", json={**JOB, "controller": "pure_pursuit",
+                                               "controller_params": {"lookahead_m": 0.1}})
+    assert r.status_code == 202, r.text
+    exp = alice.get(f"/api/v1/experiments/{r.json()['id']}").json()
+    assert exp["controller"] == "pure_pursuit"
+    assert exp["controller_params"] == {"lookahead_m": 0.1, "speed_m_s": 0.2, "rotate_to_heading_rad": 1.2}
+    listed = alice.get("/api/v1/experiments").json()["data"]
+    assert next(e for e in listed if e["id"] == exp["id"])["controller"] == "pure_pursuit"
+    default = alice.post("/api/v1/experiments", json=JOB).json()
+    assert default["controller"] == "schema" and default["controller_params"] == {}
+    for eid in (exp["id"], default["id"]):
+        alice.post(f"/api/v1/experiments/{eid}/cancel")
 
 
 def test_explicit_paths(alice):

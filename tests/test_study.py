@@ -169,12 +169,58 @@ def test_paper_spec_is_48_runs():
     assert load_spec("paper") == StudySpec.from_json(PAPER)
 
 
+def test_the_controller_study_crosses_every_builtin_with_one_planner():
+    spec = load_spec("controllers")
+    envs = {n: Environment(n, [1.8, 1.8], [], [Plan("A", [0.1, 0.1], [1, 1]), Plan("B", [0.2, 0.2], [1, 1])])
+            for n in ("room", "blocks")}
+    jobs = plan_jobs(spec, envs)
+    assert len(jobs) == 16 and len(jobs) * spec.runs_per_experiment == 64 and spec.jitter is not None
+    assert [j["configuration"] for j in jobs[:4]] == ["fmm/schema", "fmm/pure_pursuit", "fmm/regulated_pure_pursuit",
+                                                       "fmm/kanayama"]
+    assert jobs[1]["body"]["controller"] == "pure_pursuit" and jobs[1]["controller"] == "pure_pursuit"
+    assert StudySpec.from_json(spec.to_json()) == spec
+    assert "controller" not in plan_jobs(paper_spec(), envs)[0]["body"]  # studies without controllers: as before
+    tuned = StudySpec.from_json({**SMALL, "controllers": [{"name": "pure_pursuit", "params": {"lookahead_m": 0.1}}]})
+    assert tuned.configurations()[0][2] == "fmm/pure_pursuit(lookahead_m=0.1)"
+
+
+def test_twb_study_controllers_groups_by_controller(testbed, tmp_path):
+    import csv
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path / "controllers"
+    twb = Path(sys.executable).with_name("twb")
+    r = subprocess.run([str(twb), "study", "controllers", "--out", str(out), "--url", testbed.url, "--token",
+                        testbed.token, "--no-progress"], capture_output=True, text=True, timeout=600,
+                       env={k: v for k, v in os.environ.items() if k != "TWB_DEBUG"})
+    assert r.returncode == 0, r.stderr
+    assert "study controllers: 64/64 runs completed" in r.stdout
+    rows = list(csv.DictReader((out / "runs.csv").open()))
+    assert {row["controller"] for row in rows} == {"schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama"}
+    assert {row["configuration"] for row in rows} == {"fmm/schema", "fmm/pure_pursuit", "fmm/regulated_pure_pursuit",
+                                                      "fmm/kanayama"}
+    assert all(float(row["spl"]) > 0.9 and row["stop_count"] == "0" for row in rows)
+    summary = (out / "summary.md").read_text()
+    assert "## Which configuration is better?" in summary and "fmm/kanayama" in summary
+    assert "mean cross-track error" in summary  # the controller metrics are compared too
+    comparisons = {row["metric"] for row in csv.DictReader((out / "comparisons.csv").open())}
+    assert {"cross_track_error_mean_m", "heading_error_rms_rad", "time_to_goal_s", "jerk_linear_rms_m_s3"} <= comparisons
+
+
 @pytest.mark.parametrize("content,message", [
     ("{not json", "invalid JSON"),
     ('{"environments": ["room"]}', "`planners` must be a non-empty list"),
     ('{"environments": ["room"], "planners": ["fmm"], "repetitons": 2}', "unknown key(s) repetitons"),
     ('{"environments": ["room"], "planners": ["fmm"], "modes": ["real"]}', "`modes` must be a list"),
     ('[1, 2]', "must be a JSON object"),
+    ('{"environments": ["room"], "planners": ["fmm"], "controllers": []}', "`controllers` must be a non-empty list"),
+    ('{"environments": ["room"], "planners": ["fmm"], "controllers": [{"name": "pure_pursuit", "gain": 1}]}',
+     "unknown key(s) gain (allowed: label, name, params)"),
+    ('{"environments": ["room"], "planners": ["fmm"], "controllers": ["kanayama", "kanayama"]}',
+     "repeats controllers"),
 ])
 def test_bad_study_files(tmp_path, content, message):
     f = tmp_path / "bad.json"
@@ -265,9 +311,9 @@ def test_failed_field_runs_are_in_runs_csv_with_outcome_and_where_they_stopped(o
     assert any(r["stopped_at_x"] is not None for r in crashed)
     assert all(r["outcome"] == "success" for r in data.rows if r not in crashed)
     header = (overshoot_dir / "runs.csv").read_text().splitlines()[0].split(",")
-    assert header[:16] == ["study", "experiment_id", "run_id", "environment", "plan", "planner", "configuration",
-                           "mode", "repetition", "seed", "status", "outcome", "failure", "error", "stopped_at_x",
-                           "stopped_at_y"]
+    assert header[:17] == ["study", "experiment_id", "run_id", "environment", "plan", "planner", "controller",
+                           "configuration", "mode", "repetition", "seed", "status", "outcome", "failure", "error",
+                           "stopped_at_x", "stopped_at_y"]
 
 
 def test_summary_says_which_planner_is_better_and_keeps_the_failures(overshoot_dir):

@@ -75,6 +75,8 @@ def submit(
     repetitions: Annotated[Optional[int], typer.Option(help="Runs per mode (default: 1).", min=1)] = None,
     seed: Annotated[Optional[int], typer.Option(help="Seed of the job (planner sampling, noise) (default: 0).", min=0)] = None,
     field: Annotated[Optional[str], typer.Option(help="sub (a 1.8 m sub-field) or full (3.6 m field) (default: sub).")] = None,
+    controller: Annotated[Optional[str], typer.Option("--controller", help="The robots' path-tracking controller: schema (default), pure_pursuit, regulated_pure_pursuit, kanayama or a plug-in (docs/controllers.md).")] = None,
+    controller_param: Annotated[Optional[list[str]], typer.Option("--controller-param", help="Controller parameter NAME=VALUE, SI units as the name says (repeatable).")] = None,
     wait_: Annotated[bool, typer.Option("--wait", help="Wait for the end (a progress bar, or status lines when not a terminal); exit 1 unless completed.")] = False,
     timeout: Annotated[Optional[float], typer.Option(help="With --wait: give up after this many seconds (exit 3).")] = None,
     url: UrlOpt = None,
@@ -96,6 +98,10 @@ def submit(
         fields["planner"] = planner
     if param:
         fields["planner_params"] = _params(param)
+    if controller:
+        fields["controller"] = controller
+    if controller_param:
+        fields["controller_params"] = _params(controller_param, "--controller-param")
     if path:
         fields["path"] = _read_path_file(path)
     if program is not None:
@@ -239,6 +245,8 @@ def _print_experiment(exp: Any, wide: bool) -> None:
 
         length = float(np.hypot(*np.diff(exp.planned_path[:, :2], axis=0).T).sum())
     source = job_label(exp) if exp.planner is None else f"planner {exp.planner}"
+    if exp.controller != "schema":
+        source += f", controller {exp.controller}"
     con.print(f"experiment {exp.id}: [bold]{exp.status}[/bold]  {exp.environment} "
               f"{_pose(exp.start)} -> {_pose(exp.goal)}  {source}  "
               f"planned {_num(length)} m in {_num(exp.planning_time_s, 4)} s  seed {exp.seed}", highlight=False)

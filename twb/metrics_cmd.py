@@ -29,7 +29,8 @@ __all__ = ["metrics", "read_path_csv"]
 
 
 def read_path_csv(path: str | Path, what: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """Read a ``t,x,y,theta`` CSV file: points ``(N, 2)`` in metres and times ``(N,)`` in s (or None).
+    """Read a ``t,x,y,theta`` CSV file: points ``(N, 2)`` in metres — ``(N, 3)`` with theta (rad) when every
+    line gives it — and times ``(N,)`` in s (or None).
 
     Raises :class:`twb.errors.CliError` with one line naming the file
     (``what``, e.g. ``--planned``), the line and the problem.
@@ -62,6 +63,8 @@ def read_path_csv(path: str | Path, what: str) -> tuple[np.ndarray, np.ndarray |
         if len(row) != len(header):
             fail(f"{where} line {lineno}: {len(row)} fields, the header has {len(header)}")
     xy = np.column_stack([_column(rows, header.index(c), c, where) for c in ("x", "y")])
+    if "theta" in header and all(row[header.index("theta")].strip() for _, row in rows):
+        xy = np.column_stack([xy, _column(rows, header.index("theta"), "theta", where)])
     t = None
     if "t" in header:
         k = header.index("t")
@@ -114,8 +117,10 @@ def metrics(
         float, typer.Option("--goal-tolerance", help="Distance (m) from the planned end that counts as goal reached.")
     ] = 0.05,
 ) -> None:
-    """Print the metrics of an executed path against the planned one as JSON (docs/design.md, "Metrics")."""
+    """Print the metrics of an executed path against the planned one as JSON (docs/design.md, "Metrics"); with
+    times and headings of the executed path, the controller's too (docs/metrics.md, "Controller metrics")."""
     from planners import load_environment
+    from planners.control_metrics import ControlSettings, control_metrics
     from planners.metrics import MetricSettings, run_metrics
     from robot_agent.robot_profile import load_profile
 
@@ -138,5 +143,11 @@ def metrics(
         **run_metrics(p0, pr, env=environment, t=t, settings=settings),
         "parameters": settings.to_dict(),
     }
+    if t is not None and pr.shape[1] == 3:
+        control = ControlSettings(collision_radius=load_profile()["collision_radius_m"], goal_tolerance=goal_tolerance,
+                                  max_speed=load_profile()["max_speed_m_s"])
+        doc.update(control_metrics(p0, pr, t, goal=p0[-1, :2], env=environment, performed_length_m=doc["length_m"],
+                                   execution_time_s=doc["execution_time_s"], settings=control))
+        doc["parameters"].update(control.to_dict())
     json.dump(doc, sys.stdout, indent=1, allow_nan=False)
     sys.stdout.write("\n")

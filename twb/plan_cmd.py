@@ -27,12 +27,12 @@ class PlanFormat(str, Enum):
     csv = "csv"
 
 
-def _params(items: list[str]) -> dict:
+def _params(items: list[str], flag: str = "--param") -> dict:
     out: dict = {}
     for item in items:
         key, sep, raw = item.partition("=")
         if not sep or not key.strip():
-            fail(f"--param must be NAME=VALUE, got {item!r}")
+            fail(f"{flag} must be NAME=VALUE, got {item!r}")
         try:
             out[key.strip()] = json.loads(raw)
         except json.JSONDecodeError:

@@ -33,6 +33,8 @@ def list_plugins() -> None:
     """The installed planner plug-ins, loaded now: which work and why the others fail."""
     from planners.registry import plugin_report
 
+    from robot_agent.controller_specs import controller_report
+
     report = plugin_report()
     typer.echo(f"Planner plug-ins in {where()}:")
     if not report:
@@ -40,7 +42,12 @@ def list_plugins() -> None:
     for p in report:
         state = "ok" if p.loaded else f"FAILED to load: {p.error}"
         typer.echo(f"  {p.name:12s} {p.target}  [{p.distribution or 'unknown distribution'}]  {state}")
-    if any(not p.loaded for p in report):
+    controllers = controller_report()
+    if controllers:
+        typer.echo("Controller plug-ins (docs/controllers.md):")
+    for name, target, error in controllers:
+        typer.echo(f"  {name:12s} {target}  {'ok' if not error else f'FAILED to load: {error}'}")
+    if any(not p.loaded for p in report) or any(error for _, _, error in controllers):
         raise typer.Exit(1)
 
 

@@ -25,7 +25,8 @@ from ._findings import FINDINGS, Finding, findings_json, findings_markdown, pape
 from ._ompl import export_ompl
 from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
-from ._spec import NOISE, PAPER, PlannerSpec, PlanSpec, ProfileSpec, StudySpec, StudySpecError, load_spec, noise_spec, paper_spec
+from ._spec import (CONTROLLERS, NOISE, PAPER, ControllerChoice, PlannerSpec, PlanSpec, ProfileSpec, StudySpec,
+                    StudySpecError, controllers_spec, load_spec, noise_spec, paper_spec)
 from ._verdict import Answer, which_is_better
 
 __all__ = sorted(
@@ -39,6 +40,9 @@ __all__ = sorted(
         "Finding",
         "NOISE",
         "PAPER",
+        "CONTROLLERS",
+        "ControllerChoice",
+        "controllers_spec",
         "PlanSpec",
         "ProfileSpec",
         "PlannerSpec",

@@ -15,7 +15,7 @@ from .._exceptions import Conflict, NotFound, RateLimited, TwbError, ValidationE
 from .._models import Environment, Experiment, ExperimentMetrics
 from ._data import StudyData
 from ._limits import StudyRefused, check_study, refusal
-from ._spec import PlannerSpec, PlanSpec, ProfileSpec, StudySpec, StudySpecError
+from ._spec import ControllerChoice, PlannerSpec, PlanSpec, ProfileSpec, StudySpec, StudySpecError
 from ._stream import StudySink
 
 __all__ = ["StudyJob", "StudyRefused", "configuration", "flat_metrics", "plan_jobs", "run_study"]
@@ -25,10 +25,10 @@ class StudyJob(dict):
     """One experiment of a study: environment, plan, planner, configuration and the job body sent to the server."""
 
 
-def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, spec: StudySpec,
-          profile: Optional[ProfileSpec] = None) -> dict[str, Any]:
+def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, controller: Optional[ControllerChoice],
+          spec: StudySpec, profile: Optional[ProfileSpec] = None) -> dict[str, Any]:
     """The job sent to the server for one problem and configuration (an explicit path: start, waypoints, goal),
-    with the field robot's ``profile`` variant."""
+    with the robots' ``controller`` and the field robot's ``profile`` variant."""
     body: dict[str, Any] = {"environment": name, "start": list(start), "goal": list(goal)}
     if planner.waypoints is not None:
         body["path"] = [list(start), *[list(w) for w in planner.waypoints], list(goal)]
@@ -39,6 +39,8 @@ def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec
         body["jitter"] = dict(spec.jitter)
     if profile is not None and profile.overrides:
         body["profile_overrides"] = dict(profile.overrides)
+    if controller is not None:
+        body.update(controller=controller.name, controller_params=dict(controller.params))
     return body
 
 
@@ -58,7 +60,7 @@ def _environments(client: Client, spec: StudySpec) -> dict[str, Environment]:
 
 
 def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[StudyJob]:
-    """The experiments of the study, environment x plan x planner, in that order."""
+    """The experiments of the study, environment x plan x planner (x controller), in that order."""
     jobs = []
     for name in spec.environment_names():
         env = environments[name]
@@ -74,20 +76,21 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
                 start, goal = p.start, p.goal
             else:
                 start, goal = plan.start, plan.goal
-            for planner in spec.planners:
+            for planner, controller, config in spec.configurations():
                 for profile in spec.profiles or [None]:
                     jobs.append(StudyJob(environment=name, plan=plan.name,
                                          planner=planner.name if planner.waypoints is None else "path",
-                                         configuration=configuration(planner, profile),
+                                         controller=controller.name if controller is not None else "schema",
+                                         configuration=configuration(config, profile),
                                          profile=profile.label if profile else "",
-                                         body=_body(name, start, goal, planner, spec, profile)))
+                                         body=_body(name, start, goal, planner, controller, spec, profile)))
     return jobs
 
 
-def configuration(planner: PlannerSpec, profile: Optional[ProfileSpec]) -> str:
-    """A compared configuration's name: the planner configuration's, with the field robot's variant if any
-    (``fmm · tracker 3 mm``)."""
-    return planner.configuration if profile is None else f"{planner.configuration} · {profile.label}"
+def configuration(name: str, profile: Optional[ProfileSpec]) -> str:
+    """A compared configuration's name: the planner's (and controller's, ``fmm/pure_pursuit``), with the field
+    robot's variant if any (``fmm · tracker 3 mm``)."""
+    return name if profile is None else f"{name} · {profile.label}"
 
 
 #: how many of the oldest unfinished experiments are looked at per poll (the queue runs them about in order)
@@ -299,7 +302,9 @@ def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any
     body = job["body"]
     return {
         "experiment_id": job.get("experiment_id"), "environment": job["environment"], "plan": job["plan"],
-        "planner": job["planner"], "configuration": job["configuration"], "profile": job.get("profile", ""),
+        "planner": job["planner"], "controller": job["controller"],
+        "controller_params": body.get("controller_params", {}), "configuration": job["configuration"],
+        "profile": job.get("profile", ""),
         "profile_overrides": body.get("profile_overrides", {}), "planner_params": body.get("planner_params", {}),
         "path": body.get("path"), "start": body["start"],
         "goal": body["goal"], "repetitions": body["repetitions"], "modes": body["modes"],
@@ -316,7 +321,8 @@ def _rows(spec: StudySpec, job: StudyJob, exp: Experiment,
     rows, direct = [], []
     st = {d.repetition: d for d in metrics.direct}
     ident = {"study": spec.name, "experiment_id": exp.id, "environment": job["environment"], "plan": job["plan"],
-             "planner": job["planner"], "configuration": job["configuration"], "profile": job.get("profile", "")}
+             "planner": job["planner"], "controller": job["controller"], "configuration": job["configuration"],
+             "profile": job.get("profile", "")}
     for run in exp.runs:
         stop = run.stopped_at or [None, None]
         row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,

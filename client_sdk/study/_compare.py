@@ -32,14 +32,17 @@ import numpy as np
 from ._data import StudyData
 from ._outcomes import counted, distinct_runs, identical_repetitions
 
-__all__ = ["COMPARISON_COLUMNS", "COMPARED_METRICS", "Comparison", "Comparisons", "DIRECTION", "compare"]
+__all__ = ["COMPARISON_COLUMNS", "COMPARED_METRICS", "CONTROLLER_METRICS", "Comparison", "Comparisons", "DIRECTION", "compare"]
 
 #: metrics compared by default (the paper's Fig. 6), after the success rate
 COMPARED_METRICS = ("length_m", "execution_time_s", "average_speed_m_s", "deviation_mean_m", "smoothness_rad",
                     "clearance_min_m")
+#: compared too when a study has controllers (docs/metrics.md, "Controller metrics")
+CONTROLLER_METRICS = ("cross_track_error_mean_m", "heading_error_rms_rad", "time_to_goal_s", "jerk_linear_rms_m_s3")
 #: +1: higher is better, -1: lower is better, 0: neither (reported, not judged)
 DIRECTION = {"success_rate": 1, "length_m": -1, "execution_time_s": -1, "average_speed_m_s": 0,
-             "deviation_mean_m": -1, "smoothness_rad": -1, "clearance_min_m": 1}
+             "deviation_mean_m": -1, "smoothness_rad": -1, "clearance_min_m": 1, "cross_track_error_mean_m": -1,
+             "heading_error_rms_rad": -1, "time_to_goal_s": -1, "jerk_linear_rms_m_s3": -1}
 #: comparisons.csv: these columns first, in this order
 COMPARISON_COLUMNS = ("metric", "mode", "a", "b", "n_a", "n_b", "mean_a", "mean_b", "diff", "ci_low", "ci_high",
                       "test", "p", "p_holm", "effect", "effect_size", "paired", "runs_a", "runs_b", "family_size",
@@ -218,7 +221,8 @@ def compare(
     data : StudyData
     metrics : iterable of str, optional
         Metrics (runs.csv columns) to compare after ``success_rate``; default
-        :data:`COMPARED_METRICS`.
+        :data:`COMPARED_METRICS`, and :data:`CONTROLLER_METRICS` when the
+        study compares controllers.
     modes : iterable of str, optional
         Default: the study's modes.
     pairs : iterable of (a, b), optional
@@ -240,8 +244,9 @@ def compare(
     """
     if family not in ("metric", "all"):
         raise ValueError(f"`family` must be 'metric' or 'all', got {family!r}")
-    names = ["success_rate", *[m for m in (metrics if metrics is not None else COMPARED_METRICS)
-                               if m != "success_rate"]]
+    if metrics is None:
+        metrics = COMPARED_METRICS + (CONTROLLER_METRICS if data.spec.controllers is not None else ())
+    names = ["success_rate", *[m for m in metrics if m != "success_rate"]]
     modes = list(modes) if modes is not None else data.modes
     pairs = list(pairs) if pairs is not None else list(combinations(data.configurations, 2))
     raw: list[tuple] = []

@@ -37,12 +37,13 @@ __all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "csv_cell", "load_study"
            "write_csv_rows", "write_poses"]
 
 #: leading columns of runs.csv (the metrics follow)
-ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "configuration", "mode",
+ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "controller", "configuration", "mode",
               "repetition", "seed", "status", "outcome", "failure", "error", "stopped_at_x", "stopped_at_y", "subfield",
               "robot_id", "t_start", "t_end", "profile")
-DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "configuration", "repetition",
+DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "controller", "configuration", "repetition",
                   "sim_run_id", "twb_run_id", "profile")
-_STRINGS = {"study", "environment", "plan", "planner", "configuration", "profile", "mode", "status", "outcome", "failure", "error",
+_STRINGS = {"study", "environment", "plan", "planner", "controller", "configuration", "profile", "mode", "status",
+            "outcome", "failure", "error",
             "robot_id"}
 
 
@@ -78,14 +79,19 @@ class StudyData:
         # study directories written before configurations and outcomes existed
         for e in self.experiments:
             e.setdefault("configuration", e["planner"])
+            e.setdefault("controller", "schema")
         for r in self.rows:
             if not r.get("configuration"):
                 r["configuration"] = r.get("planner")
+            if not r.get("controller"):
+                r["controller"] = "schema"
             if not r.get("outcome"):
                 r["outcome"] = run_outcome(r.get("status"), r.get("failure"))
         for d in self.direct:
             if not d.get("configuration"):
                 d["configuration"] = d.get("planner")
+            if not d.get("controller"):
+                d["controller"] = "schema"
 
     @property
     def planners(self) -> list[str]:

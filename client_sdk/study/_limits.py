@@ -74,6 +74,7 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
         if unknown:
             reasons.append(f"planner {p.name!r} has no parameter(s) {', '.join(unknown)} "
                            f"(its parameters: {', '.join(sorted(defaults or {})) or 'none'})")
+    reasons += _controller_reasons(client, spec)
     experiments = 0
     for e in spec.environments:
         plans = len(e.get("plans", [])) if isinstance(e, dict) else 0
@@ -83,7 +84,7 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
             except NotFound:
                 reasons.append(f"unknown environment {e!r}: create it first or give its file in the study's "
                                "`environments`")
-        experiments += len(spec.planners) * (len(spec.plans) if spec.plans is not None else plans)
+        experiments += len(spec.configurations()) * (len(spec.plans) if spec.plans is not None else plans)
     lim = server_limits(client) if limits is None else limits
     max_reps = lim.get("max_repetitions")
     if max_reps is not None and spec.repetitions > max_reps:
@@ -97,6 +98,21 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
             reasons.append(f"you already have {queued} queued experiments and the testbed allows {quota} per user: "
                            "wait for them to finish or cancel some")
     return reasons
+
+
+def _controller_reasons(client: Any, spec: StudySpec) -> list[str]:
+    """Controllers of ``spec`` the testbed does not offer, and parameters they do not have."""
+    if spec.controllers is None:
+        return []
+    offered = {c["name"]: {p["name"] for p in c["parameters"]} for c in client.list_controllers()}
+    out = []
+    for c in spec.controllers:
+        if c.name not in offered:
+            out.append(f"controller {c.name!r} is not offered by this testbed (it offers {', '.join(offered)})")
+        elif set(c.params) - offered[c.name]:
+            out.append(f"controller {c.name!r} has no parameter(s) {', '.join(sorted(set(c.params) - offered[c.name]))} "
+                       f"(its parameters: {', '.join(sorted(offered[c.name])) or 'none'})")
+    return out
 
 
 _REPS = re.compile(r"repetitions must be at most (\d+)")

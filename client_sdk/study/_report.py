@@ -187,9 +187,14 @@ METHOD = ("How to read this: success rates are over the counted runs (completed 
           "count once. Details: docs/study.md.")
 
 
-def which_is_better_markdown(answers: list[Answer]) -> list[str]:
-    """The "Which planner is better?" section as Markdown lines."""
-    lines = ["## Which planner is better?", ""]
+def _what(data: StudyData) -> str:
+    """What the study compares: planners, or planner/controller configurations."""
+    return "planner" if data.spec.controllers is None else "configuration"
+
+
+def which_is_better_markdown(answers: list[Answer], what: str = "planner") -> list[str]:
+    """The "Which planner (configuration) is better?" section as Markdown lines."""
+    lines = [f"## Which {what} is better?", ""]
     for a in answers:
         lines += [f"**{a.title}:** " + " ".join(a.verdicts), ""]
     for a in answers:
@@ -226,7 +231,7 @@ def summary_markdown(data: StudyData, outcomes: Optional[list[OutcomeSummary]] =
               + (f"; wall time {data.meta['wall_s']:.1f} s" if data.meta.get("wall_s") is not None else ""),
               "- S = simulation (ideal robot), T = Teleworkbench (emulated field robot, tracker poses), "
               "ST = direct comparison of T against S; units m, rad, s", ""]
-    lines += which_is_better_markdown(which_is_better(data, comparisons, outcomes))
+    lines += which_is_better_markdown(which_is_better(data, comparisons, outcomes), _what(data))
     for title, header, body in summary_tables(data, outcomes, comparisons):
         lines += [f"## {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(row) + " |" for row in body]
@@ -263,9 +268,9 @@ _CAPTIONS = {
 }
 
 
-def which_is_better_html(answers: list[Answer]) -> str:
+def which_is_better_html(answers: list[Answer], what: str = "planner") -> str:
     """The "Which planner is better?" section as HTML."""
-    parts = ["<section class='answer' id='which-is-better'><h2>Which planner is better?</h2>"]
+    parts = [f"<section class='answer' id='which-is-better'><h2>Which {what} is better?</h2>"]
     for a in answers:
         parts.append(f"<p class='verdict'><strong>{html.escape(a.title)}:</strong> "
                      f"{html.escape(' '.join(a.verdicts))}</p>")
@@ -293,7 +298,7 @@ def report_html(data: StudyData, figure_names: list[str], outcomes: Optional[lis
                  "<a href='outcomes.csv'>outcomes.csv</a>, <a href='comparisons.csv'>comparisons.csv</a>, "
                  "<a href='direct.csv'>direct.csv</a>, <a href='summary.md'>summary.md</a>, "
                  "<a href='study.json'>study.json</a>, poses in <code>poses/</code>.</p>")
-    parts.append(which_is_better_html(which_is_better(data, comparisons, outcomes)))
+    parts.append(which_is_better_html(which_is_better(data, comparisons, outcomes), _what(data)))
     for name in figure_names:
         parts.append(f"<figure><a href='{name}.svg'><img src='{name}.png' alt='{name}'></a>"
                      f"<figcaption>{html.escape(_CAPTIONS.get(name, name))} (<a href='{name}.svg'>SVG</a>)"

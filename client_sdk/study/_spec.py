@@ -9,6 +9,7 @@ dependency)::
      "planners": ["fmm", "fm2", {"name": "prm", "params": {"samples": 800}}],
      "repetitions": 2, "modes": ["sim", "twb"], "seed": 0, "field": "sub",
      "jitter": {"xy_m": 0.005, "theta_rad": 0.02},  # optional: start-pose noise, so repetitions differ
+     "controllers": ["schema", {"name": "pure_pursuit", "params": {"lookahead_m": 0.1}}],  # optional
      "profiles": [{"label": "noiseless", "tracker_noise_xy_m": 0},     # optional: field-robot variants
                   {"tracker_noise_xy_m": 0.003}]}
 
@@ -17,12 +18,15 @@ dependency)::
 A planner entry may carry a ``"label"`` (the configuration's name in tables;
 default: the name, with the parameters if any) or, instead of a planner,
 ``"waypoints"``: ``{"name": "corner", "waypoints": [[x, y], ...]}`` sends the
-explicit path start -> waypoints -> goal of each problem.  ``profiles`` lists
-variants of the field robot: field parameters of the robot profile
+explicit path start -> waypoints -> goal of each problem.  ``controllers`` (optional;
+docs/controllers.md) are the robots' path-tracking controllers, a dimension beside the planners: a
+name or ``{"name", "params", "label"}``; with them the configuration is the planner's and the
+controller's, ``fmm/pure_pursuit``; without, the planner's alone (and every robot runs the default
+controller).  ``profiles`` lists variants of the field robot: field parameters of the robot profile
 (:data:`robot_agent.overrides.OVERRIDE_LIMITS`, SI units) with an optional
 ``"label"`` (default: the overrides, ``tracker_noise_xy_m=0.003``; ``shipped``
-for none); each planner configuration is then compared per variant, as
-``fmm · noiseless``.  Every combination environment x plan x planner (x profile
+for none); each configuration is then compared per variant, as
+``fmm · noiseless``.  Every combination environment x plan x planner (x controller x profile
 variant) is one experiment with ``repetitions`` runs per mode.
 """
 
@@ -36,12 +40,13 @@ from typing import Any, Mapping, Optional
 
 from robot_agent.overrides import OverrideError, check_overrides, overrides_label
 
-__all__ = ["JITTER_LIMITS", "NOISE", "PAPER", "PlannerSpec", "PlanSpec", "ProfileSpec", "StudySpec", "StudySpecError",
-           "load_spec", "noise_spec", "paper_spec"]
+__all__ = ["CONTROLLERS", "JITTER_LIMITS", "NOISE", "PAPER", "ControllerChoice", "PlannerSpec", "PlanSpec", "ProfileSpec",
+           "StudySpec", "StudySpecError", "controllers_spec", "load_spec", "noise_spec", "paper_spec"]
 
 _KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter",
-         "profiles"}
+         "profiles", "controllers"}
 _PLANNER_KEYS = {"name", "params", "label", "waypoints"}
+_CONTROLLER_KEYS = {"name", "params", "label"}
 #: the server's bounds of a job's start-pose jitter (standard deviations: m, rad)
 JITTER_LIMITS = {"xy_m": 0.05, "theta_rad": 0.5}
 _MAX_WAYPOINTS = 1000
@@ -49,6 +54,15 @@ _MAX_WAYPOINTS = 1000
 
 class StudySpecError(ValueError):
     """A study file that cannot be used; the message names the file and the field."""
+
+
+def _configuration(name: str, params: Mapping[str, Any], label: Optional[str]) -> str:
+    """``label``, else ``name`` with its parameters (``fm2(saturation=0.1)``)."""
+    if label:
+        return label
+    if not params:
+        return name
+    return f"{name}({','.join(f'{k}={v}' for k, v in sorted(params.items()))})"
 
 
 @dataclass(frozen=True)
@@ -64,11 +78,7 @@ class PlannerSpec:
     @property
     def configuration(self) -> str:
         """The configuration's name: ``label``, else the name with its parameters (``fm2(saturation=0.1)``)."""
-        if self.label:
-            return self.label
-        if not self.params:
-            return self.name
-        return f"{self.name}({','.join(f'{k}={v}' for k, v in sorted(self.params.items()))})"
+        return _configuration(self.name, self.params, self.label)
 
     def to_json(self) -> Any:
         if not self.params and self.label is None and self.waypoints is None:
@@ -81,6 +91,27 @@ class PlannerSpec:
         if self.waypoints is not None:
             out["waypoints"] = [list(p) for p in self.waypoints]
         return out
+
+
+@dataclass(frozen=True)
+class ControllerChoice:
+    """A controller of a study (docs/controllers.md): its name and parameters (SI units; empty: its defaults);
+    ``label`` names it in configurations."""
+
+    name: str
+    params: dict[str, float] = field(default_factory=dict)
+    label: Optional[str] = None
+
+    @property
+    def configuration(self) -> str:
+        """``label``, else the name with its parameters (``pure_pursuit(lookahead_m=0.1)``)."""
+        return _configuration(self.name, self.params, self.label)
+
+    def to_json(self) -> Any:
+        if not self.params and self.label is None:
+            return self.name
+        return {"name": self.name, **({"params": dict(self.params)} if self.params else {}),
+                **({"label": self.label} if self.label is not None else {})}
 
 
 @dataclass(frozen=True)
@@ -118,9 +149,16 @@ class StudySpec:
     description: str = ""
     jitter: Optional[dict[str, float]] = None
     profiles: Optional[list[ProfileSpec]] = None
+    controllers: Optional[list[ControllerChoice]] = None
 
     def environment_names(self) -> list[str]:
         return [e if isinstance(e, str) else e["name"] for e in self.environments]
+
+    def configurations(self) -> list[tuple[PlannerSpec, Optional[ControllerChoice], str]]:
+        """Every planner x controller with its configuration name, in study order."""
+        if self.controllers is None:
+            return [(p, None, p.configuration) for p in self.planners]
+        return [(p, c, f"{p.configuration}/{c.configuration}") for p in self.planners for c in self.controllers]
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -131,6 +169,10 @@ class StudySpec:
             del d["profiles"]
         else:
             d["profiles"] = [p.to_json() for p in self.profiles]
+        if self.controllers is None:
+            del d["controllers"]
+        else:
+            d["controllers"] = [c.to_json() for c in self.controllers]
         if self.plans is not None:
             d["plans"] = [p["name"] if p["start"] is None else p for p in d["plans"]]
         return d
@@ -196,38 +238,66 @@ class StudySpec:
         profiles = _profiles(data.get("profiles"), bad)
         if profiles is not None and "twb" not in modes:
             raise bad("`profiles` vary the field robot: `modes` must include \"twb\"")
+        controllers = _controllers(data.get("controllers"), bad)
         name = data.get("name", Path(source).stem if source != "study" else "study")
         if not isinstance(name, str) or not name:
             raise bad("`name` must be a non-empty string")
         return cls(name=name, environments=list(envs), planners=pspecs, plans=plan_specs, repetitions=reps,
                    modes=list(modes), seed=seed, field=fld, description=str(data.get("description", "")),
-                   jitter=jitter, profiles=profiles)
+                   jitter=jitter, profiles=profiles, controllers=controllers)
 
     @property
     def runs_per_experiment(self) -> int:
         return self.repetitions * len(self.modes)
 
 
+def _controllers(data: Any, bad: Any) -> Optional[list[ControllerChoice]]:
+    """The study's ``controllers``: names or ``{"name", "params", "label"}`` objects, each configuration once."""
+    if data is None:
+        return None
+    if not isinstance(data, list) or not data:
+        raise bad("`controllers` must be a non-empty list of names or {\"name\", \"params\"} objects")
+    out = []
+    for i, c in enumerate(data):
+        where = f"controllers[{i}]"
+        name, params, label = _entry(c, where, _CONTROLLER_KEYS, "controller", bad)
+        if not all(_finite(v) for v in params.values()):
+            raise bad(f"{where}.params must be an object of numbers (SI units)")
+        out.append(ControllerChoice(name, {k: float(v) for k, v in params.items()}, label))
+    seen: dict[str, int] = {}
+    for i, c in enumerate(out):
+        if c.configuration in seen:
+            raise bad(f"controllers[{i}] repeats controllers[{seen[c.configuration]}] ({c.configuration})")
+        seen[c.configuration] = i
+    return out
+
+
 def _finite(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def _planner(p: Any, where: str, bad: Any) -> PlannerSpec:
-    """One entry of ``planners``: a name, or an object with name and params, label or waypoints."""
+def _entry(p: Any, where: str, keys: set[str], what: str, bad: Any) -> tuple[str, Mapping[str, Any], Optional[str]]:
+    """A ``planners`` or ``controllers`` entry's name, params and label: a name, or an object of ``keys``."""
     if isinstance(p, str) and p:
-        return PlannerSpec(p)
+        return p, {}, None
     if not (isinstance(p, Mapping) and isinstance(p.get("name"), str) and p["name"]):
         raise bad(f"{where} must be a name or {{\"name\": ..., \"params\": {{...}}}}")
-    unknown = sorted(set(p) - _PLANNER_KEYS)
+    unknown = sorted(set(p) - keys)
     if unknown:
-        raise bad(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(_PLANNER_KEYS))})")
+        raise bad(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(keys))})")
     params = p.get("params", {})
     if not isinstance(params, Mapping):
-        raise bad(f"{where}.params must be an object of planner parameters")
+        raise bad(f"{where}.params must be an object of {what} parameters")
     label = p.get("label")
     if label is not None and not (isinstance(label, str) and label.strip()):
         raise bad(f"{where}.label must be a non-empty string")
-    waypoints = p.get("waypoints")
+    return p["name"], params, label
+
+
+def _planner(p: Any, where: str, bad: Any) -> PlannerSpec:
+    """One entry of ``planners``: a name, or an object with name and params, label or waypoints."""
+    name, params, label = _entry(p, where, _PLANNER_KEYS, "planner", bad)
+    waypoints = p.get("waypoints") if isinstance(p, Mapping) else None
     if waypoints is not None:
         if params:
             raise bad(f"{where}: give either `params` (a planner) or `waypoints` (an explicit path), not both")
@@ -235,7 +305,7 @@ def _planner(p: Any, where: str, bad: Any) -> PlannerSpec:
                 isinstance(w, list) and len(w) == 2 and all(_finite(x) for x in w) for w in waypoints):
             raise bad(f"{where}.waypoints must be a list of at most {_MAX_WAYPOINTS} [x, y] points (m)")
         waypoints = [[float(x) for x in w] for w in waypoints]
-    return PlannerSpec(p["name"], dict(params), label, waypoints)
+    return PlannerSpec(name, dict(params), label, waypoints)
 
 
 def _jitter(j: Any, bad: Any) -> Optional[dict[str, float]]:
@@ -331,12 +401,39 @@ def noise_spec() -> StudySpec:
     return StudySpec.from_json(NOISE, "noise")
 
 
+#: The ready controller study: one planner x every built-in controller x both paper environments x plans A, B
+#: x 2 repetitions with start-pose jitter x sim and field (64 runs; about a minute on 2 cores under
+#: `twb study controllers --embedded`).
+CONTROLLERS: dict[str, Any] = {
+    "name": "controllers",
+    "description": "Controllers as a benchmark dimension: FMM paths tracked by the motor schema, pure pursuit, "
+                   "regulated pure pursuit and Kanayama's controller, both paper environments, plans A and B, "
+                   "2 repetitions with start-pose jitter, simulation and emulated field (64 runs)",
+    "environments": ["room", "blocks"],
+    "plans": ["A", "B"],
+    "planners": ["fmm"],
+    "controllers": ["schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama"],
+    "repetitions": 2,
+    "modes": ["sim", "twb"],
+    "seed": 0,
+    "jitter": {"xy_m": 0.005, "theta_rad": 0.05},
+}
+
+
+def controllers_spec() -> StudySpec:
+    """The ready controller study (64 runs)."""
+    return StudySpec.from_json(CONTROLLERS, "controllers")
+
+
 def load_spec(source: str | Path) -> StudySpec:
-    """``"paper"``, ``"noise"`` or a study file (``.json``; ``.yaml``/``.yml`` if PyYAML is installed)."""
+    """``"paper"``, ``"noise"``, ``"controllers"`` or a study file (``.json``; ``.yaml``/``.yml`` if PyYAML is
+    installed)."""
     if str(source) == "paper":
         return paper_spec()
     if str(source) == "noise":
         return noise_spec()
+    if str(source) == "controllers":
+        return controllers_spec()
     path = Path(source)
     try:
         text = path.read_text()

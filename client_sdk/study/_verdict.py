@@ -33,6 +33,10 @@ METRIC_WORDS = {
     "deviation_mean_m": ("mean deviation from the plan", "m", 4),
     "smoothness_rad": ("smoothness κ'", "rad", 3),
     "clearance_min_m": ("minimum clearance", "m", 4),
+    "cross_track_error_mean_m": ("mean cross-track error", "m", 4),
+    "heading_error_rms_rad": ("heading error RMS", "rad", 3),
+    "time_to_goal_s": ("time to goal", "s", 2),
+    "jerk_linear_rms_m_s3": ("linear jerk RMS", "m/s³", 3),
 }
 MODE_WORDS = {"twb": "On the field (Teleworkbench)", "sim": "In simulation"}
 _TESTS = {"welch-t": "Welch's t", "paired-t": "paired t", "mann-whitney-u": "Mann-Whitney U", "wilcoxon": "Wilcoxon",

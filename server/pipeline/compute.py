@@ -72,12 +72,15 @@ def expected_duration_s(path_length_m: float, n_blocks: int, *, speed_m_s: float
 def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: list[list[float]],
                 t_start: Optional[float], t_done: Optional[float], goal: list[float], robot_radius: float,
                 planning_time_s: Optional[float]) -> dict[str, Any]:
-    """The metrics of one run (docs/metrics.md) from its planned path and logged poses ``[t, x, y, theta]``.
+    """The metrics of one run (docs/metrics.md), the controller's too, from its planned path and logged poses
+    ``[t, x, y, theta]``.
 
     Raises :class:`TooFewPoses` when fewer than two poses lie in the run.
     """
     from planners import parse_environment
+    from planners.control_metrics import ControlSettings, control_metrics
     from planners.metrics import MetricSettings, run_metrics
+    from robot_agent.params import robot_params
 
     env = parse_environment(env_data)
     pr = np.asarray(poses, dtype=float).reshape(-1, 4)
@@ -91,8 +94,13 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
     g = np.asarray(goal[:2], dtype=float)
     out = run_metrics(np.asarray(planned, dtype=float), pr[:, 1:4], env=env, t=pr[:, 0], start_time=t_start,
                       done_time=t_done, goal=g, planning_time_s=planning_time_s, settings=settings)
+    profile = robot_params()  # the testbed's robots: a collision is what their own check counts
+    control = ControlSettings(collision_radius=profile.collision_radius_m, goal_tolerance=settings.goal_tolerance,
+                              max_speed=profile.max_speed_m_s)
+    out.update(control_metrics(planned, pr[:, 1:4], pr[:, 0], goal=g, env=env, performed_length_m=out["length_m"],
+                               execution_time_s=out["execution_time_s"], settings=control))
     out["poses"] = int(len(pr))
-    out["settings"] = settings.to_dict()
+    out["settings"] = {**settings.to_dict(), **control.to_dict()}
     return _clean(out)
 
 
@@ -124,12 +132,13 @@ def collision_counts(collided: bool, obstacle: Optional[int]) -> dict[str, int]:
 def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list[list[float]], seed: int,
                  max_s: float, goal: list[float], robot_radius: float,
                  planning_time_s: Optional[float], backend: str = "ideal", platform: str = "BeBot",
-                 overrides: Optional[dict[str, float]] = None,
-                 area: Optional[tuple[float, float]] = None) -> dict[str, Any]:
+                 overrides: Optional[dict[str, float]] = None, area: Optional[tuple[float, float]] = None,
+                 controller: str = "schema", controller_params: Optional[dict[str, float]] = None) -> dict[str, Any]:
     """One run without a robot agent (a Ray or worker-process task): the ``backend`` robot (``ideal``; or
     ``field``, the emulated field robot of ``platform``'s profile with the field parameters ``overrides``)
-    follows ``path`` from the first free pose of ``starts`` (x, y, theta; m, rad: the jittered start, then
-    the start itself) among the environment's blocks and moving obstacles in a world of ``area`` (m; default the whole field) for at most ``max_s``
+    follows ``path`` with ``controller`` and its ``controller_params`` from the first free pose of
+    ``starts`` (x, y, theta; m, rad: the jittered start, then the start itself) among the environment's
+    blocks and moving obstacles in a world of ``area`` (m; default the whole field) for at most ``max_s``
     experiment seconds, as an agent's robot would (:func:`robot_agent.headless.simulate_run`), then is
     measured.
 
@@ -145,7 +154,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
 
     from robot_agent.headless import PlacementRefused, simulate_run
     from robot_agent.overrides import apply_overrides
-    from robot_agent.protocol import encode_build, encode_moving, encode_path, encode_place, format_event
+    from robot_agent.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place, format_event
     from robot_agent.robot_profile import load_profile, profile_for_platform
 
     pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
@@ -162,7 +171,8 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
         lines.append([">", encode_place(start), None])
         try:
             run = simulate_run(path, start, seed=seed, blocks=blocks, moving=moving, max_s=max_s, backend=backend,
-                               profile=profile, **({} if area is None else {"area": tuple(area)}))
+                               profile=profile, controller=controller, controller_params=controller_params,
+                               **({} if area is None else {"area": tuple(area)}))
             break
         except PlacementRefused as exc:
             lines.append(["<", f"ERR,RANGE,{exc}", None])
@@ -170,6 +180,8 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
                 return {"placement_error": str(exc), "lines": lines}
             lines.append(["s", f"the jittered start is not free ({exc}); placing at the start itself", None])
     assert run is not None
+    if controller != "schema":
+        lines.append([">", encode_controller(controller, controller_params), None])
     lines.append([">", encode_path(path), run.t_start])
     lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
     out: dict[str, Any] = {"poses": run.poses, "lines": lines, "t_start": run.t_start, "t_end": run.t_end,

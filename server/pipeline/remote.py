@@ -72,7 +72,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: Optional[RunJob]
                                              job.seed, timeout_s, job.goal,
                                              job.robot_radius, plan.planning_time_s,
                                              "field" if job.mode == "twb" else "ideal", platform,
-                                             job.profile_overrides, area)
+                                             job.profile_overrides, area, job.controller, job.controller_params)
     for direction, line, t in out["lines"]:
         ctx.on_line(direction, line, t, False)
     if "placement_error" in out:

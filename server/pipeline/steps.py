@@ -6,7 +6,8 @@ import asyncio
 import math
 from typing import Optional
 
-from robot_agent.protocol import encode_build, encode_moving, encode_path, encode_place
+from robot_agent.controller_specs import DEFAULT_CONTROLLER
+from robot_agent.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
 
 from ..agent_link import AgentLink
 from ..errors import AgentRefused, AgentUnavailable, AgentUnreachable, FailureKind, RunFailed, TestbedFault
@@ -165,6 +166,8 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
     svc.hooks.seed_next_path(robot_id, job.seed)
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
     t_sent = (await link.request("T,T,Q", ctx.wall(0))).time or 0.0  # the robot's clock, not ours
+    if job.controller != DEFAULT_CONTROLLER:  # the default needs no line: robots without T,T,C run it
+        await link.request(encode_controller(job.controller, job.controller_params), ctx.wall(0))
     await link.request(encode_path(path), ctx.wall(0))
     await rec.add_messages(ctx.take_messages())  # the log up to the path, kept even if the server dies now
     t_start: Optional[float] = None

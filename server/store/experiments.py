@@ -58,6 +58,8 @@ def create_experiment(
         planning_margin=planning_margin if body.path is None else 0.0,
         jitter=body.jitter.model_dump() if body.jitter is not None else None,
         profile_overrides=body.profile_overrides or None,
+        controller=body.controller,
+        controller_params=checked.controller_params,
     )
     session.add(exp)
     session.flush()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from dataclasses import field as dc_field
 from typing import Any, Iterable, Optional
 
 from sqlalchemy import delete, insert, select
@@ -34,13 +35,16 @@ class RunJob:
     jitter: Optional[dict[str, float]] = None
     #: field parameters replacing the robot profile's in field runs (SI units), or None
     profile_overrides: Optional[dict[str, float]] = None
+    controller: str = "schema"
+    controller_params: dict[str, float] = dc_field(default_factory=dict)
 
 
 def job_of(run: Run) -> RunJob:
     """The :class:`RunJob` of a run row (its experiment loaded with it)."""
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
-                  list(e.goal), e.field, e.robot_radius, e.jitter, e.profile_overrides)
+                  list(e.goal), e.field, e.robot_radius, e.jitter, e.profile_overrides, e.controller or "schema",
+                  dict(e.controller_params or {}))
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:

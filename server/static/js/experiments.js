@@ -234,6 +234,7 @@ export class ExperimentPage {
     const facts = [
       ["Environment", d.environment], ["Field", d.field], ["Planner", plannerName(d, this.store.programs)],
       ["Parameters", d.program != null ? "see the program below" : Object.keys(d.planner_params || {}).length ? JSON.stringify(d.planner_params) : "defaults"],
+      ["Controller", (d.controller || "schema") + (Object.keys(d.controller_params || {}).length ? ` ${JSON.stringify(d.controller_params)}` : "")],
       ["Start (x, y, θ)", pose(d.start)], ["Goal (x, y, θ)", pose(d.goal)], ["Modes", d.modes.join(" + ")],
       ["Repetitions", d.repetitions], ["Seed", d.seed], ["Owner", d.owner],
       ["Submitted", when(d.created_at)], ["Finished", when(d.finished_at)],

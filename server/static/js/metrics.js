@@ -25,6 +25,17 @@ export const METRICS = {
   goal_reached: ["Goal reached", "share", [0, 1]],
   collided: ["Collided", "share", [0, 1]],
   planning_time_s: ["Planning time", "s", [0, Infinity]],
+  cross_track_error_mean_m: ["Mean cross-track error", "m", [0, Infinity]],
+  cross_track_error_max_m: ["Max. cross-track error", "m", [0, Infinity]],
+  heading_error_rms_rad: ["Heading error RMS", "rad", [0, Math.PI]],
+  time_to_goal_s: ["Time to goal", "s", [0, Infinity]],
+  jerk_linear_rms_m_s3: ["Linear jerk RMS", "m/s³", [0, Infinity]],
+  jerk_angular_rms_rad_s3: ["Angular jerk RMS", "rad/s³", [0, Infinity]],
+  velocity_smoothness_m_s2: ["Velocity smoothness", "m/s²", [0, Infinity]],
+  stop_count: ["Stops", "", [0, Infinity]],
+  collision_count: ["Collisions", "", [0, Infinity]],
+  spl: ["SPL", "", [0, 1]],
+  barn_score: ["BARN score", "", [0, 0.5]],
 };
 
 /** A metric's name ("Path length"); an unknown key as it comes. */

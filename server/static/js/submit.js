@@ -1,6 +1,6 @@
 // The submit form: environment, start and goal placed on the map (click; drag for the
 // heading; keys too), where the path comes from (a planner and its parameters, one of your
-// uploaded programs, or an explicit path through waypoints), modes, repetitions, seed.
+// uploaded programs, or an explicit path through waypoints), the robots' controller, modes, repetitions, seed.
 // The server validates; its message is shown next to the field it is about.
 
 import { $, $$, TERMINAL, checkRadio, deg, h, num, radioValue, report, retoast, toast } from "./dom.js";
@@ -8,7 +8,7 @@ import { COLORS, MapView } from "./fieldmap.js";
 import { programLabel } from "./programs.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
-const KEYS = ["environment", "field", "start", "goal", "planner", "planner_params", "program", "path", "modes", "repetitions", "seed"];
+const KEYS = ["environment", "field", "start", "goal", "planner", "planner_params", "program", "path", "controller", "controller_params", "modes", "repetitions", "seed"];
 const DRAG_PX = 8;
 const TURN = Math.PI / 12;
 
@@ -21,6 +21,7 @@ export function fieldOfMessage(msg) {
   if (/^repetitions\b/.test(m)) return "repetitions";
   if (/^seed\b/.test(m)) return "seed";
   if (/^modes?\b/.test(m)) return "modes";
+  if (/^controller/.test(m)) return "controller";
   if (/^parameter |has no parameter|planner_params/.test(m)) return "planner_params";
   if (/program|^uploads? /.test(m)) return "program";
   if (/planner/.test(m)) return "planner";
@@ -58,6 +59,7 @@ export class SubmitPage {
         ]);
         this.envs = envs.data;
         this.planners = planners.data;
+        this.loadControllers().catch((err) => report(err, "Controllers"));
         this.loaded = true;
         this.fillSelects();
       } catch (err) {
@@ -412,6 +414,15 @@ export class SubmitPage {
     for (const el of $$("[aria-invalid]", this.form)) el.removeAttribute("aria-invalid");
   }
 
+  /** The controllers the robots offer (GET /api/v1/controllers) in the form's select; the default first. */
+  async loadControllers() {
+    const listed = await this.store.api.get("/api/v1/controllers");
+    const sel = $("#f-controller");
+    const keep = sel.value;
+    sel.replaceChildren(...listed.data.map((c) => h("option", { value: c.name, title: c.description }, c.name)));
+    sel.value = listed.data.some((c) => c.name === keep) ? keep : "schema";
+  }
+
   showError(key, message) {
     const target = key && $(`#err-${key}`);
     if (!target) {
@@ -421,6 +432,7 @@ export class SubmitPage {
     target.textContent = message;
     const inputs = {
       environment: ["#f-environment"], planner: ["#f-planner"], repetitions: ["#f-repetitions"], seed: ["#f-seed"],
+      controller: ["#f-controller"], controller_params: ["#f-controller"],
       start: ["#f-start-x", "#f-start-y", "#f-start-a"], goal: ["#f-goal-x", "#f-goal-y", "#f-goal-a"],
       planner_params: ["#f-params input", "#f-params select", "#f-params textarea"],
       program: ["#f-program"], path: ["#f-path"],
@@ -468,6 +480,7 @@ export class SubmitPage {
         start: this.poses.start,
         goal: this.poses.goal,
         ...source,
+        controller: $("#f-controller").value || "schema",
         modes,
         repetitions: intOf("#f-repetitions"),
         seed: intOf("#f-seed"),

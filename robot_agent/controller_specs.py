@@ -1,0 +1,251 @@
+"""Which path-tracking controllers a robot can run, their parameters, and plug-ins.
+
+The built-ins run inside the compiled simulation core
+(:mod:`robot_agent.controllers`, dispatched by :attr:`ControllerSpec.cid`
+with a row of :data:`~robot_agent.controllers.PARAM_SLOTS` parameters).  A
+plug-in distribution adds controllers that run in Python, declared in its
+``pyproject.toml`` as planners are (:mod:`planners.registry`)::
+
+    [project.entry-points."teleworkbench.controllers"]
+    wiggle = "my_package.controllers:Wiggle"
+
+The object (a class is instantiated) has ``params`` (a sequence of
+:class:`Param`, may be empty), an optional ``description``, and
+``command(pose, path, progress, params, dt) -> (v, w)``: the body velocities
+(m/s, rad/s) for the believed ``pose`` (x, y, theta), the path ``(P, 3)``,
+``progress`` (the segment and fraction of the robot's projection on the
+path), the validated ``params`` dict and the control step ``dt`` (s).  The
+follower's arrival, alignment, stall, timeout and limits apply as for the
+built-ins.  Built-in names cannot be taken over.  Everything here is plain
+Python (no numba): the server and the sandbox import it cheaply.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import Any, Mapping, Optional, Protocol, Sequence
+
+import numpy as np
+
+__all__ = ["BUILTINS", "DEFAULT_CONTROLLER", "ENTRY_POINT_GROUP", "ControllerError", "ControllerSpec", "Param",
+           "PluginController", "Selection", "available_controllers", "controller_report", "controller_spec",
+           "register_controller", "select"]
+
+ENTRY_POINT_GROUP = "teleworkbench.controllers"
+DEFAULT_CONTROLLER = "schema"
+_SLOTS = 8  # robot_agent.controllers.PARAM_SLOTS (not imported: that module compiles)
+_PLUGIN_ID = 100  # robot_agent.controllers.PLUGIN
+
+
+class ControllerError(ValueError):
+    """An unknown controller or a bad parameter; ``field`` names what is wrong (``controller`` or
+    ``controller_params.<name>``)."""
+
+    def __init__(self, field_name: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field_name
+
+
+@dataclass(frozen=True)
+class Param:
+    """One controller parameter: ``name`` (its unit as the suffix), ``unit``, ``default`` and the
+    closed range ``[low, high]`` it must lie in, and what it does."""
+
+    name: str
+    unit: str
+    default: float
+    low: float
+    high: float
+    doc: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (what ``GET /api/v1/controllers`` lists)."""
+        return {"name": self.name, "unit": self.unit, "default": self.default, "range": [self.low, self.high],
+                "description": self.doc}
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """A selectable controller: its ``name``, compiled id ``cid`` (plug-ins: 100), parameters, a one-line
+    ``description`` and the literature ``source``; ``plugin`` is the loaded plug-in object, if one."""
+
+    name: str
+    cid: int
+    description: str
+    source: str
+    params: tuple[Param, ...] = ()
+    plugin: Any = field(default=None, compare=False)
+
+    @property
+    def compiled(self) -> bool:
+        """Whether it runs inside the compiled core (built-ins) or in Python (plug-ins)."""
+        return self.plugin is None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (what ``GET /api/v1/controllers`` lists)."""
+        return {"name": self.name, "description": self.description, "source": self.source,
+                "compiled": self.compiled, "parameters": [p.to_dict() for p in self.params]}
+
+
+BUILTINS: dict[str, ControllerSpec] = {s.name: s for s in (
+    ControllerSpec("schema", 0, "motor-schema P-controller: move-to-waypoint schema and a heading P-control "
+                   "(the default; its gains are the robot profile's)", "Arkin 1989; the Teleworkbench robots"),
+    ControllerSpec("pure_pursuit", 1, "pure pursuit: the arc through the path point a fixed lookahead ahead",
+                   "Coulter 1992, CMU-RI-TR-92-01", (
+                       Param("lookahead_m", "m", 0.06, 0.02, 1.0, "arc length from the robot's projection on the "
+                             "path to the pursued point"),
+                       Param("speed_m_s", "m/s", 0.2, 0.01, 1.0, "cruise speed (at most the robot's top speed)"),
+                       Param("rotate_to_heading_rad", "rad", 1.2, 0.1, math.pi,
+                             "turn on the spot while the pursued point lies further off the heading"))),
+    ControllerSpec("regulated_pure_pursuit", 2, "regulated pure pursuit (nav2): speed-scaled lookahead, slower "
+                   "in curves, near obstacles and on the approach to the goal",
+                   "Macenski, Singh, Martin, Gines 2023, Autonomous Robots (arXiv:2305.20026)", (
+                       Param("speed_m_s", "m/s", 0.2, 0.01, 1.0, "desired speed (at most the robot's top speed)"),
+                       Param("lookahead_time_s", "s", 0.4, 0.0, 10.0, "lookahead = speed x this time ..."),
+                       Param("min_lookahead_m", "m", 0.05, 0.02, 1.0, "... at least this ..."),
+                       Param("max_lookahead_m", "m", 0.1, 0.02, 2.0, "... and at most this"),
+                       Param("min_radius_m", "m", 0.25, 0.0, 5.0, "curves of a smaller radius scale the speed by "
+                             "radius / min_radius_m (0: no curvature regulation)"),
+                       Param("proximity_m", "m", 0.04, 0.0, 1.0, "closer to a block or wall than this (robot edge) "
+                             "scales the speed by distance / proximity_m (0: no proximity regulation)"),
+                       Param("approach_m", "m", 0.15, 0.0, 1.0, "within this of the goal the speed scales by "
+                             "distance / approach_m"),
+                       Param("min_speed_m_s", "m/s", 0.03, 0.0, 0.5, "floor of the regulated speed"))),
+    ControllerSpec("kanayama", 3, "Kanayama's trajectory tracking: a reference pose moves along the path; "
+                   "feedback on its error in the robot frame",
+                   "Kanayama, Kimura, Miyazaki, Noguchi 1990, ICRA, 'A stable tracking control method for an "
+                   "autonomous mobile robot'", (
+                       Param("speed_m_s", "m/s", 0.15, 0.01, 1.0, "reference speed v_r"),
+                       Param("k_x_1_s", "1/s", 3.0, 0.0, 50.0, "gain on the along-track error"),
+                       Param("k_y_1_m2", "1/m^2", 400.0, 0.0, 10000.0, "gain on the cross-track error"),
+                       Param("k_theta_1_m", "1/m", 40.0, 0.0, 1000.0, "gain on the heading error"),
+                       Param("max_lead_m", "m", 0.03, 0.005, 1.0, "the reference waits while it is this far ahead "
+                             "of the robot's projection"),
+                       Param("rotate_to_heading_rad", "rad", 0.5, 0.1, math.pi,
+                             "turn on the spot while the reference's heading is further off"))),
+)}
+
+
+class PluginController(Protocol):
+    """What a plug-in controller provides (see the module docstring)."""
+
+    params: Sequence[Param]
+
+    def command(self, pose: np.ndarray, path: np.ndarray, progress: tuple[int, float], params: dict[str, float],
+                dt: float) -> tuple[float, float]: ...
+
+
+_plugins: dict[str, ControllerSpec] = {}
+
+
+def _plugin_entry_points() -> dict[str, Any]:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name not in BUILTINS}
+
+
+def _load(name: str, ep: Any) -> ControllerSpec:
+    importlib.invalidate_caches()
+    try:
+        obj = ep.load()
+        if isinstance(obj, type):
+            obj = obj()
+        params = tuple(obj.params if hasattr(obj, "params") else ())
+        if not callable(getattr(obj, "command", None)) or not all(isinstance(p, Param) for p in params):
+            raise TypeError("a controller has `command(pose, path, progress, params, dt)` and `params` (Param)")
+        if len(params) > _SLOTS:
+            raise TypeError(f"a controller has at most {_SLOTS} parameters")
+    except Exception as exc:  # a broken plug-in must not take the testbed down
+        raise ControllerError("controller", f"plug-in controller {name!r} ({ep.value}) failed to load: {exc}") \
+            from exc
+    desc = str(getattr(obj, "description", "") or f"plug-in {ep.value}")
+    return ControllerSpec(name, _PLUGIN_ID, desc, str(getattr(obj, "source", "") or ep.value), params, obj)
+
+
+def register_controller(name: str, obj: Any) -> ControllerSpec:
+    """Register a plug-in controller object under ``name`` for this process (tests, notebooks)."""
+    if name in BUILTINS:
+        raise ValueError(f"{name!r} is a built-in controller and cannot be replaced")
+
+    class _Given:
+        value = f"registered {name}"
+
+        @staticmethod
+        def load() -> Any:
+            return obj
+
+    _plugins[name] = _load(name, _Given)
+    return _plugins[name]
+
+
+def controller_spec(name: str) -> ControllerSpec:
+    """The controller called ``name``; :class:`ControllerError` listing the choices if none."""
+    if name in BUILTINS:
+        return BUILTINS[name]
+    if name in _plugins:
+        return _plugins[name]
+    eps = _plugin_entry_points()
+    if name not in eps:
+        raise ControllerError("controller", f"unknown controller {name!r} (available: "
+                                            f"{', '.join(available_controllers())})")
+    _plugins[name] = _load(name, eps[name])
+    return _plugins[name]
+
+
+def controller_report() -> list[tuple[str, str, str]]:
+    """Every installed plug-in controller, loaded now (or tried): ``(name, module:object, error or "")``."""
+    out = []
+    for name, ep in sorted(_plugin_entry_points().items()):
+        try:
+            controller_spec(name)
+            out.append((name, ep.value, ""))
+        except ControllerError as exc:
+            out.append((name, ep.value, str(exc).split(" failed to load: ", 1)[-1]))
+    return out
+
+
+def available_controllers() -> list[str]:
+    """Every selectable controller name: the built-ins, then plug-ins (by name)."""
+    return [*BUILTINS, *sorted(set(_plugin_entry_points()) | set(_plugins))]
+
+
+@dataclass(frozen=True)
+class Selection:
+    """A controller chosen for a path: its spec, the full parameters (defaults filled in) and the compiled
+    core's parameter row ``(PARAM_SLOTS,)``."""
+
+    spec: ControllerSpec
+    params: dict[str, float]
+
+    @property
+    def row(self) -> np.ndarray:
+        """The parameters in spec order, zero-padded to the table's width."""
+        out = np.zeros(_SLOTS)
+        out[:len(self.spec.params)] = [self.params[p.name] for p in self.spec.params]
+        return out
+
+
+def select(name: Optional[str] = None, params: Optional[Mapping[str, Any]] = None) -> Selection:
+    """Validate a controller choice: ``name`` (default ``schema``) and ``params`` (names of its parameters,
+    numbers in their ranges); :class:`ControllerError` naming the field otherwise."""
+    spec = controller_spec(name or DEFAULT_CONTROLLER)
+    given = dict(params or {})
+    known = {p.name: p for p in spec.params}
+    unknown = sorted(set(given) - set(known))
+    if unknown:
+        allowed = ", ".join(known) or "none"
+        raise ControllerError(f"controller_params.{unknown[0]}", f"controller_params.{unknown[0]}: controller "
+                                                                 f"{spec.name!r} has no parameter {unknown[0]!r} "
+                                                                 f"(its parameters: {allowed})")
+    out: dict[str, float] = {}
+    for p in spec.params:
+        v = given.get(p.name, p.default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not p.low <= v <= p.high:
+            raise ControllerError(f"controller_params.{p.name}", f"controller_params.{p.name} must be a number in "
+                                                                 f"[{p.low:g}, {p.high:g}] ({p.unit}), got {v!r}")
+        out[p.name] = float(v)
+    if spec.name == "regulated_pure_pursuit" and out["min_lookahead_m"] > out["max_lookahead_m"]:
+        raise ControllerError("controller_params.min_lookahead_m", "controller_params.min_lookahead_m must not "
+                                                                   "exceed max_lookahead_m")
+    return Selection(spec, out)

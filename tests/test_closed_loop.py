@@ -1,0 +1,79 @@
+"""Closed-loop programs over TCP: localisation lines (T,T,O) in, body velocities (T,T,V) out, a watchdog."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from agent_support import LineClient, running_agents
+
+from robot_agent.protocol import ProtocolError, VelocityCommand, encode_path, encode_place, parse_command
+
+GOAL = (0.9, 0.6)  # m, the robot's frame
+
+
+async def drive_to_goal(c: LineClient, goal: tuple[float, float]) -> tuple[list[str], tuple[float, float]]:
+    """A raw-socket program: a P-controller on each PO line until within 3 cm, then T,T,S.  Returns the
+    lines the robot sent and the last PO position (m)."""
+    assert await c.ask("T,T,O,1") == "OK,O"
+    assert await c.ask("T,T,V,0,0") == "OK,V"
+    seen: list[str] = []
+    x = y = math.nan
+    while True:
+        line = await c.recv(timeout=30)
+        seen.append(line)
+        if line.startswith("EV,FAIL") or line.startswith("ERR"):
+            raise AssertionError(f"the robot ended the drive: {line}")
+        if not line.startswith("PO,"):
+            continue
+        _, xs, ys, a, _t = line.split(",")
+        x, y, th = float(xs) / 1000, float(ys) / 1000, math.radians(float(a))
+        d = math.hypot(goal[0] - x, goal[1] - y)
+        if d < 0.03:
+            break
+        err = math.remainder(math.atan2(goal[1] - y, goal[0] - x) - th, math.tau)
+        v = min(150.0, 1500.0 * d) * max(math.cos(err), 0.0)  # mm/s
+        w = math.degrees(max(-2.5, min(2.5, 4.0 * err)))  # deg/s
+        await c.send(f"T,T,V,{v:.1f},{w:.1f}")
+    await c.send("T,T,S")
+    return seen + await c.until("OK,S", timeout=10), (x, y)
+
+
+@pytest.mark.parametrize("backend", ["ideal", "field"])
+async def test_a_raw_socket_program_drives_the_robot_to_a_goal(backend):
+    async with running_agents(backend=backend, time_scale=5.0) as agents:
+        c = await LineClient.connect(agents.ports[0])
+        await c.ask(encode_place((0.3, 0.3, 0.0)))
+        lines, (x, y) = await drive_to_goal(c, GOAL)
+        await c.close()
+        q = agents.core.belief(0)
+    assert math.hypot(x - GOAL[0], y - GOAL[1]) < 0.03 and math.hypot(q[0] - GOAL[0], q[1] - GOAL[1]) < 0.06
+    assert lines[0].startswith("OK,V") or any(line.startswith("EV,START") for line in lines)
+    assert "EV,FAIL,STOPPED" in " ".join(lines)  # T,T,S ends velocity mode
+    assert sum(line.startswith("PO,") for line in lines) > 10
+
+
+async def test_the_watchdog_stops_a_robot_without_new_commands():
+    async with running_agents(backend="ideal", time_scale=5.0) as agents:
+        c = await LineClient.connect(agents.ports[0])
+        await c.ask(encode_place((0.3, 0.3, 0.0)))
+        assert await c.ask("T,T,V,100,0") == "OK,V"
+        lines = await c.until("EV,FAIL", timeout=30)
+        assert lines[-1].startswith("EV,FAIL,WATCHDOG,")
+        t_start = next(float(x.split(",")[-1]) for x in c.stash + lines if x.startswith("EV,START"))
+        assert float(lines[-1].split(",")[-1]) - t_start == pytest.approx(0.5, abs=0.021)  # experiment time
+        await c.close()
+
+
+async def test_velocity_commands_during_a_path_are_refused_and_parsed_strictly():
+    async with running_agents(backend="ideal", time_scale=1.0) as agents:
+        c = await LineClient.connect(agents.ports[0])
+        await c.ask(encode_place((0.3, 0.3, 0.0)))
+        assert (await c.ask(encode_path([[0.3, 0.3, 0.0], [1.2, 0.3, 0.0]]))).startswith("OK,P")
+        assert (await c.ask("T,T,V,50,0")).startswith("ERR,STATE,a path is in progress")
+        assert (await c.ask("T,T,O,2")).startswith("ERR,SYNTAX")
+        await c.close()
+    assert parse_command("T,T,V,100,90") == VelocityCommand(0.1, math.pi / 2)
+    for bad in ("T,T,V", "T,T,V,1", "T,T,V,1,2,3", "T,T,V,1,x"):
+        with pytest.raises(ProtocolError):
+            parse_command(bad)
