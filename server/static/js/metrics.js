@@ -36,6 +36,10 @@ export const METRICS = {
   collision_count: ["Collisions", "", [0, Infinity]],
   spl: ["SPL", "", [0, 1]],
   barn_score: ["BARN score", "", [0, 0.5]],
+  collisions_obstacle: ["Collisions with moving obstacles", "", [0, Infinity]],
+  collisions_block: ["Collisions with blocks and walls", "", [0, Infinity]],
+  obstacle_distance_min_m: ["Closest approach to a moving obstacle", "m", [-Infinity, Infinity]],
+  obstacle_time_within_s: ["Time near a moving obstacle", "s", [0, Infinity]],
 };
 
 /** A metric's name ("Path length"); an unknown key as it comes. */
