@@ -239,13 +239,15 @@ class Sandbox:
         stdin = proc.stdin
         result: Optional[dict[str, Any]] = None
         pushing: Optional[asyncio.Task[None]] = None
+        writing = asyncio.Lock()
 
         async def write(data: bytes) -> None:
-            try:
-                stdin.write(data)
-                await stdin.drain()
-            except (OSError, RuntimeError):  # the launcher is gone: its result says why
-                pass
+            async with writing:
+                try:
+                    stdin.write(data)
+                    await stdin.drain()
+                except (OSError, RuntimeError):  # the launcher is gone: its result says why
+                    pass
 
         async def push() -> None:
             """Unsolicited robot lines to the program; at the run's end, ``E``."""
