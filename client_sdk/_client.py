@@ -190,7 +190,8 @@ class Client(BaseClient):
                field: Optional[str] = None, program: Optional[int] = None,
                jitter: Optional[Mapping[str, float]] = None,
                profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
-               controller_params: Optional[Mapping[str, float]] = None) -> Experiment:
+               controller_params: Optional[Mapping[str, float]] = None,
+               controller_program: Optional[int] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
@@ -206,7 +207,9 @@ class Client(BaseClient):
         profile (docs/fidelity.md, "Noise studies").
         ``controller`` chooses the robots' path-tracking controller (default
         ``schema``; :meth:`list_controllers`) and ``controller_params`` its
-        parameters (SI units, as their names say).
+        parameters (SI units, as their names say); ``controller_program``, an
+        uploaded program's id, drives the robots along the planned path
+        itself instead (docs/controllers.md, "Your own controller program").
         :class:`ValidationError` carries the server's reason when the job
         cannot run.
         """
@@ -214,7 +217,7 @@ class Client(BaseClient):
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
-                      controller_params=controller_params)
+                      controller_params=controller_params, controller_program=controller_program)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -368,13 +371,14 @@ class AsyncClient(BaseClient):
                      field: Optional[str] = None, program: Optional[int] = None,
                      jitter: Optional[Mapping[str, float]] = None,
                      profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
-                     controller_params: Optional[Mapping[str, float]] = None) -> Experiment:
+                     controller_params: Optional[Mapping[str, float]] = None,
+                     controller_program: Optional[int] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
-                      controller_params=controller_params)
+                      controller_params=controller_params, controller_program=controller_program)
         return await self._send(self._submit(job, fields))
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,

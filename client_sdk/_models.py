@@ -226,6 +226,8 @@ class ExperimentSummary(_FromJson):
     repetitions: int = 1
     field: str = "sub"
     controller: str = "schema"
+    #: the uploaded program driving the robots instead of ``controller`` (docs/controllers.md), or None
+    controller_program: Optional[int] = None
     error: str = ""
     created_at: Optional[datetime] = None
     finished_at: Optional[datetime] = None

@@ -40,6 +40,8 @@ class AgentLink:
         self._reader_task: Optional[asyncio.Task] = None
         self._lock = asyncio.Lock()
         self.closed = False
+        #: ``PO`` localisation lines (after ``T,T,O,1``) go here instead of the log: (the line, its fields)
+        self.on_pose: Optional[Callable[[str, tuple[str, ...]], None]] = None
 
     @classmethod
     async def connect(cls, host: str, port: int, *, time_scale: float, on_line: LineLog,
@@ -117,6 +119,10 @@ class AgentLink:
                 t = reply.time
                 if t is not None:
                     self._anchor = (time.monotonic(), t)
+                if reply.kind == "PO":  # many a second: not logged (the tracker stores the poses)
+                    if self.on_pose is not None:
+                        self.on_pose(raw.decode("ascii", "replace").strip(), reply.fields)
+                    continue
                 self._log("<", raw, t)
                 if reply.kind == "EV":
                     self.events.put_nowait(reply)
@@ -151,6 +157,14 @@ class AgentLink:
         if reply.kind == "ERR":
             raise AgentRefused(reply.fields[0] if reply.fields else "", reply.fields[1] if len(reply.fields) > 1 else "")
         return reply
+
+    async def forward(self, line: str, timeout_s: float) -> str:
+        """Send a program's command line and return the robot's reply line as sent (``ERR`` too, unraised)."""
+        try:
+            reply = await self.request(line, timeout_s)
+        except AgentRefused as exc:
+            return f"ERR,{exc.code},{exc.message}"
+        return ",".join((reply.kind, *reply.fields))
 
     async def next_event(self, timeout_s: float) -> Optional[Reply]:
         """The next ``EV`` line; None on timeout; :class:`AgentUnavailable` if the agent is gone."""

@@ -140,6 +140,9 @@ class Experiment(Base):
     #: the robots' path-tracking controller (docs/controllers.md) and its parameters, defaults filled in (SI)
     controller: Mapped[str] = mapped_column(String(64), default="schema", server_default="schema")
     controller_params: Mapped[Optional[dict[str, Any]]] = mapped_column(JSON, default=dict, nullable=True)
+    #: an uploaded program drives the robots along the planned path instead of a built-in controller
+    controller_program_id: Mapped[Optional[int]] = mapped_column(
+        ForeignKey("programs.id", ondelete="SET NULL"), nullable=True)
     error: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)

@@ -204,6 +204,9 @@ class ExperimentCreate(Strict):
         "The robots' path-tracking controller (`GET /api/v1/controllers`; docs/controllers.md)."))
     controller_params: dict[str, float] = Field(default_factory=dict, max_length=16, description=(
         "The controller's parameters (SI units, as each name says); the others keep their defaults."))
+    controller_program: Optional[int] = Field(default=None, ge=1, description=(
+        "An uploaded program's id that drives the robot along the planned path over its robot port "
+        "(T,T,O / T,T,V; docs/controllers.md \"Your own controller program\") instead of `controller`."))
 
     @field_validator("start", "goal")
     @classmethod
@@ -237,6 +240,13 @@ class ExperimentCreate(Strict):
             raise ValueError("profile_overrides change the emulated field robot: they need mode \"twb\"")
         if self.path is not None and self.planner is not None:
             raise ValueError("give either `planner` or `path`, not both")
+        if self.controller_program is not None:
+            if self.controller != "schema" or self.controller_params:
+                raise ValueError("controller_program: give either `controller_program` or a `controller` "
+                                 "(with `controller_params`), not both")
+            if self.profile_overrides:
+                raise ValueError("controller_program: a controller program drives the robot itself; "
+                                 "it cannot run with `profile_overrides`")
         if self.program is not None:
             if self.path is not None or self.planner is not None:
                 raise ValueError("give one of `planner`, `path` or `program`")
@@ -298,6 +308,9 @@ class ExperimentSummary(FromRow):
     repetitions: int
     field: str
     controller: str = "schema"
+    controller_program: Optional[int] = Field(
+        default=None, validation_alias=AliasChoices("controller_program_id", "controller_program"),
+        description="The uploaded program driving the robots (instead of `controller`), if any.")
     error: str
     created_at: UTCDateTime
     finished_at: Optional[UTCDateTime]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import threading
 
 from sqlalchemy import select
@@ -49,6 +51,12 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
         raise Invalid(f"repetitions must be at most {settings.max_repetitions}")
     if body.program is not None:
         _check_program(session, user, body.program, settings)
+    if body.controller_program is not None:
+        if math.isinf(settings.time_scale):
+            raise Invalid("controller_program: a controller program closes the loop against the robot's 0.5 s "
+                          "watchdog, which needs a finite time scale; this testbed runs as fast as possible "
+                          "(start it with --time-scale 1, or up to about 5)")
+        _check_program(session, user, body.controller_program, settings, field="controller_program")
     env_row = environment_named(session, user, body.environment)
     if env_row is None:
         raise Invalid(f"unknown environment {body.environment!r}")
@@ -61,10 +69,12 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
                              planning_margin=settings.planning_margin_m)
 
 
-def _check_program(session: Session, user: Principal, program_id: int, settings: Settings) -> None:
-    """A job naming a program: uploads enabled (403) and the program the user's (422)."""
+def _check_program(session: Session, user: Principal, program_id: int, settings: Settings,
+                   field: str = "program") -> None:
+    """A job naming a program (in ``field``): uploads enabled (403) and the program the user's (422)."""
     if not settings.uploads_enabled:
         raise Forbidden(UPLOADS_DISABLED)
     owner = session.scalar(select(Program.owner_id).where(Program.id == program_id))
     if owner is None or (owner != user.id and not user.is_admin):
-        raise Invalid(f"unknown program {program_id}")
+        raise Invalid(f"unknown program {program_id}" if field == "program"
+                      else f"{field}: unknown program {program_id}")

@@ -78,7 +78,7 @@ class Testbed:
         self.services = RunServices(
             settings=settings, recorder=self.recorder,
             paths=PathService(self.sessions, self.recorder, self.pool, self.sandbox, settings),
-            pool=self.pool, field=self.field, tracker=self.tracker, hooks=embedded or NoHooks())
+            pool=self.pool, field=self.field, tracker=self.tracker, hooks=embedded or NoHooks(), sandbox=self.sandbox)
         self.dispatcher = Dispatcher(self.services)
         self.admin_token = ""
 

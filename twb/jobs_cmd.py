@@ -77,6 +77,7 @@ def submit(
     field: Annotated[Optional[str], typer.Option(help="sub (a 1.8 m sub-field) or full (3.6 m field) (default: sub).")] = None,
     controller: Annotated[Optional[str], typer.Option("--controller", help="The robots' path-tracking controller: schema (default), pure_pursuit, regulated_pure_pursuit, kanayama or a plug-in (docs/controllers.md).")] = None,
     controller_param: Annotated[Optional[list[str]], typer.Option("--controller-param", help="Controller parameter NAME=VALUE, SI units as the name says (repeatable).")] = None,
+    controller_program: Annotated[Optional[int], typer.Option("--controller-program", help="Drive the robots with your uploaded controller program of this id (see twb upload; docs/controllers.md).", min=1)] = None,
     wait_: Annotated[bool, typer.Option("--wait", help="Wait for the end (a progress bar, or status lines when not a terminal); exit 1 unless completed.")] = False,
     timeout: Annotated[Optional[float], typer.Option(help="With --wait: give up after this many seconds (exit 3).")] = None,
     url: UrlOpt = None,
@@ -106,6 +107,8 @@ def submit(
         fields["path"] = _read_path_file(path)
     if program is not None:
         fields["program"] = program
+    if controller_program is not None:
+        fields["controller_program"] = controller_program
     if modes:
         fields["modes"] = [m.strip() for m in modes.split(",") if m.strip()]
     for key, value in (("repetitions", repetitions), ("seed", seed), ("field", field)):
@@ -247,6 +250,8 @@ def _print_experiment(exp: Any, wide: bool) -> None:
     source = job_label(exp) if exp.planner is None else f"planner {exp.planner}"
     if exp.controller != "schema":
         source += f", controller {exp.controller}"
+    if getattr(exp, "controller_program", None) is not None:
+        source += f", controller program #{exp.controller_program}"
     con.print(f"experiment {exp.id}: [bold]{exp.status}[/bold]  {exp.environment} "
               f"{_pose(exp.start)} -> {_pose(exp.goal)}  {source}  "
               f"planned {_num(length)} m in {_num(exp.planning_time_s, 4)} s  seed {exp.seed}", highlight=False)

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..core.settings import Settings
 from ..field import FieldState
+from ..sandbox import Sandbox
 from ..scheduler import Assignment, RobotSlot
 from ..tracking import PoseRouter
 from .paths import PathService
@@ -51,6 +52,8 @@ class RunServices:
     field: FieldState
     tracker: PoseRouter
     hooks: RobotHooks = field(default_factory=NoHooks)
+    #: runs uploaded controller programs (None: this testbed has none)
+    sandbox: Optional[Sandbox] = None
 
 
 class RunContext:

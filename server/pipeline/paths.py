@@ -92,6 +92,16 @@ class PathService:
                 self._plans.popitem(last=False)
             return plan
 
+    async def program_spec(self, program_id: Optional[int]) -> Optional[ProgramSpec]:
+        """An uploaded program as the sandbox runs it, or None if it no longer exists."""
+        def load() -> Optional[ProgramSpec]:
+            with self._sessions() as s:
+                p = s.get(Program, program_id) if program_id is not None else None
+                return None if p is None else ProgramSpec(p.id, p.name, p.kind, p.interpreter, list(p.args or []),
+                                                          p.content)
+
+        return await asyncio.to_thread(load)
+
     def known(self, experiment_id: int) -> Optional[Plan]:
         """The experiment's path if it was had recently (no database read), else None."""
         return self._plans.get(experiment_id)
@@ -133,13 +143,7 @@ class PathService:
         if not self._settings.uploads_enabled:
             raise ProgramFailed("uploads are disabled on this testbed")
 
-        def load() -> Optional[ProgramSpec]:
-            with self._sessions() as s:
-                p = s.get(Program, exp.program_id)
-                return None if p is None else ProgramSpec(p.id, p.name, p.kind, p.interpreter, list(p.args or []),
-                                                          p.content)
-
-        spec = await asyncio.to_thread(load)
+        spec = await self.program_spec(exp.program_id)
         if spec is None:
             raise ProgramFailed("the experiment's program no longer exists")
         start = list(exp.start)

@@ -48,6 +48,10 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: Optional[RunJob]
     if job is None:  # an engine's slot: the run starts here (a field variant's was started by the runner)
         job = await rec.start(ctx.run_id, robot_id=ctx.robot.robot_id, subfield=None, started_at=utcnow(),
                               status=lambda j: start_status(svc, j))
+    if job.controller_program is not None:
+        raise RunFailed("a controller program drives a robot agent over TCP; this run went to a compute "
+                        "engine's slot, which has none (run this job on a testbed without --sim-engine ray)",
+                        FailureKind.OTHER)
     if on_field:
         svc.field.claim(ctx.subfields, job.owner_id)
     plan = svc.paths.known(job.experiment_id)  # most runs of an experiment: planned already, one write less

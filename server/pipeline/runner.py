@@ -5,7 +5,8 @@ The steps, in order (each in :mod:`server.pipeline.steps`)::
     building   the gripper builds the environment (unless the robot has it built)
     placing    the gripper puts the robot at the start
     planning   the experiment's path, had once (server.pipeline.paths)
-    running    the T,T,P line is sent, events followed, tracker poses stored
+    running    the T,T,P line is sent, events followed, tracker poses stored (or the job's
+               controller program drives the robot: server.pipeline.closed_loop)
     analyzing  metrics, in a worker process
     completed
 
@@ -42,7 +43,7 @@ from ..models import Experiment, Run, utcnow
 from ..scheduler import Assignment
 from ..status import RunStatus
 from ..store.runs import RunJob
-from . import steps
+from . import closed_loop, steps
 from .context import RunContext, RunServices
 from .recorder import RunRecorder
 from .remote import run_on_engine, start_status
@@ -175,7 +176,10 @@ async def _steps(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
                                         platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
         await rec.update(ctx.run_id, status=RunStatus.RUNNING)
         try:
-            await steps.drive(ctx, svc, link, job, plan.path)
+            if job.controller_program is not None:
+                await closed_loop.drive_program(ctx, svc, link, job, plan)
+            else:
+                await steps.drive(ctx, svc, link, job, plan.path)
             failure: Optional[RunFailed] = None
         except RunFailed as exc:
             failure = exc

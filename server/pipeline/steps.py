@@ -17,7 +17,7 @@ from . import compute
 from .context import RunContext, RunServices
 from .paths import Plan
 
-__all__ = ["PARK", "analyze", "build", "connect", "drive", "fail_fields", "failure_of", "place", "run_timeout_s", "start_pose"]
+__all__ = ["PARK", "analyze", "build", "collect_poses", "connect", "drive", "fail_fields", "failure_of", "place", "run_timeout_s", "start_pose"]
 
 #: park positions (robot frame) of sub-field robots 2-4 during full-field runs: their outer corners
 PARK = {2: (1.7, 0.1, 0.0), 3: (0.1, 1.7, 0.0), 4: (1.7, 1.7, 0.0)}
@@ -195,13 +195,13 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
             await rec.update(ctx.run_id, t_start=t_start)
         elif kind in ("DONE", "FAIL"):
             await rec.update(ctx.run_id, t_start=t_start, t_end=ev.time)
-            await _collect_poses(svc, robot_id, ev.time or 0.0)
+            await collect_poses(svc, robot_id, ev.time or 0.0)
             if kind == "DONE":
                 return
             raise failure_of(*fail_fields(ev.fields))
 
 
-async def _collect_poses(svc: RunServices, robot_id: str, t_end: float) -> None:
+async def collect_poses(svc: RunServices, robot_id: str, t_end: float) -> None:
     """Make sure the tracker poses up to ``t_end`` are stored before the window closes.
 
     Robots in this process are flushed directly; remote ones are waited for,

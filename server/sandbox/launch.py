@@ -48,8 +48,13 @@ def main() -> int:
     """Run the job on stdin; the exit status (0 whenever a result was printed)."""
     ending = EndRequest()
     ending.listen(watch_parent=True)
-    job = json.loads(sys.stdin.buffer.read())
-    sys.stdin.close()
+    raw = sys.stdin.buffer.readline()  # the job is one JSON line; a controller's relay follows on stdin
+    try:
+        job = json.loads(raw)
+    except ValueError:
+        job = json.loads(raw + sys.stdin.buffer.read())
+    if not job.get("relay"):
+        sys.stdin.close()
     if job.get("probe"):
         _emit(probe(job))
         return 0
@@ -191,6 +196,7 @@ def _check_single_threaded() -> None:
 
 def _emit(obj: dict[str, Any]) -> None:
     try:
+        os.set_blocking(1, True)
         sys.stdout.write(json.dumps(obj) + "\n")
         sys.stdout.flush()
     except BrokenPipeError:  # the server is gone

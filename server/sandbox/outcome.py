@@ -8,7 +8,7 @@ from typing import Any, Optional
 
 from .program import ProgramSpec
 
-__all__ = ["ProgramOutcome", "explain", "to_outcome"]
+__all__ = ["ProgramOutcome", "explain", "explain_controller", "to_controller_outcome", "to_outcome"]
 
 _FORK_SIGNS = ("Resource temporarily unavailable", "BlockingIOError", "fork: retry", "Cannot fork",
                "can't fork", "fork failed")
@@ -45,18 +45,10 @@ def explain(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
     sig = r.get("signal")
     refused = r.get("refused") or []
     after = f" (its last line was refused: {refused[-1]})" if refused else ""
-    wall, mib = limits["wall_s"], limits["memory_bytes"] >> 20
-    if r.get("memory_oom_kills"):
-        return f"program memory limit: it used all of its {mib} MiB of memory (all its processes together) and was killed"
-    if ((r.get("procs_max") or 0) >= limits["processes"] or r.get("fork_refusals")
-            or any(x in err for x in _FORK_SIGNS)):
-        return f"program process limit: it reached its limit of {limits['processes']} processes"
-    if any(x in err for x in _MEMORY_SIGNS):
-        return f"program memory limit: it ran out of its {mib} MiB of memory"
-    if sig == signal.SIGXCPU or (sig == signal.SIGKILL and (r.get("cpu_s") or 0) >= limits["cpu_s"] - 0.5):
-        return f"program CPU limit: it used more than {limits['cpu_s']} s of CPU time"
-    if sig == signal.SIGXFSZ:
-        return f"program file size limit: it wrote a file larger than {limits['file_bytes'] >> 20} MiB"
+    wall = limits["wall_s"]
+    limit = _limit_reason(r, limits)
+    if limit:
+        return limit
     if r.get("timed_out"):
         return f"program time limit: no path within {wall:g} s" + after
     if refused:
@@ -72,11 +64,63 @@ def explain(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
     return "program sent no path: it exited without sending a T,T,P line"
 
 
+def _limit_reason(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
+    """The limit a finished program hit (memory, processes, CPU, file size), or None."""
+    err = r.get("stderr") or ""
+    sig = r.get("signal")
+    mib = limits["memory_bytes"] >> 20
+    if r.get("memory_oom_kills"):
+        return f"program memory limit: it used all of its {mib} MiB of memory (all its processes together) and was killed"
+    if ((r.get("procs_max") or 0) >= limits["processes"] or r.get("fork_refusals")
+            or any(x in err for x in _FORK_SIGNS)):
+        return f"program process limit: it reached its limit of {limits['processes']} processes"
+    if any(x in err for x in _MEMORY_SIGNS):
+        return f"program memory limit: it ran out of its {mib} MiB of memory"
+    if sig == signal.SIGXCPU or (sig == signal.SIGKILL and (r.get("cpu_s") or 0) >= limits["cpu_s"] - 0.5):
+        return f"program CPU limit: it used more than {limits['cpu_s']} s of CPU time"
+    if sig == signal.SIGXFSZ:
+        return f"program file size limit: it wrote a file larger than {limits['file_bytes'] >> 20} MiB"
+    return None
+
+
+def explain_controller(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
+    """Why a controller program's run failed through the program itself (``None``: the run decides:
+    the program exited cleanly or the run ended it); ``limits`` as in the job (bytes, s)."""
+    if r.get("launch_error"):
+        return f"program could not start: {r['launch_error']}"
+    if r.get("run_ended"):
+        return None
+    limit = _limit_reason(r, limits)
+    if limit:
+        return limit
+    if r.get("timed_out"):
+        return f"program time limit: the robot did not reach the goal within {limits['wall_s']:g} s"
+    err, sig = r.get("stderr") or "", r.get("signal")
+    if r.get("exit_code") not in (None, 0):
+        return f"program crashed: exit code {r['exit_code']}" + _last_line(err)
+    if sig is not None:
+        return f"program crashed: killed by signal {_signame(sig)}" + _last_line(err)
+    return None
+
+
 def to_outcome(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str, Any]) -> ProgramOutcome:
     """The outcome of the launcher's result ``r`` for ``spec`` run as ``argv`` under ``limits`` (the job's)."""
-    iso = r.get("isolation") or {}
     reason = explain(r, limits)
-    info = {
+    info = _info(spec, r)
+    return ProgramOutcome(r.get("path") if reason is None else None, reason, _log(spec, argv, r, limits, reason),
+                          info, r.get("path_at_s"))
+
+
+def to_controller_outcome(spec: ProgramSpec, argv: list[str], r: dict[str, Any],
+                          limits: dict[str, Any]) -> ProgramOutcome:
+    """The outcome of a controller program's result ``r`` (no path; ``reason``: :func:`explain_controller`)."""
+    reason = explain_controller(r, limits)
+    return ProgramOutcome(None, reason, _log(spec, argv, r, limits, reason), _info(spec, r))
+
+
+def _info(spec: ProgramSpec, r: dict[str, Any]) -> dict[str, Any]:
+    iso = r.get("isolation") or {}
+    return {
         "id": spec.id, "name": spec.name, "exit_code": r.get("exit_code"), "signal": r.get("signal"),
         "timed_out": r.get("timed_out", False), "wall_s": r.get("wall_s"), "cpu_s": r.get("cpu_s"),
         "max_rss_kib": r.get("max_rss_kib"), "memory_peak_kib": r.get("memory_peak_kib"),
@@ -87,8 +131,6 @@ def to_outcome(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: di
                       "server_files_hidden": bool(iso.get("hidden")), "seccomp": iso.get("seccomp", False),
                       "memory_limit": iso.get("memory_limit", "per-process")},
     }
-    return ProgramOutcome(r.get("path") if reason is None else None, reason, _log(spec, argv, r, limits, reason),
-                          info, r.get("path_at_s"))
 
 
 def _log(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str, Any],
@@ -103,6 +145,8 @@ def _log(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str
               f"{', own uid' if iso.get('uid') is not None else ''}, {memory}")]
     for direction, text in r.get("port_log", []):
         lines.append(("s", f"robot port {'<' if direction == '<' else '>'} {text}"))
+    if r.get("port_unlogged"):
+        lines.append(("s", f"robot port: {r['port_unlogged']} more lines not logged"))
     for d, name in (("o", "stdout"), ("e", "stderr")):
         for ln in (r.get(name) or "").splitlines():
             lines.append((d, ln[:10_000]))
@@ -114,7 +158,9 @@ def _log(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str
               else "stopped by the sandbox")
     peak = f", memory {r['memory_peak_kib'] / 1024:.1f} MiB" if r.get("memory_peak_kib") is not None else ""
     lines.append(("s", f"program ended ({status}) after {r.get('wall_s', 0):.2f} s, CPU {r.get('cpu_s', 0):.2f} s"
-                       + peak + (f"; {reason}" if reason else f"; path of {len(r['path'])} points received")))
+                       + peak + (f"; {reason}" if reason else f"; path of {len(r['path'])} points received"
+                                 if r.get("path") is not None else f"; {r['run_ended']}" if r.get("run_ended")
+                                 else "")))
     return lines
 
 

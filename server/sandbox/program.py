@@ -7,11 +7,13 @@ import json
 from dataclasses import dataclass
 from typing import Any, Optional
 
-__all__ = ["ENV_FILE", "PROGRAM_FILE", "ProgramSpec", "program_argv", "program_env", "program_files"]
+__all__ = ["ENV_FILE", "PATH_FILE", "PROGRAM_FILE", "ProgramSpec", "program_argv", "program_env", "program_files"]
 
 #: file names of the program in its working directory
 PROGRAM_FILE = {"python": "program.py", "executable": "program"}
 ENV_FILE = "environment.json"
+#: a controller program's planned path: ``{"path": [[x, y, theta], ...]}`` (m, m, rad)
+PATH_FILE = "path.json"
 
 
 @dataclass(frozen=True)
@@ -38,20 +40,31 @@ def program_argv(spec: ProgramSpec, interpreters: dict[str, str]) -> list[str]:
     return [interpreters[interp], path, *spec.args]
 
 
-def program_files(spec: ProgramSpec, env_data: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """The working directory's files for the job: name -> ``{"base64", "mode"}``."""
+def program_files(spec: ProgramSpec, env_data: dict[str, Any],
+                  path: Optional[list[list[float]]] = None) -> dict[str, dict[str, Any]]:
+    """The working directory's files for the job: name -> ``{"base64", "mode"}``; with a controller's
+    planned ``path`` (m, m, rad) also :data:`PATH_FILE`."""
     runnable = spec.kind == "executable" and spec.interpreter is None
-    return {
+    files = {
         PROGRAM_FILE[spec.kind]: {"base64": base64.b64encode(spec.content).decode(),
                                   "mode": 0o500 if runnable else 0o400},
         ENV_FILE: {"base64": base64.b64encode(json.dumps(env_data).encode()).decode(), "mode": 0o400},
     }
+    if path is not None:
+        files[PATH_FILE] = {"base64": base64.b64encode(json.dumps({"path": path}).encode()).decode(), "mode": 0o400}
+    return files
 
 
 def program_env(*, start: list[float], goal: list[float], field_size: tuple[float, float], seed: int,
-                robot_radius: float, planning_margin: float, robot_id: str, wall_s: float) -> dict[str, str]:
-    """The program's environment (lengths in m, angles in rad, ``wall_s`` in s); the launcher adds the rest."""
-    return {
+                robot_radius: float, planning_margin: float, robot_id: str, wall_s: float,
+                path: Optional[list[list[float]]] = None) -> dict[str, str]:
+    """The program's environment (lengths in m, angles in rad, ``wall_s`` in s); the launcher adds the rest.
+
+    A controller program (``path`` given) also gets ``TWB_PATH_FILE`` and ``TWB_PATH_POINTS``.
+    """
+    extra = {} if path is None else {"TWB_PATH_FILE": PATH_FILE, "TWB_PATH_POINTS": str(len(path)),
+                                     "TWB_ROLE": "controller"}
+    return {**extra,
         "PATH": "/usr/local/bin:/usr/bin:/bin", "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8",
         "PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1",
         "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",

@@ -10,24 +10,34 @@ from __future__ import annotations
 import socket
 from typing import Any, Callable, Optional
 
-from robot_agent.protocol import (MAX_LINE_BYTES, AuthCommand, Command, ErrorCode, LeaseCommand, PathCommand,
-                                  ProtocolError, QueryCommand, RobotState, StopCommand, format_hello, format_ok,
-                                  format_status, parse_command)
+from robot_agent.protocol import (MAX_LINE_BYTES, AuthCommand, Command, ErrorCode, LeaseCommand,
+                                  LocalisationCommand, PathCommand, ProtocolError, QueryCommand, RobotState,
+                                  StopCommand, VelocityCommand, format_hello, format_ok, format_status, parse_command)
 
 __all__ = ["MAX_LINE_BYTES", "RobotPort", "send"]
 
 #: received lines are logged up to this many characters
 LOGGED_CHARS = 2000
+#: a controller's conversation is logged up to this many lines (then counted)
+LOGGED_LINES = 4000
+#: what a controller program's robot port forwards to the run's robot (the closed-loop verbs)
+RELAYED = (LocalisationCommand, VelocityCommand, StopCommand, QueryCommand)
 
 
 class RobotPort:
     """One conversation: a greeting, an answer per line, done at the first valid ``T,T,P`` or when the program hangs up.
 
     ``field_size`` (m) bounds the path's points; ``start_pose`` (m, m, rad) is what ``T,T,Q`` reports.
+    With ``relay`` (a controller program) the closed-loop verbs (:data:`RELAYED`) are not answered
+    here but queued in ``forward`` for the run's robot, whose replies come back through
+    :meth:`from_robot`; a path, placing and building are refused.
     """
 
     def __init__(self, *, robot_id: str, platform: str, field_size: tuple[float, float],
-                 start_pose: tuple[float, float, float]) -> None:
+                 start_pose: tuple[float, float, float], relay: bool = False) -> None:
+        self.relay = relay
+        self.forward: list[str] = []  # relay: valid lines for the run's robot, in order
+        self.unlogged = 0  # relay: lines past LOGGED_LINES
         self.robot_id, self.platform = robot_id, platform
         self.field_size, self.start_pose = field_size, start_pose
         self.connected = False
@@ -73,11 +83,18 @@ class RobotPort:
     def _line(self, raw: bytes, now: float) -> tuple[bytes, bool]:
         text = raw.decode("ascii", "replace").rstrip("\r\n")
         shown = text[:LOGGED_CHARS] + (f"... ({len(text)} characters)" if len(text) > LOGGED_CHARS else "")
-        self.log.append(["<", shown])
+        self._note("<", shown)
         try:
             cmd = parse_command(raw, field_size=self.field_size)
         except ProtocolError as exc:
             return self._refuse(exc), False
+        if self.relay:
+            if isinstance(cmd, RELAYED):
+                self.forward.append(text.strip())
+                return b"", False
+            if not isinstance(cmd, (AuthCommand, LeaseCommand)):
+                message = "a controller program drives with T,T,V (and T,T,O, T,T,S, T,T,Q); the path is planned"
+                return self._refuse(ProtocolError(ErrorCode.UNSUPPORTED, message)), False
         verbs: dict[type, Callable[[Any, float], tuple[bytes, bool]]] = {
             PathCommand: self._path, QueryCommand: self._query, StopCommand: self._stop,
             AuthCommand: self._open, LeaseCommand: self._open}
@@ -107,9 +124,21 @@ class RobotPort:
         self.refused.append(line)
         return self._say(line)
 
+    def from_robot(self, line: str) -> bytes:
+        """A line of the run's robot for the program (relay); ``PO`` lines are not logged."""
+        if not line.startswith("PO,"):
+            self._note(">", line)
+        return line.encode("ascii", "replace") + b"\n"
+
     def _say(self, line: str) -> bytes:
-        self.log.append([">", line])
+        self._note(">", line)
         return line.encode() + b"\n"
+
+    def _note(self, direction: str, line: str) -> None:
+        if len(self.log) < LOGGED_LINES:
+            self.log.append([direction, line])
+        else:
+            self.unlogged += 1
 
 
 def _too_long() -> ProtocolError:

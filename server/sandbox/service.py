@@ -22,15 +22,15 @@ import signal
 import sys
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional
+from typing import TYPE_CHECKING, Any, Optional, Protocol
 
-from .outcome import ProgramOutcome, to_outcome
+from .outcome import ProgramOutcome, to_controller_outcome, to_outcome
 from .program import ProgramSpec, program_argv, program_env, program_files
 
 if TYPE_CHECKING:  # the launcher imports this package: keep it light
     from ..core.settings import Settings
 
-__all__ = ["LAUNCHER", "Sandbox", "launcher_env", "take_uid"]
+__all__ = ["LAUNCHER", "Relay", "Sandbox", "launcher_env", "take_uid"]
 
 log = logging.getLogger("twb.sandbox")
 
@@ -83,6 +83,19 @@ async def _take_uid_off_loop(base: int) -> tuple[int, int]:
     except asyncio.CancelledError:
         task.add_done_callback(lambda t: t.cancelled() or t.exception() is not None or os.close(t.result()[1]))
         raise
+
+
+class Relay(Protocol):
+    """The run's side of a controller program's robot port (:meth:`Sandbox.run_controller`)."""
+
+    async def connected(self) -> None:
+        """The program connected to its robot port."""
+
+    async def to_robot(self, line: str) -> str:
+        """A valid closed-loop line of the program for the run's robot; the reply line for the program."""
+
+    async def from_robot(self) -> Optional[str]:
+        """The next unsolicited line for the program (``PO``, ``EV``), or None: the run has ended."""
 
 
 class Sandbox:
@@ -164,6 +177,26 @@ class Sandbox:
                   field_size: tuple[float, float], seed: int, robot_radius: float, planning_margin: float,
                   robot_id: str, platform: str) -> ProgramOutcome:
         """Run ``spec`` once (lengths in m, angles in rad); never raises for the program's faults (the outcome says why)."""
+        return await self._run(spec, env_data=env_data, start=start, goal=goal, field_size=field_size, seed=seed,
+                               robot_radius=robot_radius, planning_margin=planning_margin, robot_id=robot_id,
+                               platform=platform)
+
+    async def run_controller(self, spec: ProgramSpec, relay: Relay, *, env_data: dict[str, Any], start: list[float],
+                             goal: list[float], path: list[list[float]], field_size: tuple[float, float], seed: int,
+                             robot_radius: float, planning_margin: float, robot_id: str,
+                             platform: str) -> ProgramOutcome:
+        """Run ``spec`` as the run's controller: its robot port relays the closed-loop verbs to ``relay``
+        (the run's robot) until the program ends or ``relay.from_robot()`` says the run has; ``path``
+        (m, m, rad) is the planned path it follows.  The outcome's ``reason`` is set only when the
+        program could not start, hit a limit or crashed (:func:`~.outcome.explain_controller`)."""
+        return await self._run(spec, env_data=env_data, start=start, goal=goal, field_size=field_size, seed=seed,
+                               robot_radius=robot_radius, planning_margin=planning_margin, robot_id=robot_id,
+                               platform=platform, path=path, relay=relay)
+
+    async def _run(self, spec: ProgramSpec, *, env_data: dict[str, Any], start: list[float], goal: list[float],
+                   field_size: tuple[float, float], seed: int, robot_radius: float, planning_margin: float,
+                   robot_id: str, platform: str, path: Optional[list[list[float]]] = None,
+                   relay: Optional[Relay] = None) -> ProgramOutcome:
         s = self.settings
         try:
             argv = program_argv(spec, s.sandbox_interpreters)
@@ -172,21 +205,84 @@ class Sandbox:
         if self._running is None:
             self._running = asyncio.Semaphore(s.sandbox_workers)
         env = program_env(start=start, goal=goal, field_size=field_size, seed=seed, robot_radius=robot_radius,
-                          planning_margin=planning_margin, robot_id=robot_id, wall_s=s.sandbox_wall_s)
-        job = {"files": program_files(spec, env_data), "argv": argv, "env": env, "namespaces": s.sandbox_namespaces,
-               "hide": self.hidden_paths(), "limits": self._job_limits(), "field_size": list(field_size),
-               "robot_id": robot_id, "platform": platform, "start_pose": list(start[:3]), "grace_s": 1.0}
+                          planning_margin=planning_margin, robot_id=robot_id, wall_s=s.sandbox_wall_s,
+                          path=path)
+        job = {"files": program_files(spec, env_data, path), "argv": argv, "env": env,
+               "namespaces": s.sandbox_namespaces, "hide": self.hidden_paths(), "limits": self._job_limits(),
+               "field_size": list(field_size), "robot_id": robot_id, "platform": platform,
+               "start_pose": list(start[:3]), "grace_s": 1.0, "relay": relay is not None}
         async with self._running:
             uid, lock = await _take_uid_off_loop(s.sandbox_uid_base)
             try:
-                result, err = await self._launch({**job, "uid": uid, "gid": uid}, s.sandbox_wall_s + 30)
+                job = {**job, "uid": uid, "gid": uid}
+                timeout = s.sandbox_wall_s + 30
+                result, err = await (self._launch(job, timeout) if relay is None
+                                     else self._launch_relay(job, timeout, relay))
             except asyncio.TimeoutError:
                 raise RuntimeError("the sandbox launcher did not finish in time") from None
             finally:
                 os.close(lock)
         if result is None:
             raise RuntimeError(f"the sandbox launcher failed: {err.strip()[-500:] or 'no result'}")
+        if relay is not None:
+            return to_controller_outcome(spec, argv, result, self._job_limits())
         return to_outcome(spec, argv, result, self._job_limits())
+
+    async def _launch_relay(self, job: dict[str, Any], timeout_s: float,
+                            relay: Relay) -> tuple[Optional[dict[str, Any]], str]:
+        """Run the launcher with a controller's ``job``, relaying its robot port to ``relay``; (result, stderr)."""
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", LAUNCHER, stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=launcher_env(),
+            start_new_session=True, limit=1 << 20)
+        assert proc.stdin is not None and proc.stdout is not None and proc.stderr is not None
+        stdin = proc.stdin
+        result: Optional[dict[str, Any]] = None
+        pushing: Optional[asyncio.Task[None]] = None
+        writing = asyncio.Lock()
+
+        async def write(data: bytes) -> None:
+            async with writing:
+                try:
+                    stdin.write(data)
+                    await stdin.drain()
+                except (OSError, RuntimeError):  # the launcher is gone: its result says why
+                    pass
+
+        async def push() -> None:
+            """Unsolicited robot lines to the program; at the run's end, ``E``."""
+            while (line := await relay.from_robot()) is not None:
+                await write(b"R " + line.encode("ascii", "replace") + b"\n")
+            await write(b"E the run ended\n")
+
+        async def converse() -> None:
+            nonlocal result, pushing
+            await write(json.dumps(job).encode() + b"\n")
+            while raw := await proc.stdout.readline():  # type: ignore[union-attr]
+                text = raw.decode("utf-8", "replace").rstrip("\n")
+                if text == "C" and pushing is None:
+                    await relay.connected()
+                    pushing = asyncio.create_task(push(), name="twb-controller-push")
+                elif text.startswith("R "):
+                    await write(b"R " + (await relay.to_robot(text[2:])).encode("ascii", "replace") + b"\n")
+                elif text.startswith("{"):
+                    try:
+                        result = json.loads(text)
+                    except ValueError:
+                        continue
+
+        err_task = asyncio.create_task(proc.stderr.read())
+        try:
+            await asyncio.wait_for(converse(), timeout_s)
+            await asyncio.wait_for(proc.wait(), 5)
+        except BaseException:
+            await _stop(proc)
+            raise
+        finally:
+            if pushing is not None:
+                pushing.cancel()
+        err = await err_task
+        return result, err.decode("utf-8", "replace")
 
 
 async def _stop(proc: asyncio.subprocess.Process) -> None:

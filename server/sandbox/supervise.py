@@ -55,12 +55,15 @@ class Program:
     exited_at: Optional[float] = None
     path_mono: Optional[float] = None
     pipes_open: int = 2
+    relay_buf: bytes = b""  # relay: a partial line from the server
+    run_ended: Optional[str] = None  # relay: the server ended the run (why)
 
 
 def blank_result() -> dict[str, Any]:
     """A result with every field, for a program that never ran."""
     return {"exit_code": None, "signal": None, "timed_out": False, "launch_error": None, "procs_max": 0,
             "robot_port": None, "path": None, "path_at_s": None, "connected": False, "port_log": [], "refused": [],
+            "port_unlogged": 0, "run_ended": None,
             "wall_s": 0.0, "cpu_s": 0.0, "max_rss_kib": 0, "memory_peak_kib": None, "memory_oom_kills": None,
             "fork_refusals": None, "stdout": "", "stderr": "", "stdout_dropped": 0, "stderr_dropped": 0}
 
@@ -138,7 +141,7 @@ def spawn(job: dict[str, Any], iso: dict[str, Any], listener: socket.socket, wor
             shutil.rmtree(work, ignore_errors=True)
         raise
     port = RobotPort(robot_id=job["robot_id"], platform=job["platform"], field_size=tuple(job["field_size"]),
-                     start_pose=tuple(job["start_pose"]))
+                     start_pose=tuple(job["start_pose"]), relay=bool(job.get("relay")))
     return Program(proc, port, listener, port_no, work, private_tmp, uid, int(limits["output_bytes"]), t0)
 
 
@@ -155,6 +158,9 @@ def pump(prog: Program, *, wall_s: float, grace_s: float, stop: Callable[[], Opt
         sel.register(pipe, selectors.EVENT_READ, name)
     prog.listener.setblocking(False)
     sel.register(prog.listener, selectors.EVENT_READ, "listen")
+    if prog.port.relay:  # the server's lines for the program come on stdin
+        os.set_blocking(0, False)
+        sel.register(0, selectors.EVENT_READ, "relay")
     deadline = prog.t0 + wall_s
     next_count = 0.0
     try:
@@ -163,6 +169,8 @@ def pump(prog: Program, *, wall_s: float, grace_s: float, stop: Callable[[], Opt
             stopped = stop()
             if stopped:
                 return False, stopped
+            if prog.run_ended is not None:
+                return False, None
             ends = [deadline] if prog.path_mono is None else [prog.path_mono + grace_s]
             if prog.exited_at is not None:  # drain the pipes (no longer once nobody holds them)
                 ends.append(prog.exited_at + (DRAIN_S if prog.pipes_open else 0.0))
@@ -174,7 +182,7 @@ def pump(prog: Program, *, wall_s: float, grace_s: float, stop: Callable[[], Opt
                 next_count = now + COUNT_EVERY_S
             _reap_exited(prog, now)
             for key, _ in sel.select(max(0.0, min(0.05, end_at - now))):
-                {"listen": _accept, "conn": _converse}.get(key.data, _collect)(prog, sel, key)
+                {"listen": _accept, "conn": _converse, "relay": _relay_in}.get(key.data, _collect)(prog, sel, key)
     finally:
         sel.close()
 
@@ -205,6 +213,42 @@ def _accept(prog: Program, sel: selectors.BaseSelector, key: selectors.SelectorK
     conn.setblocking(False)
     send(conn, prog.port.greeting())
     sel.register(conn, selectors.EVENT_READ, "conn")
+    if prog.port.relay:
+        _to_server(b"C\n")
+
+
+def _to_server(data: bytes) -> None:
+    """Relay: lines for the server on stdout (``C``: the program connected; ``R <line>``: for the robot)."""
+    while data:
+        try:
+            data = data[os.write(1, data):]
+        except BlockingIOError:
+            selectors.DefaultSelector().select(0.01)
+        except OSError:  # the server is gone: the end request follows
+            return
+
+
+def _relay_in(prog: Program, sel: selectors.BaseSelector, key: selectors.SelectorKey) -> None:
+    """Relay: the server's lines on stdin, ``R <line>`` for the program, ``E <why>`` (or EOF) the run's end."""
+    try:
+        data = os.read(0, 65536)
+    except BlockingIOError:
+        return
+    if not data:
+        sel.unregister(0)
+        prog.run_ended = prog.run_ended or "the server closed the relay"
+        return
+    prog.relay_buf += data
+    *lines, prog.relay_buf = prog.relay_buf.split(b"\n")
+    out = b""
+    for line in lines:
+        text = line.decode("ascii", "replace")
+        if text.startswith("R "):
+            out += prog.port.from_robot(text[2:])
+        elif text.startswith("E"):
+            prog.run_ended = text[2:] or "the run ended"
+    if prog.conn is not None and out:
+        send(prog.conn, out)
 
 
 def _converse(prog: Program, sel: selectors.BaseSelector, key: selectors.SelectorKey) -> None:
@@ -218,6 +262,9 @@ def _converse(prog: Program, sel: selectors.BaseSelector, key: selectors.Selecto
         data = b""
     replies, done = prog.port.feed(data, time.monotonic() - prog.t0)
     send(prog.conn, replies)
+    if prog.port.forward:
+        _to_server(b"".join(b"R " + line.encode() + b"\n" for line in prog.port.forward))
+        prog.port.forward.clear()
     if done:
         sel.unregister(prog.conn)
         prog.conn.close()
@@ -292,7 +339,8 @@ def report(prog: Program, *, ended_itself: bool, wall_s: float, cgroup: Optional
         "signal": -rc if ended_itself and rc is not None and rc < 0 else None,
         "procs_max": prog.procs_max, "robot_port": prog.port_no,
         "path": prog.port.path, "path_at_s": prog.port.path_at, "connected": prog.port.connected,
-        "port_log": prog.port.log, "refused": prog.port.refused,
+        "port_log": prog.port.log, "refused": prog.port.refused, "port_unlogged": prog.port.unlogged,
+        "run_ended": prog.run_ended,
         "wall_s": round(wall_s, 3), "cpu_s": round(ru.ru_utime + ru.ru_stime, 3), "max_rss_kib": ru.ru_maxrss,
         "memory_peak_kib": None if peak is None else peak >> 10,
         "memory_oom_kills": cgroup.oom_kills() if cgroup is not None else None,

@@ -44,6 +44,8 @@ def program_command(job: dict[str, Any], work: str, port: int) -> tuple[list[str
     env.update({"TWB_ROBOT_HOST": "127.0.0.1", "TWB_ROBOT_PORT": str(port), "HOME": work, "TMPDIR": work,
                 "TWB_WORKDIR": work})
     env["TWB_ENV_FILE"] = os.path.join(work, env.get("TWB_ENV_FILE", "environment.json"))
+    if "TWB_PATH_FILE" in env:  # a controller program's planned path
+        env["TWB_PATH_FILE"] = os.path.join(work, env["TWB_PATH_FILE"])
     subst = {"{" + k[4:].lower() + "}": v for k, v in env.items() if k.startswith("TWB_")}
     argv = []
     for a in job["argv"]:

@@ -60,6 +60,7 @@ def create_experiment(
         profile_overrides=body.profile_overrides or None,
         controller=body.controller,
         controller_params=checked.controller_params,
+        controller_program_id=body.controller_program,
     )
     session.add(exp)
     session.flush()

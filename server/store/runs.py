@@ -37,6 +37,8 @@ class RunJob:
     profile_overrides: Optional[dict[str, float]] = None
     controller: str = "schema"
     controller_params: dict[str, float] = dc_field(default_factory=dict)
+    #: an uploaded program that drives the robot along the planned path (docs/controllers.md), or None
+    controller_program: Optional[int] = None
 
 
 def job_of(run: Run) -> RunJob:
@@ -44,7 +46,7 @@ def job_of(run: Run) -> RunJob:
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
                   list(e.goal), e.field, e.robot_radius, e.jitter, e.profile_overrides, e.controller or "schema",
-                  dict(e.controller_params or {}))
+                  dict(e.controller_params or {}), e.controller_program_id)
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:

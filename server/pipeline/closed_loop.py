@@ -1,0 +1,182 @@
+"""A run driven by an uploaded controller program: the planned path in, body velocities out, over TCP.
+
+Instead of the server sending ``T,T,P``, the experiment's ``controller_program``
+runs in the sandbox (:meth:`server.sandbox.Sandbox.run_controller`).  Its robot
+port relays the closed-loop verbs (``T,T,O``, ``T,T,V``, ``T,T,S``, ``T,T,Q``)
+to the run's robot over the run's own authenticated connection, and sends the
+program the robot's ``PO`` and ``EV`` lines.  When the program connects, the
+server puts the robot in velocity mode (``T,T,V,0,0``): from then on the
+robot's 0.5 s watchdog holds.  The run ends when:
+
+- the program stops the robot (``T,T,S``, or ``T,T,V,0,0`` within the goal
+  tolerance: the server stops it) — ``completed`` within the goal tolerance,
+  else ``failed`` (program);
+- the program exits, crashes or hits a sandbox limit — the robot is stopped;
+  ``completed`` only after a clean exit with the robot within the tolerance;
+- the robot ends velocity mode itself: ``EV,FAIL,WATCHDOG`` (no ``T,T,V`` for
+  0.5 s of experiment time), ``EV,FAIL,COLLISION`` — ``failed``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from typing import Optional
+
+from planners.metrics import DEFAULT_GOAL_TOLERANCE
+
+from ..agent_link import AgentLink
+from ..errors import FailureKind, RunFailed
+from ..sandbox import ProgramSpec
+from ..status import SubfieldState
+from ..store.runs import RunJob
+from ..validation import FIELD_SIZE, SUBFIELD_SIZE
+from .context import RunContext, RunServices
+from .paths import Plan
+from .steps import collect_poses, fail_fields, failure_of, start_pose
+
+__all__ = ["ControllerRelay", "drive_program"]
+
+
+class ControllerRelay:
+    """The run's side of a controller program's robot port (:class:`server.sandbox.service.Relay`).
+
+    ``goal`` (m) in the robot's frame; ``tolerance_m``: how near the goal the
+    robot must stop.  ``ended`` resolves with the robot's ending ``EV,FAIL``
+    fields (``STOPPED`` when the program or the server stopped it).
+    """
+
+    def __init__(self, link: AgentLink, ctx: RunContext, goal: tuple[float, float], tolerance_m: float) -> None:
+        self.link, self.ctx = link, ctx
+        self.goal, self.tolerance_m = goal, tolerance_m
+        self.pose: Optional[tuple[float, float]] = None  # the last PO position, m
+        self.t_start: Optional[float] = None
+        self.t_end: Optional[float] = None
+        self.ended: asyncio.Future[tuple[str, ...]] = asyncio.get_running_loop().create_future()
+        self._subscribed = False
+        self._lines: asyncio.Queue[Optional[str]] = asyncio.Queue()
+        #: the program connected and the robot is in velocity mode
+        self.armed = False
+        link.on_pose = self._on_pose
+
+    def distance_m(self) -> float:
+        """How far the last localised position is from the goal (m; inf before any)."""
+        return math.inf if self.pose is None else math.dist(self.pose, self.goal)
+
+    def _on_pose(self, line: str, fields: tuple[str, ...]) -> None:
+        try:
+            self.pose = (float(fields[0]) / 1000.0, float(fields[1]) / 1000.0)
+        except (IndexError, ValueError):
+            return
+        if self._subscribed and not self.ended.done():
+            self._lines.put_nowait(line)
+
+    async def connected(self) -> None:
+        """The program is on its robot port: localise, and put the robot in velocity mode (the watchdog holds)."""
+        if self.armed or self.ended.done():
+            return
+        self.armed = True
+        await self.link.request("T,T,O,1", self.ctx.wall(0))
+        await self.link.request("T,T,V,0,0", self.ctx.wall(0))
+
+    async def to_robot(self, line: str) -> str:
+        """One valid closed-loop line of the program; the reply for it."""
+        if line.startswith("T,T,O"):  # the server's own subscription stays; only what the program gets changes
+            self._subscribed = line.endswith("1")
+            return "OK,O"
+        if self.ended.done():
+            return "ERR,STATE,the run has ended"
+        reply = await self.link.forward(line, self.ctx.wall(0))
+        if line.startswith("T,T,V") and reply.startswith("OK") and self._zero(line) \
+                and self.distance_m() <= self.tolerance_m:
+            await self.link.forward("T,T,S", self.ctx.wall(0))  # arrived and told to stand: the run is over
+        return reply
+
+    @staticmethod
+    def _zero(line: str) -> bool:
+        try:
+            return all(float(v) == 0.0 for v in line.split(",")[3:5])
+        except ValueError:
+            return False
+
+    async def from_robot(self) -> Optional[str]:
+        """The next ``PO``/``EV`` line for the program; None once the run has ended."""
+        return await self._lines.get()
+
+    async def follow_events(self) -> None:
+        """Pass the robot's events to the program until velocity mode ends (``ended``)."""
+        while not self.ended.done():
+            ev = await self.link.next_event(3600.0)
+            if ev is None:
+                continue
+            self._lines.put_nowait(",".join(("EV", *ev.fields)))
+            kind = ev.fields[0] if ev.fields else ""
+            if kind == "START" and self.t_start is None:
+                self.t_start = ev.time
+            elif kind == "FAIL":
+                self.t_end = ev.time
+                self.ended.set_result(ev.fields)
+
+    def close(self) -> None:
+        """No more lines for the program: its sandbox ends."""
+        self._lines.put_nowait(None)
+
+
+async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob, plan: Plan) -> None:
+    """Run the job's controller program against the robot (see the module docstring); returns when the run
+    completed, else raises :class:`RunFailed`."""
+    if svc.sandbox is None or not svc.settings.uploads_enabled:
+        raise RunFailed("program could not start: uploads are disabled on this testbed", FailureKind.PROGRAM)
+    spec: Optional[ProgramSpec] = await svc.paths.program_spec(job.controller_program)
+    if spec is None:
+        raise RunFailed("the experiment's controller program no longer exists", FailureKind.PROGRAM)
+    rec, robot_id = svc.recorder, ctx.robot.robot_id
+    for k in ctx.subfields:
+        await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id, owner_id=job.owner_id)
+    svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
+    await rec.add_messages(ctx.take_messages())
+    relay = ControllerRelay(link, ctx, (job.goal[0], job.goal[1]), DEFAULT_GOAL_TOLERANCE)
+    s = svc.settings
+    program = asyncio.create_task(svc.sandbox.run_controller(
+        spec, relay, env_data=job.environment_data, start=start_pose(job), goal=list(job.goal), path=plan.path,
+        field_size=SUBFIELD_SIZE if job.field == "sub" else FIELD_SIZE, seed=job.seed,
+        robot_radius=job.robot_radius, planning_margin=s.planning_margin_m, robot_id=robot_id,
+        platform=ctx.robot.platform or "BeBot"), name=f"twb-controller-{ctx.run_id}")
+    events = asyncio.create_task(relay.follow_events(), name=f"twb-controller-events-{ctx.run_id}")
+    try:
+        await asyncio.wait({program, relay.ended}, return_when=asyncio.FIRST_COMPLETED)
+        if not relay.ended.done() and relay.armed:  # the program ended first: stop the robot
+            await link.request("T,T,S", ctx.wall(0))
+            await asyncio.wait({relay.ended}, timeout=ctx.wall(5))
+        relay.close()
+        outcome = await program
+    finally:
+        relay.close()
+        events.cancel()
+        program.cancel()
+        link.on_pose = None
+    for direction, line in outcome.log:
+        ctx.on_line(direction, line, None, False)
+    t_end = relay.t_end if relay.t_end is not None else link.now()
+    await rec.update(ctx.run_id, t_start=relay.t_start, t_end=t_end)
+    await collect_poses(svc, robot_id, t_end or 0.0)
+    _verdict(relay, outcome.reason)
+
+
+def _verdict(relay: ControllerRelay, program_reason: Optional[str]) -> None:
+    """Raise why the run failed, if it did: the robot's ending first, then the program's, then where it stopped."""
+    fields = relay.ended.result() if relay.ended.done() else ()
+    reason = fields[1] if len(fields) > 1 else ""
+    if reason == "WATCHDOG":
+        raise RunFailed("watchdog: the controller program sent no T,T,V for 0.5 s of experiment time "
+                        "(the robot stopped)", FailureKind.PROGRAM)
+    if reason and reason != "STOPPED":
+        raise failure_of(*fail_fields(fields))
+    if program_reason is not None:
+        raise RunFailed(program_reason, FailureKind.PROGRAM)
+    if not relay.armed:
+        raise RunFailed("program ended without connecting to the robot port", FailureKind.PROGRAM)
+    d = relay.distance_m()
+    if d > relay.tolerance_m:
+        raise RunFailed(f"program stopped the robot {d:.3f} m from the goal (tolerance {relay.tolerance_m} m)",
+                        FailureKind.PROGRAM)
