@@ -103,3 +103,50 @@ def test_bad_fleets_are_refused_naming_the_robot():
         simulate_fleet([p, p], [(0.3, 0.3, 0.0)], seed=1, area=SUB)
     with pytest.raises(ValueError, match="robot 0: 2 path points but 3 departure times"):
         simulate_fleet([p], [(0.3, 0.3, 0.0)], seed=1, area=SUB, depart=[[1, 2, 3]])
+
+
+# ---------------------------------------------------------------- metrics (planners.fleet_metrics)
+
+from planners.fleet_metrics import FleetSettings, fleet_metrics  # noqa: E402
+
+
+def measured(fleet):
+    return fleet_metrics([r.poses for r in fleet.runs], fleet.outcomes, [r.t_end for r in fleet.runs],
+                         [r.obstacle for r in fleet.runs], FleetSettings(robot_radius=RADIUS))
+
+
+def test_metrics_of_the_two_swaps():
+    paths = [straight(s, g) for s, g in zip(CORNERS, OPPOSITE)]
+    crash = measured(simulate_fleet(paths, [p[0] for p in paths], seed=1, area=SUB))
+    assert crash["collisions_robot"] == 4 and crash["collisions_static"] == crash["collisions_moving"] == 0
+    assert crash["success_rate"] == 0.0 and crash["makespan_s"] is None and crash["time_sum_s"] is None
+    assert crash["robot_distance_min_m"] < 2 * RADIUS + 0.01
+    assert [r["collision"] for r in crash["robots"]] == ["robot"] * 4
+    paths, depart, starts = planned(parse_environment({"name": "swap", "size": list(SUB)}), CORNERS, OPPOSITE)
+    fleet = simulate_fleet(paths, starts, depart=depart, seed=1, area=SUB)
+    ok = measured(fleet)
+    assert ok["success_rate"] == 1.0 and ok["collisions_robot"] == 0 and not ok["deadlock"]
+    assert ok["makespan_s"] == pytest.approx(max(r.t_end for r in fleet.runs))
+    assert ok["time_sum_s"] == pytest.approx(sum(r.t_end for r in fleet.runs))
+    assert ok["robot_distance_min_m"] == pytest.approx(min_distance(fleet), abs=1e-9)
+    assert ok["robot_distance_min_m"] == min(r["robot_distance_min_m"] for r in ok["robots"])
+    lengths = [float(np.hypot(*np.diff(r.poses[:, 1:3], axis=0).T).sum()) for r in fleet.runs]
+    assert ok["path_length_sum_m"] == pytest.approx(sum(lengths), rel=0.02)  # resampled every 20 ms
+
+
+def test_deadlock_and_safety_time_on_made_up_poses():
+    """Two robots drive towards each other for 2 s, then stand 0.15 m apart for 8 s without ending their paths."""
+    t = np.arange(0.0, 10.0 + 1e-9, 0.02)
+    x = np.minimum(t, 2.0) * 0.1  # 0 .. 0.2 m, then still
+    a = np.column_stack([t, 0.3 + x, np.full_like(t, 0.5), np.zeros_like(t)])
+    b = np.column_stack([t, 0.85 - x, np.full_like(t, 0.5), np.full_like(t, np.pi)])
+    m = fleet_metrics([a, b], ["TIMEOUT_SIM"] * 2, [None, None], settings=FleetSettings(safety_radius=0.2))
+    assert m["robot_distance_min_m"] == pytest.approx(0.15)
+    assert m["deadlock"] and m["no_progress_max_s"] == pytest.approx(8.0, abs=0.1)
+    # closer than 0.2 m from x = 0.3 + 0.1 t, 0.85 - 0.1 t: from t = 1.75 s on
+    assert m["safety_time_s"] == pytest.approx(10.0 - 1.75, abs=0.05)
+    assert m["robots"][0]["safety_time_s"] == m["safety_time_s"]
+    with pytest.raises(ValueError, match="`deadlock_s` must be a positive number"):
+        FleetSettings(deadlock_s=0)
+    with pytest.raises(ValueError, match="2 robots, 1 outcomes"):
+        fleet_metrics([a, b], ["DONE"], [1.0, 1.0])
