@@ -150,3 +150,55 @@ def test_deadlock_and_safety_time_on_made_up_poses():
         FleetSettings(deadlock_s=0)
     with pytest.raises(ValueError, match="2 robots, 1 outcomes"):
         fleet_metrics([a, b], ["DONE"], [1.0, 1.0])
+
+
+# ---------------------------------------------------------------- the server's pure parts: the task, the pre-flight
+
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from planners import load_environment  # noqa: E402
+from server.errors import PreflightError  # noqa: E402
+from server.pipeline import compute  # noqa: E402
+from server.validation import preflight_fleet  # noqa: E402
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "fleet"
+
+
+def test_the_swap_job_as_one_task_uncoordinated_collides_prioritized_completes():
+    env = json.loads((Path(__file__).resolve().parents[1] / "planners" / "data" / "swap.json").read_text())
+    out = {}
+    for name in ("uncoordinated", "prioritized"):
+        job = json.loads((EXAMPLES / f"swap-{name}.json").read_text())
+        out[name] = compute.fleet_job(env, job["robots"], job["planner"], {}, job["seed"], 120.0, 0.045)
+    bad, good = out["uncoordinated"], out["prioritized"]
+    assert [r["outcome"] for r in bad["robots"]] == ["COLLISION"] * 4 and bad["metrics"]["collisions_robot"] == 4
+    assert [r["outcome"] for r in good["robots"]] == ["DONE"] * 4
+    m = good["metrics"]
+    assert m["success_rate"] == 1.0 and m["robot_distance_min_m"] > 2 * RADIUS and m["makespan_s"] > 0
+    assert json.dumps(m)  # JSON-ready
+    for r in good["robots"]:
+        assert r["lines"][0][1].startswith("T,T,P,") and r["lines"][-1][1].startswith("EV,DONE")
+
+
+def test_fleet_task_planning_errors_name_the_robot():
+    env = json.loads((Path(__file__).resolve().parents[1] / "planners" / "data" / "room.json").read_text())
+    robots = [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 0.3], "goal": [0.9, 0.9]}]
+    assert compute.fleet_job(env, robots, "fmm", {}, 1, 60.0, 0.045)["planning_error"].startswith("robot 1:")
+
+
+def test_fleet_preflight_names_the_field():
+    env = load_environment("room")
+    ok = [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 0.3], "goal": [0.3, 1.5]}]
+    preflight_fleet(env, ok, 0.045)
+    cases = [
+        (ok[:1], "robots: a multi-robot job has 2 to 16 robots, got 1"),
+        (ok * 9, "got 18"),
+        ([ok[0], {"start": [0.35, 0.3], "goal": [0.3, 1.5]}], r"robots\[1\]\.start is 0.050 m from robots\[0\]\.start"),
+        ([ok[0], {"start": [1.5, 0.3], "goal": [1.5, 1.5]}], r"robots\[1\]\.goal is 0.000 m from robots\[0\]\.goal"),
+        ([ok[0], {"start": [0.9, 0.9], "goal": [0.3, 1.5]}], r"robots\[1\]\.start: "),
+        ([ok[0], {"start": [1.5, 0.3], "goal": [0.9, 0.9]}], r"robots\[1\]\.goal: "),
+    ]
+    for robots, match in cases:
+        with pytest.raises(PreflightError, match=match):
+            preflight_fleet(env, robots, 0.045)
