@@ -29,7 +29,7 @@ from .environment import Environment, load_environment
 from .errors import NoPathFound, PlanningError
 from .st_astar import SpaceTimeAStar, TimedPath, movers_table, plan_timed
 
-__all__ = ["MultiPlan", "min_separation", "plan_prioritized"]
+__all__ = ["MultiPlan", "fleet_waypoints", "min_separation", "plan_prioritized"]
 
 #: the space-time defaults for fleets: waits allowed, a smaller time margin (robots that can be timed)
 FLEET_DEFAULTS = {"wait": True, "time_margin_s": 0.5, "clearance": 0.0}
@@ -108,3 +108,30 @@ def plan_prioritized(env: Environment | str, starts: Sequence[Sequence[float]], 
         if r + 1 < len(s_xy):
             table |= movers_table(space, run, horizon, others=[timed])
     return MultiPlan(paths, max(float(p.times[-1]) for p in paths), time.perf_counter() - t_begin, infos)
+
+
+def fleet_waypoints(timed: TimedPath, goal_heading: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A timed path as a follower's path and its holds: waypoints ``(K, 3)`` (m, m, rad; each facing the next,
+    the last ``goal_heading`` or the last segment's direction) at the plan's corners and waits, and
+    departure times ``(K,)`` (s): where the plan waits, the time it leaves the point, NaN elsewhere.
+
+    Straight runs of lattice moves become one segment; a wait (a repeated point) becomes one waypoint the
+    robot holds at (:func:`robot_agent.fleet.simulate_fleet`)."""
+    pts, t = np.asarray(timed.points, dtype=float), np.asarray(timed.times, dtype=float)
+    same = np.r_[False, (np.diff(pts, axis=0) == 0).all(axis=1)]  # point k repeats point k - 1
+    keep = ~same
+    xy = pts[keep]
+    leave = np.maximum.reduceat(t, np.flatnonzero(keep))  # the last time at each distinct point
+    arrive = t[keep]
+    waits = leave > arrive + 1e-9
+    seg = np.diff(xy, axis=0)
+    turn = np.r_[True, np.abs(seg[1:, 0] * seg[:-1, 1] - seg[1:, 1] * seg[:-1, 0]) > 1e-12, True] if len(xy) > 1 \
+        else np.array([True])
+    corner = turn | waits
+    corner[0] = corner[-1] = True
+    xy, depart = xy[corner], np.where(waits, leave, np.nan)[corner]
+    d = np.diff(xy, axis=0)
+    head = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
+    last = goal_heading if goal_heading is not None else (float(head[-1]) if len(head) else 0.0)
+    depart[-1] = np.nan
+    return np.column_stack([xy, np.r_[head, last]]), depart

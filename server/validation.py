@@ -24,7 +24,11 @@ from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 from .errors import PreflightError
 from .schemas import ExperimentCreate
 
-__all__ = ["FIELD_SIZE", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight"]
+__all__ = ["FIELD_SIZE", "MAX_ROBOTS", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight",
+           "preflight_fleet"]
+
+#: robots a multi-robot job may have (issue 17)
+MAX_ROBOTS = 16
 
 
 @dataclass(frozen=True)
@@ -87,6 +91,35 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
         _check_clear(space, pts, robot_radius)
         path = [list(map(float, p)) for p in body.path]
     return Preflight(env, _pose(s), _pose(g), params, path, controller.params)
+
+
+def preflight_fleet(env: Environment, robots: list[dict[str, Any]], robot_radius: float,
+                    planning_margin: float = 0.0) -> None:
+    """Check a multi-robot job's ``robots`` (``{"start", "goal"}``, m, rad) in ``env``: 2 to :data:`MAX_ROBOTS`
+    robots, every start and goal free for ``robot_radius + planning_margin`` (m) and clear of the moving
+    obstacles at time 0 (starts), no two starts or goals closer than twice that.  Raises
+    :class:`PreflightError` naming the field (``robots[i].start`` ...)."""
+    if not 2 <= len(robots) <= MAX_ROBOTS:
+        raise PreflightError(f"robots: a multi-robot job has 2 to {MAX_ROBOTS} robots, got {len(robots)}")
+    radius = robot_radius + planning_margin
+    for i, r in enumerate(robots):
+        for key in ("start", "goal"):
+            try:
+                check_query(env, r[key], r[key], robot_radius=radius)  # the pose alone
+            except PlanningError as exc:
+                why = str(exc).removeprefix("start ").removeprefix("goal ")
+                raise PreflightError(f"robots[{i}].{key}: {key} {why}") from None
+        taken = obstacle_at(env.moving_obstacles, np.asarray(r["start"][:2], dtype=float), 0.0, robot_radius)
+        if taken is not None:
+            raise PreflightError(f"robots[{i}].start is closer than the robot radius {robot_radius:g} m to moving "
+                                 f"obstacle {taken} (moving_obstacles[{taken}]) when the paths start")
+    for key in ("start", "goal"):
+        xy = np.array([r[key][:2] for r in robots], dtype=float)
+        d = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1)) + np.diag(np.full(len(xy), np.inf))
+        if d.min() < 2 * radius:
+            a, b = sorted(np.unravel_index(int(np.argmin(d)), d.shape))
+            raise PreflightError(f"robots[{b}].{key} is {d[a, b]:.3f} m from robots[{a}].{key}: two robots need "
+                                 f"{2 * radius:.3f} m between their centres")
 
 
 def _check_clear(space: Any, pts: np.ndarray, robot_radius: float) -> None:

@@ -12,7 +12,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "moving_tuples", "compare_runs", "expected_duration_s", "explicit_path", "jittered", "measure_run",
+__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "moving_tuples", "compare_runs", "expected_duration_s", "explicit_path", "fleet_job", "jittered", "measure_run",
            "plan_job", "simulate_job", "warm_up"]
 
 
@@ -193,6 +193,81 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     except TooFewPoses as exc:
         out["metrics_error"] = str(exc)
     return out
+
+
+def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: Optional[str],
+              params: dict[str, Any], seed: int, max_s: float, robot_radius: float, backend: str = "ideal",
+              controller: str = "schema", controller_params: Optional[dict[str, float]] = None) -> dict[str, Any]:
+    """A multi-robot run as one task (issue 17): plan every robot, run them all in one world on one clock
+    (:func:`robot_agent.fleet.simulate_fleet`), measure them (:func:`planners.fleet_metrics.fleet_metrics`).
+
+    ``robots``: per robot ``{"start", "goal", "path"?}`` (m, rad).  ``planner`` ``prioritized`` plans them
+    together (timed paths: robots hold where the plan waits); any other planner plans each robot alone,
+    uncoordinated (the baseline); a robot's explicit ``path`` is driven as given.  Returns ``{"robots": [per
+    robot {"path", "depart", "poses" (N, 4) t s, x m, y m, theta rad, "lines", "t_start", "t_end",
+    "outcome", "obstacle", "holds"}], "planning_time_s", "metrics"}``, or ``{"planning_error": why}`` /
+    ``{"placement_error": why}``."""
+    import time
+
+    from planners import PlanningError, parse_environment, plan_path
+    from planners.fleet_metrics import FleetSettings, fleet_metrics
+    from planners.prioritized import fleet_waypoints, plan_prioritized
+    from robot_agent.fleet import simulate_fleet
+    from robot_agent.headless import PlacementRefused
+    from robot_agent.params import robot_params
+    from robot_agent.protocol import encode_path, format_event
+
+    env = parse_environment(env_data)
+    t0 = time.perf_counter()
+    paths: list[list[list[float]]] = []
+    depart: list[Optional[list[float]]] = []
+    try:
+        if planner == "prioritized":
+            plan = plan_prioritized(env, [r["start"] for r in robots], [r["goal"] for r in robots],
+                                    robot_radius=robot_radius, params=params)
+            for r, timed in zip(robots, plan.paths):
+                g = r["goal"]
+                pts, dep = fleet_waypoints(timed, g[2] if len(g) > 2 else None)
+                paths.append(np.round(pts, 6).tolist())
+                depart.append([None if not math.isfinite(v) else float(v) for v in dep])
+        else:
+            for i, r in enumerate(robots):
+                if r.get("path") is not None:
+                    paths.append(explicit_path(r["path"], r["goal"]))
+                else:
+                    try:
+                        got = plan_path(env, r["start"], r["goal"], planner or "fmm", robot_radius=robot_radius,
+                                        params=params, seed=seed)
+                    except PlanningError as exc:
+                        raise PlanningError(f"robot {i}: {exc}") from None
+                    paths.append(np.round(got.path, 6).tolist())
+                depart.append(None)
+    except PlanningError as exc:
+        return {"planning_error": str(exc)}
+    planning_time_s = time.perf_counter() - t0
+    starts = []
+    for r, p in zip(robots, paths):
+        s = list(r["start"])
+        starts.append(s if len(s) > 2 else [*s[:2], p[0][2]])
+    dep_arrays = [None if d is None else np.array([np.nan if v is None else v for v in d]) for d in depart]
+    try:
+        fleet = simulate_fleet(paths, starts, seed=seed, depart=dep_arrays, blocks=block_tuples(env_data),
+                               moving=moving_tuples(env_data), backend=backend, area=env.size, max_s=max_s,
+                               controller=controller, controller_params=controller_params)
+    except PlacementRefused as exc:
+        return {"placement_error": str(exc)}
+    settings = FleetSettings(robot_radius=robot_params().collision_radius_m)
+    metrics = fleet_metrics([r.poses for r in fleet.runs], fleet.outcomes, [r.t_end for r in fleet.runs],
+                            [r.obstacle for r in fleet.runs], settings)
+    metrics["planning_time_s"] = planning_time_s
+    out = []
+    for i, run in enumerate(fleet.runs):
+        lines = [[">", encode_path(paths[i]), run.t_start]]
+        lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
+        out.append({"path": paths[i], "depart": depart[i], "poses": run.poses, "lines": lines,
+                    "t_start": run.t_start, "t_end": run.t_end, "outcome": run.outcome, "obstacle": run.obstacle,
+                    "holds": [[int(k), float(s)] for k, s in fleet.holds[i]]})
+    return {"robots": out, "planning_time_s": planning_time_s, "metrics": _clean(metrics)}
 
 
 def compare_runs(sim_poses: list[list[float]], twb_poses: list[list[float]]) -> dict[str, Any]:

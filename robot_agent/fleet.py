@@ -1,0 +1,208 @@
+"""Several robots' run as one function call: one shared world, one clock, no socket (issue 17).
+
+The multi-robot sibling of :func:`robot_agent.headless.simulate_run`.  ``N``
+robots stand in ONE world of the environment's size (frame origin (0, 0) for
+all of them), so they collide with the walls, the blocks, their moving
+obstacles and each other (centres closer than two collision radii).  They
+all start on the same step and each follows its own path with the same
+compiled follower and controller as a single run; paths, placements, blocks
+and moving obstacles go through the wire codec's rounding as over TCP.
+
+**Holding at waypoints.**  ``T,T,P`` carries no times and the follower cannot
+wait.  A fleet run is commanded by the testbed, though, which can hold a
+robot: a path may come with departure times (``depart``, s on the fleet's
+clock, NaN where there is no hold).  The path is then sent in *legs* split at
+the held waypoints: the robot drives a leg to its end (it stops and turns
+towards the next point), and the testbed sends the next leg once the clock
+reached the waypoint's departure time -- at once if the robot is late.  Each
+leg is a new path for the robot (a new noise key, ``path_key(seed, "robot-i",
+leg)``, as an agent counts its paths), so a leg's moving obstacles are
+re-sent with their clock shifted to the fleet's.  Events are reported per
+robot as one path: one START, WP indices of the whole path, one DONE or FAIL.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .backends import make_backend
+from .controller_specs import select
+from .frames import FIELD_SIZE
+from .headless import HeadlessRun, PlacementRefused
+from .noise import path_key
+from .params import robot_params
+from .protocol import (BuildCommand, MovingCommand, PathCommand, PlaceCommand, encode_build, encode_moving, encode_path,
+                       encode_place, parse_command)
+from .robot_profile import DEFAULT_PROFILE
+from .sim import SimCore, SimEvent
+from .world import World
+
+__all__ = ["FleetRun", "MAX_FLEET", "simulate_fleet"]
+
+#: the most robots one fleet run takes
+MAX_FLEET = 16
+_CHUNK = 4096  # control steps per compiled call when no robot waits for a leg
+
+
+@dataclass
+class FleetRun:
+    """What a fleet run gave: one :class:`~robot_agent.headless.HeadlessRun` per robot (its tracker poses
+    ``(N, 4)`` t s, x m, y m, theta rad on the fleet's clock, its events, start and end times), the
+    ``holds`` each robot made (waypoint index, s held) and ``dt`` (s, the control step)."""
+
+    runs: list[HeadlessRun]
+    holds: list[list[tuple[int, float]]] = field(default_factory=list)
+    dt: float = 0.02
+
+    @property
+    def outcomes(self) -> list[str]:
+        """Each robot's outcome: ``DONE``, the FAIL reason or ``TIMEOUT_SIM``."""
+        return [r.outcome for r in self.runs]
+
+
+def _legs(n_points: int, depart: np.ndarray | None) -> list[tuple[int, int, float]]:
+    """``(first, last, release s)`` index ranges (inclusive) of a path of ``n_points`` split at its holds."""
+    if depart is None:
+        return [(0, n_points - 1, 0.0)]
+    held = [k for k in range(n_points - 1) if math.isfinite(depart[k])]
+    legs, first = [], 0
+    release = float(depart[0]) if math.isfinite(depart[0]) else 0.0
+    for k in held:
+        if k == 0:
+            continue
+        legs.append((first, k, release))
+        first, release = k + 1, float(depart[k])
+    legs.append((first, n_points - 1, release))
+    return legs
+
+
+def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], starts: Sequence[Sequence[float]], *,
+                   seed: int, depart: Sequence[Sequence[float] | np.ndarray | None] | None = None,
+                   blocks: Sequence[Sequence[float]] = (), moving: Sequence[tuple] = (), backend: str = "ideal",
+                   profile: str | dict = DEFAULT_PROFILE, area: tuple[float, float] = FIELD_SIZE,
+                   max_s: float = 3600.0, controller: str | None = None,
+                   controller_params: dict[str, float] | None = None) -> FleetRun:
+    """Run robot ``i`` along ``paths[i]`` ``(N_i, 3)`` (m, m, rad) from ``starts[i]`` (x, y, theta) in one world
+    of ``area`` (m) with ``blocks`` (cx, cy, w, h, angle: m, rad) and, for every robot, the ``moving``
+    obstacles (params, waypoints, as :func:`~robot_agent.protocol.encode_moving`; their time is the fleet's
+    clock), all robots starting at time 0, until every robot ended its path or ``max_s`` (s) passed.
+
+    ``depart[i]`` ``(N_i,)`` (optional): the time (s) robot ``i`` may leave waypoint ``k`` at the earliest
+    (NaN: no hold); see the module's docstring.  The seed gives every robot's noise.  Raises
+    :class:`~robot_agent.headless.PlacementRefused` naming the robot whose start is not free and
+    ``ValueError`` for mismatched or too many robots."""
+    n = len(paths)
+    if not 1 <= n <= MAX_FLEET:
+        raise ValueError(f"a fleet has 1 to {MAX_FLEET} robots, got {n}")
+    if len(starts) != n:
+        raise ValueError(f"{n} paths but {len(starts)} starts")
+    if depart is not None and len(depart) != n:
+        raise ValueError(f"{n} paths but {len(depart)} departure lists")
+    chosen = select(controller, controller_params)
+    params = robot_params(profile)
+    size = (float(area[0]), float(area[1]))
+    world = World(np.array([size]), np.zeros(n, dtype=np.int64), np.zeros((n, 2)), np.tile(size, (n, 1)),
+                  params.collision_radius_m)
+    core = SimCore(params, make_backend(backend, n, params), world, log_poses=True)
+    built = parse_command(encode_build(blocks), field_size=size)
+    movers = parse_command(encode_moving(moving), field_size=size)
+    assert isinstance(built, BuildCommand) and isinstance(movers, MovingCommand)
+    world.set_blocks(0, built.blocks)
+    sent: list[np.ndarray] = []
+    holds_at: list[np.ndarray | None] = []
+    for i in range(n):
+        p = parse_command(encode_path(paths[i]), field_size=size)
+        assert isinstance(p, PathCommand)
+        sent.append(np.asarray(p.points, dtype=float))
+        d = None if depart is None or depart[i] is None else np.asarray(depart[i], dtype=float).reshape(-1)
+        if d is not None and len(d) != len(sent[i]):
+            raise ValueError(f"robot {i}: {len(sent[i])} path points but {len(d)} departure times")
+        holds_at.append(d)
+    xy = np.array([[float(v) for v in st[:2]] for st in starts]).reshape(n, 2)
+    gap = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1)) + np.diag(np.full(n, np.inf))
+    if n > 1 and gap.min() < 2 * world.radius:
+        a, b = sorted(np.unravel_index(int(np.argmin(gap)), gap.shape))
+        raise PlacementRefused(f"cannot place robot {b}: robot {a} stands {gap[a, b]:.3f} m from it, closer than "
+                               f"two collision radii ({2 * world.radius:.3f} m)")
+    away = np.full((n, 3), 1e6)  # the robots' mutual distances are checked above
+    for i in range(n):
+        placed = parse_command(encode_place(starts[i]), field_size=size)
+        assert isinstance(placed, PlaceCommand)
+        world.set_moving(i, list(movers.obstacles))
+        why = world.place_conflict(i, placed.pose, away)
+        if why:
+            raise PlacementRefused(f"cannot place robot {i}: {why}")
+        core.place(i, placed.pose)
+    core.poses.drain()
+
+    legs = [_legs(len(sent[i]), holds_at[i]) for i in range(n)]
+    nxt = np.zeros(n, dtype=np.int64)  # each robot's next leg
+    ready = np.ones(n, dtype=bool)  # its previous leg is done (or none began): it may take the next
+    over = np.zeros(n, dtype=bool)  # finished its path or failed
+    arrived_at = np.zeros(n)  # fleet time its last leg ended (s)
+    events: list[list[SimEvent]] = [[] for _ in range(n)]
+    holds: list[list[tuple[int, float]]] = [[] for _ in range(n)]
+    end_step = math.ceil(max_s / core.dt)
+    dt = core.dt
+
+    def send(i: int) -> None:
+        first, last, _ = legs[i][nxt[i]]
+        now = core.step_count
+        shifted = [(np.array([par[0], par[1], par[2], par[3] - now * dt]), pts) for par, pts in movers.obstacles]
+        world.set_moving(i, shifted)
+        core.set_path(i, sent[i][first:last + 1], path_key(seed, f"robot-{i}", int(nxt[i])), chosen)
+        ready[i] = False
+
+    while core.step_count < end_step and not over.all():
+        now = core.step_count
+        release = np.full(n, np.inf)
+        for i in np.flatnonzero(ready & ~over):
+            r = int(math.ceil(legs[i][nxt[i]][2] / dt - 1e-9))
+            if r <= now:
+                if nxt[i] > 0:
+                    holds[i].append((legs[i][nxt[i]][0] - 1, now * dt - arrived_at[i]))
+                send(i)
+            else:
+                release[i] = r
+        # a robot with legs to go must be seen the step its leg ends: then step one at a time
+        legs_left = np.array([len(legs[i]) - 1 - nxt[i] for i in range(n)])
+        step_to = int(min(end_step, release.min()))
+        if core.busy():
+            chunk = 1 if ((legs_left > 0) & ~over).any() else _CHUNK
+            got = core.advance(max(1, min(chunk, step_to - now)))
+        else:
+            core.skip(max(1, step_to - now))
+            got = []
+        for e in got:
+            i = e.robot
+            first = legs[i][nxt[i]][0]
+            last_leg = nxt[i] == len(legs[i]) - 1
+            if e.kind == "START":
+                if nxt[i] == 0:
+                    events[i].append(e)
+            elif e.kind == "WP":
+                events[i].append(SimEvent(i, "WP", e.t, index=(e.index or 0) + first))
+            elif e.kind == "DONE":
+                if last_leg:
+                    events[i].append(e)
+                    over[i] = True
+                else:
+                    nxt[i] += 1
+                    ready[i] = True
+                    arrived_at[i] = e.t
+            else:
+                events[i].append(e)
+                over[i] = True
+    logged = core.poses.drain()
+    runs = []
+    for i in range(n):
+        ev = events[i]
+        t_start = next((e.t for e in ev if e.kind == "START"), None)
+        t_end = next((e.t for e in ev if e.kind in ("DONE", "FAIL")), None)
+        runs.append(HeadlessRun(logged.get(i, np.zeros((0, 4))), ev, t_start, t_end))
+    return FleetRun(runs, holds, dt)
+
