@@ -14,7 +14,15 @@ TWB = Path(sys.executable).with_name("twb")
 
 def pytest_sessionstart(session: pytest.Session) -> None:
     """Compile the simulation kernels once, before any test starts agent processes: on a fresh
-    checkout every process would otherwise compile them at the same time (numba's cache)."""
+    checkout every process would otherwise compile them at the same time (numba's cache).
+
+    Also: a test run started as a background job of a script inherits SIGINT ignored, and every
+    process a test starts would inherit that too and never stop on the Ctrl-C the tests send it;
+    with a handler here, children start with the default again."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     from robot_agent.sim import warm_up
 
     warm_up()

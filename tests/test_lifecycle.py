@@ -129,3 +129,26 @@ def test_a_testbed_started_by_a_program_ends_when_the_program_is_killed(tmp_path
     while left := [k for k in kids if alive(k)]:
         assert time.monotonic() < deadline, f"processes outlived the program that started them: {left}"
         time.sleep(0.2)
+
+
+
+def test_an_agent_stops_on_ctrl_c_and_sigterm_even_when_started_with_ctrl_c_ignored():
+    """A background job of a script starts with SIGINT ignored: `twb agent` must still stop on Ctrl-C (and on
+    SIGTERM, flushing what it has), not hang until killed."""
+    import re
+    import subprocess
+
+    from servers import TWB
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        proc = subprocess.Popen([str(TWB), "agent", "--port", "0", "--backend", "ideal", "--time-scale", "max",
+                                 "--robot-id", "bg"], stderr=subprocess.PIPE, text=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+        try:
+            while not re.search(r"ports \[\d+", line := proc.stderr.readline()):
+                assert line, f"twb agent exited early with {proc.poll()}"
+            proc.send_signal(sig)
+            assert proc.wait(timeout=20) == 0
+        finally:
+            proc.kill()
+            proc.wait()

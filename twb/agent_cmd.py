@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+import signal
 from enum import Enum
 from typing import Annotated, Optional
 
@@ -90,11 +91,18 @@ def agent(
     )
 
     async def run() -> None:
+        # Ctrl-C and SIGTERM stop the robots cleanly, also when this process was started with SIGINT ignored
+        # (a background job of a script), where asyncio's own Ctrl-C handling stays off
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
         await agents.start()
         try:
-            await asyncio.Event().wait()
+            await stop.wait()
         finally:
             await agents.stop()
+        logging.getLogger("robot_agent.host").warning("stopped")
 
     try:
         asyncio.run(run())
