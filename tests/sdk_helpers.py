@@ -54,4 +54,8 @@ def agent_process(robot_id: str, *options: str) -> Iterator[int]:
         yield port
     finally:
         proc.send_signal(signal.SIGINT)
-        proc.wait(30)
+        try:
+            proc.wait(30)
+        finally:  # a test that fails here leaves no agent behind
+            proc.kill()
+            proc.wait()
