@@ -246,7 +246,9 @@ class Dispatcher:
         self._estimate_now()
 
     def _estimate_now(self) -> None:
-        self._estimate_later = None
+        if self._estimate_later is not None:  # a refresh asked for now makes the one waiting needless
+            self._estimate_later.cancel()
+            self._estimate_later = None
         self._estimated_at = time.monotonic()
         remaining = {rid: self._expected.get(rid, 60.0) / 2 for rid in self._tasks}
         starts = self.scheduler.estimate_starts(remaining)

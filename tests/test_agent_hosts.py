@@ -22,12 +22,12 @@ class Host:
 
     def __init__(self, url: str, token: str, *args: str) -> None:
         self.argv = [str(TWB), "agent", "--port", "0", "--time-scale", "5", "--server", url, "--token", token, *args]
-        self.proc = self.start()
+        self.start()
 
-    def start(self) -> subprocess.Popen:
+    def start(self) -> None:
+        """The host (again): its agent process, with the same robots."""
         self.proc = subprocess.Popen(self.argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                      start_new_session=True)
-        return self.proc
 
     def vanish(self) -> None:
         """The host is gone at once (power cut: SIGKILL, no goodbye to the server)."""

@@ -33,7 +33,7 @@ import numpy as np
 
 from ._spec import StudySpec
 
-__all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "csv_cell", "load_study", "read_csv_rows", "run_outcome",
+__all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "run_outcome", "write_csv",
            "write_csv_rows", "write_poses"]
 
 #: leading columns of runs.csv (the metrics follow)
@@ -183,8 +183,7 @@ def load_study(directory: str | Path) -> StudyData:
     return StudyData(spec, doc["environments"], doc["experiments"], rows, direct, meta, d)
 
 
-def csv_cell(v: Any) -> str:
-    """A value as a CSV cell (None: empty; booleans ``true``/``false``; non-finite floats: empty)."""
+def _cell(v: Any) -> str:
     if v is None:
         return ""
     if isinstance(v, bool):
@@ -219,12 +218,17 @@ def write_csv_rows(path: Path, rows: Iterable[dict[str, Any]], first: Iterable[s
         for k in r:
             if k not in cols:
                 cols.append(k)
+    write_csv(path, cols, rows)
+    return cols
+
+
+def write_csv(path: Path, columns: list[str], rows: Iterable[dict[str, Any]]) -> None:
+    """Write dict rows as CSV with these ``columns``, one row at a time (``rows`` may be a generator)."""
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(cols)
+        w.writerow(columns)
         for r in rows:
-            w.writerow([csv_cell(r.get(c)) for c in cols])
-    return cols
+            w.writerow([_cell(r.get(c)) for c in columns])
 
 
 def read_csv_rows(path: Path) -> list[dict[str, Any]]:

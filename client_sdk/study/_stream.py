@@ -9,14 +9,13 @@ the rows' column names is kept in memory while the study runs.
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
 
-from ._data import DIRECT_COLUMNS, ID_COLUMNS, StudyData, csv_cell, load_study, write_poses
+from ._data import DIRECT_COLUMNS, ID_COLUMNS, StudyData, load_study, write_csv, write_poses
 from ._spec import StudySpec
 
 __all__ = ["StudySink"]
@@ -40,13 +39,8 @@ class _Rows:
 
     def close(self, path: Path) -> None:
         self._file.close()
-        cols = list(self._columns)
-        with open(self._part) as src, open(path, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(cols)
-            for line in src:
-                row = json.loads(line)
-                w.writerow([csv_cell(row.get(c)) for c in cols])
+        with open(self._part) as src:
+            write_csv(path, list(self._columns), (json.loads(line) for line in src))
         self._part.unlink()
 
 

@@ -69,8 +69,7 @@ def add_poses(session: Session, run_id: int, rows: np.ndarray) -> None:
     if conn.dialect.name == "postgresql":
         _copy(conn.connection.driver_connection, run_id, rows)
     else:
-        conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle),
-                             [(run_id, t, x, y, a) for t, x, y, a in rows.tolist()])
+        conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle), _tuples(run_id, rows))
 
 
 def _copy(pg: object, run_id: int, rows: np.ndarray) -> None:
@@ -86,12 +85,17 @@ def _executemany(conn: object, sqlite: bool, paramstyle: str, run_id: int, rows:
         if sqlite:  # the run id comes from the server's own window: skip the per-row key lookup
             cur.execute("PRAGMA foreign_keys=OFF")
         try:
-            cur.executemany(_insert_sql(paramstyle), [(run_id, t, x, y, a) for t, x, y, a in rows.tolist()])
+            cur.executemany(_insert_sql(paramstyle), _tuples(run_id, rows))
         finally:
             if sqlite:  # the pooled connection goes back as it came
                 cur.execute("PRAGMA foreign_keys=ON")
     finally:
         cur.close()
+
+
+def _tuples(run_id: int, rows: np.ndarray) -> list[tuple[int, float, float, float, float]]:
+    """The INSERT's parameters: ``(run_id, t, x, y, theta)`` per row."""
+    return [(run_id, t, x, y, a) for t, x, y, a in rows.tolist()]
 
 
 def _insert_sql(paramstyle: str) -> str:
