@@ -240,12 +240,19 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     page.select_option("#f-planner", "fm2")
     expect(page.locator("#f-controller option")).to_have_count(4)  # the built-ins, schema first
     page.select_option("#f-controller", "pure_pursuit")
+    # the controller's parameters: one input each, the default as placeholder; a bad value is refused next to it
+    expect(page.locator("#f-cparam-lookahead_m")).to_have_attribute("placeholder", "0.06")
+    page.fill("#f-cparam-lookahead_m", "-1")
     page.fill("#f-repetitions", "2")
     page.fill("#f-seed", "3")
+    page.click("#submit-button")
+    expect(page.locator("#err-controller_params")).to_contain_text("lookahead_m")
+    expect(page.locator("#f-cparam-lookahead_m")).to_have_attribute("aria-invalid", "true")
+    page.fill("#f-cparam-lookahead_m", "0.08")
     page.screenshot(path=OUTPUT / "submit.png")
     exp = submit_and_wait(page, testbed)
     exp_id = exp["id"]
-    assert exp["controller"] == "pure_pursuit" and exp["controller_params"]["lookahead_m"] == 0.06
+    assert exp["controller"] == "pure_pursuit" and exp["controller_params"]["lookahead_m"] == 0.08
     expect(page.locator("dl.facts").first).to_contain_text("Controllerpure_pursuit")
     assert exp["start"][:2] == pytest.approx([0.3, 0.3], abs=0.01) and exp["planner"] == "fm2"
     assert exp["goal"][2] == pytest.approx(math.pi / 2, abs=0.02) and exp["repetitions"] == 2 and exp["seed"] == 3
@@ -286,7 +293,8 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     page.screenshot(path=OUTPUT / "field.png")
     page.click("#nav a[data-view=experiments]")
     expect(page.locator(f'#exp-finished tr[data-experiment="{exp_id}"]')).to_be_visible()
-    assert page.console.errors == []
+    # the only console error: the browser's note on the 422 answer to the bad controller parameter
+    assert len(page.console.errors) == 1 and "422" in page.console.errors[0], page.console.errors
 
 
 def test_server_validation_errors_are_shown_next_to_the_field(page, testbed):

@@ -21,6 +21,7 @@ export function fieldOfMessage(msg) {
   if (/^repetitions\b/.test(m)) return "repetitions";
   if (/^seed\b/.test(m)) return "seed";
   if (/^modes?\b/.test(m)) return "modes";
+  if (/^controller_params/.test(m)) return "controller_params";
   if (/^controller/.test(m)) return "controller";
   if (/^parameter |has no parameter|planner_params/.test(m)) return "planner_params";
   if (/program|^uploads? /.test(m)) return "program";
@@ -155,6 +156,7 @@ export class SubmitPage {
     $("#f-path").addEventListener("input", () => this.fromPathText());
     $("#f-environment").addEventListener("change", () => this.onEnvironment(true));
     $("#f-planner").addEventListener("change", () => this.onPlanner());
+    $("#f-controller").addEventListener("change", () => this.onController());
     for (const r of $$('input[name="field"]', this.form)) r.addEventListener("change", () => this.onEnvironment(false));
     for (const r of $$('input[name="pick"]', this.form)) r.addEventListener("change", () => this.draw());
     for (const which of ["start", "goal"]) {
@@ -421,6 +423,35 @@ export class SubmitPage {
     const keep = sel.value;
     sel.replaceChildren(...listed.data.map((c) => h("option", { value: c.name, title: c.description }, c.name)));
     sel.value = listed.data.some((c) => c.name === keep) ? keep : "schema";
+    this.controllers = listed.data;
+    this.onController();
+  }
+
+  /** One number input per parameter of the chosen controller: empty keeps the default (its placeholder);
+   * the range and unit are in the input's limits and title. */
+  onController() {
+    const c = (this.controllers || []).find((q) => q.name === $("#f-controller").value);
+    $("#controller-desc").textContent = c ? `${c.description}${c.source ? ` (${c.source})` : ""}` : "";
+    const box = $("#f-controller-params");
+    const params = c?.parameters || [];
+    box.replaceChildren(...(params.length ? params.map((p) => {
+      const id = `f-cparam-${p.name}`;
+      const [low, high] = p.range || [null, null];
+      const input = h("input", { id, type: "number", step: "any", "data-cparam": p.name, placeholder: String(p.default),
+        min: low, max: high, title: `${p.description} (${p.unit}; ${low} to ${high})`,
+        "aria-describedby": "err-controller_params" });
+      return h("label", { for: id }, `${p.name}`, input);
+    }) : [h("p", { class: "muted small" }, c ? "This controller takes no parameters." : "")]));
+  }
+
+  /** The controller parameters typed in (the others keep their defaults). */
+  controllerParams() {
+    const out = {};
+    for (const el of $$("[data-cparam]", $("#f-controller-params"))) {
+      const raw = el.value.trim();
+      if (raw !== "") out[el.dataset.cparam] = Number(raw);
+    }
+    return out;
   }
 
   showError(key, message) {
@@ -432,7 +463,7 @@ export class SubmitPage {
     target.textContent = message;
     const inputs = {
       environment: ["#f-environment"], planner: ["#f-planner"], repetitions: ["#f-repetitions"], seed: ["#f-seed"],
-      controller: ["#f-controller"], controller_params: ["#f-controller"],
+      controller: ["#f-controller"], controller_params: ["#f-controller-params input"],
       start: ["#f-start-x", "#f-start-y", "#f-start-a"], goal: ["#f-goal-x", "#f-goal-y", "#f-goal-a"],
       planner_params: ["#f-params input", "#f-params select", "#f-params textarea"],
       program: ["#f-program"], path: ["#f-path"],
@@ -440,8 +471,10 @@ export class SubmitPage {
     }[key] || [];
     const els = inputs.flatMap((sel) => $$(sel, this.form));
     const param = /parameter \w+\.(\w+)/.exec(message)?.[1];
+    const cparam = /^controller_params\.(\w+)/.exec(message)?.[1];
     for (const el of els) {
-      if (key !== "planner_params" || !param || el.dataset.param === param) el.setAttribute("aria-invalid", "true");
+      if (key === "controller_params" ? !cparam || el.dataset.cparam === cparam
+        : key !== "planner_params" || !param || el.dataset.param === param) el.setAttribute("aria-invalid", "true");
     }
     return els.find((el) => el.getAttribute("aria-invalid")) || els[0] || target;
   }
@@ -481,6 +514,7 @@ export class SubmitPage {
         goal: this.poses.goal,
         ...source,
         controller: $("#f-controller").value || "schema",
+        controller_params: this.controllerParams(),
         modes,
         repetitions: intOf("#f-repetitions"),
         seed: intOf("#f-seed"),
