@@ -115,6 +115,13 @@ def test_controller_programs_drive_or_fail_with_the_reason(client):
     assert exp["controller_program"] == python and exp["controller"] == "schema"
     for run in runs(client, good):
         assert run["status"] == "completed" and run["metrics"]["goal_reached"], run
+        m = run["metrics"]  # the program's compute cost per control step
+        assert m["controller_steps"] > 10 and m["controller_cpu_s"] > 0, m
+        assert m["controller_cpu_per_step_ms"] == pytest.approx(1000 * m["controller_cpu_s"] / m["controller_steps"],
+                                                                rel=1e-3)
+        assert 0 < m["controller_response_ms_median"] <= m["controller_response_ms_p95"]
+        # the sandbox's report (the program may still be reading when the run ends and the sandbox ends it)
+        assert m["controller_program"]["id"] == python and m["controller_program"]["wall_s"] > 0, m
         text = log(client, run["id"])
         assert "robot port < T,T,O,1" in text and "T,T,V," in text and "T,T,P" not in text.split("program")[-1]
 
@@ -130,6 +137,8 @@ def test_controller_programs_drive_or_fail_with_the_reason(client):
     for refusal in ("ERR,SYNTAX", "ERR,UNSUPPORTED,a controller program drives with T,T,V"):
         assert refusal in reasons["garbage"][2]
     assert reasons["crash"][:2] == ("program", "program crashed: exit code 3")
+    silent = runs(client, failing["silent"])[0]["metrics"]  # a failed run is measured too: it never answered
+    assert silent["controller_steps"] == 0 and silent["controller_response_ms_median"] is None
     assert reasons["wall"][0] == "collision", reasons["wall"][:2]
 
 

@@ -21,7 +21,10 @@ from __future__ import annotations
 
 import asyncio
 import math
-from typing import Optional
+import time
+from typing import Any, Optional
+
+import numpy as np
 
 from planners.metrics import DEFAULT_GOAL_TOLERANCE
 
@@ -35,7 +38,7 @@ from .context import RunContext, RunServices
 from .paths import Plan
 from .steps import collect_poses, fail_fields, failure_of, start_pose
 
-__all__ = ["ControllerRelay", "drive_program"]
+__all__ = ["ControllerRelay", "drive_program", "program_metrics"]
 
 
 class ControllerRelay:
@@ -55,6 +58,10 @@ class ControllerRelay:
         self.ended: asyncio.Future[tuple[str, ...]] = asyncio.get_running_loop().create_future()
         self._subscribed = False
         self._lines: asyncio.Queue[Optional[str]] = asyncio.Queue()
+        #: the program's T,T,V lines, and how long each answered the first PO line it had not answered yet (s)
+        self.steps = 0
+        self.responses_s: list[float] = []
+        self._unanswered: Optional[float] = None
         #: the program connected and the robot is in velocity mode
         self.armed = False
         link.on_pose = self._on_pose
@@ -86,6 +93,11 @@ class ControllerRelay:
             return "OK,O"
         if self.ended.done():
             return "ERR,STATE,the run has ended"
+        if line.startswith("T,T,V"):
+            self.steps += 1
+            if self._unanswered is not None:
+                self.responses_s.append(time.perf_counter() - self._unanswered)
+                self._unanswered = None
         reply = await self.link.forward(line, self.ctx.wall(0))
         if line.startswith("T,T,V") and reply.startswith("OK") and self._zero(line) \
                 and self.distance_m() <= self.tolerance_m:
@@ -101,7 +113,10 @@ class ControllerRelay:
 
     async def from_robot(self) -> Optional[str]:
         """The next ``PO``/``EV`` line for the program; None once the run has ended."""
-        return await self._lines.get()
+        line = await self._lines.get()
+        if line is not None and line.startswith("PO") and self._unanswered is None:
+            self._unanswered = time.perf_counter()
+        return line
 
     async def follow_events(self) -> None:
         """Pass the robot's events to the program until velocity mode ends (``ended``)."""
@@ -157,10 +172,29 @@ async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job:
         link.on_pose = None
     for direction, line in outcome.log:
         ctx.on_line(direction, line, None, False)
+    ctx.end_metrics.update(program_metrics(relay.steps, relay.responses_s, outcome.info))
     t_end = relay.t_end if relay.t_end is not None else link.now()
     await rec.update(ctx.run_id, t_start=relay.t_start, t_end=t_end)
     await collect_poses(svc, robot_id, t_end or 0.0)
     _verdict(relay, outcome.reason)
+
+
+def program_metrics(steps: int, responses_s: list[float], info: dict[str, Any]) -> dict[str, Any]:
+    """A controller program's compute cost (docs/metrics.md): ``controller_steps`` (its ``T,T,V`` lines),
+    ``controller_cpu_s`` (its CPU time, s), ``controller_cpu_per_step_ms`` (that per step, ms) and the wall
+    time from a ``PO`` line handed to it to its next ``T,T,V`` (ms, median and 95th percentile; the sandbox's
+    relay included), plus ``controller_program``: the sandbox's report (exit, wall and CPU s, memory KiB)."""
+    cpu = info.get("cpu_s")
+    r = np.asarray(responses_s, dtype=float) * 1000.0
+    report = {k: info.get(k) for k in ("id", "name", "exit_code", "signal", "timed_out", "wall_s", "cpu_s",
+                                       "max_rss_kib", "memory_peak_kib", "processes_max")}
+    return {
+        "controller_steps": int(steps), "controller_cpu_s": cpu,
+        "controller_cpu_per_step_ms": None if cpu is None or steps == 0 else round(1000.0 * cpu / steps, 4),
+        "controller_response_ms_median": round(float(np.median(r)), 4) if len(r) else None,
+        "controller_response_ms_p95": round(float(np.percentile(r, 95)), 4) if len(r) else None,
+        "controller_program": report,
+    }
 
 
 def _verdict(relay: ControllerRelay, program_reason: Optional[str]) -> None:

@@ -73,6 +73,8 @@ class RunContext:
         #: poses a compute engine's task returned (s, m, m, rad)
         self.end_fields: dict[str, Any] = {}
         self.end_poses: Optional[np.ndarray] = None
+        #: metrics a step measured itself (a controller program's compute time), added to the run's metrics
+        self.end_metrics: dict[str, Any] = {}
 
     @property
     def subfields(self) -> tuple[int, ...]:

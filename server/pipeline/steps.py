@@ -232,6 +232,7 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
         raise TestbedFault(f"cannot compute metrics: {exc}") from None
     metrics["collided"] = collided
     metrics.update(compute.collision_counts(collided, obstacle))
+    metrics.update(ctx.end_metrics)
     ctx.end_fields["metrics"] = metrics  # stored with the run's end
     if failed and poses:
         ctx.end_fields["stopped_at"] = [round(poses[-1][1], 4), round(poses[-1][2], 4)]
