@@ -40,6 +40,11 @@ export const METRICS = {
   collisions_block: ["Collisions with blocks and walls", "", [0, Infinity]],
   obstacle_distance_min_m: ["Closest approach to a moving obstacle", "m", [-Infinity, Infinity]],
   obstacle_time_within_s: ["Time near a moving obstacle", "s", [0, Infinity]],
+  controller_steps: ["Controller steps", "", [0, Infinity]],
+  controller_cpu_s: ["Controller CPU time", "s", [0, Infinity]],
+  controller_cpu_per_step_ms: ["Controller CPU per step", "ms", [0, Infinity]],
+  controller_response_ms_median: ["Controller response (median)", "ms", [0, Infinity]],
+  controller_response_ms_p95: ["Controller response (95th pct.)", "ms", [0, Infinity]],
 };
 
 /** A metric's name ("Path length"); an unknown key as it comes. */
