@@ -21,7 +21,8 @@ def replay(
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
-    """Animated replay of a run over its environment: planned path, performed path, robot with heading."""
+    """Animated replay of a run over its environment: planned path, performed path, robot with heading, and the
+    environment's moving obstacles where they were."""
     if out.suffix.lower() != ".gif":
         fail(f"--out must be a .gif file (written with Pillow), got {out}")
     with sdk_client(url, token) as client:
@@ -40,7 +41,8 @@ def replay(
              f"({run.status})")
     fig, anim, n = replay_animation(env.to_json(), poses, planned=exp.planned_path,
                                     robot_radius=exp.robot_radius or 0.045, fps=fps, speed=speed,
-                                    max_frames=max_frames, title=title, color=COLORS.get(run.mode, "#d62728"))
+                                    max_frames=max_frames, title=title, color=COLORS.get(run.mode, "#d62728"),
+                                    obstacle_t0=run.t_start)
     out.parent.mkdir(parents=True, exist_ok=True)
     anim.save(out, writer=PillowWriter(fps=fps), dpi=dpi)
     typer.echo(f"{out}: {n} frames, {n / fps:.1f} s")

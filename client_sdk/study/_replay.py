@@ -1,9 +1,10 @@
-"""An animated replay of one run over its environment: our stand-in for the testbed's recorded video."""
+"""An animated replay of a run over its environment (every robot, every moving obstacle): our stand-in for the
+testbed's recorded video."""
 
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -12,23 +13,30 @@ from ._figures import COLORS, draw_environment
 __all__ = ["replay_animation"]
 
 
-def replay_animation(env: dict[str, Any], poses: np.ndarray, *, planned: Optional[np.ndarray] = None,
+def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarray], *,
+                     planned: Optional[np.ndarray | Sequence[Optional[np.ndarray]]] = None,
                      robot_radius: float = 0.045, fps: int = 15, speed: float = 4.0, max_frames: int = 300,
-                     title: str = "", color: str = COLORS["twb"]):  # type: ignore[no-untyped-def]
-    """A matplotlib ``FuncAnimation`` of a run: planned path, performed path so far, robot with heading.
+                     title: str = "", color: str = COLORS["twb"],
+                     obstacle_t0: Optional[float] = None):  # type: ignore[no-untyped-def]
+    """A matplotlib ``FuncAnimation`` of a run: planned paths, performed paths so far, every robot with its
+    heading, and the environment's moving obstacles where they were at each frame.
 
     Parameters
     ----------
     env : environment file (docs/design.md, "Environment file") the run was made in
-    poses : (N, 4) float array, s, m, m, rad
-        Logged poses t, x, y, theta, oldest first.
-    planned : (M, 2|3) float array, m, optional
+    poses : (N, 4) float array, or one such array per robot of a multi-robot run; s, m, m, rad
+        Logged poses t, x, y, theta, oldest first (one clock for all robots).
+    planned : (M, 2|3) float array, or one per robot (None where there is none), m, optional
     robot_radius : float, m
     fps : int
         Frames per second of the animation.
     speed : float
         Experiment seconds per animation second (raised when the run would
         need more than ``max_frames`` frames).
+    color : the robot's colour (one robot; several get a colour each)
+    obstacle_t0 : float, s, optional
+        The pose time at which the moving obstacles' clock is 0 (a run's ``t_start``: obstacles move
+        from its path's start); default the first pose's time.
 
     Returns
     -------
@@ -39,43 +47,78 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray, *, planned: Optiona
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
-    p = np.asarray(poses, dtype=float).reshape(-1, 4)
-    if len(p) < 1:
+    several = not isinstance(poses, np.ndarray)
+    tracks = [np.asarray(q, dtype=float).reshape(-1, 4) for q in (poses if several else [poses])]
+    if not tracks or all(len(q) == 0 for q in tracks):
         raise ValueError("`poses` is empty: the run logged no pose to replay")
     if not (fps >= 1 and speed > 0 and max_frames >= 2):
         raise ValueError("`fps` must be >= 1, `speed` > 0 and `max_frames` >= 2")
-    t0, t1 = float(p[0, 0]), float(p[-1, 0])
+    plans = list(planned) if several and planned is not None else [planned] * (1 if not several else len(tracks))
+    t0 = min(float(q[0, 0]) for q in tracks if len(q))
+    t1 = max(float(q[-1, 0]) for q in tracks if len(q))
     dt = speed / fps
     n = int(math.floor((t1 - t0) / dt)) + 1
     if n > max_frames:
         dt, n = (t1 - t0) / (max_frames - 1), max_frames
     times = t0 + dt * np.arange(n)
-    idx = np.minimum(np.searchsorted(p[:, 0], times, side="right") - 1, len(p) - 1).clip(0)
-    idx = np.append(idx, [len(p) - 1] * max(1, fps // 2))  # hold the last pose for half a second
+    times = np.append(times, [t1] * max(1, fps // 2))  # hold the last poses for half a second
+    idx = [np.minimum(np.searchsorted(q[:, 0], times, side="right") - 1, len(q) - 1).clip(0) for q in tracks]
+    movers, centres = _obstacle_centres(env, times - (t0 if obstacle_t0 is None else obstacle_t0))
 
     fig = Figure(figsize=(5, 5.3), layout="constrained")
     ax = fig.subplots()
     draw_environment(ax, env)
-    if planned is not None and len(planned):
-        pl = np.asarray(planned, dtype=float)
-        ax.plot(pl[:, 0], pl[:, 1], "k--", lw=1, label="planned")
-    (trace,) = ax.plot([], [], color=color, lw=1.5, label="performed")
-    robot = Circle((p[0, 1], p[0, 2]), robot_radius, fc=color, ec="k", alpha=0.6)
-    ax.add_patch(robot)
-    (heading,) = ax.plot([], [], "k-", lw=1.5)
+    colours = [color] if len(tracks) == 1 else [f"C{i % 10}" for i in range(len(tracks))]
+    artists: list[tuple[Any, Any, Any]] = []
+    for i, (q, c) in enumerate(zip(tracks, colours)):
+        pl = plans[i] if i < len(plans) else None
+        if pl is not None and len(pl):
+            pl = np.asarray(pl, dtype=float)
+            ax.plot(pl[:, 0], pl[:, 1], "--", color="k" if len(tracks) == 1 else c, lw=1,
+                    label="planned" if i == 0 else None)
+        label = "performed" if len(tracks) == 1 else f"robot {i}"
+        (trace,) = ax.plot([], [], color=c, lw=1.5, label=label)
+        first = q[0] if len(q) else np.full(4, np.nan)
+        robot = Circle((first[1], first[2]), robot_radius, fc=c, ec="k", alpha=0.6)
+        ax.add_patch(robot)
+        (heading,) = ax.plot([], [], "k-", lw=1.5)
+        artists.append((trace, robot, heading))
+    discs = [Circle(tuple(centres[m, 0]), ob.radius, fc="#7f7f7f", ec="k", hatch="//", alpha=0.8,
+                    label="moving obstacle" if m == 0 else None) for m, ob in enumerate(movers)]
+    for d in discs:
+        ax.add_patch(d)
     clock = ax.text(0.06, 0.96, "", transform=ax.transAxes, va="top", fontsize=9,
                     bbox={"fc": "white", "ec": "none", "alpha": 0.7})
     ax.legend(loc="lower right", fontsize=8)
     ax.set_title(title, fontsize=10)
 
     def update(k: int):  # type: ignore[no-untyped-def]
-        i = int(idx[k])
-        x, y, a = p[i, 1], p[i, 2], p[i, 3]
-        trace.set_data(p[: i + 1, 1], p[: i + 1, 2])
-        robot.center = (x, y)
-        heading.set_data([x, x + robot_radius * 1.6 * math.cos(a)], [y, y + robot_radius * 1.6 * math.sin(a)])
-        clock.set_text(f"t = {p[i, 0] - t0:5.1f} s")
-        return trace, robot, heading, clock
+        out: list[Any] = [clock]
+        for q, ix, (trace, robot, heading) in zip(tracks, idx, artists):
+            if not len(q):
+                continue
+            i = int(ix[k])
+            x, y, a = q[i, 1], q[i, 2], q[i, 3]
+            trace.set_data(q[: i + 1, 1], q[: i + 1, 2])
+            robot.center = (x, y)
+            heading.set_data([x, x + robot_radius * 1.6 * math.cos(a)], [y, y + robot_radius * 1.6 * math.sin(a)])
+            out += [trace, robot, heading]
+        for m, d in enumerate(discs):
+            d.center = tuple(centres[m, k])
+            out.append(d)
+        clock.set_text(f"t = {times[k] - t0:5.1f} s")
+        return out
 
-    anim = FuncAnimation(fig, update, frames=len(idx), interval=1000 / fps, blit=False)
-    return fig, anim, len(idx)
+    anim = FuncAnimation(fig, update, frames=len(times), interval=1000 / fps, blit=False)
+    return fig, anim, len(times)
+
+
+def _obstacle_centres(env: dict[str, Any], t: np.ndarray) -> tuple[tuple[Any, ...], np.ndarray]:
+    """The environment's moving obstacles and their centres ``(M, T, 2)`` (m) at obstacle times ``t`` (s)."""
+    if not env.get("moving_obstacles"):
+        return (), np.zeros((0, len(t), 2))
+    from planners import parse_environment
+    from planners.moving import positions
+
+    obstacles = parse_environment(env).moving_obstacles
+    return obstacles, positions(obstacles, np.maximum(t, 0.0))
