@@ -137,6 +137,9 @@ class EnvironmentPublic(BaseModel):
     plans: list[dict[str, Any]] = []
     description: str = ""
     moving_obstacles: list[dict[str, Any]] = []
+    moving_tracks: list[dict[str, Any]] = Field(default_factory=list, description=(
+        "Derived, for drawing: each moving obstacle as it moves — radius (m), speed (m/s), repeat, delay_s (s) "
+        "and its waypoints (m), a random walk's expanded with its seed."))
     builtin: bool
     owner: Optional[str] = None
 

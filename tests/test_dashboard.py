@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
 
 from servers import TOKEN, Process, wait_for
@@ -295,6 +296,44 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     expect(page.locator(f'#exp-finished tr[data-experiment="{exp_id}"]')).to_be_visible()
     # the only console error: the browser's note on the 422 answer to the bad controller parameter
     assert len(page.console.errors) == 1 and "422" in page.console.errors[0], page.console.errors
+
+
+MOVERS = {"name": "movers", "size": [1.8, 1.8], "blocks": [], "moving_obstacles": [
+    {"radius": 0.05, "waypoints": [[0.2, 0.2], [1.6, 0.2], [1.6, 1.0]], "speed": 0.1, "repeat": "once", "delay_s": 2},
+    {"radius": 0.04, "waypoints": [[0.3, 1.5], [1.5, 1.5], [0.9, 0.9]], "speed": 0.15, "repeat": "loop"},
+    {"radius": 0.06, "waypoints": [[0.2, 0.9], [1.0, 0.9]], "speed": 0.12, "repeat": "pingpong", "delay_s": 1},
+    {"radius": 0.03, "random_walk": {"seed": 7, "start": [0.9, 0.5], "steps": 12, "step_m": 0.2}, "speed": 0.1,
+     "repeat": "pingpong"}]}
+
+
+def test_moving_obstacles_are_drawn_where_the_simulation_has_them(page, testbed):
+    """The dashboard's moving obstacles (static/js/moving.js) stand where planners.moving puts them, at every
+    repeat mode, delay and a random walk; the submit map draws them where they stand when a path starts."""
+    from planners import parse_environment
+    from planners.moving import positions
+
+    with testbed.client() as c:
+        r = c.post("/api/v1/environments", json=MOVERS)
+        assert r.status_code in (201, 409), r.text
+        tracks = c.get("/api/v1/environments/movers").json()["moving_tracks"]
+    assert len(tracks) == 4 and len(tracks[3]["waypoints"]) == 13  # the random walk, expanded
+    login(page, testbed.url)
+    times = [0.0, 0.5, 1.0, 3.3, 7.7, 12.0, 19.9, 31.4, 64.0, 150.0]
+    got = page.evaluate("""async ([tracks, times]) => {
+      const { obstacleAt } = await import("/static/js/moving.js");
+      return tracks.map((tr) => times.map((t) => obstacleAt(tr, t)));
+    }""", [tracks, times])
+    want = positions(parse_environment(MOVERS).moving_obstacles, np.array(times))
+    np.testing.assert_allclose(np.array(got), want, atol=1e-9)
+
+    page.click("#nav a[data-view=submit]")
+    page.select_option("#f-environment", "movers")
+    page.wait_for_timeout(300)
+    teal = (0x00, 0x89, 0x7B)
+    for (x, y), ob in zip(want[:, 0], MOVERS["moving_obstacles"]):
+        r = ob["radius"] * 0.7
+        assert count_pixels(page, "#submit-canvas", teal, tol=30, region=(x - r, y - r, x + r, y + r)) > 10, (x, y)
+    assert page.console.errors == []
 
 
 def test_server_validation_errors_are_shown_next_to_the_field(page, testbed):

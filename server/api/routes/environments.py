@@ -23,8 +23,21 @@ def _public(row: Environment, owner: str | None) -> EnvironmentPublic:
     d = row.data
     return EnvironmentPublic(
         name=row.name, size=d["size"], blocks=d.get("blocks", []), plans=d.get("plans", []),
-        description=d.get("description", ""), moving_obstacles=d.get("moving_obstacles", []), builtin=row.builtin, owner=owner,
+        description=d.get("description", ""), moving_obstacles=d.get("moving_obstacles", []),
+        moving_tracks=_tracks(d), builtin=row.builtin, owner=owner,
     )
+
+
+def _tracks(d: dict) -> list[dict]:
+    """The moving obstacles with their waypoints as they move (random walks expanded), for drawing."""
+    if not d.get("moving_obstacles"):
+        return []
+    try:
+        obstacles = parse_environment(d).moving_obstacles
+    except InvalidEnvironment:  # stored before a rule tightened: shown without tracks, not an error
+        return []
+    return [{"radius": o.radius, "speed": o.speed, "repeat": o.repeat, "delay_s": o.delay_s,
+             "waypoints": [list(p) for p in o.waypoints]} for o in obstacles]
 
 
 @router.get("", response_model=Page[EnvironmentPublic])

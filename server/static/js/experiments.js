@@ -7,6 +7,7 @@ import { saveBlob } from "./api.js";
 import { barChart, lineChart, speedProfile } from "./charts.js";
 import { $, TERMINAL, badge, debounce, duration, h, num, pose, report, toast, when } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { obstacleLayers } from "./moving.js";
 import { METRICS, allEqual, clipNote, intervalText, metricLabel, showIfClipped } from "./metrics.js";
 import { ProgramPanel } from "./programrun.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
@@ -300,6 +301,7 @@ export class ExperimentPage {
     paths.push(...crashes);
     this.map.update({
       blocks: env ? env.blocks : [],
+      ...obstacleLayers(env?.moving_tracks, 0), // where the moving obstacles stand when a path starts
       paths,
       markers: [{ x: d.start[0], y: d.start[1], theta: d.start[2], color: COLORS.start, label: "start" },
         { x: d.goal[0], y: d.goal[1], theta: d.goal[2], color: COLORS.goal, label: "goal" }],

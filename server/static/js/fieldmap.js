@@ -14,6 +14,7 @@ export const COLORS = {
   wall: "#1c2430",
   start: "#2e9d4a",
   goal: "#c62828",
+  obstacle: "#00897b",
 };
 
 const STATE_FILL = {
@@ -203,6 +204,28 @@ export class MapView {
         ctx.fillText(m.label, right ? X(m.x) + r + 4 : X(m.x) - r - 4, Y(m.y) + r + 2);
         ctx.textAlign = "left";
       }
+    }
+
+    // moving obstacles: their tracks (dotted) and the discs, hatched grey, at true size
+    ctx.strokeStyle = COLORS.obstacle;
+    ctx.lineWidth = 1;
+    ctx.setLineDash([2, 3]);
+    for (const tr of L.obstacleTracks || []) {
+      if (tr.points.length < 2) continue;
+      ctx.beginPath();
+      tr.points.forEach(([x, y], i) => (i ? ctx.lineTo(X(x), Y(y)) : ctx.moveTo(X(x), Y(y))));
+      ctx.stroke();
+    }
+    ctx.setLineDash([]);
+    for (const o of L.obstacles || []) {
+      const rad = Math.max(4, o.radius * g.scale);
+      ctx.fillStyle = COLORS.obstacle;
+      ctx.strokeStyle = "#2f3640";
+      ctx.lineWidth = 1.2;
+      ctx.beginPath();
+      ctx.arc(X(o.x), Y(o.y), rad, 0, 2 * Math.PI);
+      ctx.fill();
+      ctx.stroke();
     }
 
     // robots: filled disc at true size (at least 6 px), white heading line

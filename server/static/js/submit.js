@@ -5,6 +5,7 @@
 
 import { $, $$, TERMINAL, checkRadio, deg, h, num, radioValue, report, retoast, toast } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { obstacleLayers } from "./moving.js";
 import { programLabel } from "./programs.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
@@ -304,7 +305,7 @@ export class SubmitPage {
       const pts = [this.poses.start, ...this.waypoints, this.poses.goal].filter(Boolean);
       paths.push({ points: pts.map((q) => [q[0], q[1]]), color: COLORS.planned, width: 2, dash: [7, 5] });
     }
-    this.map.update({ blocks: env ? env.blocks : [], markers, paths,
+    this.map.update({ blocks: env ? env.blocks : [], ...obstacleLayers(env?.moving_tracks, 0), markers, paths,
       subfields: this.fieldMode === "full" ? [[0, 0], [1.8, 0], [0, 1.8], [1.8, 1.8]].map((o) => ({ origin: o, size: SUBFIELD_SIZE, state: "idle" })) : [] });
     if (this.pick === "waypoint") {
       const n = this.waypoints.length;
