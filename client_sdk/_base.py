@@ -124,8 +124,9 @@ def _one(item: Callable[[dict[str, Any]], Any]) -> Callable[[httpx.Response], An
 
 
 def _poses_array(response: httpx.Response) -> np.ndarray:
+    """``(N, 4)`` t, x, y, theta, or ``(N, 5)`` with the robot's index last (a multi-robot run's)."""
     body = _json(response)
-    return np.asarray(body["poses"], dtype=float).reshape(-1, 4)
+    return np.asarray(body["poses"], dtype=float).reshape(-1, len(body.get("columns") or "txya"))
 
 
 def _plain(value: Any) -> Any:
@@ -245,12 +246,13 @@ class BaseClient:
     def _get_run(self, run_id: int) -> Call:
         return Call("GET", f"{API_PREFIX}/runs/{int(run_id)}", _one(Run.from_json))
 
-    def _get_poses(self, run_id: int, format: str) -> Call:
+    def _get_poses(self, run_id: int, format: str, robot: Optional[int] = None) -> Call:
         path = f"{API_PREFIX}/runs/{int(run_id)}/poses"
+        which = {} if robot is None else {"robot": int(robot)}
         if format == "csv":
-            return Call("GET", path, lambda r: r.text, params={"format": "csv"})
+            return Call("GET", path, lambda r: r.text, params={"format": "csv", **which})
         if format == "array":
-            return Call("GET", path, _poses_array, params={"format": "json"})
+            return Call("GET", path, _poses_array, params={"format": "json", **which})
         raise ValueError(f"`format` must be 'array' or 'csv', got {format!r}")
 
     def _get_messages(self, run_id: int, offset: int, limit: int) -> Call:

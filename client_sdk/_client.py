@@ -191,7 +191,8 @@ class Client(BaseClient):
                jitter: Optional[Mapping[str, float]] = None,
                profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
                controller_params: Optional[Mapping[str, float]] = None,
-               controller_program: Optional[int] = None) -> Experiment:
+               controller_program: Optional[int] = None,
+               robots: Optional[Sequence[Mapping[str, Any]]] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
@@ -210,6 +211,10 @@ class Client(BaseClient):
         parameters (SI units, as their names say); ``controller_program``, an
         uploaded program's id, drives the robots along the planned path
         itself instead (docs/controllers.md, "Your own controller program").
+        ``robots`` makes it a multi-robot job instead of ``start``/``goal``:
+        2 to 16 ``{"start", "goal", "path"?}`` in one world on one clock;
+        ``planner="prioritized"`` plans them together, any other planner each
+        robot alone (docs/server.md, "Multi-robot jobs").
         :class:`ValidationError` carries the server's reason when the job
         cannot run.
         """
@@ -217,7 +222,7 @@ class Client(BaseClient):
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
-                      controller_params=controller_params, controller_program=controller_program)
+                      controller_params=controller_params, controller_program=controller_program, robots=robots)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -262,13 +267,16 @@ class Client(BaseClient):
         return self._send(self._get_run(run_id))
 
     @overload
-    def get_poses(self, run_id: int, format: Literal["array"] = "array") -> np.ndarray: ...
+    def get_poses(self, run_id: int, format: Literal["array"] = "array", *, robot: Optional[int] = None) -> np.ndarray: ...
     @overload
-    def get_poses(self, run_id: int, format: Literal["csv"]) -> str: ...
+    def get_poses(self, run_id: int, format: Literal["csv"], *, robot: Optional[int] = None) -> str: ...
 
-    def get_poses(self, run_id: int, format: PosesFormat = "array") -> np.ndarray | str:
-        """Logged poses of a run: an ``(N, 4)`` array of t, x, y, theta (s, m, m, rad), or CSV text."""
-        return self._send(self._get_poses(run_id, format))
+    def get_poses(self, run_id: int, format: PosesFormat = "array", *, robot: Optional[int] = None) -> np.ndarray | str:
+        """Logged poses of a run: an ``(N, 4)`` array of t, x, y, theta (s, m, m, rad), or CSV text.
+
+        A multi-robot run's rows carry the robot's index as a fifth column (``(N, 5)``, robot by robot);
+        ``robot=k`` keeps robot k's."""
+        return self._send(self._get_poses(run_id, format, robot))
 
     def get_messages(self, run_id: int, *, offset: int = 0, limit: int = 1000) -> Page[Message]:
         """Protocol lines exchanged with the robot during a run, with experiment time."""
@@ -372,13 +380,14 @@ class AsyncClient(BaseClient):
                      jitter: Optional[Mapping[str, float]] = None,
                      profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
                      controller_params: Optional[Mapping[str, float]] = None,
-                     controller_program: Optional[int] = None) -> Experiment:
+                     controller_program: Optional[int] = None,
+                     robots: Optional[Sequence[Mapping[str, Any]]] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
-                      controller_params=controller_params, controller_program=controller_program)
+                      controller_params=controller_params, controller_program=controller_program, robots=robots)
         return await self._send(self._submit(job, fields))
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
@@ -433,9 +442,10 @@ class AsyncClient(BaseClient):
         """See :meth:`Client.get_run`."""
         return await self._send(self._get_run(run_id))
 
-    async def get_poses(self, run_id: int, format: PosesFormat = "array") -> np.ndarray | str:
+    async def get_poses(self, run_id: int, format: PosesFormat = "array", *,
+                        robot: Optional[int] = None) -> np.ndarray | str:
         """See :meth:`Client.get_poses`."""
-        return await self._send(self._get_poses(run_id, format))
+        return await self._send(self._get_poses(run_id, format, robot))
 
     async def get_messages(self, run_id: int, *, offset: int = 0, limit: int = 1000) -> Page[Message]:
         """See :meth:`Client.get_messages`."""

@@ -247,6 +247,8 @@ class Experiment(ExperimentSummary):
 
     start: list[float] = _field(default_factory=list)
     goal: list[float] = _field(default_factory=list)
+    #: a multi-robot job's robots, ``{"start", "goal", "path"?}`` each (m, rad); None for one robot
+    robots: Optional[list[dict[str, Any]]] = None
     planner_params: dict[str, Any] = _field(default_factory=dict)
     seed: int = 0
     robot_radius: Optional[float] = None

@@ -115,8 +115,11 @@ class Experiment(Base):
     status: Mapped[str] = mapped_column(String(16), default=RunStatus.QUEUED, index=True)
     environment: Mapped[str] = mapped_column(String(100))
     environment_data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    #: robot 0's start and goal for a multi-robot job
     start: Mapped[list[Any]] = mapped_column(JSON)
     goal: Mapped[list[Any]] = mapped_column(JSON)
+    #: a multi-robot job's robots, ``[{"start", "goal", "path"?}, ...]`` (m, rad); None for one robot
+    robots: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
     planner: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)
     planner_params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     explicit_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
@@ -188,7 +191,8 @@ class Run(Base):
 
 
 class Pose(Base):
-    """A logged pose of a run: tracker measurement (twb) or ground truth (sim)."""
+    """A logged pose of a run: tracker measurement (twb) or ground truth (sim); ``robot`` is the fleet member
+    of a multi-robot run (its index in the job's ``robots``), None for a single robot's."""
 
     __tablename__ = "poses"
     __table_args__ = (Index("ix_poses_run_t", "run_id", "t"),)
@@ -199,6 +203,7 @@ class Pose(Base):
     x: Mapped[float] = mapped_column(Float)
     y: Mapped[float] = mapped_column(Float)
     theta: Mapped[float] = mapped_column(Float)
+    robot: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
 
 
 class Message(Base):

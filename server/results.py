@@ -25,7 +25,8 @@ def experiment_metrics(session: Session, exp: Experiment) -> dict[str, Any]:
     were); failed runs keep their metrics in ``runs``, flagged by ``outcome``.
     ``direct`` is the paper's "ST": for each repetition with both a completed
     ``sim`` and ``twb`` run, the deviation (and Hausdorff / Fréchet distances)
-    of the field path from the simulated one.
+    of the field path from the simulated one (not for multi-robot jobs: their
+    runs' metrics are the fleet's, per robot under ``robots``).
     """
     runs = list(exp.runs)
     per_run = [{"run_id": r.id, "mode": r.mode, "repetition": r.repetition, "status": r.status,
@@ -40,7 +41,7 @@ def experiment_metrics(session: Session, exp: Experiment) -> dict[str, Any]:
         by_rep.setdefault(r.repetition, {})[r.mode] = r
     direct = []
     for rep, modes in sorted(by_rep.items()):
-        if "sim" in modes and "twb" in modes:
+        if "sim" in modes and "twb" in modes and exp.robots is None:
             sim, twb = modes["sim"], modes["twb"]
             direct.append({"repetition": rep, "sim_run_id": sim.id, "twb_run_id": twb.id,
                            **compare_runs(_driven(session, sim), _driven(session, twb))})

@@ -25,6 +25,7 @@ __all__ = [
     "Page",
     "ProgramCreate",
     "ProgramPublic",
+    "RobotIn",
     "RobotPublic",
     "RobotRegister",
     "RunPublic",
@@ -156,11 +157,50 @@ class Jitter(Strict):
     theta_rad: float = Field(default=0.0, ge=0, le=0.5)
 
 
+#: robots a multi-robot job may have (issue 17)
+MAX_ROBOTS = 16
+#: the planner that plans a multi-robot job's robots together (timed paths, robots hold where it waits)
+FLEET_PLANNER = "prioritized"
+
+
+def _check_pose(v: Optional[Pose]) -> Optional[Pose]:
+    if v is not None and len(v) not in (2, 3):
+        raise ValueError("must be [x, y] or [x, y, theta]")
+    return v
+
+
+def _check_path(v: Optional[list[Pose]]) -> Optional[list[Pose]]:
+    if v is None:
+        return v
+    if len(v) < 2:
+        raise ValueError("needs at least 2 points")
+    for i, p in enumerate(v):
+        if len(p) not in (2, 3):
+            raise ValueError(f"point {i} must be [x, y] or [x, y, theta]")
+    return v
+
+
+class RobotIn(Strict):
+    """One robot of a multi-robot job: its ``start`` and ``goal`` (``[x, y]`` or ``[x, y, theta]``, m, rad)
+    and, instead of being planned, an explicit ``path`` (points from the start to the goal, m, rad)."""
+
+    model_config = ConfigDict(allow_inf_nan=False, extra="forbid", strict=True)
+
+    start: Pose
+    goal: Pose
+    path: Optional[list[Pose]] = Field(default=None, max_length=10_000)
+
+    _pose = field_validator("start", "goal")(_check_pose)
+    _path = field_validator("path")(_check_path)
+
+
 class ExperimentCreate(Strict):
     """A job: plan with ``planner`` (or send the explicit ``path``, or run the uploaded ``program``), run it in ``modes``.
 
     Poses are ``[x, y]`` or ``[x, y, theta]`` (m, rad) in the frame of the
     sub-field (``field: "sub"``) or of the whole 3.6 m field (``"full"``).
+    A multi-robot job gives ``robots`` instead of ``start``/``goal``
+    (docs/server.md, "Multi-robot jobs").
     """
 
     model_config = ConfigDict(
@@ -180,6 +220,10 @@ class ExperimentCreate(Strict):
     environment: str = Field(min_length=1, max_length=100)
     start: Optional[Pose] = None
     goal: Optional[Pose] = None
+    robots: Optional[list[RobotIn]] = Field(default=None, min_length=2, max_length=MAX_ROBOTS, description=(
+        "A multi-robot job instead of `start`/`goal`: 2 to 16 robots in one world on one clock, each "
+        "{\"start\", \"goal\", \"path\"?} (m, rad). Planner `prioritized` plans them together; any other "
+        "planner plans each robot alone (uncoordinated); a robot's `path` is driven as given."))
     planner: Optional[str] = Field(default=None, max_length=64)
     planner_params: dict[str, Any] = Field(default_factory=dict)
     path: Optional[list[Pose]] = Field(default=None, max_length=10_000)
@@ -211,24 +255,8 @@ class ExperimentCreate(Strict):
         "An uploaded program's id that drives the robot along the planned path over its robot port "
         "(T,T,O / T,T,V; docs/controllers.md \"Your own controller program\") instead of `controller`."))
 
-    @field_validator("start", "goal")
-    @classmethod
-    def _pose(cls, v: Optional[Pose]) -> Optional[Pose]:
-        if v is not None and len(v) not in (2, 3):
-            raise ValueError("must be [x, y] or [x, y, theta]")
-        return v
-
-    @field_validator("path")
-    @classmethod
-    def _path(cls, v: Optional[list[Pose]]) -> Optional[list[Pose]]:
-        if v is None:
-            return v
-        if len(v) < 2:
-            raise ValueError("needs at least 2 points")
-        for i, p in enumerate(v):
-            if len(p) not in (2, 3):
-                raise ValueError(f"point {i} must be [x, y] or [x, y, theta]")
-        return v
+    _pose = field_validator("start", "goal")(_check_pose)
+    _path = field_validator("path")(_check_path)
 
     @field_validator("modes")
     @classmethod
@@ -241,6 +269,11 @@ class ExperimentCreate(Strict):
     def _planner_or_path(self) -> "ExperimentCreate":
         if self.profile_overrides and "twb" not in self.modes:
             raise ValueError("profile_overrides change the emulated field robot: they need mode \"twb\"")
+        if self.robots is not None:
+            return self._fleet()
+        if self.planner == FLEET_PLANNER:
+            raise ValueError(f"planner: `{FLEET_PLANNER}` plans several robots together; give `robots` (a "
+                             "multi-robot job) instead of `start`/`goal`, or a single-robot planner")
         if self.path is not None and self.planner is not None:
             raise ValueError("give either `planner` or `path`, not both")
         if self.controller_program is not None:
@@ -268,6 +301,33 @@ class ExperimentCreate(Strict):
                 raise ValueError("`planner_params` needs a `planner`")
             self.start = self.start or list(self.path[0])
             self.goal = self.goal or list(self.path[-1])
+        return self
+
+    def _fleet(self) -> "ExperimentCreate":
+        """A multi-robot job: ``robots`` alone say where the robots go; what it cannot have is refused."""
+        assert self.robots is not None
+        for name in ("start", "goal", "path", "program", "controller_program", "jitter"):
+            if getattr(self, name) is not None:
+                why = {"start": "give either `start`/`goal` or `robots`, not both",
+                       "goal": "give either `start`/`goal` or `robots`, not both",
+                       "path": "a multi-robot job takes each robot's path as `robots[i].path`",
+                       "program": "an uploaded planner program plans one robot; it cannot plan a multi-robot job",
+                       "controller_program": "a controller program drives one robot; it cannot drive a "
+                                             "multi-robot job",
+                       "jitter": "start-pose jitter is not available for multi-robot jobs"}[name]
+                raise ValueError(f"{name}: {why}")
+        explicit = [r.path is not None for r in self.robots]
+        if self.planner == FLEET_PLANNER and any(explicit):
+            i = explicit.index(True)
+            raise ValueError(f"robots[{i}].path: `{FLEET_PLANNER}` plans every robot together; it cannot keep "
+                             "a robot's explicit path (give no planner, or a single-robot one, to mix them)")
+        if all(explicit):
+            if self.planner is not None:
+                raise ValueError("give either `planner` or a `path` for every robot, not both")
+            if self.planner_params:
+                raise ValueError("`planner_params` needs a `planner`")
+        elif self.planner is None:
+            self.planner = "fmm"
         return self
 
 
@@ -323,8 +383,10 @@ class ExperimentSummary(FromRow):
 
 
 class ExperimentPublic(ExperimentSummary):
-    start: list[float]
-    goal: list[float]
+    start: list[float] = Field(description="The start (m, rad); robot 0's in a multi-robot job.")
+    goal: list[float] = Field(description="The goal (m, rad); robot 0's in a multi-robot job.")
+    robots: Optional[list[dict[str, Any]]] = Field(default=None, description=(
+        "A multi-robot job's robots, {\"start\", \"goal\", \"path\"?} each (m, rad); null for one robot."))
     planner_params: dict[str, Any]
     seed: int
     robot_radius: float

@@ -111,17 +111,21 @@ class PoseRouter:
         self._seen(robot_id, rows, w)
         return stored, (w.run_id if w else None)
 
-    def show(self, robot_id: str, run_id: int, owner_id: int, rows: np.ndarray) -> None:
+    def show(self, robot_id: str, run_id: int, owner_id: int, rows: np.ndarray, member: Optional[int] = None) -> None:
         """Poses ``(N, 4)`` of a run that are stored with its end (a compute engine's run): known as the
-        robot's last pose and shown live, not stored here."""
+        robot's last pose and shown live, not stored here.  ``member``: the poses are fleet member
+        ``member``'s of a multi-robot run on ``robot_id``: known and shown as robot ``"<robot_id>/<member>"``
+        (in ``robot_id``'s frame), the live event also carrying ``"robot": member``."""
         if len(rows):
-            self._seen(robot_id, rows, _Window(run_id, owner_id))
+            self._seen(robot_id, rows, _Window(run_id, owner_id), member)
 
-    def _seen(self, robot_id: str, rows: np.ndarray, w: Optional[_Window]) -> None:
+    def _seen(self, robot_id: str, rows: np.ndarray, w: Optional[_Window], member: Optional[int] = None) -> None:
         """The robot's last pose and time, its waiters woken, and a live event (at most every 0.1 s)."""
         last = float(rows[:, 0].max())
         t_last, x_last, y_last, a_last = (float(v) for v in rows[-1])
         ox, oy = self._origin_of(robot_id)
+        if member is not None:
+            robot_id = f"{robot_id}/{member}"
         self._last_pose[robot_id] = [t_last, x_last + ox, y_last + oy, a_last]
         wake = []
         with self._lock:
@@ -134,11 +138,14 @@ class PoseRouter:
         now = time.monotonic()
         if now - self._last_live.get(robot_id, 0.0) >= _LIVE_INTERVAL_S:
             self._last_live[robot_id] = now
-            self._broker.publish({
+            event = {
                 "type": "pose", "robot_id": robot_id, "run_id": w.run_id if w else None,
                 "owner_id": w.owner_id if w else None, "t": t_last, "x": x_last + ox, "y": y_last + oy,
                 "theta": a_last,
-            })
+            }
+            if member is not None:
+                event["robot"] = member
+            self._broker.publish(event)
 
 
 def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:

@@ -22,13 +22,10 @@ from robot_agent.controller_specs import select as select_controller
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from .errors import PreflightError
-from .schemas import ExperimentCreate
+from .schemas import FLEET_PLANNER, MAX_ROBOTS, ExperimentCreate
 
 __all__ = ["FIELD_SIZE", "MAX_ROBOTS", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight",
            "preflight_fleet"]
-
-#: robots a multi-robot job may have (issue 17)
-MAX_ROBOTS = 16
 
 
 @dataclass(frozen=True)
@@ -41,6 +38,8 @@ class Preflight:
     planner_params: dict[str, Any]
     path: list[list[float]] | None
     controller_params: dict[str, float] = field(default_factory=dict)
+    #: a multi-robot job's robots, ``{"start", "goal", "path"?}`` (m, rad); ``start``/``goal`` are robot 0's
+    robots: list[dict[str, Any]] | None = None
 
 
 def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: float,
@@ -52,26 +51,15 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
     uploaded program (whose path is checked when it arrives,
     :func:`check_program_path`) only need the robot radius itself.
     """
-    try:
-        env = parse_environment(env_data)
-    except PlanningError as exc:
-        raise PreflightError(f"environment: {exc}") from None
-    limit = SUBFIELD_SIZE if body.field == "sub" else FIELD_SIZE
-    if env.width > limit[0] + 1e-9 or env.height > limit[1] + 1e-9:
-        raise PreflightError(
-            f"environment {env.name!r} is {env.width:g} x {env.height:g} m; a {body.field}-field job "
-            f"allows at most {limit[0]:g} x {limit[1]:g} m" + (' (use "field": "full")' if body.field == "sub" else "")
-        )
+    env = _environment(body, env_data)
     try:
         controller = select_controller(body.controller, body.controller_params)
     except ControllerError as exc:
         raise PreflightError(f"{exc.field}: {exc}" if exc.field == "controller" else str(exc)) from None
-    params: dict[str, Any] = {}
-    if body.planner is not None:
-        try:
-            params = get_planner(body.planner).validate_params(body.planner_params)
-        except (PlanningError, ValueError) as exc:
-            raise PreflightError(str(exc)) from None
+    params = _planner_params(body)
+    if body.robots is not None:
+        robots = _fleet_robots(body, env, robot_radius, planning_margin)
+        return Preflight(env, robots[0]["start"], robots[0]["goal"], params, None, controller.params, robots)
     radius = robot_radius + (planning_margin if body.planner is not None else 0.0)
     try:
         space, s, g = check_query(env, body.start, body.goal, robot_radius=radius)
@@ -91,6 +79,63 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
         _check_clear(space, pts, robot_radius)
         path = [list(map(float, p)) for p in body.path]
     return Preflight(env, _pose(s), _pose(g), params, path, controller.params)
+
+
+def _environment(body: ExperimentCreate, env_data: dict[str, Any]) -> Environment:
+    """The job's environment model, no larger than its field kind allows; PreflightError otherwise."""
+    try:
+        env = parse_environment(env_data)
+    except PlanningError as exc:
+        raise PreflightError(f"environment: {exc}") from None
+    limit = SUBFIELD_SIZE if body.field == "sub" else FIELD_SIZE
+    if env.width > limit[0] + 1e-9 or env.height > limit[1] + 1e-9:
+        raise PreflightError(
+            f"environment {env.name!r} is {env.width:g} x {env.height:g} m; a {body.field}-field job "
+            f"allows at most {limit[0]:g} x {limit[1]:g} m" + (' (use "field": "full")' if body.field == "sub" else "")
+        )
+    return env
+
+
+def _planner_params(body: ExperimentCreate) -> dict[str, Any]:
+    """The planner's parameters, defaults filled in ({} without a planner); PreflightError naming a bad one."""
+    if body.planner is None:
+        return {}
+    try:
+        if body.planner == FLEET_PLANNER:
+            from planners.prioritized import FLEET_DEFAULTS
+            from planners.st_astar import SpaceTimeAStar
+
+            return SpaceTimeAStar().validate_params({**FLEET_DEFAULTS, **body.planner_params})
+        return get_planner(body.planner).validate_params(body.planner_params)
+    except (PlanningError, ValueError) as exc:
+        raise PreflightError(f"planner_params: {exc}" if body.planner == FLEET_PLANNER else str(exc)) from None
+
+
+def _fleet_robots(body: ExperimentCreate, env: Environment, robot_radius: float,
+                  planning_margin: float) -> list[dict[str, Any]]:
+    """A multi-robot job's robots checked (:func:`preflight_fleet`; each planned robot's goal reachable, each
+    explicit path from its start to its goal and clear by ``robot_radius``, m); as plain ``{"start", "goal",
+    "path"?}`` (m, rad).  Raises :class:`PreflightError` naming ``robots[i]...``."""
+    assert body.robots is not None
+    robots = [r.model_dump(exclude_none=True) for r in body.robots]
+    margin = planning_margin if body.planner is not None else 0.0
+    preflight_fleet(env, robots, robot_radius, margin)
+    for i, r in enumerate(robots):
+        explicit = r.get("path") is not None
+        try:
+            space, s, g = check_query(env, r["start"], r["goal"], robot_radius=robot_radius + (0.0 if explicit else margin))
+        except PlanningError as exc:
+            raise PreflightError(f"robots[{i}]: {exc}") from None
+        if explicit:
+            pts = np.array([p[:2] for p in r["path"]], dtype=float)
+            if np.hypot(*(pts[0] - s[:2])) > 1e-3 or np.hypot(*(pts[-1] - g[:2])) > 1e-3:
+                raise PreflightError(f"robots[{i}].path must begin at robots[{i}].start and end at robots[{i}].goal "
+                                     "(within 1 mm)")
+            try:
+                _check_clear(space, pts, robot_radius)
+            except PreflightError as exc:
+                raise PreflightError(f"robots[{i}].{exc}") from None
+    return robots
 
 
 def preflight_fleet(env: Environment, robots: list[dict[str, Any]], robot_radius: float,

@@ -41,4 +41,40 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0009",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0010",)]
+
+
+def test_multi_robot_migration_up_and_down_keeps_data(database_url):
+    """0010 (an experiment's robots, a pose's fleet member) on both databases: old rows get NULL, fleet rows
+    are written and read, and the downgrade keeps every other column's data."""
+    from sqlalchemy import inspect, text
+
+    cfg = config(database_url)
+    command.upgrade(cfg, "0009")
+    engine = make_engine(database_url)
+    with engine.begin() as c:
+        c.execute(text("insert into users (id, name, is_admin, created_at) values (1, 'old', false, '2026-01-01')"))
+        c.execute(text(
+            "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner_params,"
+            " modes, repetitions, seed, field, robot_radius, planning_info, error, created_at) values (1, 1, 'completed',"
+            " 'room', '{}', '[0.3, 0.3]', '[1.5, 1.5]', '{}', '[\"sim\"]', 1, 0, 'sub', 0.045, '{}', '', '2026-01-01')"))
+        c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
+                       " created_at) values (7, 1, 'sim', 1, 'completed', 0, 1, '{}', '', '2026-01-01')"))
+        c.execute(text("insert into poses (run_id, t, x, y, theta) values (7, 0.5, 0.3, 0.3, 0.0)"))
+    command.upgrade(cfg, "0010")
+    with engine.begin() as c:
+        assert c.execute(text("select robots from experiments")).all() == [(None,)]
+        assert c.execute(text("select t, x, robot from poses")).all() == [(0.5, 0.3, None)]
+        c.execute(text("update experiments set robots = :r"), {"r": '[{"start": [0.3, 0.3], "goal": [1.5, 1.5]}]'})
+        c.execute(text("insert into poses (run_id, t, x, y, theta, robot) values (7, 1.0, 0.4, 0.3, 0.0, 3)"))
+        assert c.execute(text("select robot from poses order by t")).all() == [(None,), (3,)]
+    engine.dispose()
+    command.downgrade(cfg, "0009")
+    engine = make_engine(database_url)
+    cols = {t: {c["name"] for c in inspect(engine).get_columns(t)} for t in ("experiments", "poses")}
+    assert "robots" not in cols["experiments"] and "robot" not in cols["poses"]
+    with engine.begin() as c:
+        assert c.execute(text("select t, x from poses order by t")).all() == [(0.5, 0.3), (1.0, 0.4)]
+        assert c.execute(text("select environment, start from experiments")).all()[0][0] == "room"
+    engine.dispose()
+    command.upgrade(cfg, "head")

@@ -234,6 +234,16 @@ def _print_experiment_list(page: Any, wide: bool) -> None:
 
 _LIST_COLUMNS = ("id", "status", "environment", "planner", "modes", "reps", "created", "error")
 _RUN_COLUMNS = ("run", "mode", "rep", "status", "robot", "sub-field", "length (m)", "time (s)", "mean dev. (m)", "error")
+#: a run's three numbers in `twb status`: (metric, digits) for one robot, and for a multi-robot job's fleet
+_RUN_NUMBERS = (("length_m", 3), ("execution_time_s", 2), ("deviation_mean_m", 4))
+_FLEET_RUN_COLUMNS = ("run", "mode", "rep", "status", "robot", "sub-field", "success", "makespan (s)",
+                      "min robot dist. (m)", "error")
+_FLEET_RUN_NUMBERS = (("success_rate", 2), ("makespan_s", 2), ("robot_distance_min_m", 4))
+
+
+def _is_fleet(exp: Any) -> bool:
+    """A multi-robot job (its robots given instead of a start and goal)."""
+    return getattr(exp, "robots", None) is not None
 
 
 def _print_experiment(exp: Any, wide: bool) -> None:
@@ -248,22 +258,25 @@ def _print_experiment(exp: Any, wide: bool) -> None:
 
         length = float(np.hypot(*np.diff(exp.planned_path[:, :2], axis=0).T).sum())
     source = job_label(exp) if exp.planner is None else f"planner {exp.planner}"
+    fleet = _is_fleet(exp)
+    where = (f"{len(exp.robots)} robots, robot 0 {_pose(exp.start)} -> {_pose(exp.goal)}" if fleet
+             else f"{_pose(exp.start)} -> {_pose(exp.goal)}")
     if exp.controller != "schema":
         source += f", controller {exp.controller}"
     if getattr(exp, "controller_program", None) is not None:
         source += f", controller program #{exp.controller_program}"
-    con.print(f"experiment {exp.id}: [bold]{exp.status}[/bold]  {exp.environment} "
-              f"{_pose(exp.start)} -> {_pose(exp.goal)}  {source}  "
-              f"planned {_num(length)} m in {_num(exp.planning_time_s, 4)} s  seed {exp.seed}", highlight=False)
+    planned = f"planned {_num(length)} m" + (" (robot 0)" if fleet else "")
+    con.print(f"experiment {exp.id}: [bold]{exp.status}[/bold]  {exp.environment} {where}  {source}  "
+              f"{planned} in {_num(exp.planning_time_s, 4)} s  seed {exp.seed}", highlight=False)
     if exp.error:
         con.print(f"error: {exp.error}", highlight=False)
+    names, numbers = (_FLEET_RUN_COLUMNS, _FLEET_RUN_NUMBERS) if fleet else (_RUN_COLUMNS, _RUN_NUMBERS)
     rows = []
     for r in exp.runs:
         m = r.metrics
-        rows.append(dict(zip(_RUN_COLUMNS, (
+        rows.append(dict(zip(names, (
             str(r.id), r.mode, str(r.repetition), r.status, r.robot_id or "", _num(r.subfield),
-            _num(m.get("length_m")), _num(m.get("execution_time_s"), 2), _num(m.get("deviation_mean_m"), 4),
-            r.error[:50]))))
+            *(_num(m.get(k), digits) for k, digits in numbers), r.error[:50]))))
 
     def build(cols: list[str]) -> Table:
         table = Table(*cols)
@@ -271,8 +284,8 @@ def _print_experiment(exp: Any, wide: bool) -> None:
             table.add_row(*(row[c] for c in cols))
         return table
 
-    columns = [c for c in _RUN_COLUMNS if c != "error" or any(r.error for r in exp.runs)]
-    print_fitted(con, build, columns, ("mean dev. (m)", "time (s)", "length (m)", "sub-field"), wide)
+    columns = [c for c in names if c != "error" or any(r.error for r in exp.runs)]
+    print_fitted(con, build, columns, (*reversed(names[6:9]), "sub-field"), wide)
 
 
 def _pose(p: list[float]) -> str:
@@ -314,6 +327,13 @@ RESULT_COLUMNS = (
     ("execution_time_s", "time (s)"), ("average_speed_m_s", "speed (m/s)"), ("deviation_mean_m", "mean dev. (m)"),
     ("deviation_max_m", "max dev. (m)"), ("length_ratio", "length ratio"), ("goal_reached", "goal"),
     ("collided", "collided"),
+)
+#: the fleet's metrics of a multi-robot job's runs (docs/metrics.md, "Several robots")
+FLEET_RESULT_COLUMNS = (
+    ("success_rate", "success"), ("makespan_s", "makespan (s)"), ("robot_distance_min_m", "min robot dist. (m)"),
+    ("collisions_robot", "robot coll."), ("collisions_static", "static coll."), ("collisions_moving", "moving coll."),
+    ("deadlock", "deadlock"), ("time_sum_s", "flowtime (s)"), ("path_length_sum_m", "length sum (m)"),
+    ("safety_time_s", "safety time (s)"),
 )
 
 
@@ -371,6 +391,13 @@ def _print_results_csv(m: Any) -> None:
 #: metrics left out first when the terminal is narrow (the last ones here go first)
 _RESULT_PRIORITY = ("length_m", "execution_time_s", "deviation_mean_m", "goal_reached", "collided", "length_ratio",
                     "average_speed_m_s", "clearance_min_m", "deviation_max_m", "smoothness_rad")
+_FLEET_PRIORITY = tuple(k for k, _ in FLEET_RESULT_COLUMNS)
+
+
+def _result_columns(m: Any) -> tuple[tuple[tuple[str, str], ...], tuple[str, ...]]:
+    """The metrics columns of the results table and their priority: the fleet's for a multi-robot job."""
+    fleet = any(isinstance(r.metrics.get("robots"), list) for r in m.runs)
+    return (FLEET_RESULT_COLUMNS, _FLEET_PRIORITY) if fleet else (RESULT_COLUMNS, _RESULT_PRIORITY)
 
 
 def compact_table(columns: list[str], title: Optional[str] = None, numeric: tuple[str, ...] = ()) -> Any:
@@ -390,16 +417,16 @@ def _header(label: str) -> str:
     return f"{name}\n({unit}" if sep else label.replace(" ", "\n", 1)
 
 
-def _result_rows(m: Any) -> list[tuple[dict[str, str], Optional[str]]]:
+def _result_rows(m: Any, metrics: tuple[tuple[str, str], ...] = RESULT_COLUMNS) -> list[tuple[dict[str, str], Optional[str]]]:
     """Rows of the results table: one per run, then mean and std per mode (bold)."""
     rows: list[tuple[dict[str, str], Optional[str]]] = []
     for r in m.runs:
         rows.append(({"run": str(r.run_id), "mode": r.mode, "rep": str(r.repetition), "status": r.status,
-                      **{_header(h): _num(r.metrics.get(k)) for k, h in RESULT_COLUMNS}}, None))
+                      **{_header(h): _num(r.metrics.get(k)) for k, h in metrics}}, None))
     for mode, agg in m.aggregates.items():
         for label, field in (("mean", "mean"), ("± std", "std")):
             cells = {}
-            for k, h in RESULT_COLUMNS:
+            for k, h in metrics:
                 s = agg.metrics.get(k)
                 v = None if s is None else getattr(s, field)
                 cells[_header(h)] = "–" if v is None else f"{v:.3f}"
@@ -412,8 +439,9 @@ def _print_results(m: Any, exp: Any, wide: bool) -> None:
     from .tables import console, print_fitted
 
     con = console(wide)
-    headers = {k: _header(h) for k, h in RESULT_COLUMNS}
-    rows = _result_rows(m)
+    metrics, priority = _result_columns(m)
+    headers = {k: _header(h) for k, h in metrics}
+    rows = _result_rows(m, metrics)
     title = f"experiment {m.experiment_id}: {m.status}" + (f" ({exp.environment}, {job_label(exp)})" if exp else "")
 
     def build(cols: list[str]) -> Any:
@@ -423,7 +451,7 @@ def _print_results(m: Any, exp: Any, wide: bool) -> None:
         return table
 
     columns = ["run", "mode", "rep", "status", *headers.values()]
-    optional = [headers[k] for k in reversed(_RESULT_PRIORITY)]
+    optional = [headers[k] for k in reversed(priority)]
     print_fitted(con, build, columns, optional, wide)
     if m.planned:
         con.print("planned path: " + "  ".join(f"{h} {_num(m.planned.get(k))}" for k, h in RESULT_COLUMNS[:3]),

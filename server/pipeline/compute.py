@@ -197,16 +197,21 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
 
 def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: Optional[str],
               params: dict[str, Any], seed: int, max_s: float, robot_radius: float, backend: str = "ideal",
-              controller: str = "schema", controller_params: Optional[dict[str, float]] = None) -> dict[str, Any]:
+              controller: str = "schema", controller_params: Optional[dict[str, float]] = None,
+              platform: str = "BeBot", overrides: Optional[dict[str, float]] = None,
+              plan_seed: Optional[int] = None) -> dict[str, Any]:
     """A multi-robot run as one task (issue 17): plan every robot, run them all in one world on one clock
     (:func:`robot_agent.fleet.simulate_fleet`), measure them (:func:`planners.fleet_metrics.fleet_metrics`).
 
     ``robots``: per robot ``{"start", "goal", "path"?}`` (m, rad).  ``planner`` ``prioritized`` plans them
     together (timed paths: robots hold where the plan waits); any other planner plans each robot alone,
-    uncoordinated (the baseline); a robot's explicit ``path`` is driven as given.  Returns ``{"robots": [per
-    robot {"path", "depart", "poses" (N, 4) t s, x m, y m, theta rad, "lines", "t_start", "t_end",
-    "outcome", "obstacle", "holds"}], "planning_time_s", "metrics"}``, or ``{"planning_error": why}`` /
-    ``{"placement_error": why}``."""
+    uncoordinated (the baseline); a robot's explicit ``path`` is driven as given.  Planning keeps
+    ``robot_radius`` (m) and samples with ``plan_seed`` (default ``seed``); ``seed`` gives the robots' noise.
+    The robots are ``backend`` robots (``ideal``, or ``field``: the emulated field robot of ``platform``'s
+    profile with the field parameters ``overrides``) following with ``controller`` for at most ``max_s``
+    experiment seconds.  Returns ``{"robots": [per robot {"path", "depart", "poses" (N, 4) t s, x m, y m,
+    theta rad, "lines", "t_start", "t_end", "outcome", "obstacle", "holds"}], "planning_time_s", "metrics"}``,
+    or ``{"planning_error": why}`` / ``{"placement_error": why}``."""
     import time
 
     from planners import PlanningError, parse_environment, plan_path
@@ -214,8 +219,10 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     from planners.prioritized import fleet_waypoints, plan_prioritized
     from robot_agent.fleet import simulate_fleet
     from robot_agent.headless import PlacementRefused
+    from robot_agent.overrides import apply_overrides
     from robot_agent.params import robot_params
     from robot_agent.protocol import encode_path, format_event
+    from robot_agent.robot_profile import load_profile, profile_for_platform
 
     env = parse_environment(env_data)
     t0 = time.perf_counter()
@@ -237,7 +244,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
                 else:
                     try:
                         got = plan_path(env, r["start"], r["goal"], planner or "fmm", robot_radius=robot_radius,
-                                        params=params, seed=seed)
+                                        params=params, seed=seed if plan_seed is None else plan_seed)
                     except PlanningError as exc:
                         raise PlanningError(f"robot {i}: {exc}") from None
                     paths.append(np.round(got.path, 6).tolist())
@@ -250,10 +257,11 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
         s = list(r["start"])
         starts.append(s if len(s) > 2 else [*s[:2], p[0][2]])
     dep_arrays = [None if d is None else np.array([np.nan if v is None else v for v in d]) for d in depart]
+    profile = apply_overrides(load_profile(profile_for_platform(platform)), overrides)
     try:
         fleet = simulate_fleet(paths, starts, seed=seed, depart=dep_arrays, blocks=block_tuples(env_data),
-                               moving=moving_tuples(env_data), backend=backend, area=env.size, max_s=max_s,
-                               controller=controller, controller_params=controller_params)
+                               moving=moving_tuples(env_data), backend=backend, profile=profile, area=env.size,
+                               max_s=max_s, controller=controller, controller_params=controller_params)
     except PlacementRefused as exc:
         return {"placement_error": str(exc)}
     settings = FleetSettings(robot_radius=robot_params().collision_radius_m)

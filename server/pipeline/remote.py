@@ -18,14 +18,13 @@ exchanged go to the run's log, and the end is classified as a robot's
 from __future__ import annotations
 
 import json
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from ..errors import FailureKind, RunFailed, TestbedFault
-from ..models import utcnow
 from ..status import RunStatus
 from ..store.runs import RunJob
 from . import compute, steps
@@ -39,15 +38,12 @@ def start_status(svc: RunServices, job: RunJob) -> RunStatus:
     return RunStatus.RUNNING if svc.paths.known(job.experiment_id) else RunStatus.PLANNING
 
 
-async def run_on_engine(ctx: RunContext, svc: RunServices, job: Optional[RunJob] = None) -> None:
-    """Carry out the run as a task (``job``: the run's, when already loaded); raises as
+async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
+    """Carry out the run (started by the runner: ``job`` is its) as a task; raises as
     :func:`server.pipeline.runner` expects of its steps.  A field run (mode ``twb``, on a field robot) is
     the emulated field robot with the job's profile overrides, in the robot's frame, holding its sub-field."""
     rec = svc.recorder
     on_field = not ctx.robot.engine
-    if job is None:  # an engine's slot: the run starts here (a field variant's was started by the runner)
-        job = await rec.start(ctx.run_id, robot_id=ctx.robot.robot_id, subfield=None, started_at=utcnow(),
-                              status=lambda j: start_status(svc, j))
     if job.controller_program is not None:
         raise RunFailed("a controller program drives a robot agent over TCP; this run went to a compute "
                         "engine's slot, which has none (run this job on a testbed without --sim-engine ray)",

@@ -14,7 +14,8 @@ A simulation run on a compute engine's slot (Ray) is one task instead
 (planning, running, analyzing: :mod:`server.pipeline.remote`), and so is a
 field run whose job has profile overrides: the emulated field robot with
 other parameters, computed in a worker while the run holds its robot and
-sub-field (a robot's physics cannot be changed for one run).
+sub-field (a robot's physics cannot be changed for one run).  A multi-robot
+run is always one task, in both modes (:mod:`server.pipeline.fleet`).
 
 Whose fault an ending is (:mod:`server.errors`): ``failed`` is the job's
 (no path, collision, stall, timeout), ``error`` the testbed's (robot
@@ -45,6 +46,7 @@ from ..status import RunStatus
 from ..store.runs import RunJob
 from . import closed_loop, steps
 from .context import RunContext, RunServices
+from .fleet import run_fleet
 from .recorder import RunRecorder
 from .remote import run_on_engine, start_status
 
@@ -141,20 +143,29 @@ def _blame(ctx: RunContext) -> Optional[str]:
 
 
 async def _carry_out(ctx: RunContext, svc: RunServices) -> None:
-    """On a compute engine's slot, or a field run with profile overrides (the emulated field robot with
-    other parameters, :mod:`.remote`): one task; else the steps on the robot."""
-    if ctx.robot.engine:
-        await run_on_engine(ctx, svc)
-        return
+    """A multi-robot run (:mod:`.fleet`), a run on a compute engine's slot or a field run with profile
+    overrides (the emulated field robot with other parameters, :mod:`.remote`): one task; else the steps on
+    the robot."""
     job = await svc.recorder.start(
         ctx.run_id, robot_id=ctx.robot.robot_id, started_at=utcnow(),
         subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None,
-        status=lambda j: start_status(svc, j) if _as_task(j) else RunStatus.BUILDING)
-    if _as_task(job):
+        status=lambda j: _first_status(ctx, svc, j))
+    if job.robots is not None:
+        ctx.as_task = True
+        await run_fleet(ctx, svc, job)
+    elif ctx.as_task or _as_task(job):
         ctx.as_task = True
         await run_on_engine(ctx, svc, job)
     else:
         await _steps(ctx, svc, job)
+
+
+def _first_status(ctx: RunContext, svc: RunServices, job: RunJob) -> RunStatus:
+    """The state a run starts in: a multi-robot run ``running`` (its task plans too), another task as
+    :func:`start_status` says, a run on a robot ``building``."""
+    if job.robots is not None:
+        return RunStatus.RUNNING
+    return start_status(svc, job) if ctx.as_task or _as_task(job) else RunStatus.BUILDING
 
 
 def _as_task(job: RunJob) -> bool:

@@ -46,6 +46,7 @@ def create_experiment(
         environment_data=checked.env.to_dict(),
         start=checked.start,
         goal=checked.goal,
+        robots=checked.robots,
         planner=body.planner,
         planner_params=checked.planner_params,
         explicit_path=checked.path,

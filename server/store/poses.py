@@ -1,9 +1,13 @@
-"""A run's logged poses: the one query for them, and the bulk insert of tracker batches."""
+"""A run's logged poses: the one query for them, and the bulk insert of tracker batches and run ends.
+
+A multi-robot run's poses carry the fleet member they belong to (``robot``,
+its index in the job's ``robots``); a single robot's have none (NULL).
+"""
 
 from __future__ import annotations
 
 import threading
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 from sqlalchemy import Engine, select
@@ -15,23 +19,31 @@ from ..models import Pose
 __all__ = ["add_poses", "insert_poses", "run_poses"]
 
 _COLUMNS = "run_id, t, x, y, theta"
+_FLEET_COLUMNS = "run_id, t, x, y, theta, robot"
 
 _EPS = 1e-9
 
 
 def run_poses(session: Session, run_id: int, *, after_t: Optional[float] = None,
-              between: Optional[tuple[Optional[float], Optional[float]]] = None) -> list[list[float]]:
+              between: Optional[tuple[Optional[float], Optional[float]]] = None, robot: Optional[int] = None,
+              fleet: bool = False) -> list[list[float]]:
     """Poses ``[t, x, y, theta]`` (s, m, m, rad) of a run, oldest first.
 
     ``after_t``: only later than this experiment time.  ``between``: only
     within ``(t_start, t_end)`` (inclusive, 1 ns slack) when both are known.
+    ``robot``: only this fleet member's.  ``fleet``: a multi-robot run's rows
+    ``[t, x, y, theta, robot]``, robot by robot, each oldest first.
     """
-    q = select(Pose.t, Pose.x, Pose.y, Pose.theta).where(Pose.run_id == run_id)
+    cols = (Pose.t, Pose.x, Pose.y, Pose.theta) + ((Pose.robot,) if fleet else ())
+    q = select(*cols).where(Pose.run_id == run_id)
     if after_t is not None:
         q = q.where(Pose.t > after_t)
     if between is not None and between[0] is not None and between[1] is not None:
         q = q.where(Pose.t >= between[0] - _EPS, Pose.t <= between[1] + _EPS)
-    return [list(r) for r in session.execute(q.order_by(Pose.t))]
+    if robot is not None:
+        q = q.where(Pose.robot == robot)
+    order = (Pose.robot, Pose.t) if fleet else (Pose.t,)
+    return [list(r) for r in session.execute(q.order_by(*order))]
 
 
 def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threading.Lock) -> None:
@@ -61,22 +73,29 @@ def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threadi
 
 
 def add_poses(session: Session, run_id: int, rows: np.ndarray) -> None:
-    """Store ``rows`` ``(N, 4)`` (t, x, y, theta: s, m, m, rad) for ``run_id`` inside the session's transaction
-    (a run's end written at once: its poses, log and status commit together), by the same bulk paths."""
+    """Store ``rows`` for ``run_id`` inside the session's transaction (a run's end written at once: its poses,
+    log and status commit together), by the same bulk paths: ``(N, 4)`` (t, x, y, theta: s, m, m, rad) of one
+    robot, or ``(N, 5)`` with the fleet member's index last (a multi-robot run)."""
     if len(rows) == 0:
         return
     conn = session.connection()
     if conn.dialect.name == "postgresql":
         _copy(conn.connection.driver_connection, run_id, rows)
     else:
-        conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle), _tuples(run_id, rows))
+        conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle, _is_fleet(rows)), _tuples(run_id, rows))
+
+
+def _is_fleet(rows: np.ndarray) -> bool:
+    """Rows with the fleet member's index as a fifth column."""
+    return rows.ndim == 2 and rows.shape[1] == 5
 
 
 def _copy(pg: object, run_id: int, rows: np.ndarray) -> None:
+    columns = _FLEET_COLUMNS if _is_fleet(rows) else _COLUMNS
     with pg.cursor() as cur:  # type: ignore[attr-defined]
-        with cur.copy(f"COPY poses ({_COLUMNS}) FROM STDIN") as copy:
-            for t, x, y, a in rows.tolist():
-                copy.write_row((run_id, t, x, y, a))
+        with cur.copy(f"COPY poses ({columns}) FROM STDIN") as copy:
+            for row in _tuples(run_id, rows):
+                copy.write_row(row)
 
 
 def _executemany(conn: object, sqlite: bool, paramstyle: str, run_id: int, rows: np.ndarray) -> None:
@@ -93,16 +112,20 @@ def _executemany(conn: object, sqlite: bool, paramstyle: str, run_id: int, rows:
         cur.close()
 
 
-def _tuples(run_id: int, rows: np.ndarray) -> list[tuple[int, float, float, float, float]]:
-    """The INSERT's parameters: ``(run_id, t, x, y, theta)`` per row."""
+def _tuples(run_id: int, rows: np.ndarray) -> list[tuple[Any, ...]]:
+    """The INSERT's parameters: ``(run_id, t, x, y, theta)`` per row, ``(..., robot)`` for a multi-robot run's."""
+    if _is_fleet(rows):
+        return [(run_id, t, x, y, a, int(k)) for t, x, y, a, k in rows.tolist()]
     return [(run_id, t, x, y, a) for t, x, y, a in rows.tolist()]
 
 
-def _insert_sql(paramstyle: str) -> str:
-    """The poses INSERT for the driver's parameter style (a raw executemany is ~5x faster than the ORM's)."""
+def _insert_sql(paramstyle: str, fleet: bool = False) -> str:
+    """The poses INSERT for the driver's parameter style (a raw executemany is ~5x faster than the ORM's);
+    ``fleet``: with the fleet member's column."""
+    n = 6 if fleet else 5
     marks = {"qmark": "?", "format": "%s", "pyformat": "%s", "numeric": None, "named": None}.get(paramstyle, "?")
     if marks is None:
-        params = ", ".join(f":{i}" if paramstyle == "numeric" else f":p{i}" for i in range(1, 6))
+        params = ", ".join(f":{i}" if paramstyle == "numeric" else f":p{i}" for i in range(1, n + 1))
     else:
-        params = ", ".join([marks] * 5)
-    return f"INSERT INTO poses ({_COLUMNS}) VALUES ({params})"
+        params = ", ".join([marks] * n)
+    return f"INSERT INTO poses ({_FLEET_COLUMNS if fleet else _COLUMNS}) VALUES ({params})"

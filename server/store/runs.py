@@ -39,6 +39,13 @@ class RunJob:
     controller_params: dict[str, float] = dc_field(default_factory=dict)
     #: an uploaded program that drives the robot along the planned path (docs/controllers.md), or None
     controller_program: Optional[int] = None
+    #: a multi-robot job's robots ``[{"start", "goal", "path"?}]`` (m, rad), or None; they are planned with
+    #: the run (``planner``, ``planner_params``, ``seed`` of the experiment, ``planning_margin`` m)
+    robots: Optional[list[dict[str, Any]]] = None
+    planner: Optional[str] = None
+    planner_params: dict[str, Any] = dc_field(default_factory=dict)
+    experiment_seed: int = 0
+    planning_margin: float = 0.0
 
 
 def job_of(run: Run) -> RunJob:
@@ -46,7 +53,8 @@ def job_of(run: Run) -> RunJob:
     e = run.experiment
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
                   list(e.goal), e.field, e.robot_radius, e.jitter, e.profile_overrides, e.controller or "schema",
-                  dict(e.controller_params or {}), e.controller_program_id)
+                  dict(e.controller_params or {}), e.controller_program_id, e.robots, e.planner,
+                  dict(e.planner_params or {}), e.seed, e.planning_margin or 0.0)
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:

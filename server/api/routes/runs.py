@@ -11,7 +11,7 @@ from sqlalchemy import func, select
 
 from ...access import owned
 from ...models import Message, Run
-from ...schemas import RunPublic
+from ...schemas import MAX_ROBOTS, RunPublic
 from ...store.poses import run_poses
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep
 from ..responses import AUTHENTICATED, errors
@@ -37,25 +37,35 @@ def get_poses(
     run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
-    format: Literal["json", "csv"] = Query(default="json", description="json or csv (header t,x,y,theta)."),
+    format: Literal["json", "csv"] = Query(default="json", description=(
+        "json or csv (header t,x,y,theta; t,x,y,theta,robot for a multi-robot run).")),
     after_t: Optional[float] = Query(default=None, allow_inf_nan=False,
                                      description="Only poses later than this experiment time (s): for polling."),
+    robot: Optional[int] = Query(default=None, ge=0, lt=MAX_ROBOTS, description=(
+        "A multi-robot run: only this robot's poses (its index in the job's `robots`).")),
 ):
     """Logged poses of a run, oldest first: tracker measurements (twb) or ground truth (sim).
 
     Times are experiment seconds on the robot's clock; x, y in metres and
-    theta in radians, in the frame of the experiment's field.
+    theta in radians, in the frame of the experiment's field.  A multi-robot
+    run's rows carry the robot's index as a fifth column (``robot``), robot by
+    robot (robot 0's first), each robot's oldest first; ``robot=k`` keeps
+    robot k's.
     """
-    owned(session, user, Run, run_id, "Run")
-    rows = run_poses(session, run_id, after_t=after_t)
+    run = owned(session, user, Run, run_id, "Run")
+    fleet = run.experiment.robots is not None
+    rows = run_poses(session, run_id, after_t=after_t, robot=robot if fleet else None, fleet=fleet)
+    if robot is not None and not fleet:
+        rows = rows if robot == 0 else []  # one robot: robot 0 is the only one
+    columns = ["t", "x", "y", "theta"] + (["robot"] if fleet else [])
     if format == "csv":
         buf = io.StringIO()
-        buf.write("t,x,y,theta\n")
-        for t, x, y, a in rows:
-            buf.write(f"{t:.4f},{x:.5f},{y:.5f},{a:.5f}\n")
+        buf.write(",".join(columns) + "\n")
+        for row in rows:
+            buf.write(f"{row[0]:.4f},{row[1]:.5f},{row[2]:.5f},{row[3]:.5f}" + (f",{row[4]}" if fleet else "") + "\n")
         return PlainTextResponse(buf.getvalue(), media_type="text/csv",
                                  headers={"Content-Disposition": f'attachment; filename="run-{run_id}-poses.csv"'})
-    return {"run_id": run_id, "count": len(rows), "columns": ["t", "x", "y", "theta"], "poses": rows}
+    return {"run_id": run_id, "count": len(rows), "columns": columns, "poses": rows}
 
 
 @router.get("/{run_id:int}/messages", responses=errors(404))

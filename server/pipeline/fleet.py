@@ -1,0 +1,197 @@
+"""A multi-robot run as one task (issue 17): every robot planned, driven in one world on one clock, measured.
+
+The robots of a multi-robot job (``robots`` on the experiment) run together
+in :func:`server.pipeline.compute.fleet_job`, one task in the compute pool
+(the worker processes, or Ray): planning (``prioritized`` together, any
+other planner robot by robot), the simulation of all robots in one world
+(they collide with each other), the fleet metrics.  A ``sim`` run is the
+ideal robots; a ``twb`` run is the emulated field robots of the platform of
+the field robot the scheduler gave it, computed as a task while the run
+holds that robot and its sub-field (or the whole field), as a field run
+with profile overrides is (:mod:`server.pipeline.remote`): no agent drives
+them, the lines logged are the ones they would have exchanged.
+
+Back on the server the poses are stored per robot (the ``robot`` column),
+each robot's last pose is shown live as robot ``"<robot_id>/<k>"``, the
+protocol lines go to the run's log prefixed ``robot k:``, and the run ends
+``completed`` when every robot reached its goal, else ``failed`` naming
+the robots and what they hit (:func:`fleet_failure`) -- measured either way.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, Optional
+
+import numpy as np
+
+from ..errors import FailureKind, RunFailed, TestbedFault
+from ..status import SubfieldState
+from ..store.runs import RunJob
+from . import compute
+from .context import RunContext, RunServices
+
+__all__ = ["fleet_failure", "fleet_poses", "fleet_timeout_s", "run_fleet"]
+
+#: a robot's end as the run's failure: kind, and how the message says it (``{k}``: the robot's index)
+_ENDS = {
+    "TIMEOUT_SIM": (FailureKind.TIMEOUT, "robot {k} did not reach its goal within {s:.0f} s of experiment time"),
+    "TIMEOUT": (FailureKind.CONTROLLER_TIMEOUT, "robot {k}'s controller gave up on its path"),
+    "STALLED": (FailureKind.STALLED, "robot {k} could not make progress"),
+}
+#: which failure kind names a run whose robots failed in several ways (first wins)
+_PRECEDENCE = (FailureKind.COLLISION, FailureKind.TIMEOUT, FailureKind.CONTROLLER_TIMEOUT, FailureKind.STALLED,
+               FailureKind.OTHER)
+
+
+def fleet_timeout_s(svc: RunServices, robots: list[dict[str, Any]]) -> float:
+    """Experiment seconds a fleet may drive before its robots still under way count as timed out: the run
+    timeout of one robot driving every robot's way one after the other (a prioritized plan may make robots
+    wait for each other); a planned robot's way is its straight line times 1.5 (m)."""
+    length = 0.0
+    for r in robots:
+        pts = r.get("path") or [r["start"], r["goal"]]
+        straight = sum(math.dist(a[:2], b[:2]) for a, b in zip(pts[:-1], pts[1:]))
+        length += straight if r.get("path") else 1.5 * straight
+    s = svc.settings
+    return max(s.run_timeout_min_s, s.run_timeout_factor * compute.expected_duration_s(length, 0))
+
+
+def fleet_poses(robots: list[dict[str, Any]]) -> np.ndarray:
+    """Every robot's poses as one ``(N, 5)`` array: t s, x m, y m, theta rad, the robot's index; robot by robot."""
+    parts = [np.column_stack([np.asarray(r["poses"], dtype=float).reshape(-1, 4), np.full(len(r["poses"]), k)])
+             for k, r in enumerate(robots)]
+    return np.concatenate(parts) if parts else np.zeros((0, 5))
+
+
+def _hit_robot(k: int, robots: list[dict[str, Any]]) -> Optional[int]:
+    """The robot nearest to robot ``k`` where and when ``k`` stopped (the one it collided with)."""
+    me = np.asarray(robots[k]["poses"], dtype=float).reshape(-1, 4)
+    if not len(me):
+        return None
+    t, x, y = me[-1, :3]
+    best, gap = None, math.inf
+    for j, r in enumerate(robots):
+        p = np.asarray(r["poses"], dtype=float).reshape(-1, 4)
+        if j == k or not len(p):
+            continue
+        d = math.hypot(float(np.interp(t, p[:, 0], p[:, 1])) - x, float(np.interp(t, p[:, 0], p[:, 2])) - y)
+        if d < gap:
+            best, gap = j, d
+    return best
+
+
+def _end_text(k: int, robot: dict[str, Any], measured: dict[str, Any], robots: list[dict[str, Any]],
+              timeout_s: float) -> tuple[FailureKind, str]:
+    """How robot ``k`` failed: its failure kind and a phrase naming it and what it hit."""
+    outcome = robot["outcome"]
+    if outcome == "COLLISION":
+        kind = measured.get("collision")
+        if kind == "moving" and robot.get("obstacle") is not None:
+            o = robot["obstacle"]
+            return FailureKind.COLLISION, f"robot {k} hit moving obstacle {o} (the environment's moving_obstacles[{o}])"
+        other = _hit_robot(k, robots) if kind == "robot" else None
+        if other is not None:
+            return FailureKind.COLLISION, f"robot {k} hit robot {other}"
+        return FailureKind.COLLISION, f"robot {k} hit a block or the wall"
+    fkind, text = _ENDS.get(outcome, (FailureKind.OTHER, "robot {k}: " + outcome.lower().replace("_", " ")))
+    return fkind, text.format(k=k, s=timeout_s)
+
+
+def fleet_failure(robots: list[dict[str, Any]], metrics: dict[str, Any], timeout_s: float) -> Optional[RunFailed]:
+    """The run's failure when a robot did not reach its goal (None when every one did): its kind is the
+    gravest of the robots' (a collision before a timeout ...), its message names every robot that failed and
+    what it hit, e.g. ``collision: robot 0 hit robot 2; robot 2 hit robot 0``, and says so when the fleet was
+    deadlocked.  ``robots``: :func:`~server.pipeline.compute.fleet_job`'s; ``metrics`` its fleet metrics."""
+    ends = [_end_text(k, r, metrics["robots"][k], robots, timeout_s)
+            for k, r in enumerate(robots) if r["outcome"] != "DONE"]
+    if not ends:
+        return None
+    kind = min((fk for fk, _ in ends), key=_PRECEDENCE.index)
+    label = {FailureKind.COLLISION: "collision", FailureKind.TIMEOUT: "timeout",
+             FailureKind.CONTROLLER_TIMEOUT: "timeout", FailureKind.STALLED: "stalled"}.get(kind, "failed")
+    text = f"{label}: " + "; ".join(t for _, t in ends)
+    if metrics.get("deadlock"):
+        text += f" (deadlock: no robot under way moved {metrics['settings']['progress_m']:g} m for " \
+                f"{metrics['no_progress_max_s']:.1f} s)"
+    failure = RunFailed(text, kind)
+    first = next((r for r in robots if r["outcome"] == "COLLISION"), None)
+    failure.obstacle = first.get("obstacle") if first is not None else None
+    return failure
+
+
+def _span(robots: list[dict[str, Any]]) -> tuple[Optional[float], Optional[float]]:
+    """The fleet's ``t_start`` (the first robot's START) and ``t_end`` (the last robot's end, or its last pose
+    when it did not end), s."""
+    starts = [r["t_start"] for r in robots if r["t_start"] is not None]
+    ends = []
+    for r in robots:
+        poses = np.asarray(r["poses"], dtype=float).reshape(-1, 4)
+        end = r["t_end"] if r["t_end"] is not None else (float(poses[-1, 0]) if len(poses) else None)
+        if end is not None:
+            ends.append(end)
+    return (min(starts) if starts else None), (max(ends) if ends else None)
+
+
+async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
+    """Carry out a multi-robot run as one task; raises as :func:`server.pipeline.runner` expects of its steps
+    (:class:`RunFailed` when a robot did not arrive, planning included; :class:`TestbedFault` when the
+    robots could not be placed)."""
+    assert job.robots is not None
+    on_field = job.mode == "twb"
+    platform = ctx.robot.platform or "BeBot"
+    if on_field:
+        svc.field.claim(ctx.subfields, job.owner_id)
+        for k in ctx.subfields:
+            await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id, owner_id=job.owner_id)
+        what = (f"{len(job.robots)} emulated field robots ({platform}"
+                + (f", profile overrides {json.dumps(job.profile_overrides, sort_keys=True)}"
+                   if job.profile_overrides else "")
+                + f") on the field of {ctx.robot.robot_id}")
+    else:
+        what = f"{len(job.robots)} ideal robots on {ctx.robot.engine or 'the worker pool'} ({ctx.robot.robot_id})"
+    ctx.on_line("s", f"a multi-robot run of {what}, computed as one task in one world on one clock: the lines "
+                     "below are the ones each robot would have exchanged, prefixed `robot k:`", None, False)
+    timeout_s = fleet_timeout_s(svc, job.robots)
+    out: dict[str, Any] = await svc.pool.run(
+        compute.fleet_job, job.environment_data, job.robots, job.planner, job.planner_params, job.seed, timeout_s,
+        job.robot_radius + job.planning_margin, "field" if on_field else "ideal", job.controller,
+        job.controller_params, platform, job.profile_overrides if on_field else None, job.experiment_seed)
+    if "planning_error" in out:
+        raise RunFailed(f"planning failed: {out['planning_error']}", FailureKind.PLANNING, whole_experiment=True)
+    if "placement_error" in out:
+        raise TestbedFault(f"the gripper could not place the robots: {out['placement_error']}")
+    robots = out["robots"]
+    await _keep_plan(svc, job, robots, out["planning_time_s"])
+    for k, r in enumerate(robots):
+        for direction, line, t in r["lines"]:
+            ctx.on_line(direction, f"robot {k}: {line}", t, False)
+        for w, held in r["holds"]:
+            ctx.on_line("s", f"robot {k}: held at waypoint {w} for {held:.2f} s, as planned", None, False)
+    ctx.end_poses = fleet_poses(robots)  # stored with the run's end, in its one transaction
+    for k, r in enumerate(robots):  # shown live now
+        svc.tracker.show(ctx.robot.robot_id, ctx.run_id, job.owner_id, np.asarray(r["poses"]).reshape(-1, 4), member=k)
+    failure = fleet_failure(robots, out["metrics"], timeout_s)
+    t_start, t_end = _span(robots)
+    metrics = dict(out["metrics"])
+    metrics["collided"] = any(r["outcome"] == "COLLISION" for r in robots)
+    ctx.end_fields.update(t_start=t_start, t_end=t_end, metrics=metrics)
+    if failure is not None:
+        first = next(r for r in robots if r["outcome"] != "DONE")
+        last = np.asarray(first["poses"], dtype=float).reshape(-1, 4)
+        if len(last):
+            ctx.end_fields["stopped_at"] = [round(float(last[-1, 1]), 4), round(float(last[-1, 2]), 4)]
+        raise failure
+
+
+async def _keep_plan(svc: RunServices, job: RunJob, robots: list[dict[str, Any]],
+                     planning_time_s: Optional[float]) -> None:
+    """The experiment's plan, kept by its first run: robot 0's path as ``planned_path`` (m, m, rad), every
+    robot's path and departure times (s, None: no hold) in ``planning_info["robots"]``."""
+    stored, _ = await svc.recorder.planned_path(job.experiment_id)
+    if stored is not None:
+        return
+    info = {"robots": [{"path": r["path"], "depart": r["depart"]} for r in robots],
+            "explicit": job.planner is None}
+    await svc.recorder.store_plan(job.experiment_id, robots[0]["path"], planning_time_s, info)
