@@ -61,13 +61,20 @@ def pair_distances(xy: np.ndarray) -> np.ndarray:
     return d
 
 
-def collision_kind(outcome: str, obstacle: Optional[int], gap_to_robot_m: float, robot_radius: float) -> Optional[str]:
-    """What a robot hit: ``robot`` (another robot within two collision radii, 5 mm tolerance, when it
-    stopped), ``moving`` (a moving obstacle), ``static`` (a block or the wall), or None (no collision)."""
+def collision_kind(outcome: str, obstacle: Optional[int], gap_to_robot_m: float, robot_radius: float,
+                   static_clearance_m: Optional[float] = None) -> Optional[str]:
+    """What a robot hit: ``robot`` (another robot), ``moving`` (a moving obstacle), ``static`` (a block or the
+    wall), or None (no collision).  ``gap_to_robot_m``: the centre distance to the nearest robot when it
+    stopped (m); ``static_clearance_m``: its centre's distance to the nearest block or wall then (m).  With
+    both, whichever was nearer to touching it (``gap - 2 r`` against ``clearance - r``): tracker poses lag
+    and scatter, so neither comes out at exactly a touch; without the clearance, a robot within two
+    collision radii plus 5 mm."""
     if outcome != "COLLISION":
         return None
     if obstacle is not None:
         return "moving"
+    if static_clearance_m is not None:
+        return "robot" if gap_to_robot_m - 2 * robot_radius <= static_clearance_m - robot_radius else "static"
     return "robot" if gap_to_robot_m <= 2 * robot_radius + 0.005 else "static"
 
 
@@ -80,10 +87,13 @@ def _longest_run(mask: np.ndarray) -> int:
 
 
 def fleet_metrics(poses: Sequence[np.ndarray], outcomes: Sequence[str], ends: Sequence[Optional[float]],
-                  obstacles: Sequence[Optional[int]] = (), settings: FleetSettings = FleetSettings()) -> dict[str, Any]:
+                  obstacles: Sequence[Optional[int]] = (), settings: FleetSettings = FleetSettings(),
+                  static_clearance: Sequence[Optional[float]] = ()) -> dict[str, Any]:
     """Per-robot and fleet metrics of robots' tracker ``poses`` (each ``(N_i, 4)``: t s, x m, y m, theta rad on
     the fleet's clock), their ``outcomes`` (``DONE``, a FAIL reason, ``TIMEOUT_SIM``), the times (s) their
-    paths ended (None: not ended) and the moving obstacle each collided with (None: none).
+    paths ended (None: not ended), the moving obstacle each collided with (None: none) and, optionally, each
+    one's distance from its last pose to the nearest block or wall (m; tells a collision with a robot from
+    one with a block, :func:`collision_kind`).
 
     Returns ``{"robots": [per robot], "robot_distance_min_m", "safety_time_s", "collisions_robot",
     "collisions_moving", "collisions_static", "makespan_s", "path_length_sum_m", "time_sum_s",
@@ -92,6 +102,7 @@ def fleet_metrics(poses: Sequence[np.ndarray], outcomes: Sequence[str], ends: Se
     if r == 0 or len(outcomes) != r or len(ends) != r:
         raise ValueError(f"one outcome and end per robot: {r} robots, {len(outcomes)} outcomes, {len(ends)} ends")
     obs = list(obstacles) if len(obstacles) else [None] * r
+    clear = list(static_clearance) if len(static_clearance) else [None] * r
     dt = settings.dt
     t, xy = _grid([np.asarray(p, dtype=float).reshape(-1, 4) for p in poses], dt)
     d = pair_distances(xy)
@@ -114,7 +125,7 @@ def fleet_metrics(poses: Sequence[np.ndarray], outcomes: Sequence[str], ends: Se
     for i in range(r):
         stop = int(np.searchsorted(t, min(end_t[i], t[-1] if len(t) else 0.0)))
         gap = float(d[i, :, min(stop, len(t) - 1)].min()) if len(t) else np.inf
-        kind = collision_kind(outcomes[i], obs[i], gap, settings.robot_radius)
+        kind = collision_kind(outcomes[i], obs[i], gap, settings.robot_radius, clear[i])
         if kind:
             kinds[kind] += 1
         robots.append({"robot": i, "outcome": outcomes[i], "done": outcomes[i] == "DONE",

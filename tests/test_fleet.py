@@ -107,7 +107,7 @@ def test_bad_fleets_are_refused_naming_the_robot():
 
 # ---------------------------------------------------------------- metrics (planners.fleet_metrics)
 
-from planners.fleet_metrics import FleetSettings, fleet_metrics  # noqa: E402
+from planners.fleet_metrics import FleetSettings, collision_kind, fleet_metrics  # noqa: E402
 
 
 def measured(fleet):
@@ -132,6 +132,16 @@ def test_metrics_of_the_two_swaps():
     assert ok["robot_distance_min_m"] == min(r["robot_distance_min_m"] for r in ok["robots"])
     lengths = [float(np.hypot(*np.diff(r.poses[:, 1:3], axis=0).T).sum()) for r in fleet.runs]
     assert ok["path_length_sum_m"] == pytest.approx(sum(lengths), rel=0.02)  # resampled every 20 ms
+
+
+def test_a_collision_is_with_whatever_was_nearer_to_touching():
+    """Tracker poses lag: two field robots that hit each other may be logged more than 5 mm beyond a touch;
+    with the clearance to the blocks and walls known, the nearer of the two is what was hit."""
+    assert collision_kind("COLLISION", None, 0.09, 0.04) == "static"  # without the clearance: 5 mm at most
+    assert collision_kind("COLLISION", None, 0.09, 0.04, static_clearance_m=0.6) == "robot"
+    assert collision_kind("COLLISION", None, 0.3, 0.04, static_clearance_m=0.045) == "static"
+    assert collision_kind("COLLISION", 2, 0.09, 0.04, static_clearance_m=0.6) == "moving"
+    assert collision_kind("DONE", None, 0.09, 0.04, static_clearance_m=0.6) is None
 
 
 def test_deadlock_and_safety_time_on_made_up_poses():

@@ -31,6 +31,9 @@ JOBS = [
     # a field-robot variant (noise study): a task in the worker pool there, on Ray here
     {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fmm",
      "modes": ["twb"], "repetitions": 1, "seed": 5, "profile_overrides": {"tracker_noise_xy_m": 0.002}},
+    # a multi-robot job: compute.fleet_job in the worker pool there, a Ray task here (poses with the robot column)
+    {"environment": "swap", "planner": "prioritized", "modes": ["sim"], "repetitions": 1, "seed": 1,
+     "robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 1.5], "goal": [0.3, 0.3]}]},
 ]
 
 
@@ -41,7 +44,7 @@ def _run_all(p: Process) -> list[list[tuple[dict, np.ndarray]]]:
         ids = [c.post("/api/v1/experiments", json=job).json()["id"] for job in JOBS]
         for i in ids:
             exp = wait_for(c, i, timeout=120)
-            out.append([(r, np.array(c.get(f"/api/v1/runs/{r['id']}/poses").json()["poses"]))
+            out.append([(r, np.array(c.get(f"/api/v1/runs/{r['id']}/poses").json()["poses"], dtype=float))
                         for r in sorted(exp["runs"], key=lambda r: r["repetition"])])
     return out
 
@@ -78,7 +81,7 @@ def test_a_run_on_ray_equals_the_same_run_on_a_local_agent(postgres, tmp_path):
         assert on_ray.stop() == 0, on_ray.output()
     assert "Traceback" not in on_ray.output(), on_ray.output()
     statuses = [[r["status"] for r, _ in runs] for runs in theirs]
-    assert statuses == [["completed", "completed"], ["completed"], ["completed"]]
+    assert statuses == [["completed", "completed"], ["completed"], ["completed"], ["completed"]]
     for job, runs_a, runs_b in zip(JOBS, mine, theirs):
         for (ra, pa), (rb, pb) in zip(runs_a, runs_b):
             if job["modes"] == ["twb"]:

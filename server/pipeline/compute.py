@@ -216,6 +216,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
 
     from planners import PlanningError, parse_environment, plan_path
     from planners.fleet_metrics import FleetSettings, fleet_metrics
+    from planners.geometry import distance_to_obstacles
     from planners.prioritized import fleet_waypoints, plan_prioritized
     from robot_agent.fleet import simulate_fleet
     from robot_agent.headless import PlacementRefused
@@ -265,8 +266,10 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     except PlacementRefused as exc:
         return {"placement_error": str(exc)}
     settings = FleetSettings(robot_radius=robot_params().collision_radius_m)
+    last = [r.poses[-1, 1:3] if len(r.poses) else None for r in fleet.runs]
+    clearance = [None if p is None else float(distance_to_obstacles(env, p[None])[0]) for p in last]
     metrics = fleet_metrics([r.poses for r in fleet.runs], fleet.outcomes, [r.t_end for r in fleet.runs],
-                            [r.obstacle for r in fleet.runs], settings)
+                            [r.obstacle for r in fleet.runs], settings, clearance)
     metrics["planning_time_s"] = planning_time_s
     out = []
     for i, run in enumerate(fleet.runs):

@@ -1,0 +1,205 @@
+"""Multi-robot jobs through a real `twb up` (issue 17): POST /experiments with `robots`, one task per run, poses per
+robot, the fleet's metrics, failures naming the robots, 422s naming the field, the SDK and `twb submit FILE`.
+
+(The migration's way up and down: tests/test_migrations.py; the fleet simulation and its metrics without a server:
+tests/test_fleet.py.)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from client_sdk import Client
+from robot_agent.params import robot_params
+from server.core.settings import Settings
+from server.pipeline import compute
+from server.pipeline.fleet import fleet_timeout_s
+from servers import EventListener, Process, wait_for
+
+ROOT = Path(__file__).resolve().parents[1]
+RADIUS = robot_params().collision_radius_m
+JOBS = {name: json.loads((ROOT / "examples" / "fleet" / f"swap-{name}.json").read_text())
+        for name in ("prioritized", "uncoordinated")}
+TWO = [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 0.3], "goal": [0.3, 1.5]}]
+
+
+@pytest.fixture(scope="module")
+def testbed(tmp_path_factory):
+    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("fleet"))
+    yield p
+    assert p.stop() == 0, p.output()
+    assert "Traceback" not in p.output(), p.output()
+
+
+@pytest.fixture(scope="module")
+def client(testbed):
+    with testbed.client() as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def prioritized(client):
+    """The prioritized swap in simulation, finished: (experiment, its run)."""
+    exp = wait_for(client, client.post("/api/v1/experiments", json=JOBS["prioritized"]).json()["id"], timeout=120)
+    return exp, exp["runs"][0]
+
+
+def poses(client, run_id: int, **params) -> np.ndarray:
+    body = client.get(f"/api/v1/runs/{run_id}/poses", params=params).json()
+    return np.array(body["poses"], dtype=float).reshape(-1, len(body["columns"]))
+
+
+def lines(client, run_id: int) -> list[str]:
+    return [m["line"] for m in client.get(f"/api/v1/runs/{run_id}/messages", params={"limit": 5000}).json()["data"]]
+
+
+def test_the_prioritized_swap_completes_with_the_robots_apart_and_poses_per_robot(client, prioritized):
+    exp, run = prioritized
+    assert exp["status"] == "completed" and run["status"] == "completed", exp
+    assert exp["robots"] == JOBS["prioritized"]["robots"] and exp["start"] == exp["robots"][0]["start"]
+    m = run["metrics"]
+    assert m["robot_distance_min_m"] > 2 * RADIUS and m["success_rate"] == 1.0 and m["makespan_s"] > 0
+    assert not m["collided"] and m["collisions_robot"] == 0 and [r["outcome"] for r in m["robots"]] == ["DONE"] * 4
+    assert run["t_start"] == 0.0 and run["t_end"] == pytest.approx(m["makespan_s"])
+    # the plan: robot 0's as the planned path, every robot's in the planning info
+    assert exp["planned_path"] == exp["planning_info"]["robots"][0]["path"] and len(exp["planning_info"]["robots"]) == 4
+    every = poses(client, run["id"])
+    assert every.shape[1] == 5 and set(every[:, 4]) == {0, 1, 2, 3}
+    for k, r in enumerate(JOBS["prioritized"]["robots"]):
+        mine = poses(client, run["id"], robot=k)
+        assert set(mine[:, 4]) == {k} and np.array_equal(mine, every[every[:, 4] == k])
+        assert np.all(np.diff(mine[:, 0]) > 0)  # oldest first
+        assert np.hypot(*(mine[-1, 1:3] - r["goal"][:2])) < 0.02
+    csv = client.get(f"/api/v1/runs/{run['id']}/poses", params={"format": "csv", "robot": 3}).text.splitlines()
+    assert csv[0] == "t,x,y,theta,robot" and all(row.endswith(",3") for row in csv[1:]) and len(csv) > 10
+    log = lines(client, run["id"])
+    assert log[0].startswith("a multi-robot run of 4 ideal robots")
+    for k in range(4):
+        mine = [x for x in log if x.startswith(f"robot {k}: ")]
+        assert mine[0].startswith(f"robot {k}: T,T,P,") and mine[-1].startswith(f"robot {k}: EV,DONE,")
+
+
+def test_the_same_seed_gives_the_same_poses_as_the_task_run_directly(client, prioritized):
+    """compute.fleet_job called here with the run's arguments: the server's stored poses, bit for bit."""
+    exp, run = prioritized
+    env = client.get("/api/v1/environments/swap").json()
+    platform = next(r["platform"] for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])
+    timeout_s = fleet_timeout_s(SimpleNamespace(settings=Settings()), exp["robots"])
+    out = compute.fleet_job({k: env[k] for k in ("name", "size", "blocks", "plans", "description")}, exp["robots"],
+                            exp["planner"], exp["planner_params"], run["seed"], timeout_s,
+                            exp["robot_radius"] + exp["planning_margin"], "ideal", exp["controller"],
+                            exp["controller_params"], platform or "BeBot", None, exp["seed"])
+    for k, r in enumerate(out["robots"]):
+        assert np.array_equal(poses(client, run["id"], robot=k)[:, :4], r["poses"]), k
+    assert out["metrics"]["robot_distance_min_m"] == run["metrics"]["robot_distance_min_m"]
+
+
+def test_the_uncoordinated_swap_fails_with_its_collisions_counted_and_measured(client):
+    exp = wait_for(client, client.post("/api/v1/experiments", json=JOBS["uncoordinated"]).json()["id"], timeout=120)
+    run = exp["runs"][0]
+    assert exp["status"] == "failed" and run["status"] == "failed" and run["failure"] == "collision", exp
+    assert run["error"].startswith("collision: robot 0 hit robot ") and run["error"].count(" hit robot ") == 4
+    assert "collision at (0.8" in exp["error"]  # where the first robot stopped, near the centre
+    m = run["metrics"]  # measured although failed
+    assert m["collided"] and m["collisions_robot"] == 4 and m["success_rate"] == 0.0 and m["makespan_s"] is None
+    assert m["robot_distance_min_m"] < 2 * RADIUS + 0.01
+    assert [r["collision"] for r in m["robots"]] == ["robot"] * 4
+    assert set(poses(client, run["id"])[:, 4]) == {0, 1, 2, 3}
+    got = client.get(f"/api/v1/experiments/{exp['id']}/metrics").json()
+    assert got["runs"][0]["outcome"] == "collision" and got["direct"] == []
+
+
+@pytest.mark.parametrize("job, detail", [
+    ({"robots": [TWO[0], {"start": [0.35, 0.3], "goal": [0.3, 1.5]}]},
+     r"robots[1].start is 0.050 m from robots[0].start"),
+    ({"robots": [{"start": [0.1 * i + 0.2, 0.3], "goal": [0.1 * i + 0.2, 1.5]} for i in range(17)]},
+     "robots: List should have at most 16 items"),
+    ({"robots": TWO[:1]}, "robots: List should have at least 2 items"),
+    ({"environment": "room", "robots": [TWO[0], {"start": [0.9, 0.45], "goal": [0.3, 1.5]}]}, "robots[1].start: start"),
+    ({"environment": "room", "robots": [TWO[0], {"start": [1.5, 0.3], "goal": [0.9, 0.45]}]}, "robots[1].goal: goal"),
+    ({"robots": [TWO[0], {"start": [1.5, 0.3], "goal": [0.3, 1.5, "north"]}]}, "robots[1].goal[2]:"),
+    ({"robots": [TWO[0], {"start": [1.5, 0.3], "goal": [0.3, 1.5], "path": [[1.5, 0.3], [0.3, 1.4]]}],
+      "planner": None}, "robots[1].path must begin at robots[1].start and end at robots[1].goal"),
+    ({"start": [0.3, 0.3], "goal": [1.5, 1.5], "planner": "prioritized"}, "planner: `prioritized` plans several robots"),
+    ({"robots": TWO, "start": [0.3, 0.3]}, "start: give either `start`/`goal` or `robots`, not both"),
+    ({"robots": TWO, "path": [[0.3, 0.3], [1.5, 1.5]]}, "path: a multi-robot job takes each robot's path"),
+    ({"robots": TWO, "program": 1}, "program: an uploaded planner program plans one robot"),
+    ({"robots": TWO, "controller_program": 1}, "controller_program: a controller program drives one robot"),
+    ({"robots": [TWO[0], {**TWO[1], "path": [[1.5, 0.3], [0.3, 1.5]]}], "planner": "prioritized"},
+     "robots[1].path: `prioritized` plans every robot together"),
+    ({"robots": TWO, "planner": "prioritized", "planner_params": {"speeed": 1}}, "planner_params: planner"),
+])
+def test_bad_multi_robot_jobs_are_refused_naming_the_field(client, job, detail):
+    body = {"environment": "swap", "planner": "prioritized", "modes": ["sim"], **job}
+    if body.get("planner") is None:
+        body.pop("planner")
+    r = client.post("/api/v1/experiments", json=body)
+    assert r.status_code == 422 and detail in r.json()["detail"], r.text
+
+
+def test_a_field_fleet_on_a_sub_field_is_the_emulated_field_robots_shown_live(testbed, client):
+    """`twb` mode: the field robots of the run's sub-field, computed as one task; every robot's last pose is
+    published live as robot "<field robot>/<k>" in field coordinates."""
+    job = {**JOBS["prioritized"], "modes": ["twb"], "field": "sub"}
+    submitted: dict = {}
+    listener = EventListener(testbed.url, testbed.token,
+                             until=lambda e: e["event"] == "experiment" and e["experiment"]["id"] == submitted.get("id")
+                             and e["experiment"]["status"] in ("completed", "failed", "error"))
+    submitted.update(client.post("/api/v1/experiments", json=job).json())
+    exp = wait_for(client, submitted["id"], timeout=120)
+    listener.join(10)
+    listener.stop()
+    run = exp["runs"][0]
+    assert exp["status"] == "completed", exp
+    assert run["robot_id"].startswith("field-") and run["subfield"] in (1, 2, 3, 4)
+    assert run["metrics"]["robot_distance_min_m"] > 2 * RADIUS
+    log = lines(client, run["id"])
+    assert log[0].startswith("a multi-robot run of 4 emulated field robots (BeBot) on the field of field-")
+    origin = next(r["origin"] for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])
+    live = {e["robot_id"]: e for e in listener.seen if e["event"] == "pose" and e["run_id"] == run["id"]}
+    assert set(live) == {f"{run['robot_id']}/{k}" for k in range(4)}, listener.seen
+    for k in range(4):
+        mine, e = poses(client, run["id"], robot=k), live[f"{run['robot_id']}/{k}"]
+        assert e["robot"] == k and e["t"] == mine[-1, 0]
+        assert (e["x"], e["y"]) == pytest.approx((mine[-1, 1] + origin[0], mine[-1, 2] + origin[1]))
+
+
+def test_a_full_field_fleet_holds_the_whole_field(client):
+    """`field: "full"`: the emulated field robots in the whole field's frame, the run on all four sub-fields;
+    two robots pass each other in lanes 0.6 m apart across the middle of the field."""
+    env = {"name": "open-field", "size": [3.6, 3.6], "blocks": []}
+    assert client.post("/api/v1/environments", json=env).status_code == 201
+    robots = [{"start": [0.4, 1.5], "goal": [3.2, 1.5]}, {"start": [3.2, 2.1], "goal": [0.4, 2.1]}]
+    job = {"environment": "open-field", "robots": robots, "planner": "prioritized", "modes": ["twb"], "field": "full"}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=180)
+    run = exp["runs"][0]
+    assert exp["status"] == "completed" and run["subfield"] is None, (exp["error"], run["error"])
+    assert run["metrics"]["robot_distance_min_m"] > 2 * RADIUS and run["metrics"]["success_rate"] == 1.0
+    for k, r in enumerate(robots):
+        assert np.hypot(*(poses(client, run["id"], robot=k)[-1, 1:3] - r["goal"])) < 0.03
+    assert client.post("/api/v1/experiments", json={**job, "field": "sub"}).json()["detail"].startswith("environment 'open-field' is 3.6 x 3.6 m; a sub-field job allows at most 1.8 x 1.8 m")
+
+
+def test_the_sdk_and_twb_submit_take_multi_robot_jobs(testbed, twb, tmp_path):
+    with Client(testbed.url, testbed.token) as c:
+        exp = c.wait(c.submit("swap", robots=TWO, planner="prioritized", modes=["sim"], seed=3).id, timeout=120,
+                     progress=False)
+        assert exp.status == "completed" and exp.robots == TWO
+        every = c.get_poses(exp.runs[0].id)
+        one = c.get_poses(exp.runs[0].id, robot=1)
+        assert every.shape[1] == 5 and np.array_equal(one, every[every[:, 4] == 1])
+    auth = ["--url", testbed.url, "--token", testbed.token]
+    out = twb("submit", str(ROOT / "examples" / "fleet" / "swap-prioritized.json"), "--wait", *auth)
+    assert out.returncode == 0, out.stderr
+    exp_id = out.stdout.split()[0]
+    shown = twb("status", exp_id, "--wide", *auth)
+    assert shown.returncode == 0 and "4 robots, robot 0" in shown.stdout and "makespan (s)" in shown.stdout, shown
+    results = twb("results", exp_id, "--wide", *auth)
+    assert results.returncode == 0 and "min robot dist." in results.stdout and "makespan" in results.stdout, results
+    csv = twb("results", exp_id, "--csv", *auth)
+    assert csv.returncode == 0 and "robot_distance_min_m" in csv.stdout.splitlines()[0], csv
