@@ -185,6 +185,34 @@ def test_a_full_field_fleet_holds_the_whole_field(client):
     assert client.post("/api/v1/experiments", json={**job, "field": "sub"}).json()["detail"].startswith("environment 'open-field' is 3.6 x 3.6 m; a sub-field job allows at most 1.8 x 1.8 m")
 
 
+def test_fleet_poses_go_in_by_each_databases_bulk_path(database_url):
+    """A run's end with the robot column: COPY on PostgreSQL, executemany on SQLite; read back robot by robot."""
+    from server.core.db import make_engine, make_session_factory, migrate
+    from server.models import Experiment, Run, User
+    from server.store.poses import add_poses, run_poses
+
+    engine = make_engine(database_url)
+    migrate(engine)
+    sessions = make_session_factory(engine)
+    with sessions.begin() as s:
+        s.add(User(id=1, name="u"))
+        s.add(Experiment(id=1, owner_id=1, environment="swap", environment_data={}, start=[0, 0], goal=[1, 1],
+                         robots=TWO, modes=["sim"], robot_radius=0.045))
+        s.add_all([Run(id=1, experiment_id=1, mode="sim", repetition=1), Run(id=2, experiment_id=1, mode="sim",
+                                                                             repetition=2)])
+    t = np.arange(5) * 0.02
+    rows = np.concatenate([np.column_stack([t, t + k, t, t, np.full(5, k)]) for k in (1, 0)])  # robot 1 first
+    with sessions.begin() as s:
+        add_poses(s, 1, rows)
+        add_poses(s, 2, rows[:5, :4])  # one robot's: no robot column
+    with sessions() as s:
+        got = np.array(run_poses(s, 1, fleet=True))
+        assert np.array_equal(got, np.concatenate([rows[5:], rows[:5]]))  # robot by robot, oldest first
+        assert np.array_equal(np.array(run_poses(s, 1, robot=1)), rows[:5, :4])
+        assert run_poses(s, 2, fleet=True) == [[*r, None] for r in rows[:5, :4].tolist()]
+    engine.dispose()
+
+
 def test_the_sdk_and_twb_submit_take_multi_robot_jobs(testbed, twb, tmp_path):
     with Client(testbed.url, testbed.token) as c:
         exp = c.wait(c.submit("swap", robots=TWO, planner="prioritized", modes=["sim"], seed=3).id, timeout=120,
