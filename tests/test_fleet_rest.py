@@ -18,7 +18,7 @@ from client_sdk import Client
 from robot_agent.params import robot_params
 from server.core.settings import Settings
 from server.pipeline import compute
-from server.pipeline.fleet import fleet_timeout_s
+from server.pipeline.fleet import fleet_failure, fleet_timeout_s
 from servers import EventListener, Process, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -114,6 +114,20 @@ def test_the_uncoordinated_swap_fails_with_its_collisions_counted_and_measured(c
     assert got["runs"][0]["outcome"] == "collision" and got["direct"] == []
 
 
+def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(client):
+    """Robot 0 parks in the doorway for good; robot 1, planned after it, cannot pass: the first run's planning
+    fails, and the experiment's other runs fail with it without planning again."""
+    door = {"name": "door", "size": [1.8, 1.0], "blocks": [{"x": 0.9, "y": 0.2, "w": 0.06, "h": 0.4},
+                                                           {"x": 0.9, "y": 0.8, "w": 0.06, "h": 0.4}]}
+    assert client.post("/api/v1/environments", json=door).status_code == 201
+    job = {"environment": "door", "planner": "prioritized", "modes": ["sim", "twb"], "repetitions": 2,
+           "robots": [{"start": [0.3, 0.5], "goal": [0.9, 0.5]}, {"start": [1.5, 0.5], "goal": [0.3, 0.5]}]}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=120)
+    assert exp["status"] == "failed" and exp["error"].startswith("planning failed: robot 1 (of 2, planned in order)"), exp
+    assert [r["failure"] for r in exp["runs"]] == ["planning"] * 4 and exp["planned_path"] is None
+    assert all(r["metrics"] == {} for r in exp["runs"])
+
+
 @pytest.mark.parametrize("job, detail", [
     ({"robots": [TWO[0], {"start": [0.35, 0.3], "goal": [0.3, 1.5]}]},
      r"robots[1].start is 0.050 m from robots[0].start"),
@@ -183,6 +197,23 @@ def test_a_full_field_fleet_holds_the_whole_field(client):
     for k, r in enumerate(robots):
         assert np.hypot(*(poses(client, run["id"], robot=k)[-1, 1:3] - r["goal"])) < 0.03
     assert client.post("/api/v1/experiments", json={**job, "field": "sub"}).json()["detail"].startswith("environment 'open-field' is 3.6 x 3.6 m; a sub-field job allows at most 1.8 x 1.8 m")
+
+
+def test_a_fleet_failure_names_each_robot_and_the_gravest_kind():
+    still = np.array([[0.0, 0.5, 0.5, 0.0], [9.0, 0.5, 0.5, 0.0]])
+    robots = [{"outcome": o, "obstacle": ob, "poses": still + [0, k, 0, 0]}
+              for k, (o, ob) in enumerate([("DONE", None), ("TIMEOUT_SIM", None), ("STALLED", None),
+                                           ("COLLISION", 1)])]
+    metrics = {"robots": [{"collision": None}] * 3 + [{"collision": "moving"}], "deadlock": True,
+               "no_progress_max_s": 7.5, "settings": {"progress_m": 0.01}}
+    failure = fleet_failure(robots, metrics, 100.0)
+    assert failure.kind == "collision" and failure.obstacle == 1
+    assert str(failure) == ("collision: robot 1 did not reach its goal within 100 s of experiment time; robot 2 could "
+                            "not make progress; robot 3 hit moving obstacle 1 (the environment's moving_obstacles[1]) "
+                            "(deadlock: no robot under way moved 0.01 m for 7.5 s)")
+    no_collision = fleet_failure(robots[:3], {**metrics, "robots": metrics["robots"][:3], "deadlock": False}, 100.0)
+    assert no_collision.kind == "timeout" and str(no_collision).startswith("timeout: robot 1 did not")
+    assert fleet_failure(robots[:1], metrics, 100.0) is None
 
 
 def test_fleet_poses_go_in_by_each_databases_bulk_path(database_url):
