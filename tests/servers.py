@@ -27,6 +27,15 @@ class Process(LocalTestbed):
         return httpx.Client(base_url=self.url, headers=headers, timeout=30, **kw)
 
 
+def serve(args: list[str], data_dir: Path, **kw):  # type: ignore[no-untyped-def]
+    """A module fixture's body: the testbed ``args`` start in ``data_dir`` and are yielded; afterwards they must
+    stop cleanly, without a traceback in their output."""
+    p = Process(args, data_dir, **kw)
+    yield p
+    assert p.stop() == 0, p.output()
+    assert "Traceback" not in p.output(), p.output()
+
+
 def wait_for(client: httpx.Client, experiment_id: int, timeout: float = 60.0, terminal=None) -> dict:
     """Poll an experiment until it reaches a terminal state."""
     terminal = terminal or {"completed", "failed", "error", "cancelled", "interrupted"}

@@ -19,7 +19,7 @@ from robot_agent.params import robot_params
 from server.core.settings import Settings
 from server.pipeline import compute
 from server.pipeline.fleet import fleet_failure, fleet_timeout_s
-from servers import EventListener, Process, wait_for
+from servers import EventListener, serve, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 RADIUS = robot_params().collision_radius_m
@@ -30,10 +30,7 @@ TWO = [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 0.3], "goal": 
 
 @pytest.fixture(scope="module")
 def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("fleet"))
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("fleet"))
 
 
 @pytest.fixture(scope="module")
