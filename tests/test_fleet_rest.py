@@ -259,3 +259,11 @@ def test_the_sdk_and_twb_submit_take_multi_robot_jobs(testbed, twb, tmp_path):
     assert results.returncode == 0 and "min robot dist." in results.stdout and "makespan" in results.stdout, results
     csv = twb("results", exp_id, "--csv", *auth)
     assert csv.returncode == 0 and "robot_distance_min_m" in csv.stdout.splitlines()[0], csv
+    with Client(testbed.url, testbed.token) as c:
+        run_id = str(c.get_experiment(int(exp_id)).runs[0].id)
+    for extra in ((), ("--robot", "3")):
+        gif = tmp_path / f"replay{len(extra)}.gif"
+        out = twb("replay", run_id, "--out", str(gif), "--max-frames", "6", "--dpi", "30", *extra, *auth)
+        assert out.returncode == 0 and gif.stat().st_size > 1000, out.stderr
+    bad = twb("replay", run_id, "--robot", "4", "--out", str(tmp_path / "x.gif"), *auth)
+    assert bad.returncode == 2 and "has 4 robots (0 to 3); --robot 4 is none" in bad.stderr, bad.stderr

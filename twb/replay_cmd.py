@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -18,7 +18,7 @@ def replay(
     speed: Annotated[float, typer.Option(help="Experiment seconds per second of animation.", min=0.01)] = 4.0,
     max_frames: Annotated[int, typer.Option(help="At most this many frames (speed rises to fit).", min=2)] = 300,
     dpi: Annotated[int, typer.Option(help="Resolution of the frames.", min=20, max=300)] = 80,
-    robot: Annotated[Optional[int], typer.Option("--robot", help="A multi-robot run: replay this robot (default 0).", min=0)] = None,
+    robot: Annotated[Optional[int], typer.Option("--robot", help="A multi-robot run: only this robot (default: every robot).", min=0)] = None,
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
@@ -30,31 +30,24 @@ def replay(
         run = client.get_run(run_id)
         exp = client.get_experiment(run.experiment_id)
         env = client.get_environment(exp.environment)
-        fleet, k = exp.robots is not None, robot or 0
+        fleet = exp.robots is not None
         if robot is not None and not fleet:
             fail(f"run {run_id} is a single robot's; --robot is for multi-robot runs")
-        if fleet and k >= len(exp.robots):
-            fail(f"run {run_id} has {len(exp.robots)} robots (0 to {len(exp.robots) - 1}); --robot {k} is none")
-        poses = client.get_poses(run_id, robot=k) if fleet else client.get_poses(run_id)
-    planned = exp.planned_path
-    if fleet:  # robot k's poses and plan (every robot's plan is in the experiment's planning info)
-        import numpy as np
-
-        plans = (exp.planning_info or {}).get("robots") or []
-        planned = np.asarray(plans[k]["path"], dtype=float) if k < len(plans) else None
-        poses = poses[:, :4]
-        if robot is None:
-            typer.echo(f"run {run_id} is a multi-robot run of {len(exp.robots)} robots: replaying robot 0 "
-                       "(--robot K for another)", err=True)
+        if robot is not None and robot >= len(exp.robots):
+            fail(f"run {run_id} has {len(exp.robots)} robots (0 to {len(exp.robots) - 1}); --robot {robot} is none")
+        poses = client.get_poses(run_id) if robot is None else client.get_poses(run_id, robot=robot)
     if len(poses) == 0:
         fail(f"run {run_id} ({run.status}) has no logged poses to replay")
+    planned = exp.planned_path
+    if fleet:
+        poses, planned = _fleet_tracks(exp, poses, robot)
     from matplotlib.animation import PillowWriter
 
     from client_sdk.study import replay_animation
     from client_sdk.study._figures import COLORS
 
     title = (f"run {run.id}: {exp.environment} · {exp.planner or 'path'} · {run.mode} #{run.repetition} "
-             f"({run.status})" + (f" · robot {k}" if fleet else ""))
+             f"({run.status})" + (f" · robot {robot}" if robot is not None else ""))
     fig, anim, n = replay_animation(env.to_json(), poses, planned=planned,
                                     robot_radius=exp.robot_radius or 0.045, fps=fps, speed=speed,
                                     max_frames=max_frames, title=title, color=COLORS.get(run.mode, "#d62728"),
@@ -62,3 +55,16 @@ def replay(
     out.parent.mkdir(parents=True, exist_ok=True)
     anim.save(out, writer=PillowWriter(fps=fps), dpi=dpi)
     typer.echo(f"{out}: {n} frames, {n / fps:.1f} s")
+
+
+def _fleet_tracks(exp: Any, poses: Any, robot: Optional[int]) -> tuple[Any, Any]:
+    """A multi-robot run's poses ``(N, 5)`` (t, x, y, theta, robot) and plans as the replay takes them: robot
+    ``robot``'s ``(N, 4)`` poses and path, or (None) every robot's in a list (plans: the experiment's
+    ``planning_info["robots"]``)."""
+    import numpy as np
+
+    plans = [np.asarray(r["path"], dtype=float) for r in (exp.planning_info or {}).get("robots") or []]
+    if robot is not None:
+        return poses[:, :4], (plans[robot] if robot < len(plans) else None)
+    tracks = [poses[poses[:, 4] == k, :4] for k in range(len(exp.robots))]
+    return tracks, (plans if len(plans) == len(tracks) else None)
