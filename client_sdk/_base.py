@@ -126,7 +126,7 @@ def _one(item: Callable[[dict[str, Any]], Any]) -> Callable[[httpx.Response], An
 def _poses_array(response: httpx.Response) -> np.ndarray:
     """``(N, 4)`` t, x, y, theta, or ``(N, 5)`` with the robot's index last (a multi-robot run's)."""
     body = _json(response)
-    return np.asarray(body["poses"], dtype=float).reshape(-1, len(body.get("columns") or "txya"))
+    return np.asarray(body["poses"], dtype=float).reshape(-1, len(body.get("columns") or ("t", "x", "y", "theta")))
 
 
 def _plain(value: Any) -> Any:
