@@ -9,6 +9,7 @@ served, path traversal, the planners list) always run.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from pathlib import Path
@@ -22,6 +23,7 @@ from servers import TOKEN, Process, wait_for
 CHROMIUM = Path(os.environ.get("TWB_CHROMIUM") or "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"]
 OUTPUT = Path(os.environ.get("TWB_TEST_OUTPUT") or Path(__file__).parent / "output") / "dashboard"
+ROOT = Path(__file__).resolve().parents[1]
 LAPTOP = {"width": 1366, "height": 900}
 TABLET = {"width": 768, "height": 1024}
 
@@ -465,6 +467,49 @@ def test_without_uploads_the_dashboard_says_so_plainly(page, testbed):
 
 CRASH_RGB = (0xD8, 0x1B, 0x60)  # experiments.js CRASH_COLOR: the cross where a failed run stopped
 OVERSHOOT_ENV = {"name": "dash-overshoot", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
+#: the first robots' colours of a multi-robot experiment (static/js/fleet.js ROBOT_COLORS)
+FLEET_RGB = [(0xE6, 0x19, 0x4B), (0x3C, 0xB4, 0x4B), (0x43, 0x63, 0xD8), (0xF5, 0x82, 0x31)]
+
+
+def test_a_multi_robot_experiment_shows_every_robot(page, testbed):
+    """Four robots swapping corners (prioritized, sim and field): the experiment page draws each robot's planned
+    and performed paths in its colour and tabulates each robot; the field page shows them where they ended."""
+    from playwright.sync_api import expect
+
+    job = json.loads((ROOT / "examples" / "fleet" / "swap-prioritized.json").read_text())
+    with testbed.client() as c:
+        r = c.post("/api/v1/experiments", json={**job, "modes": ["sim", "twb"]})
+        assert r.status_code == 202, r.text
+        exp_id = r.json()["id"]
+    login(page, testbed.url)
+    page.goto(f"{testbed.url}/#/experiments/{exp_id}")
+    expect(page.locator("#view-experiment .exp-head .badge")).to_have_text("completed", timeout=60_000)
+    expect(page.locator("#robots-table tbody tr")).to_have_count(8)  # 2 runs x 4 robots
+    expect(page.locator("#robots-table tbody tr td:nth-child(4)")).to_have_text(["arrived"] * 8)
+    with testbed.client() as c:
+        m = c.get(f"/api/v1/experiments/{exp_id}/metrics").json()
+    twb = next(x for x in m["runs"] if x["mode"] == "twb")
+    shown = page.locator(f'#runs-table tr[data-run="{twb["run_id"]}"] td[data-metric="makespan_s"]').inner_text()
+    assert float(shown) == pytest.approx(twb["metrics"]["makespan_s"], abs=1e-3)
+    expect(page.locator("dl.facts").first).to_contain_text("Robots4")
+    page.wait_for_timeout(300)
+    for k, rgb in enumerate(FLEET_RGB):
+        start = job["robots"][k]["start"]
+        assert count_pixels(page, "#experiment-canvas", rgb, tol=40) > 100, f"robot {k}'s paths not drawn"
+        assert count_pixels(page, "#experiment-canvas", rgb, tol=40,
+                            region=(start[0] - 0.06, start[1] - 0.06, start[0] + 0.06, start[1] + 0.06)) > 5
+    page.screenshot(path=OUTPUT / "fleet-experiment.png", full_page=True)
+
+    page.click("#nav a[data-view=field]")
+    expect(page.locator("#view-field")).to_be_visible()
+    page.wait_for_timeout(600)
+    seen = [count_pixels(page, "#field-canvas", rgb, tol=40) for rgb in FLEET_RGB]
+    assert sum(n > 30 for n in seen) >= 2, seen  # at least two of the fleet's robots (and traces) on the field
+    assert "/3 at (" in page.get_attribute("#field-canvas", "aria-label")
+    page.screenshot(path=OUTPUT / "fleet-field.png")
+    assert page.console.errors == []
+
+
 CORNER = {"start": [0.9, 0.3, 1.5708], "goal": [1.5, 0.69, 0.0]}  # the path turns 6 cm below the block
 
 

@@ -7,6 +7,7 @@ import { saveBlob } from "./api.js";
 import { barChart, lineChart, speedProfile } from "./charts.js";
 import { $, TERMINAL, badge, debounce, duration, h, num, pose, report, toast, when } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { byRobot, fleetLayers, robotColor, robotsTable } from "./fleet.js";
 import { obstacleLayers } from "./moving.js";
 import { METRICS, allEqual, clipNote, intervalText, metricLabel, showIfClipped } from "./metrics.js";
 import { ProgramPanel } from "./programrun.js";
@@ -125,9 +126,25 @@ const RUN_COLUMNS = [
   ["collided", "Collided"],
 ];
 
+/** A multi-robot run's columns: the fleet's metrics (docs/metrics.md "Several robots"). */
+const FLEET_COLUMNS = [
+  ["success_rate", "Arrived"],
+  ["makespan_s", "Makespan (s)"],
+  ["time_sum_s", "Time sum (s)"],
+  ["path_length_sum_m", "Length sum (m)"],
+  ["robot_distance_min_m", "Closest (m)"],
+  ["safety_time_s", "Too close (s)"],
+  ["collisions_robot", "Robot hits"],
+  ["collisions_moving", "Obstacle hits"],
+  ["collisions_static", "Block hits"],
+  ["deadlock", "Deadlock"],
+];
+
 /** The charted metrics: [key, whether the planned path's value is drawn as a reference]. */
 const CHARTS = [["length_m", true], ["execution_time_s", false], ["average_speed_m_s", false], ["deviation_mean_m", false],
   ["smoothness_rad", true], ["clearance_min_m", true]];
+const FLEET_CHARTS = [["success_rate", false], ["makespan_s", false], ["time_sum_s", false], ["path_length_sum_m", false],
+  ["robot_distance_min_m", false], ["safety_time_s", false]];
 
 export class ExperimentPage {
   constructor(store) {
@@ -176,6 +193,7 @@ export class ExperimentPage {
       charts: h("div", { class: "charts", id: "experiment-charts" }),
       speed: h("div", { class: "wide-chart" }),
       runs: h("table", { class: "grid dense", id: "runs-table" }),
+      robots: h("table", { class: "grid dense", id: "robots-table" }),
       aggregates: h("table", { class: "grid", id: "aggregates-table" }),
       aggNote: clipNote("aggregates-note"),
       direct: h("table", { class: "grid", id: "direct-table" }),
@@ -193,6 +211,8 @@ export class ExperimentPage {
           h("p", { class: "muted small" }, "Bars: mean per mode; whiskers: 95% confidence interval; dots: runs; dashed green: the planned path."),
           e.charts, e.speed)),
       h("div", { class: "panel" }, h("h2", {}, "Runs"), h("div", { class: "table-scroll" }, e.runs)),
+      e.robotsPanel = h("div", { class: "panel", hidden: true }, h("h2", {}, "Robots of each run"),
+        h("div", { class: "table-scroll" }, e.robots)),
       h("div", { class: "panel" }, h("h2", {}, "Aggregates per mode"), h("div", { class: "table-scroll" }, e.aggregates), e.aggNote),
       h("div", { class: "panel" }, h("h2", {}, "Direct comparison, sim vs field per repetition"),
         h("div", { class: "table-scroll" }, e.direct)),
@@ -217,7 +237,7 @@ export class ExperimentPage {
   }
 
   onPose(ev) {
-    if (this.id === null || !this.data || ev.run_id == null) return;
+    if (this.id === null || !this.data || ev.run_id == null || ev.robot != null) return; // a fleet's: drawn when stored
     const run = this.data.d.runs.find((r) => r.id === ev.run_id);
     if (!run || this.poses.has(run.id)) return;
     const [ox, oy] = this.store.originOf(ev.robot_id);
@@ -236,7 +256,9 @@ export class ExperimentPage {
       ["Environment", d.environment], ["Field", d.field], ["Planner", plannerName(d, this.store.programs)],
       ["Parameters", d.program != null ? "see the program below" : Object.keys(d.planner_params || {}).length ? JSON.stringify(d.planner_params) : "defaults"],
       ["Controller", (d.controller || "schema") + (Object.keys(d.controller_params || {}).length ? ` ${JSON.stringify(d.controller_params)}` : "")],
-      ["Start (x, y, θ)", pose(d.start)], ["Goal (x, y, θ)", pose(d.goal)], ["Modes", d.modes.join(" + ")],
+      ...(d.robots ? [["Robots", `${d.robots.length}, each its colour on the map`]]
+        : [["Start (x, y, θ)", pose(d.start)], ["Goal (x, y, θ)", pose(d.goal)]]),
+      ["Modes", d.modes.join(" + ")],
       ["Repetitions", d.repetitions], ["Seed", d.seed], ["Owner", d.owner],
       ["Submitted", when(d.created_at)], ["Finished", when(d.finished_at)],
       ["Planning time", d.planning_time_s == null ? "–" : `${num(d.planning_time_s * 1000, 1)} ms`],
@@ -281,8 +303,13 @@ export class ExperimentPage {
     const { d } = this.data;
     const env = this.store.env(d.environment);
     if (!env) this.store.envAsync(d.environment).then(() => this.drawMap()).catch(() => {});
-    const paths = [];
     const runs = this.runs();
+    if (d.robots) {
+      const fleet = fleetLayers(d, runs, this.poses, this.hidden);
+      this.map.update({ blocks: env ? env.blocks : [], ...obstacleLayers(env?.moving_tracks, 0), ...fleet });
+      return;
+    }
+    const paths = [];
     for (const r of runs) {
       if (this.hidden.has(`run-${r.id}`)) continue;
       const logged = this.poses.get(r.id);
@@ -309,8 +336,9 @@ export class ExperimentPage {
   }
 
   renderRuns(d, m) {
-    const head = h("thead", {}, h("tr", {}, ["Run", "Mode #", "Status", "Robot", "Sub-field", ...RUN_COLUMNS.map(([, t]) => t),
-      "Poses, messages"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + RUN_COLUMNS.length ? "num" : null }, t))));
+    const columns = d.robots ? FLEET_COLUMNS : RUN_COLUMNS;
+    const head = h("thead", {}, h("tr", {}, ["Run", "Mode #", "Status", "Robot", "Sub-field", ...columns.map(([, t]) => t),
+      "Poses, messages"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + columns.length ? "num" : null }, t))));
     const rows = this.runs().map((r) => {
       const mt = r.metrics || {};
       return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
@@ -318,7 +346,7 @@ export class ExperimentPage {
           r.error ? h("div", { class: "muted small run-error" }, r.error) : "",
           r.stopped_at ? h("div", { class: "muted small stopped" }, `✕ stopped at ${pose(r.stopped_at)}`) : ""),
         h("td", {}, r.robot_id || "–"), h("td", {}, r.subfield ?? "–"),
-        ...RUN_COLUMNS.map(([k]) => h("td", { class: "num", dataset: { metric: k } }, num(mt[k]))),
+        ...columns.map(([k]) => h("td", { class: "num", dataset: { metric: k } }, num(mt[k]))),
         h("td", {}, r.t_start == null ? "–" : h("span", { class: "downloads" },
           this.dl(`/api/v1/runs/${r.id}/poses?format=csv`, `run-${r.id}-poses.csv`, "CSV", `Download poses of run ${r.id} as CSV`),
           this.dl(`/api/v1/runs/${r.id}/poses?format=json`, `run-${r.id}-poses.json`, "JSON", `Download poses of run ${r.id} as JSON`),
@@ -326,9 +354,11 @@ export class ExperimentPage {
     });
     if (m.planned) {
       rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, "planned"), h("td", {}, ""),
-        h("td", {}, ""), h("td", {}, ""), ...RUN_COLUMNS.map(([k]) => h("td", { class: "num" }, num(m.planned[k]))), h("td", {}, "")));
+        h("td", {}, ""), h("td", {}, ""), ...columns.map(([k]) => h("td", { class: "num" }, num(m.planned[k]))), h("td", {}, "")));
     }
     this.els.runs.replaceChildren(head, h("tbody", {}, rows));
+    this.els.robotsPanel.hidden = !d.robots;
+    if (d.robots) this.els.robots.replaceChildren(...robotsTable(this.runs()));
   }
 
   renderAggregates(m, d) {
@@ -362,14 +392,16 @@ export class ExperimentPage {
       h("th", { scope: "col", class: i > 2 ? "num" : null, title: i > 2 ? keys[i - 3] : null }, t))));
     const body = h("tbody", {}, rows.length ? rows.map((r) => h("tr", {}, h("td", {}, r.repetition), h("td", {}, r.sim_run_id), h("td", {}, r.twb_run_id),
       ...keys.map((k) => h("td", { class: "num" }, num(r[k]))))) :
-      h("tr", { class: "empty-row" }, h("td", { colspan: 7 }, "Needs a completed sim and twb run of the same repetition.")));
+      h("tr", { class: "empty-row" }, h("td", { colspan: 7 }, this.data?.d.robots
+        ? "Not for multi-robot jobs: compare their sim and twb runs by the fleet's metrics above."
+        : "Needs a completed sim and twb run of the same repetition.")));
     this.els.direct.replaceChildren(head, body);
   }
 
   renderCharts(d, m) {
     const modes = d.modes;
     const done = (m.runs || []).filter((r) => r.status === "completed");
-    const charts = CHARTS.map(([key, withRef]) => {
+    const charts = (d.robots ? FLEET_CHARTS : CHARTS).map(([key, withRef]) => {
       const [title, unit] = METRICS[key];
       const groups = modes.map((md) => ({
         // a mode whose runs all failed says so instead of showing an empty slot
@@ -382,13 +414,16 @@ export class ExperimentPage {
       return h("figure", { dataset: { metric: key } }, h("figcaption", {}, `${title} (${unit})`), barChart({ title, unit, groups, ref }));
     });
     this.els.charts.replaceChildren(...charts);
-    const series = this.runs().filter((r) => this.poses.has(r.id)).map((r) => ({
-      label: `${r.mode} #${r.repetition}`, color: MODE_COLOR[r.mode], alpha: 0.85, mode: r.mode,
-      points: speedProfile(this.poses.get(r.id), r.t_start),
-    }));
+    // a fleet's runs: one line per robot (its colour), each from its own poses
+    const series = this.runs().filter((r) => this.poses.has(r.id)).flatMap((r) => (d.robots
+      ? byRobot(this.poses.get(r.id)).map((track, k) => ({ label: `${r.mode} #${r.repetition} robot ${k}`, color: robotColor(k),
+        alpha: r.mode === "sim" ? 0.5 : 0.85, mode: r.mode, points: speedProfile(track || [], r.t_start) }))
+      : [{ label: `${r.mode} #${r.repetition}`, color: MODE_COLOR[r.mode], alpha: 0.85, mode: r.mode,
+        points: speedProfile(this.poses.get(r.id), r.t_start) }]));
     this.els.speed.replaceChildren(series.length ? h("figure", {}, h("figcaption", { class: "small" }, "Speed over time (m/s against s since EV,START)"),
       lineChart({ title: "Speed over time", xLabel: "time since start (s)", yLabel: "speed (m/s)", series,
-        legend: [...new Set(series.map((q) => q.mode))].map((md) => ({ label: MODE_NAME[md] || md, color: MODE_COLOR[md] })) })) : "");
+        legend: d.robots ? d.robots.map((_, k) => ({ label: `robot ${k}`, color: robotColor(k) }))
+          : [...new Set(series.map((q) => q.mode))].map((md) => ({ label: MODE_NAME[md] || md, color: MODE_COLOR[md] })) })) : "");
   }
 
   dl(path, filename, label, aria) {

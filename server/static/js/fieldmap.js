@@ -233,7 +233,7 @@ export class MapView {
       const rad = Math.max(6, (r.radius || 0.045) * g.scale);
       const cx = X(r.x);
       const cy = Y(r.y);
-      ctx.fillStyle = r.ghost ? COLORS.robotGhost : COLORS.robot;
+      ctx.fillStyle = r.color || (r.ghost ? COLORS.robotGhost : COLORS.robot);
       ctx.strokeStyle = "#5a2600";
       ctx.lineWidth = 1.5;
       ctx.setLineDash(r.ghost ? [3, 2] : []);

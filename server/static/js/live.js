@@ -4,6 +4,8 @@
 import { $, TERMINAL, badge, duration, h } from "./dom.js";
 import { plannerName } from "./experiments.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { robotColor } from "./fleet.js";
+import { obstacleLayers } from "./moving.js";
 import { FIELD_SIZE } from "./store.js";
 
 export class FieldPage {
@@ -88,6 +90,9 @@ export class FieldPage {
     const plannedBlocks = [];
     const paths = [];
     const markers = [];
+    const fleet = []; // the robots of multi-robot runs
+    const obstacles = [];
+    const obstacleTracks = [];
     const seenRuns = new Set();
     for (const sf of st.subfields) {
       const runId = st.subfieldRun.get(sf.id);
@@ -97,8 +102,28 @@ export class FieldPage {
       const trace = st.traces.get(runId);
       const active = sf.run_id === runId;
       if (trace) paths.push({ points: trace.points, color: COLORS.twb, width: 2, alpha: active ? 1 : 0.55 });
+      // a multi-robot run: every robot's trace and where it is, in its colour
+      (trace?.robots || []).forEach((r, k) => {
+        if (!r) return;
+        paths.push({ points: r.points, color: robotColor(k), width: 2, alpha: active ? 1 : 0.55 });
+        if (r.last) fleet.push({ ...r.last, radius: 0.04, color: robotColor(k), label: `${trace.robot_id}/${k}` });
+      });
       const d = run && st.details.get(run.experiment_id);
-      if (d && active && run.robot_id) {
+      const env = d && st.env(d.environment);
+      if (env?.moving_tracks?.length && trace && trace.t1 != null) {
+        // the moving obstacles where they were at the last pose shown (their clock starts with the path)
+        const [ox, oy] = d.field === "full" ? [0, 0] : sf.origin;
+        const t = trace.t1 - (trace.robots ? 0 : (run?.t_start ?? trace.t0 ?? trace.t1));
+        const shifted = env.moving_tracks.map((tr) => ({ ...tr, waypoints: tr.waypoints.map(([x, y]) => [x + ox, y + oy]) }));
+        const o = obstacleLayers(shifted, t);
+        obstacles.push(...o.obstacles);
+        obstacleTracks.push(...o.obstacleTracks);
+      }
+      if (d && active && run.robot_id && d.robots) {
+        const [ox, oy] = st.originOf(run.robot_id);
+        (d.planning_info?.robots || []).forEach((r, k) => r.path && paths.push({
+          points: r.path.map(([x, y]) => [x + ox, y + oy]), color: robotColor(k), width: 1.5, dash: [7, 5], alpha: 0.7 }));
+      } else if (d && active && run.robot_id) {
         const [ox, oy] = st.originOf(run.robot_id);
         if (sf.state === "building" && this.rebuilding(sf, d)) {
           const target = st.env(d.environment);
@@ -119,8 +144,9 @@ export class FieldPage {
       robots.push({ x: p.x, y: p.y, theta: p.theta, label: r.robot_id + (p.source === "home" ? " (start-up)" : ""),
                     ghost: p.source === "home" || r.status === "offline" });
     }
+    robots.push(...fleet);
     this.describe(robots);
-    return { subfields, blocks, plannedBlocks, paths, markers, robots };
+    return { subfields, blocks, plannedBlocks, paths, markers, robots, obstacles, obstacleTracks };
   }
 
   /** Whether the gripper is building another environment than the one the sub-field reports. */

@@ -7,6 +7,7 @@
 //   "stream"      detail = stream state
 //   "unauthorized" the token stopped working
 
+import { byRobot } from "./fleet.js";
 import { EventStream } from "./api.js";
 import { TERMINAL, report } from "./dom.js";
 
@@ -33,7 +34,9 @@ export class Store extends EventTarget {
     this.runs = new Map(); // run id -> RunPublic
     this.programs = new Map(); // program id -> ProgramPublic (names for the lists)
     this.poses = new Map(); // robot id -> {x, y, theta, t, run_id, source: live|log|home}
-    this.traces = new Map(); // run id -> {robot_id, points: [[x, y]] field frame, exact}
+    // run id -> {robot_id, points: [[x, y]] field frame, exact, t0, t1 (s, first and last pose time seen);
+    // a multi-robot run's: robots, one {points, last: {x, y, theta}} per robot}
+    this.traces = new Map();
     this.subfieldRun = new Map(); // sub-field id -> latest run id seen on it
     // when an event last told a run's or a sub-field's state (performance.now()): an API answer asked for
     // before that is older than what the dashboard shows, and does not overwrite it
@@ -243,12 +246,24 @@ export class Store extends EventTarget {
     if (!run.robot_id) return;
     const res = await this.api.get(`/api/v1/runs/${runId}/poses`);
     const [ox, oy] = this.originOf(run.robot_id);
-    const points = res.poses.map(([, x, y]) => [x + ox, y + oy]);
     if (run.mode === "twb" && run.subfield != null && (this.subfieldRun.get(run.subfield) ?? -1) < runId) {
       this.subfieldRun.set(run.subfield, runId);
     }
+    const times = { t0: res.poses[0]?.[0] ?? null, t1: res.poses[res.poses.length - 1]?.[0] ?? null };
+    if ((res.columns || []).includes("robot")) {
+      // a multi-robot run: its robots' paths and where each ended; the field robot itself did not move
+      const robots = byRobot(res.poses).map((track) => ({
+        points: (track || []).map(([, x, y]) => [x + ox, y + oy]),
+        last: track?.length ? { x: track[track.length - 1][1] + ox, y: track[track.length - 1][2] + oy, theta: track[track.length - 1][3] } : null,
+      }));
+      this.traces.set(runId, { robot_id: run.robot_id, points: [], robots, exact: true, ...times });
+      this.prune();
+      this.emit("field");
+      return;
+    }
+    const points = res.poses.map(([, x, y]) => [x + ox, y + oy]);
     const old = this.traces.get(runId);
-    if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true });
+    if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true, ...times });
     this.prune();
     const last = res.poses[res.poses.length - 1];
     if (last && this.isFieldRobot(run.robot_id)) {
@@ -333,6 +348,7 @@ export class Store extends EventTarget {
   }
 
   onPose(ev) {
+    if (ev.robot != null) return this.onFleetPose(ev);
     if (this.isFieldRobot(ev.robot_id)) {
       this.poses.set(ev.robot_id, { x: ev.x, y: ev.y, theta: ev.theta, t: ev.t, run_id: ev.run_id, source: "live" });
     }
@@ -344,7 +360,29 @@ export class Store extends EventTarget {
         this.prune();
       }
       if (!tr.exact && tr.points.length < MAX_TRACE) tr.points.push([ev.x, ev.y]);
+      if (!tr.exact) {
+        tr.t0 ??= ev.t;
+        tr.t1 = ev.t;
+      }
     }
+    this.emit("field");
+    this.emit("pose", ev);
+  }
+
+  /** A pose of robot `ev.robot` of a multi-robot run (its id `<assigned robot>/<k>`, field frame). */
+  onFleetPose(ev) {
+    if (ev.run_id == null) return;
+    let tr = this.traces.get(ev.run_id);
+    if (!tr) {
+      tr = { robot_id: ev.robot_id.split("/")[0], points: [], robots: [], exact: false, t0: ev.t, t1: ev.t };
+      this.traces.set(ev.run_id, tr);
+      this.prune();
+    }
+    if (tr.exact) return;
+    const r = (tr.robots[ev.robot] ||= { points: [], last: null });
+    if (r.points.length < MAX_TRACE) r.points.push([ev.x, ev.y]);
+    r.last = { x: ev.x, y: ev.y, theta: ev.theta };
+    tr.t1 = Math.max(tr.t1 ?? ev.t, ev.t);
     this.emit("field");
     this.emit("pose", ev);
   }
