@@ -43,8 +43,8 @@ from .world import World
 
 __all__ = ["FleetRun", "MAX_FLEET", "simulate_fleet"]
 
-#: the most robots one fleet run takes
-MAX_FLEET = 16
+#: the most robots one fleet run takes: what the field's tracker follows
+MAX_FLEET = 64
 _CHUNK = 4096  # control steps per compiled call when no robot waits for a leg
 
 

@@ -157,8 +157,9 @@ class Jitter(Strict):
     theta_rad: float = Field(default=0.0, ge=0, le=0.5)
 
 
-#: robots a multi-robot job may have (issue 17)
-MAX_ROBOTS = 16
+#: robots a multi-robot job may have (issue 17): 16 on a sub-field, 64 (what the tracker follows) on the whole field
+MAX_ROBOTS = 64
+MAX_ROBOTS_SUB = 16
 #: the planner that plans a multi-robot job's robots together (timed paths, robots hold where it waits)
 FLEET_PLANNER = "prioritized"
 
@@ -221,7 +222,8 @@ class ExperimentCreate(Strict):
     start: Optional[Pose] = None
     goal: Optional[Pose] = None
     robots: Optional[list[RobotIn]] = Field(default=None, min_length=2, max_length=MAX_ROBOTS, description=(
-        "A multi-robot job instead of `start`/`goal`: 2 to 16 robots in one world on one clock, each "
+        "A multi-robot job instead of `start`/`goal`: 2 to 16 robots on a sub-field, to 64 on the whole field "
+        "(`field: \"full\"`), in one world on one clock, each "
         "{\"start\", \"goal\", \"path\"?} (m, rad). Planner `prioritized` plans them together; any other "
         "planner plans each robot alone (uncoordinated); a robot's `path` is driven as given."))
     planner: Optional[str] = Field(default=None, max_length=64)

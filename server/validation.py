@@ -22,7 +22,7 @@ from robot_agent.controller_specs import select as select_controller
 from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from .errors import PreflightError
-from .schemas import FLEET_PLANNER, MAX_ROBOTS, ExperimentCreate
+from .schemas import FLEET_PLANNER, MAX_ROBOTS, MAX_ROBOTS_SUB, ExperimentCreate
 
 __all__ = ["FIELD_SIZE", "MAX_ROBOTS", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight",
            "preflight_fleet"]
@@ -119,7 +119,7 @@ def _fleet_robots(body: ExperimentCreate, env: Environment, robot_radius: float,
     assert body.robots is not None
     robots = [r.model_dump(exclude_none=True) for r in body.robots]
     margin = planning_margin if body.planner is not None else 0.0
-    preflight_fleet(env, robots, robot_radius, margin)
+    preflight_fleet(env, robots, robot_radius, margin, most=MAX_ROBOTS if body.field == "full" else MAX_ROBOTS_SUB)
     for i, r in enumerate(robots):
         explicit = r.get("path") is not None
         try:
@@ -139,13 +139,15 @@ def _fleet_robots(body: ExperimentCreate, env: Environment, robot_radius: float,
 
 
 def preflight_fleet(env: Environment, robots: list[dict[str, Any]], robot_radius: float,
-                    planning_margin: float = 0.0) -> None:
-    """Check a multi-robot job's ``robots`` (``{"start", "goal"}``, m, rad) in ``env``: 2 to :data:`MAX_ROBOTS`
-    robots, every start and goal free for ``robot_radius + planning_margin`` (m) and clear of the moving
+                    planning_margin: float = 0.0, most: int = MAX_ROBOTS_SUB) -> None:
+    """Check a multi-robot job's ``robots`` (``{"start", "goal"}``, m, rad) in ``env``: 2 to ``most`` robots
+    (:data:`MAX_ROBOTS_SUB` on a sub-field, :data:`MAX_ROBOTS` on the whole field), every start and goal free for ``robot_radius + planning_margin`` (m) and clear of the moving
     obstacles at time 0 (starts), no two starts or goals closer than twice that.  Raises
     :class:`PreflightError` naming the field (``robots[i].start`` ...)."""
-    if not 2 <= len(robots) <= MAX_ROBOTS:
-        raise PreflightError(f"robots: a multi-robot job has 2 to {MAX_ROBOTS} robots, got {len(robots)}")
+    if not 2 <= len(robots) <= most:
+        where = ("; a sub-field holds at most 16 (use \"field\": \"full\" for up to 64)"
+                 if most < MAX_ROBOTS and len(robots) <= MAX_ROBOTS else "")
+        raise PreflightError(f"robots: a multi-robot job has 2 to {most} robots, got {len(robots)}{where}")
     radius = robot_radius + planning_margin
     for i, r in enumerate(robots):
         for key in ("start", "goal"):

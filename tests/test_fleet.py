@@ -97,8 +97,8 @@ def test_bad_fleets_are_refused_naming_the_robot():
         simulate_fleet([p, p], [(0.3, 0.3, 0.0), (0.35, 0.3, 0.0)], seed=1, area=SUB)
     with pytest.raises(PlacementRefused, match="cannot place robot 1: the robot would touch a block"):
         simulate_fleet([p, p], [(0.3, 0.3, 0.0), (0.9, 0.9, 0.0)], seed=1, area=SUB, blocks=[[0.9, 0.9, 0.2, 0.2, 0]])
-    with pytest.raises(ValueError, match=f"1 to {MAX_FLEET} robots, got 17"):
-        simulate_fleet([p] * 17, [(0.3, 0.3, 0.0)] * 17, seed=1, area=SUB)
+    with pytest.raises(ValueError, match=f"1 to {MAX_FLEET} robots, got 65"):
+        simulate_fleet([p] * 65, [(0.3, 0.3, 0.0)] * 65, seed=1, area=SUB)
     with pytest.raises(ValueError, match="2 paths but 1 starts"):
         simulate_fleet([p, p], [(0.3, 0.3, 0.0)], seed=1, area=SUB)
     with pytest.raises(ValueError, match="robot 0: 2 path points but 3 departure times"):

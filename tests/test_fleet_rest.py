@@ -129,7 +129,9 @@ def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(cl
     ({"robots": [TWO[0], {"start": [0.35, 0.3], "goal": [0.3, 1.5]}]},
      r"robots[1].start is 0.050 m from robots[0].start"),
     ({"robots": [{"start": [0.1 * i + 0.2, 0.3], "goal": [0.1 * i + 0.2, 1.5]} for i in range(17)]},
-     "robots: List should have at most 16 items"),
+     'robots: a multi-robot job has 2 to 16 robots, got 17; a sub-field holds at most 16 (use "field": "full"'),
+    ({"robots": [{"start": [0.05 * i + 0.2, 0.3], "goal": [0.05 * i + 0.2, 1.5]} for i in range(65)], "field": "full"},
+     "robots: List should have at most 64 items"),
     ({"robots": TWO[:1]}, "robots: List should have at least 2 items"),
     ({"environment": "room", "robots": [TWO[0], {"start": [0.9, 0.45], "goal": [0.3, 1.5]}]}, "robots[1].start: start"),
     ({"environment": "room", "robots": [TWO[0], {"start": [1.5, 0.3], "goal": [0.9, 0.45]}]}, "robots[1].goal: goal"),
@@ -194,6 +196,21 @@ def test_a_full_field_fleet_holds_the_whole_field(client):
     for k, r in enumerate(robots):
         assert np.hypot(*(poses(client, run["id"], robot=k)[-1, 1:3] - r["goal"])) < 0.03
     assert client.post("/api/v1/experiments", json={**job, "field": "sub"}).json()["detail"].startswith("environment 'open-field' is 3.6 x 3.6 m; a sub-field job allows at most 1.8 x 1.8 m")
+
+
+def test_the_whole_field_takes_more_robots_than_a_sub_field(client):
+    """24 robots in lanes 0.14 m apart, each straight up the whole field (uncoordinated: A* each): more than a
+    sub-field's 16, all arrive, none touches another."""
+    if client.get("/api/v1/environments/open-field").status_code == 404:
+        client.post("/api/v1/environments", json={"name": "open-field", "size": [3.6, 3.6], "blocks": []})
+    robots = [{"start": [0.2 + 0.14 * i, 0.3, 1.5708], "goal": [0.2 + 0.14 * i, 3.3, 1.5708]} for i in range(24)]
+    job = {"environment": "open-field", "robots": robots, "planner": "astar", "modes": ["sim"], "field": "full"}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=180)
+    (run,) = exp["runs"]
+    assert exp["status"] == "completed", (exp["error"], run["error"])
+    m = run["metrics"]
+    assert len(m["robots"]) == 24 and m["success_rate"] == 1.0 and m["robot_distance_min_m"] > 2 * RADIUS
+    assert len(np.unique(poses(client, run["id"])[:, 4])) == 24
 
 
 def test_a_fleet_failure_names_each_robot_and_the_gravest_kind():
