@@ -14,6 +14,7 @@ from .._client import Client
 from .._exceptions import Conflict, NotFound, RateLimited, TwbError, ValidationError
 from .._models import Environment, Experiment, ExperimentMetrics
 from ._data import StudyData
+from ._fleet_results import fleet_row
 from ._limits import StudyRefused, check_study, refusal
 from ._spec import ControllerChoice, PlannerSpec, PlanSpec, ProfileSpec, StudySpec, StudySpecError
 from ._stream import StudySink
@@ -25,13 +26,14 @@ class StudyJob(dict):
     """One experiment of a study: environment, plan, planner, configuration and the job body sent to the server."""
 
 
-def _body(name: str, start: list[float], goal: list[float], planner: PlannerSpec, controller: Optional[ControllerChoice],
+def _body(name: str, problem: dict[str, Any], planner: PlannerSpec, controller: Optional[ControllerChoice],
           spec: StudySpec, profile: Optional[ProfileSpec] = None) -> dict[str, Any]:
-    """The job sent to the server for one problem and configuration (an explicit path: start, waypoints, goal),
-    with the robots' ``controller`` and the field robot's ``profile`` variant."""
-    body: dict[str, Any] = {"environment": name, "start": list(start), "goal": list(goal)}
+    """The job sent to the server for one problem (``{"start", "goal"}``, or a fleet's ``{"robots"}``; m, rad) and
+    configuration (an explicit path: start, waypoints, goal), with the robots' ``controller`` and the field
+    robot's ``profile`` variant."""
+    body: dict[str, Any] = {"environment": name, **problem}
     if planner.waypoints is not None:
-        body["path"] = [list(start), *[list(w) for w in planner.waypoints], list(goal)]
+        body["path"] = [list(problem["start"]), *[list(w) for w in planner.waypoints], list(problem["goal"])]
     else:
         body.update(planner=planner.name, planner_params=dict(planner.params))
     body.update(modes=list(spec.modes), repetitions=spec.repetitions, seed=spec.seed, field=spec.field)
@@ -68,23 +70,35 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
         if not plans:
             raise ValueError(f"environment {name!r} has no plans: give explicit start/goal pairs in the study's `plans`")
         for plan in plans:
-            if plan.start is None:
-                try:
-                    p = env.plan(plan.name)
-                except KeyError as exc:
-                    raise ValueError(str(exc.args[0])) from None
-                start, goal = p.start, p.goal
-            else:
-                start, goal = plan.start, plan.goal
+            problem = _problem(plan, env)
             for planner, controller, config in spec.configurations():
                 for profile in spec.profiles or [None]:
-                    jobs.append(StudyJob(environment=name, plan=plan.name,
-                                         planner=planner.name if planner.waypoints is None else "path",
-                                         controller=controller.name if controller is not None else "schema",
-                                         configuration=configuration(config, profile),
-                                         profile=profile.label if profile else "",
-                                         body=_body(name, start, goal, planner, controller, spec, profile)))
+                    job = StudyJob(environment=name, plan=plan.name,
+                                   planner=planner.name if planner.waypoints is None else "path",
+                                   controller=controller.name if controller is not None else "schema",
+                                   configuration=configuration(config, profile),
+                                   profile=profile.label if profile else "",
+                                   body=_body(name, problem, planner, controller, spec, profile))
+                    if plan.fleet:
+                        job["robots"] = plan.robot_count
+                    jobs.append(job)
     return jobs
+
+
+def _problem(plan: PlanSpec, env: Environment) -> dict[str, Any]:
+    """A plan's poses in ``env``: ``{"start", "goal"}`` (a plan of the environment's, or explicit), or a fleet's
+    ``{"robots": [{"start", "goal"}, ...]}`` (a circle around the environment's centre); m, rad."""
+    if plan.circle is not None:
+        return {"robots": plan.circle.robots_in(env.size)}
+    if plan.robots is not None:
+        return {"robots": [dict(r) for r in plan.robots]}
+    if plan.start is not None:
+        return {"start": list(plan.start), "goal": list(plan.goal or [])}
+    try:
+        p = env.plan(plan.name)
+    except KeyError as exc:
+        raise ValueError(str(exc.args[0])) from None
+    return {"start": list(p.start), "goal": list(p.goal)}
 
 
 def configuration(name: str, profile: Optional[ProfileSpec]) -> str:
@@ -300,19 +314,27 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
 def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any]:
     """An experiment's entry in study.json: its job, how it ended and its runs (``rejected``: never submitted)."""
     body = job["body"]
-    return {
+    robots = body.get("robots")
+    entry = {
         "experiment_id": job.get("experiment_id"), "environment": job["environment"], "plan": job["plan"],
         "planner": job["planner"], "controller": job["controller"],
         "controller_params": body.get("controller_params", {}), "configuration": job["configuration"],
         "profile": job.get("profile", ""),
         "profile_overrides": body.get("profile_overrides", {}), "planner_params": body.get("planner_params", {}),
-        "path": body.get("path"), "start": body["start"],
-        "goal": body["goal"], "repetitions": body["repetitions"], "modes": body["modes"],
+        "path": body.get("path"), "start": robots[0]["start"] if robots else body["start"],
+        "goal": robots[0]["goal"] if robots else body["goal"], "repetitions": body["repetitions"],
+        "modes": body["modes"],
         "status": exp.status if exp else "rejected", "error": exp.error if exp else job.get("rejected", ""),
         "planned_path": exp.planned_path.tolist() if exp is not None and exp.planned_path is not None else None,
         "planning_time_s": exp.planning_time_s if exp else None,
         "runs": [r.id for r in exp.runs] if exp else [],
     }
+    if robots:
+        # a fleet: every robot's start and goal, and the path planned for each (None where planning failed)
+        entry["robots"] = robots
+        planned = (exp.planning_info or {}).get("robots") or [] if exp is not None else []
+        entry["planned_paths"] = [r.get("path") for r in planned] or None
+    return entry
 
 
 def _rows(spec: StudySpec, job: StudyJob, exp: Experiment,
@@ -328,7 +350,11 @@ def _rows(spec: StudySpec, job: StudyJob, exp: Experiment,
         row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,
                "status": run.status, "outcome": run.outcome, "failure": run.failure, "error": run.error,
                "stopped_at_x": stop[0], "stopped_at_y": stop[1], "subfield": run.subfield,
-               "robot_id": run.robot_id, "t_start": run.t_start, "t_end": run.t_end, **flat_metrics(run.metrics)}
+               "robot_id": run.robot_id, "t_start": run.t_start, "t_end": run.t_end}
+        if "robots" in job:
+            row.update(fleet_row(job["robots"], run.outcome, run.metrics))
+        else:
+            row.update(flat_metrics(run.metrics))
         d = st.get(run.repetition)
         if d is not None:
             row.update({f"st_{k}": v for k, v in d.metrics.items()})

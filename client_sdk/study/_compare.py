@@ -30,9 +30,11 @@ from typing import Any, Iterable, Optional
 import numpy as np
 
 from ._data import StudyData
+from ._fleet_results import FLEET_COMPARED, FLEET_METRICS, measured
 from ._outcomes import counted, distinct_runs, identical_repetitions
 
-__all__ = ["COMPARISON_COLUMNS", "COMPARED_METRICS", "CONTROLLER_METRICS", "Comparison", "Comparisons", "DIRECTION", "compare"]
+__all__ = ["COMPARISON_COLUMNS", "COMPARED_METRICS", "CONTROLLER_METRICS", "Comparison", "Comparisons", "DIRECTION", "compare",
+           "compared_over"]
 
 #: metrics compared by default (the paper's Fig. 6), after the success rate
 COMPARED_METRICS = ("length_m", "execution_time_s", "average_speed_m_s", "deviation_mean_m", "smoothness_rad",
@@ -42,7 +44,8 @@ CONTROLLER_METRICS = ("cross_track_error_mean_m", "heading_error_rms_rad", "time
 #: +1: higher is better, -1: lower is better, 0: neither (reported, not judged)
 DIRECTION = {"success_rate": 1, "length_m": -1, "execution_time_s": -1, "average_speed_m_s": 0,
              "deviation_mean_m": -1, "smoothness_rad": -1, "clearance_min_m": 1, "cross_track_error_mean_m": -1,
-             "heading_error_rms_rad": -1, "time_to_goal_s": -1, "jerk_linear_rms_m_s3": -1}
+             "heading_error_rms_rad": -1, "time_to_goal_s": -1, "jerk_linear_rms_m_s3": -1,
+             **{m: spec.direction for m, spec in FLEET_METRICS.items()}}
 #: comparisons.csv: these columns first, in this order
 COMPARISON_COLUMNS = ("metric", "mode", "a", "b", "n_a", "n_b", "mean_a", "mean_b", "diff", "ci_low", "ci_high",
                       "test", "p", "p_holm", "effect", "effect_size", "paired", "runs_a", "runs_b", "family_size",
@@ -141,8 +144,9 @@ def _mean_comparison(metric: str, mode: str, ra: list[dict[str, Any]], rb: list[
                      **kw: Any) -> tuple[Any, int, int, str]:
     from planners.stats import compare_means
 
-    done_a = [r for r in ra if r.get("status") == "completed"]
-    done_b = [r for r in rb if r.get("status") == "completed"]
+    over = compared_over(metric)
+    done_a = [r for r in ra if _enters(r, over)]
+    done_b = [r for r in rb if _enters(r, over)]
     note = ""
     if paired:
         by_key: dict[tuple, list] = {}
@@ -172,7 +176,7 @@ def _mean_comparison(metric: str, mode: str, ra: list[dict[str, Any]], rb: list[
         res = compare_means([r.get(metric) for r in da], [r.get(metric) for r in db], paired=False, **kw)
         runs_a, runs_b = len(done_a), len(done_b)
     if not done_a or not done_b:
-        note = "no completed run of " + " and ".join(
+        note = f"no {over} run of " + " and ".join(
             n for n, d in ((ra[0]["configuration"] if ra else "a", done_a),
                            (rb[0]["configuration"] if rb else "b", done_b)) if not d)
     else:
@@ -184,6 +188,17 @@ def _mean_comparison(metric: str, mode: str, ra: list[dict[str, Any]], rb: list[
             parts.append(res.note)
         note = "; ".join(parts)
     return res, runs_a, runs_b, note
+
+
+def compared_over(metric: str) -> str:
+    """The runs a metric is compared over: ``completed`` (a single robot's metrics, a fleet's times and lengths)
+    or ``measured`` (a fleet's safety metrics: failed runs included; :data:`FLEET_METRICS`)."""
+    spec = FLEET_METRICS.get(metric)
+    return spec.over if spec is not None else "completed"
+
+
+def _enters(row: dict[str, Any], over: str) -> bool:
+    return row.get("status") == "completed" if over == "completed" else measured(row)
 
 
 def _rate_comparison(mode: str, ra: list[dict[str, Any]], rb: list[dict[str, Any]], confidence: float) \
@@ -222,7 +237,10 @@ def compare(
     metrics : iterable of str, optional
         Metrics (runs.csv columns) to compare after ``success_rate``; default
         :data:`COMPARED_METRICS`, and :data:`CONTROLLER_METRICS` when the
-        study compares controllers.
+        study compares controllers; a fleet study's
+        :data:`~client_sdk.study._fleet_results.FLEET_COMPARED`.  A metric is
+        compared over the completed runs, a fleet's safety metrics over every
+        measured run (``FLEET_METRICS``' ``over``).
     modes : iterable of str, optional
         Default: the study's modes.
     pairs : iterable of (a, b), optional
@@ -244,7 +262,9 @@ def compare(
     """
     if family not in ("metric", "all"):
         raise ValueError(f"`family` must be 'metric' or 'all', got {family!r}")
-    if metrics is None:
+    if metrics is None and data.spec.fleet:
+        metrics = FLEET_COMPARED
+    elif metrics is None:
         metrics = COMPARED_METRICS + (CONTROLLER_METRICS if data.spec.controllers is not None else ())
     names = ["success_rate", *[m for m in metrics if m != "success_rate"]]
     modes = list(modes) if modes is not None else data.modes

@@ -11,7 +11,8 @@ The collector writes, in the output directory:
   planned path's, ``st_*`` the direct sim-vs-twb comparison of the run's
   repetition);
 - ``direct.csv``: one row per experiment and repetition with both modes;
-- ``poses/run-<id>.csv``: the logged poses ``t,x,y,theta`` of each run.
+- ``poses/run-<id>.csv``: the logged poses ``t,x,y,theta`` of each run (a fleet's run:
+  ``t,x,y,theta,robot``, robot by robot).
 
 Everything else (summary, figures, report, OMPL database) is computed from
 these files, offline.
@@ -61,8 +62,9 @@ class StudyData:
     _poses: dict[int, np.ndarray] = _field(default_factory=dict, repr=False)
 
     def poses(self, run_id: int) -> np.ndarray:
-        """``(N, 4)`` t, x, y, theta of a run (s, m, m, rad), from memory or ``poses/run-<id>.csv`` (read each
-        time, not kept: a study of thousands of runs would not fit)."""
+        """``(N, 4)`` t, x, y, theta of a run (s, m, m, rad) -- ``(N, 5)`` with the robot's index last for a fleet's
+        run --, from memory or ``poses/run-<id>.csv`` (read each time, not kept: a study of thousands of runs would
+        not fit)."""
         if run_id in self._poses:
             return self._poses[run_id]
         if self.directory is None:
@@ -70,10 +72,14 @@ class StudyData:
         path = self.directory / "poses" / f"run-{run_id}.csv"
         if not path.exists():
             return np.empty((0, 4))
-        return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2).reshape(-1, 4)
+        with open(path) as f:
+            columns = len(f.readline().split(","))
+        return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2).reshape(-1, columns)
 
     def add_poses(self, run_id: int, poses: np.ndarray) -> None:
-        self._poses[run_id] = np.asarray(poses, dtype=float).reshape(-1, 4)
+        """Keep a run's poses in memory: ``(N, 4)``, or ``(N, 5)`` with the robot's index (a fleet's run)."""
+        arr = np.asarray(poses, dtype=float)
+        self._poses[run_id] = arr.reshape(-1, 5 if arr.ndim == 2 and arr.shape[1] == 5 else 4)
 
     def __post_init__(self) -> None:
         # study directories written before configurations and outcomes existed
@@ -150,10 +156,13 @@ class StudyData:
 
 
 def write_poses(path: Path, poses: np.ndarray) -> None:
-    """``poses`` ``(N, 4)`` t, x, y, theta (s, m, m, rad) as a study's CSV (header ``t,x,y,theta``)."""
+    """``poses`` ``(N, 4)`` t, x, y, theta (s, m, m, rad) as a study's CSV (header ``t,x,y,theta``); a fleet's
+    ``(N, 5)`` with the robot's index as a fifth column (header ``t,x,y,theta,robot``)."""
+    arr = np.asarray(poses, dtype=float)
+    fleet = arr.ndim == 2 and arr.shape[1] == 5
     buf = io.StringIO()
-    buf.write("t,x,y,theta\n")
-    np.savetxt(buf, np.asarray(poses, dtype=float).reshape(-1, 4), delimiter=",", fmt="%.5f")
+    buf.write("t,x,y,theta,robot\n" if fleet else "t,x,y,theta\n")
+    np.savetxt(buf, arr.reshape(-1, 5 if fleet else 4), delimiter=",", fmt=["%.5f"] * 4 + ["%d"] * fleet)
     path.write_text(buf.getvalue())
 
 

@@ -337,7 +337,14 @@ def figure_outcomes(data: StudyData):  # type: ignore[no-untyped-def]
 
 
 def make_figures(data: StudyData) -> dict[str, Any]:
-    """``{"fig5_outcomes": Figure, "fig6_metrics": Figure, "fig7_ratios": Figure, "fig8_paths": Figure}``."""
+    """``{"fig5_outcomes": Figure, "fig6_metrics": Figure, "fig7_ratios": Figure, "fig8_paths": Figure}``; a
+    fleet study's: ``{"fig5_outcomes", "fig6_fleet_metrics" (fleet metrics against the robot count),
+    "fig8_fleet_paths" (every robot's path)}`` (:mod:`._fleet_figures`)."""
+    if data.spec.fleet:
+        from ._fleet_figures import figure_fleet_metrics, figure_fleet_paths
+
+        return {"fig5_outcomes": figure_outcomes(data), "fig6_fleet_metrics": figure_fleet_metrics(data),
+                "fig8_fleet_paths": figure_fleet_paths(data)}
     return {"fig5_outcomes": figure_outcomes(data), "fig6_metrics": figure_metrics(data),
             "fig7_ratios": figure_ratios(data), "fig8_paths": figure_paths(data)}
 

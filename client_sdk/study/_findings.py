@@ -110,7 +110,10 @@ class _Means:
 
 
 def paper_findings(data: StudyData) -> list[Finding]:
-    """The nine findings (:data:`FINDINGS`) on ``data``'s completed runs, in that order."""
+    """The nine findings (:data:`FINDINGS`) on ``data``'s completed runs, in that order; a fleet study's are all
+    not applicable (the paper measured one robot at a time)."""
+    if data.spec.fleet:
+        return [_finding(key, None, {}, "a fleet study: the paper's findings concern one robot") for key in FINDINGS]
     m = _Means(data)
     both = [p for p in dict.fromkeys(r["planner"] for r in m.done) if m.has(p, "sim", "twb")]
     out = [

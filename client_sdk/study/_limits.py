@@ -18,10 +18,16 @@ from __future__ import annotations
 import re
 from typing import Any, Optional
 
+import numpy as np
+
 from .._base import API_PREFIX, Call
 from .._client import Client
 from .._exceptions import ApiError, NotFound
-from ._spec import StudySpec, StudySpecError
+from ._fleet import SEPARATION_M
+from ._spec import FLEET_PLANNER, StudySpec, StudySpecError
+
+#: the planner whose parameters prioritized planning takes (the server: SpaceTimeAStar's, with the fleet's defaults)
+_FLEET_BASE = "st_astar"
 
 __all__ = ["StudyRefused", "check_study", "refusal", "server_limits"]
 
@@ -66,10 +72,12 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
     for p in spec.planners:
         if p.waypoints is not None:
             continue
-        if p.name not in offered:
+        # prioritized planning is the space-time A* robot after robot: offered with it, with its parameters
+        name = _FLEET_BASE if p.name == FLEET_PLANNER else p.name
+        if name not in offered:
             reasons.append(f"planner {p.name!r} is not offered by this testbed (it offers {', '.join(sorted(offered))})")
             continue
-        defaults = offered[p.name]
+        defaults = offered[name]
         unknown = sorted(set(p.params) - set(defaults)) if defaults is not None else []
         if unknown:
             reasons.append(f"planner {p.name!r} has no parameter(s) {', '.join(unknown)} "
@@ -78,13 +86,17 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
     experiments = 0
     for e in spec.environments:
         plans = len(e.get("plans", [])) if isinstance(e, dict) else 0
+        size = e.get("size") if isinstance(e, dict) else None
         if isinstance(e, str):
             try:
-                plans = len(client.get_environment(e).plans)
+                known = client.get_environment(e)
+                plans, size = len(known.plans), known.size
             except NotFound:
                 reasons.append(f"unknown environment {e!r}: create it first or give its file in the study's "
                                "`environments`")
         experiments += len(spec.configurations()) * (len(spec.plans) if spec.plans is not None else plans)
+        if size:
+            reasons += _circle_reasons(spec, e if isinstance(e, str) else e["name"], size)
     lim = server_limits(client) if limits is None else limits
     max_reps = lim.get("max_repetitions")
     if max_reps is not None and spec.repetitions > max_reps:
@@ -98,6 +110,22 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
             reasons.append(f"you already have {queued} queued experiments and the testbed allows {quota} per user: "
                            "wait for them to finish or cancel some")
     return reasons
+
+
+def _circle_reasons(spec: StudySpec, env: str, size: list[float]) -> list[str]:
+    """The study's circles of robots that do not fit in environment ``env`` of ``size`` (m): every start and goal
+    at least a robot radius with the planning margin (:data:`~client_sdk.study._fleet.SEPARATION_M` / 2) inside
+    the field."""
+    out = []
+    room = SEPARATION_M / 2
+    for p in spec.plans or []:
+        if p.circle is None:
+            continue
+        xy = np.array([r[k][:2] for r in p.circle.robots_in(size) for k in ("start", "goal")])
+        if (xy < room - 1e-9).any() or (xy > np.asarray(size[:2]) - room + 1e-9).any():
+            out.append(f"plan {p.name!r}: its circle of radius {p.circle.radius_m:g} m does not fit in environment "
+                       f"{env!r} ({size[0]:g} x {size[1]:g} m): every robot needs {room:.3f} m to the field's edge")
+    return out
 
 
 def _controller_reasons(client: Any, spec: StudySpec) -> list[str]:

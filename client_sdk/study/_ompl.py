@@ -14,7 +14,9 @@ mapping:
   planned path's) — and every metric of ``runs.csv`` under its own name
   (performed path, ratios, ``st_*`` direct comparison, ``planned_*``);
 - *progress*: the robot's way to the goal, once per experiment second from
-  ``EV,START`` (``time``), as ``distance_to_goal`` and ``path_length`` so far.
+  ``EV,START`` (``time``), as ``distance_to_goal`` and ``path_length`` so far
+  (not for a fleet study: its runs have a goal per robot; a fleet problem's
+  ``setup`` holds its ``robots``).
 """
 
 from __future__ import annotations
@@ -136,7 +138,9 @@ def export_ompl(data: StudyData, db_path: str | Path, *, progress: bool = True) 
             exps = [e for e in data.experiments if (e["environment"], e["plan"]) == (env, plan)]
             mine = [r for r in rows if (r["environment"], r["plan"]) == (env, plan)]
             total = sum(r.get("execution_time_s") or 0.0 for r in mine) + sum(e.get("planning_time_s") or 0.0 for e in exps)
-            setup = json.dumps({"environment": env, "plan": plan, "start": exps[0]["start"], "goal": exps[0]["goal"],
+            problem = {"robots": exps[0]["robots"]} if exps[0].get("robots") else \
+                {"start": exps[0]["start"], "goal": exps[0]["goal"]}
+            setup = json.dumps({"environment": env, "plan": plan, **problem,
                                 "modes": data.spec.modes, "repetitions": data.spec.repetitions,
                                 "field": data.spec.field, "study": data.spec.name})
             c.execute("INSERT INTO experiments VALUES (NULL, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -176,7 +180,7 @@ def export_ompl(data: StudyData, db_path: str | Path, *, progress: bool = True) 
             c.execute(sql, (exp_ids[(r["environment"], r["plan"])], planner_ids[(r["configuration"], r["mode"])], *vals))
             run_rowid = c.lastrowid
             counts["runs"] += 1
-            if progress and r.get("status") == "completed":
+            if progress and r.get("status") == "completed" and not data.spec.fleet:  # a fleet has no one goal
                 try:
                     poses = data.poses(r["run_id"])
                 except KeyError:

@@ -17,7 +17,7 @@ comparisons: five copies of one observation are one observation.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Iterable, Optional
+from typing import Any, ClassVar, Iterable, Optional
 
 from ._data import StudyData
 
@@ -27,8 +27,9 @@ __all__ = ["COUNTED", "IDENTITY_METRICS", "NOT_COUNTED", "OutcomeSummary", "dist
 NOT_COUNTED = ("error", "cancelled", "interrupted", "pending")
 #: the outcome columns of the tables: success, the two common failures, everything else
 COUNTED = ("success", "collision", "timeout", "other")
-#: metrics compared to decide that repetitions are identical
-IDENTITY_METRICS = ("length_m", "execution_time_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m")
+#: metrics compared to decide that repetitions are identical (a single robot's, then a fleet's: a row has one set)
+IDENTITY_METRICS = ("length_m", "execution_time_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m",
+                    "path_length_sum_m", "robot_distance_min_m", "safety_time_s", "makespan_s")
 
 
 def _proportion(k: int, n: int) -> dict[str, Any]:
@@ -91,6 +92,9 @@ class OutcomeSummary:
     (``identical``), so the interval is not narrowed by copies.
     """
 
+    #: the outcomes with a column of their own; every other failure is ``other``
+    NAMED: ClassVar[tuple[str, ...]] = ("success", "collision", "timeout")
+
     configuration: str
     mode: str
     runs: int
@@ -109,16 +113,16 @@ class OutcomeSummary:
         return self.counts.get("success", 0)
 
     def count(self, column: str) -> int:
-        """Runs in one of :data:`COUNTED`'s columns (``other``: every failure but collision and timeout)."""
+        """Runs in one of the :attr:`NAMED` columns or ``other`` (every failure not named: for a single robot's
+        runs every failure but collision and timeout)."""
         if column == "other":
-            return sum(n for o, n in self.counts.items() if o not in NOT_COUNTED + ("success", "collision", "timeout"))
+            return sum(n for o, n in self.counts.items() if o not in NOT_COUNTED + self.NAMED)
         return self.counts.get(column, 0)
 
     @property
     def other_detail(self) -> str:
         """The failures in the ``other`` column by name, e.g. ``stalled 1, planning 1``."""
-        return ", ".join(f"{o} {n}" for o, n in sorted(self.counts.items())
-                         if o not in NOT_COUNTED + ("success", "collision", "timeout"))
+        return ", ".join(f"{o} {n}" for o, n in sorted(self.counts.items()) if o not in NOT_COUNTED + self.NAMED)
 
     @property
     def not_counted(self) -> int:

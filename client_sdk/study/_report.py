@@ -10,6 +10,7 @@ from typing import Any, Optional
 from ._compare import COMPARISON_COLUMNS, Comparisons
 from ._data import StudyData, write_csv_rows
 from ._figures import make_figures, mean_std, save_figures
+from ._fleet_tables import fleet_tables, write_fleet_csvs
 from ._outcomes import OutcomeSummary
 from ._verdict import METRIC_WORDS, Answer, which_is_better
 
@@ -106,6 +107,8 @@ def summary_tables(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = N
     if comparisons is not None and len(comparisons):
         tables.append(("Comparisons: every pair, per mode and metric (difference a − b; bootstrap 95% CI; "
                        "Holm-adjusted p per metric)", *comparison_rows(comparisons)))
+    if data.spec.fleet:
+        return tables + fleet_tables(data)
     header = ["configuration", "mode", "completed"] + [h for _, h in SUMMARY_METRICS]
     body = []
     for p in configs:
@@ -265,6 +268,13 @@ _CAPTIONS = {
                    "the completed runs.",
     "fig8_paths": "Fig. 8 — computed (dashed), simulated (blue) and field (red) paths over each environment; failed "
                   "runs in orange up to where they stopped, ✕ marking the spot.",
+    "fig6_fleet_metrics": "Fleet metrics against the number of robots, per environment: the share of runs in which "
+                          "every robot arrived (Wilson 95% interval), the makespan over the completed runs and the "
+                          "closest approach of two robots over every measured run (Student-t 95% intervals); a "
+                          "line per configuration and mode (field solid, simulation dashed).",
+    "fig8_fleet_paths": "Every robot of a fleet's run, each in its colour: planned (dashed) and driven (solid) paths, "
+                        "start ○, goal ☆, ✕ where a robot that did not arrive stopped, the moving obstacles' "
+                        "tracks dotted; the first run per configuration and mode.",
 }
 
 
@@ -296,7 +306,9 @@ def report_html(data: StudyData, figure_names: list[str], outcomes: Optional[lis
     parts.append(f"<p>{len(data.experiments)} experiments, {len(data.rows)} runs: {done} completed, {failed} failed. "
                  "Data: <a href='runs.csv'>runs.csv</a> (one row per run: outcome, every metric), "
                  "<a href='outcomes.csv'>outcomes.csv</a>, <a href='comparisons.csv'>comparisons.csv</a>, "
-                 "<a href='direct.csv'>direct.csv</a>, <a href='summary.md'>summary.md</a>, "
+                 "<a href='direct.csv'>direct.csv</a>, " + (
+                     "<a href='fleet_outcomes.csv'>fleet_outcomes.csv</a>, <a href='fleet.csv'>fleet.csv</a>, "
+                     if spec.fleet else "") + "<a href='summary.md'>summary.md</a>, "
                  "<a href='study.json'>study.json</a>, poses in <code>poses/</code>.</p>")
     parts.append(which_is_better_html(which_is_better(data, comparisons, outcomes), _what(data)))
     for name in figure_names:
@@ -323,6 +335,8 @@ def write_report(data: StudyData, directory: Optional[Path] = None, dpi: int = 1
     (d / "summary.md").write_text(summary_markdown(data, outcomes, comparisons))
     figures = make_figures(data)
     paths = [d / "outcomes.csv", d / "comparisons.csv", d / "summary.md", *save_figures(figures, d, dpi=dpi)]
+    if data.spec.fleet:
+        paths += write_fleet_csvs(data, d)
     (d / "report.html").write_text(report_html(data, list(figures), outcomes, comparisons))
     paths.append(d / "report.html")
     return paths

@@ -33,15 +33,18 @@ variant) is one experiment with ``repetitions`` runs per mode.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
 from robot_agent.overrides import OverrideError, check_overrides, overrides_label
 
-__all__ = ["CONTROLLERS", "JITTER_LIMITS", "NOISE", "PAPER", "ControllerChoice", "PlannerSpec", "PlanSpec", "ProfileSpec",
-           "StudySpec", "StudySpecError", "controllers_spec", "load_spec", "noise_spec", "paper_spec"]
+from ._fleet import Circle, is_pose, parse_circle, parse_robots
+from ._fleet import finite as _finite
+
+__all__ = ["CONTROLLERS", "DISCS", "FLEET", "FLEET_PLANNER", "JITTER_LIMITS", "NOISE", "PAPER", "READY", "ControllerChoice",
+           "PlannerSpec", "PlanSpec", "ProfileSpec", "StudySpec", "StudySpecError", "controllers_spec", "fleet_spec",
+           "load_spec", "noise_spec", "paper_spec"]
 
 _KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter",
          "profiles", "controllers"}
@@ -50,6 +53,8 @@ _CONTROLLER_KEYS = {"name", "params", "label"}
 #: the server's bounds of a job's start-pose jitter (standard deviations: m, rad)
 JITTER_LIMITS = {"xy_m": 0.05, "theta_rad": 0.5}
 _MAX_WAYPOINTS = 1000
+#: the planner that plans a fleet's robots together (docs/server.md, "Multi-robot jobs")
+FLEET_PLANNER = "prioritized"
 
 
 class StudySpecError(ValueError):
@@ -116,11 +121,35 @@ class ControllerChoice:
 
 @dataclass(frozen=True)
 class PlanSpec:
-    """A start/goal pair: a plan name of the environment, or explicit poses (m, rad)."""
+    """A problem: a plan name of the environment, explicit start and goal poses (m, rad), or a fleet of robots
+    (:mod:`._fleet`): explicit ``robots`` (``{"start", "goal"}`` each) or a generated ``circle``."""
 
     name: str
     start: Optional[list[float]] = None
     goal: Optional[list[float]] = None
+    robots: Optional[list[dict[str, list[float]]]] = None
+    circle: Optional[Circle] = None
+
+    @property
+    def fleet(self) -> bool:
+        """Several robots (``robots`` or ``circle``)."""
+        return self.robots is not None or self.circle is not None
+
+    @property
+    def robot_count(self) -> int:
+        """How many robots the problem has (1 for a single robot)."""
+        if self.circle is not None:
+            return self.circle.robots
+        return len(self.robots) if self.robots is not None else 1
+
+    def to_json(self) -> Any:
+        if self.robots is not None:
+            return {"name": self.name, "robots": [dict(r) for r in self.robots]}
+        if self.circle is not None:
+            return {"name": self.name, "circle": self.circle.to_json()}
+        if self.start is None:
+            return self.name
+        return {"name": self.name, "start": self.start, "goal": self.goal}
 
 
 @dataclass(frozen=True)
@@ -174,8 +203,13 @@ class StudySpec:
         else:
             d["controllers"] = [c.to_json() for c in self.controllers]
         if self.plans is not None:
-            d["plans"] = [p["name"] if p["start"] is None else p for p in d["plans"]]
+            d["plans"] = [p.to_json() for p in self.plans]
         return d
+
+    @property
+    def fleet(self) -> bool:
+        """The study's problems are fleets of robots (``robots`` or ``circle`` plans; docs/study.md)."""
+        return self.plans is not None and any(p.fleet for p in self.plans)
 
     @classmethod
     def from_json(cls, data: Any, source: str = "study") -> "StudySpec":
@@ -209,18 +243,7 @@ class StudySpec:
         if plans is not None:
             if not isinstance(plans, list) or not plans:
                 raise bad("`plans` must be a non-empty list of plan names or {\"name\", \"start\", \"goal\"} objects")
-            plan_specs = []
-            for i, p in enumerate(plans):
-                if isinstance(p, str) and p:
-                    plan_specs.append(PlanSpec(p))
-                elif isinstance(p, Mapping) and {"name", "start", "goal"} <= set(p):
-                    for k in ("start", "goal"):
-                        v = p[k]
-                        if not (isinstance(v, list) and len(v) in (2, 3) and all(isinstance(x, (int, float)) for x in v)):
-                            raise bad(f"plans[{i}].{k} must be [x, y] or [x, y, theta] (m, rad)")
-                    plan_specs.append(PlanSpec(str(p["name"]), list(p["start"]), list(p["goal"])))
-                else:
-                    raise bad(f"plans[{i}] must be a plan name or {{\"name\", \"start\", \"goal\"}}")
+            plan_specs = [_plan(p, f"plans[{i}]", bad) for i, p in enumerate(plans)]
         reps = data.get("repetitions", 1)
         if not isinstance(reps, int) or isinstance(reps, bool) or reps < 1:
             raise bad(f"`repetitions` must be an integer >= 1, got {reps!r}")
@@ -239,6 +262,7 @@ class StudySpec:
         if profiles is not None and "twb" not in modes:
             raise bad("`profiles` vary the field robot: `modes` must include \"twb\"")
         controllers = _controllers(data.get("controllers"), bad)
+        _check_fleet(plan_specs, pspecs, jitter, bad)
         name = data.get("name", Path(source).stem if source != "study" else "study")
         if not isinstance(name, str) or not name:
             raise bad("`name` must be a non-empty string")
@@ -249,6 +273,62 @@ class StudySpec:
     @property
     def runs_per_experiment(self) -> int:
         return self.repetitions * len(self.modes)
+
+
+def _plan(p: Any, where: str, bad: Any) -> PlanSpec:
+    """One entry of ``plans``: a plan name, ``{"name", "start", "goal"}``, or a fleet: ``{"name", "robots"}`` or
+    ``{"name", "circle"}`` (:mod:`._fleet`)."""
+    if isinstance(p, str) and p:
+        return PlanSpec(p)
+    forms = "a plan name, {\"name\", \"start\", \"goal\"}, {\"name\", \"robots\"} or {\"name\", \"circle\"}"
+    if not isinstance(p, Mapping) or "name" not in p:
+        raise bad(f"{where} must be {forms}")
+    kinds = [k for k in ("robots", "circle") if k in p] + (["start/goal"] if {"start", "goal"} & set(p) else [])
+    if len(kinds) != 1:
+        raise bad(f"{where} must be {forms}" + (f": give one of {', '.join(kinds)}, not both" if kinds else ""))
+    if kinds[0] == "start/goal":
+        if not {"start", "goal"} <= set(p):
+            raise bad(f"{where} must be {forms}")
+        for k in ("start", "goal"):
+            if not is_pose(p[k]):
+                raise bad(f"{where}.{k} must be [x, y] or [x, y, theta] (m, rad)")
+        return PlanSpec(str(p["name"]), list(p["start"]), list(p["goal"]))
+    if not (isinstance(p["name"], str) and p["name"]):
+        raise bad(f"{where}.name must be a non-empty string")
+    unknown = sorted(set(p) - {"name", kinds[0]})
+    if unknown:
+        raise bad(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: name, {kinds[0]})")
+    if kinds[0] == "robots":
+        return PlanSpec(p["name"], robots=parse_robots(p["robots"], f"{where}.robots", bad))
+    return PlanSpec(p["name"], circle=parse_circle(p["circle"], f"{where}.circle", bad))
+
+
+def _check_fleet(plans: Optional[list[PlanSpec]], planners: list[PlannerSpec], jitter: Optional[dict[str, float]],
+                 bad: Any) -> None:
+    """A study compares single robots or fleets, not both; ``prioritized`` plans fleets only; a fleet takes no
+    explicit ``waypoints`` path and no start-pose ``jitter`` (the server's rules for multi-robot jobs)."""
+    problems = plans or []
+    fleets = [i for i, p in enumerate(problems) if p.fleet]
+    single = [i for i, p in enumerate(problems) if not p.fleet]
+    if fleets and single:
+        f, s = problems[fleets[0]], problems[single[0]]
+        raise bad(f"plans[{fleets[0]}] ({f.name}) is a fleet of {f.robot_count} robots but plans[{single[0]}] "
+                  f"({s.name}) is one robot: a study compares either single robots or fleets (their metrics "
+                  "differ); make two studies")
+    names = [p.name for p in problems]
+    twin = next((i for i, n in enumerate(names) if n in names[:i]), None)
+    if twin is not None:
+        raise bad(f"plans[{twin}] repeats the name of plans[{names.index(names[twin])}] ({names[twin]}): give "
+                  "each problem its own name")
+    for i, p in enumerate(planners):
+        if p.name == FLEET_PLANNER and not fleets:
+            raise bad(f"planners[{i}]: `{FLEET_PLANNER}` plans several robots together: it needs fleet problems "
+                      "in `plans` ({\"name\", \"robots\"} or {\"name\", \"circle\"})")
+        if p.waypoints is not None and fleets:
+            raise bad(f"planners[{i}]: `waypoints` is an explicit path for one robot; a fleet study's "
+                      "configurations are planners")
+    if jitter is not None and fleets:
+        raise bad("`jitter`: multi-robot jobs take no start-pose jitter (docs/server.md, \"Multi-robot jobs\")")
 
 
 def _controllers(data: Any, bad: Any) -> Optional[list[ControllerChoice]]:
@@ -270,10 +350,6 @@ def _controllers(data: Any, bad: Any) -> Optional[list[ControllerChoice]]:
             raise bad(f"controllers[{i}] repeats controllers[{seen[c.configuration]}] ({c.configuration})")
         seen[c.configuration] = i
     return out
-
-
-def _finite(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def _entry(p: Any, where: str, keys: set[str], what: str, bad: Any) -> tuple[str, Mapping[str, Any], Optional[str]]:
@@ -425,15 +501,52 @@ def controllers_spec() -> StudySpec:
     return StudySpec.from_json(CONTROLLERS, "controllers")
 
 
+#: An empty sub-field with two discs crossing its middle (inside a circle of radius 0.6 m around the centre, so
+#: every robot of the fleet study starts and ends clear of them): the fleet study's obstacle scenario.
+DISCS: dict[str, Any] = {
+    "name": "discs",
+    "size": [1.8, 1.8],
+    "description": "An empty sub-field with two discs crossing its middle, one left and right (y = 1.05 m), one up "
+                   "and down (x = 0.75 m): the fleet study's moving obstacles",
+    "blocks": [],
+    "moving_obstacles": [
+        {"radius": 0.04, "waypoints": [[0.55, 1.05], [1.25, 1.05]], "speed": 0.1, "repeat": "pingpong"},
+        {"radius": 0.04, "waypoints": [[0.75, 0.55], [0.75, 1.25]], "speed": 0.08, "repeat": "pingpong"},
+    ],
+}
+
+#: The ready fleet study (issue 17): prioritized planning against FMM per robot (uncoordinated) on the circle
+#: benchmark with 2, 4 and 8 robots, in the empty sub-field and with two moving discs, 3 repetitions x sim and
+#: field (72 runs; `twb study fleet --embedded`).
+FLEET: dict[str, Any] = {
+    "name": "fleet",
+    "description": "Robot counts x obstacle scenarios: prioritized (space-time, coordinated) against FMM per robot "
+                   "(uncoordinated) on the circle benchmark with 2, 4 and 8 robots (radius 0.6 m, each bound for "
+                   "the antipodal point), in the empty sub-field `swap` and in `discs` (two moving discs), "
+                   "3 repetitions, simulation and emulated field (72 runs)",
+    "environments": ["swap", DISCS],
+    "plans": [{"name": f"circle-{n}", "circle": {"robots": n, "radius_m": 0.6}} for n in (2, 4, 8)],
+    "planners": ["prioritized", "fmm"],
+    "repetitions": 3,
+    "modes": ["sim", "twb"],
+    "seed": 0,
+}
+
+
+def fleet_spec() -> StudySpec:
+    """The ready fleet study (72 runs; docs/study.md, "The fleet study")."""
+    return StudySpec.from_json(FLEET, "fleet")
+
+
+#: the ready studies by name (``twb study NAME``)
+READY = {"paper": paper_spec, "noise": noise_spec, "controllers": controllers_spec, "fleet": fleet_spec}
+
+
 def load_spec(source: str | Path) -> StudySpec:
-    """``"paper"``, ``"noise"``, ``"controllers"`` or a study file (``.json``; ``.yaml``/``.yml`` if PyYAML is
-    installed)."""
-    if str(source) == "paper":
-        return paper_spec()
-    if str(source) == "noise":
-        return noise_spec()
-    if str(source) == "controllers":
-        return controllers_spec()
+    """A ready study by name (:data:`READY`: ``"paper"``, ``"noise"``, ``"controllers"``, ``"fleet"``) or a study
+    file (``.json``; ``.yaml``/``.yml`` if PyYAML is installed)."""
+    if str(source) in READY:
+        return READY[str(source)]()
     path = Path(source)
     try:
         text = path.read_text()

@@ -19,8 +19,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Optional
 
-from ._compare import DIRECTION, Comparison, Comparisons
+from ._compare import DIRECTION, Comparison, Comparisons, compared_over
 from ._data import StudyData
+from ._fleet_results import FLEET_METRICS
 from ._outcomes import OutcomeSummary
 
 __all__ = ["METRIC_WORDS", "MODE_WORDS", "Answer", "display_name", "fmt_p", "which_is_better"]
@@ -37,7 +38,10 @@ METRIC_WORDS = {
     "heading_error_rms_rad": ("heading error RMS", "rad", 3),
     "time_to_goal_s": ("time to goal", "s", 2),
     "jerk_linear_rms_m_s3": ("linear jerk RMS", "m/s³", 3),
+    **{m: (spec.words, spec.unit, spec.decimals) for m, spec in FLEET_METRICS.items()},
 }
+#: what success is, in a sentence: a single robot's, a fleet's
+REACH = {False: "reached the goal", True: "got every robot to its goal"}
 MODE_WORDS = {"twb": "On the field (Teleworkbench)", "sim": "In simulation"}
 _TESTS = {"welch-t": "Welch's t", "paired-t": "paired t", "mann-whitney-u": "Mann-Whitney U", "wilcoxon": "Wilcoxon",
           "fisher-exact": "Fisher's exact"}
@@ -70,13 +74,13 @@ class Answer:
     facts: list[str] = field(default_factory=list)
 
 
-def _outcome_sentence(o: OutcomeSummary) -> str:
+def _outcome_sentence(o: OutcomeSummary, reach: str = REACH[False]) -> str:
     name = display_name(o.configuration)
     if not o.counted:
         why = f"its {o.not_submitted} run(s) were refused by the testbed" if o.not_submitted else "no run ended"
         return f"{name}: no counted run ({why})."
     s = o.success
-    parts = [f"{name} reached the goal in {o.successes} of {o.counted} runs"]
+    parts = [f"{name} {reach} in {o.successes} of {o.counted} runs"]
     if s.get("rate") is not None:
         parts.append(f" (95% CI {100 * s['ci_low']:.0f}–{100 * s['ci_high']:.0f} %)")
     fails = []
@@ -99,7 +103,7 @@ def _outcome_sentence(o: OutcomeSummary) -> str:
     return "".join(parts) + "."
 
 
-def _rate_sentence(c: Comparison, alpha: float) -> str:
+def _rate_sentence(c: Comparison, alpha: float, reach: str = REACH[False]) -> str:
     r = c.result
     a, b = display_name(c.a), display_name(c.b)
     if not c.tested:
@@ -108,12 +112,12 @@ def _rate_sentence(c: Comparison, alpha: float) -> str:
     ci = c.confidence_interval()
     p = f"Fisher's exact {fmt_p(r.pvalue)}, Holm-adjusted {fmt_p(c.pvalue_holm)}" + (f"; {c.note}" if c.note else "")
     if r.k_a * r.n_b == r.k_b * r.n_a:
-        return f"{a} and {b} reached the goal equally often ({counts}; {p})."
+        return f"{a} and {b} {reach} equally often ({counts}; {p})."
     w, l_ = (a, b) if r.difference > 0 else (b, a)
     lo, hi = (ci.low, ci.high) if r.difference > 0 else (-ci.high, -ci.low)
     diff = f"{100 * abs(r.difference):.0f} percentage points (95% CI {100 * lo:+.0f} to {100 * hi:+.0f})"
     if c.significant(alpha):
-        return f"{w} reached the goal significantly more often than {l_}: {counts}, {diff}; {p}."
+        return f"{w} {reach} significantly more often than {l_}: {counts}, {diff}; {p}."
     return f"The success rates do not differ significantly ({counts}: {w} ahead by {diff}; {p})."
 
 
@@ -135,12 +139,13 @@ def _metric_sentence(c: Comparison) -> str:
             f"{'; ' + effect if effect else ''}){tail}.")
 
 
-def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float) -> tuple[str, list[str]]:
+def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float,
+          reach: str = REACH[False]) -> tuple[str, list[str]]:
     facts = []
     an, bn = display_name(a), display_name(b)
     rate = comps.get("success_rate", mode, a, b)
     if rate is not None:
-        facts.append(_rate_sentence(rate, alpha))
+        facts.append(_rate_sentence(rate, alpha, reach))
     metrics = [c for c in comps if c.mode == mode and c.a == a and c.b == b and c.metric != "success_rate"]
     sig = [c for c in metrics if c.significant(alpha)]
     facts += [_metric_sentence(c) for c in sig]
@@ -157,18 +162,21 @@ def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float) -> tuple[
         facts.append(f"Not tested: {', '.join(names)} — {note}.")
     if metrics and any(c.tested for c in metrics):
         paired = any(c.result.paired for c in metrics if c.tested)
-        facts.append("Metrics are over completed runs, " + (
+        wide = [METRIC_WORDS.get(c.metric, (c.metric,))[0] for c in metrics if compared_over(c.metric) == "measured"]
+        facts.append("Metrics are over completed runs" + (
+            f" ({', '.join(wide)}: over every measured run, failed ones included)" if wide else "") + ", " + (
             "paired by problem and repetition." if paired else "unpaired (the two did not run the same problems "
                                                                "and repetitions)."))
         if rate is not None and rate.result.n_a and rate.result.n_b and \
                 rate.result.k_a * rate.result.n_b != rate.result.k_b * rate.result.n_a:
-            facts.append(f"Careful: they describe successful runs only — {an} {rate.result.k_a} of "
+            which = "the completed-run metrics" if wide else "they"
+            facts.append(f"Careful: {which} describe successful runs only — {an} {rate.result.k_a} of "
                          f"{rate.result.n_a}, {bn} {rate.result.k_b} of {rate.result.n_b} — so the one that fails "
                          "more is judged on its easier runs (survivor bias); read them with the success rates.")
     where = {"twb": "on the field", "sim": "in simulation"}.get(mode, f"in {mode}")
     if rate is not None and rate.significant(alpha):
         w, l_ = (an, bn) if rate.difference > 0 else (bn, an)
-        return f"{w} is better than {l_} {where}: it reached the goal significantly more often.", facts
+        return f"{w} is better than {l_} {where}: it {reach} significantly more often.", facts
     judged = [c for c in sig if c.better() is not None]
     winners = {c.better() for c in judged}
     if len(winners) == 1:
@@ -178,7 +186,7 @@ def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float) -> tuple[
         if rate is None or not rate.tested:
             rates = ""
         elif rate.result.k_a * rate.result.n_b == rate.result.k_b * rate.result.n_a:
-            rates = "; both reached the goal equally often"
+            rates = f"; both {reach} equally often"
         else:
             rates = "; the success rates do not differ significantly"
         return f"{display_name(w)} is better than {display_name(l_)} {where} on {on}{rates}.", facts
@@ -198,13 +206,14 @@ def which_is_better(data: StudyData, comparisons: Optional[Comparisons] = None,
     comps = comparisons if comparisons is not None else data.compare()
     outs = outcomes if outcomes is not None else data.outcomes()
     modes = sorted(data.modes, key=lambda m: (m != "twb", m))
+    reach = REACH[data.spec.fleet]
     answers = []
     for mode in modes:
         ans = Answer(mode, MODE_WORDS.get(mode, mode))
-        ans.facts += [_outcome_sentence(o) for o in outs if o.mode == mode]
+        ans.facts += [_outcome_sentence(o, reach) for o in outs if o.mode == mode]
         pairs = list(dict.fromkeys((c.a, c.b) for c in comps if c.mode == mode))
         for a, b in pairs:
-            verdict, facts = _pair(mode, a, b, comps, alpha)
+            verdict, facts = _pair(mode, a, b, comps, alpha, reach)
             ans.verdicts.append(verdict)
             if len(pairs) > 1:
                 facts = [f"{display_name(a)} vs {display_name(b)}: {f}" for f in facts]

@@ -1,0 +1,182 @@
+"""A fleet study's results: each run's row, how it ended by kind, and the fleet metrics per configuration x
+environment x robot count x mode with their uncertainty.
+
+A fleet's run succeeds when every robot reached its goal.  A failed run is
+counted under the kind of its failure (:func:`fleet_outcome`): a robot-robot
+collision, a collision with a moving obstacle, with a block or the wall
+(the gravest present, in that order), a deadlock (a timeout while no robot
+under way moved: the fleet metrics' ``deadlock``), a timeout, or the server's
+failure otherwise (``planning``: the planner found no way for some robot).
+
+The metrics (docs/metrics.md, "Several robots") are summarised with
+:func:`planners.stats.summarize` (mean, std, Student-t 95% interval) over
+the runs each one is defined for (:data:`FLEET_METRICS`' ``over``):
+``completed`` runs (makespan, flowtime, the sum of path lengths, the time
+within the safety radius: a fleet that crashed early drove less and for a
+shorter time) or every ``measured`` run, failed ones included (the closest
+approach, the share of robots that arrived, collisions by kind: how unsafe a
+failed fleet was is the point).  Identical repetitions (the deterministic simulation) count once,
+as everywhere in a study (:func:`~client_sdk.study._outcomes.distinct_runs`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping, NamedTuple, Optional
+
+from ._data import StudyData
+from ._outcomes import NOT_COUNTED, OutcomeSummary, distinct_runs
+
+__all__ = ["FLEET_COMPARED", "FLEET_KINDS", "FLEET_METRICS", "FleetGroup", "FleetMetric", "fleet_groups",
+           "fleet_outcome", "fleet_row", "measured"]
+
+
+class FleetMetric(NamedTuple):
+    """How a fleet metric is named (``words``, ``unit``, ``decimals``), over which runs it is summarised
+    (``"completed"`` or ``"measured"``) and which way is better (+1 higher, -1 lower, 0 neither)."""
+
+    words: str
+    unit: str
+    decimals: int
+    over: str
+    direction: int
+
+
+#: the fleet metrics of a study's tables and comparisons, in the order they are shown
+FLEET_METRICS: dict[str, FleetMetric] = {
+    "makespan_s": FleetMetric("makespan", "s", 2, "completed", -1),
+    "time_sum_s": FleetMetric("flowtime (sum of arrival times)", "s", 2, "completed", -1),
+    "path_length_sum_m": FleetMetric("sum of path lengths", "m", 3, "completed", -1),
+    "robot_success_rate": FleetMetric("share of robots arrived", "", 3, "measured", 1),
+    "robot_distance_min_m": FleetMetric("closest approach of two robots", "m", 3, "measured", 1),
+    "safety_time_s": FleetMetric("time within the safety radius", "s", 2, "completed", -1),
+    "collisions_robot": FleetMetric("robots in robot-robot collisions", "", 2, "measured", -1),
+    "collisions_moving": FleetMetric("robots hitting a moving obstacle", "", 2, "measured", -1),
+    "collisions_static": FleetMetric("robots hitting a block or the wall", "", 2, "measured", -1),
+}
+#: compared between configurations by default in a fleet study (after the success rate)
+FLEET_COMPARED = ("makespan_s", "time_sum_s", "path_length_sum_m", "robot_distance_min_m", "safety_time_s")
+#: how a fleet's run ended, in the order of the tables (every other failure is "other")
+FLEET_KINDS = ("success", "robot-robot collision", "moving-obstacle collision", "block/wall collision", "deadlock",
+               "timeout")
+_COLLISIONS = (("collisions_robot", FLEET_KINDS[1]), ("collisions_moving", FLEET_KINDS[2]),
+               ("collisions_static", FLEET_KINDS[3]))
+_STUCK = ("timeout", "controller_timeout", "stalled")
+
+
+def fleet_outcome(outcome: Optional[str], metrics: Mapping[str, Any]) -> str:
+    """How a fleet's run ended: ``success``; a collision by the gravest kind present (robot-robot, a moving
+    obstacle, a block or the wall); ``deadlock`` for a timeout, stall or controller time-out while the fleet
+    was deadlocked; else the run's outcome (``timeout``, ``planning``, ``error``, ...)."""
+    if outcome == "collision":
+        return next((kind for key, kind in _COLLISIONS if (metrics.get(key) or 0) > 0), "collision")
+    if outcome in _STUCK and metrics.get("deadlock"):
+        return "deadlock"
+    return outcome or "pending"
+
+
+def _robot_end(r: Mapping[str, Any]) -> str:
+    """One robot's end: ``arrived``, ``hit-robot``, ``hit-moving``, ``hit-static``, or its outcome."""
+    if r.get("done"):
+        return "arrived"
+    if r.get("collision"):
+        return f"hit-{r['collision']}"
+    return str(r.get("outcome") or "unknown").lower()
+
+
+def fleet_row(robots: int, outcome: Optional[str], metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """A fleet's run in ``runs.csv``: ``robots`` (how many), its scalar fleet metrics (the share of robots that
+    arrived as ``robot_success_rate``: ``success_rate`` is the study's run-level rate), ``robots_arrived``,
+    ``robot_ends`` (each robot's end, space-separated, robot 0 first) and ``fleet_outcome``."""
+    row: dict[str, Any] = {"robots": robots, "fleet_outcome": fleet_outcome(outcome, metrics)}
+    for k, v in metrics.items():
+        if not isinstance(v, (dict, list)):
+            row["robot_success_rate" if k == "success_rate" else k] = v
+    per_robot = metrics.get("robots") or []
+    row["robots_arrived"] = sum(bool(r.get("done")) for r in per_robot) if per_robot else None
+    row["robot_ends"] = " ".join(_robot_end(r) for r in per_robot) or None
+    return row
+
+
+def measured(row: Mapping[str, Any]) -> bool:
+    """A fleet's run that was driven and measured (completed, or failed after its robots set off)."""
+    return row.get("status") in ("completed", "failed") and row.get("robots_arrived") is not None
+
+
+def _runs_over(rows: list[dict[str, Any]], over: str) -> list[dict[str, Any]]:
+    return [r for r in rows if (r.get("status") == "completed" if over == "completed" else measured(r))]
+
+
+@dataclass(frozen=True, kw_only=True)
+class FleetGroup(OutcomeSummary):
+    """One configuration's runs on one fleet problem (environment, plan of ``robots`` robots) in one mode: an
+    :class:`~client_sdk.study._outcomes.OutcomeSummary` whose ``counts`` are runs per :func:`fleet_outcome`
+    (columns :data:`FLEET_KINDS`) and whose ``success`` is the share of runs in which every robot arrived, over
+    the distinct counted runs (Wilson 95% interval), with ``metrics``: :func:`planners.stats.summarize` of each
+    of :data:`FLEET_METRICS` over its distinct runs (``n`` says how many).
+    """
+
+    NAMED: ClassVar[tuple[str, ...]] = FLEET_KINDS
+
+    environment: str
+    plan: str
+    robots: int
+    metrics: dict[str, dict[str, Any]]
+
+    def keys(self) -> dict[str, Any]:
+        return {"configuration": self.configuration, "environment": self.environment, "plan": self.plan,
+                "robots": self.robots, "mode": self.mode}
+
+    def row(self) -> dict[str, Any]:
+        """The group's row of ``fleet_outcomes.csv``."""
+        s = self.success
+        return {**self.keys(), "runs": self.runs, "not_submitted": self.not_submitted,
+                **{kind: self.count(kind) for kind in FLEET_KINDS}, "other": self.count("other"),
+                "other_detail": self.other_detail, "not_counted": self.not_counted, "success_rate": s.get("rate"),
+                "ci_low": s.get("ci_low"), "ci_high": s.get("ci_high"), "distinct_runs": s.get("n"),
+                "identical_repetitions": self.identical}
+
+    def aggregate(self) -> dict[str, Any]:
+        """As :func:`planners.stats.aggregate` gives a group (for :func:`planners.stats.table_rows`), each
+        summary with the runs it is ``over``."""
+        return {**self.keys(), "runs": self.runs,
+                "metrics": {m: {**s, "over": FLEET_METRICS[m].over} for m, s in self.metrics.items()}}
+
+
+def fleet_groups(data: StudyData) -> list[FleetGroup]:
+    """One :class:`FleetGroup` per configuration x environment x plan x mode, in study order (a refused job's
+    group too, with its runs ``not_submitted``)."""
+    from planners.stats import proportion, summarize
+
+    out = []
+    for config in data.configurations:
+        for env, plan in data.problems:
+            exps = [e for e in data.experiments if (e["configuration"], e["environment"], e["plan"]) ==
+                    (config, env, plan)]
+            if not exps:
+                continue
+            robots = len(exps[0].get("robots") or []) or 1
+            for mode in data.modes:
+                rows = [r for r in data.rows if (r["configuration"], r["environment"], r["plan"], r["mode"]) ==
+                        (config, env, plan, mode)]
+                counts: dict[str, int] = {}
+                for r in rows:
+                    kind = r.get("fleet_outcome") or r.get("outcome") or "pending"
+                    counts[kind] = counts.get(kind, 0) + 1
+                refused = sum(e.get("repetitions", data.spec.repetitions) for e in exps
+                              if e["status"] == "rejected" and mode in e.get("modes", [mode]))
+                distinct, merged = distinct_runs(rows)
+                success = proportion(sum(r["outcome"] == "success" for r in distinct), len(distinct))
+                metrics = {m: summarize(r.get(m) for r in _runs_over(distinct, spec.over))
+                           for m, spec in FLEET_METRICS.items()}
+                out.append(FleetGroup(configuration=config, mode=mode, runs=len(rows), not_submitted=refused,
+                                      counts=dict(sorted(counts.items(), key=_order)), success=success,
+                                      identical=merged, environment=env, plan=plan, robots=robots, metrics=metrics))
+    return out
+
+
+def _order(item: tuple[str, int]) -> tuple[int, str]:
+    kind = item[0]
+    if kind in FLEET_KINDS:
+        return FLEET_KINDS.index(kind), kind
+    return (len(FLEET_KINDS) + (1 if kind in NOT_COUNTED else 0)), kind
