@@ -37,6 +37,21 @@ def invoke(capsys, monkeypatch, *args: str, env: dict[str, str | None] | None = 
     return Result(code, out.out, out.err)
 
 
+def study_process(testbed, spec: dict, directory: Path, *options: str) -> tuple[subprocess.CompletedProcess, Path]:  # type: ignore[no-untyped-def]
+    """``twb study`` of the study file ``spec`` (written to ``directory``) on ``testbed`` (a tests.servers
+    Process), its output in ``directory/out``, as a child process; returns the finished process and ``out``."""
+    import json
+    import os
+
+    path = directory / f"{spec.get('name', 'study')}.json"
+    path.write_text(json.dumps(spec))
+    out = directory / "out"
+    r = subprocess.run([str(TWB), "study", str(path), "--out", str(out), "--url", testbed.url, "--token",
+                        testbed.token, *options], capture_output=True, text=True, timeout=300,
+                       env={k: v for k, v in os.environ.items() if k != "TWB_DEBUG"})
+    return r, out
+
+
 @contextlib.contextmanager
 def agent_process(robot_id: str, *options: str) -> Iterator[int]:
     """One ideal robot (``twb agent --port 0 --time-scale max [options]``); yields its TCP port, stops it

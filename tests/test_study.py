@@ -22,7 +22,7 @@ from client_sdk.study import (
 )
 from client_sdk import Environment, Plan
 from servers import Process
-from sdk_helpers import invoke
+from sdk_helpers import invoke, study_process
 
 SMALL = {"name": "small", "environments": ["room"], "plans": ["A"], "planners": ["fmm", "fm2"],
          "repetitions": 1, "modes": ["sim", "twb"], "seed": 2}
@@ -37,19 +37,8 @@ def testbed(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def study_dir(testbed, tmp_path_factory):
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
     d = tmp_path_factory.mktemp("study")
-    spec = d / "small.json"
-    spec.write_text(json.dumps(SMALL))
-    out = d / "out"
-    twb = Path(sys.executable).with_name("twb")
-    r = subprocess.run([str(twb), "study", str(spec), "--out", str(out), "--url", testbed.url, "--token",
-                        testbed.token, "--ompl", str(out / "study.db")], capture_output=True, text=True, timeout=300,
-                       env={k: v for k, v in os.environ.items() if k != "TWB_DEBUG"})
+    r, out = study_process(testbed, SMALL, d, "--ompl", str(d / "out" / "study.db"))
     assert r.returncode == 0, r.stderr
     assert "study small: 4/4 runs completed" in r.stdout
     return out
@@ -282,20 +271,10 @@ OVERSHOOT = {
 
 @pytest.fixture(scope="module")
 def overshoot_dir(testbed, tmp_path_factory):
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    d = tmp_path_factory.mktemp("overshoot")
-    (d / "overshoot.json").write_text(json.dumps(OVERSHOOT))
-    twb = Path(sys.executable).with_name("twb")
-    r = subprocess.run([str(twb), "study", str(d / "overshoot.json"), "--out", str(d / "out"), "--url", testbed.url,
-                        "--token", testbed.token, "--no-progress"], capture_output=True, text=True, timeout=300,
-                       env={k: v for k, v in os.environ.items() if k != "TWB_DEBUG"})
+    r, out = study_process(testbed, OVERSHOOT, tmp_path_factory.mktemp("overshoot"), "--no-progress")
     assert r.returncode == 0, r.stderr  # failed runs are results, not errors
     assert "study overshoot: 15/20 runs completed, 5 failed (collision 5)" in r.stdout, r.stdout
-    return d / "out"
+    return out
 
 
 def test_failed_field_runs_are_in_runs_csv_with_outcome_and_where_they_stopped(overshoot_dir):

@@ -11,7 +11,10 @@ Collecting talks to the server (:func:`run_study`); everything after works
 offline from the study directory (:func:`load_study`): outcomes
 (:meth:`StudyData.outcomes`), comparisons between configurations
 (:meth:`StudyData.compare`, after SciPy's result objects), the answer in words
-(:func:`which_is_better`), figures and the report.  The command line is
+(:func:`which_is_better`), figures and the report.  A study of fleets (several
+robots per problem: ``robots`` or ``circle`` plans) gets fleet tables
+(:func:`fleet_groups`) and figures (:func:`figure_fleet_metrics`,
+:func:`figure_fleet_paths`).  The command line is
 ``twb study``; see ``docs/study.md``.  Needs matplotlib for the figures.
 """
 
@@ -25,13 +28,26 @@ from ._findings import FINDINGS, Finding, findings_json, findings_markdown, pape
 from ._ompl import export_ompl
 from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
-from ._spec import (CONTROLLERS, NOISE, PAPER, ControllerChoice, PlannerSpec, PlanSpec, ProfileSpec, StudySpec,
-                    StudySpecError, controllers_spec, load_spec, noise_spec, paper_spec)
+from ._fleet import Circle, circle_robots
+from ._fleet_figures import figure_fleet_metrics, figure_fleet_paths
+from ._fleet_results import FLEET_METRICS, FleetGroup, fleet_groups
+from ._spec import (CONTROLLERS, DISCS, FLEET, NOISE, PAPER, ControllerChoice, PlannerSpec, PlanSpec, ProfileSpec,
+                    StudySpec, StudySpecError, controllers_spec, fleet_spec, load_spec, noise_spec, paper_spec)
 from ._verdict import Answer, which_is_better
 
 __all__ = sorted(
     [
         "Answer",
+        "Circle",
+        "DISCS",
+        "FLEET",
+        "FLEET_METRICS",
+        "FleetGroup",
+        "circle_robots",
+        "figure_fleet_metrics",
+        "figure_fleet_paths",
+        "fleet_groups",
+        "fleet_spec",
         "COMPARED_METRICS",
         "Comparison",
         "Comparisons",

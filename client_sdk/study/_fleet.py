@@ -61,17 +61,17 @@ def circle_robots(n: int, radius_m: float, centre: Sequence[float]) -> list[dict
     the antipodal point ``centre - radius_m (cos a_k, sin a_k)``, arriving with the same heading (it drives
     straight through the centre).  Neighbours stand ``2 radius_m sin(π/n)`` apart (m).
 
-    Returns ``[{"start": [x, y, theta], "goal": [x, y, theta]}, ...]`` (m, rad; rounded to 1e-9 so that exact
-    positions such as 0.3 stay 0.3), as a multi-robot job's ``robots``.
+    Returns ``[{"start": [x, y, theta], "goal": [x, y, theta]}, ...]`` (m, rad; positions rounded to 1e-9 m so
+    that exact positions such as 0.3 stay 0.3), as a multi-robot job's ``robots``.
     """
     if n < 1 or not radius_m > 0:
         raise ValueError(f"a circle needs at least one robot and a radius > 0, got {n} and {radius_m!r}")
     a = 2 * np.pi * np.arange(n) / n
     offset = radius_m * np.column_stack([np.cos(a), np.sin(a)])
     c = np.asarray(centre[:2], dtype=float)
-    heading = np.arctan2(-offset[:, 1], -offset[:, 0])  # towards the centre, in (-π, π]
-    start = np.round(np.column_stack([c + offset, heading]), 9) + 0.0  # + 0.0: no -0.0
-    goal = np.round(np.column_stack([c - offset, heading]), 9) + 0.0
+    heading = np.pi - np.mod(-a, 2 * np.pi)  # a + π wrapped to (-π, π]: towards the centre
+    start = np.column_stack([np.round(c + offset, 9) + 0.0, heading])  # + 0.0: no -0.0
+    goal = np.column_stack([np.round(c - offset, 9) + 0.0, heading])
     return [{"start": s.tolist(), "goal": g.tolist()} for s, g in zip(start, goal)]
 
 

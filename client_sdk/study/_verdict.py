@@ -133,8 +133,11 @@ def _metric_sentence(c: Comparison) -> str:
     if math.isfinite(ci.low) and math.isfinite(ci.high) and (r.pvalue < level) == (ci.low <= 0 <= ci.high):
         tail += " (marginal: the interval and the test disagree)"
     effect = f"{_EFFECTS.get(r.effect, r.effect)} = {r.effect_size:.2g}" if math.isfinite(r.effect_size) else ""
-    return (f"{words.capitalize()}: {a} {_num(r.mean_a, dec)} vs {b} {_num(r.mean_b, dec)} {unit}, difference "
-            f"{r.difference:+.{dec}f} {unit} (95% CI {ci.low:+.{dec}f} to {ci.high:+.{dec}f}; {n}; "
+    unit = f" {unit}" if unit else ""
+    interval = (f"95% CI {ci.low:+.{dec}f} to {ci.high:+.{dec}f}" if math.isfinite(ci.low) and math.isfinite(ci.high)
+                else "no interval: too few runs for the bootstrap")
+    return (f"{words.capitalize()}: {a} {_num(r.mean_a, dec)} vs {b} {_num(r.mean_b, dec)}{unit}, difference "
+            f"{r.difference:+.{dec}f}{unit} ({interval}; {n}; "
             f"{_TESTS.get(r.test, r.test)} {fmt_p(r.pvalue)}, Holm-adjusted {fmt_p(c.pvalue_holm)}"
             f"{'; ' + effect if effect else ''}){tail}.")
 

@@ -1,0 +1,290 @@
+"""Fleet studies (issue 17): study files that cross robot counts (fleet problems: explicit robots, the circle
+generator) and obstacle scenarios; their validation, the circle's geometry, a small fleet study through a real
+testbed (outcomes by kind, fleet metrics with intervals, figures) and the ready `twb study fleet`.
+
+(Single-robot studies: tests/test_study.py; multi-robot jobs without a study: tests/test_fleet_rest.py.)
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from client_sdk import Environment
+from client_sdk.study import (
+    DISCS,
+    FLEET,
+    StudySpec,
+    StudySpecError,
+    load_spec,
+    load_study,
+    make_figures,
+    plan_jobs,
+)
+from client_sdk.study._fleet import SEPARATION_M, circle_robots
+from client_sdk.study._fleet_results import FLEET_KINDS, fleet_outcome, fleet_row
+from servers import serve
+from sdk_helpers import invoke, study_process
+
+ROOT = Path(__file__).resolve().parents[1]
+SWAP = json.loads((ROOT / "planners" / "data" / "swap.json").read_text())
+
+#: prioritized against uncoordinated FMM on 2 and 4 robots in the empty sub-field, 2 repetitions x sim and field
+SMALL = {"name": "fleet-small", "environments": ["swap"],
+         "plans": [{"name": "circle-2", "circle": {"robots": 2, "radius_m": 0.6}},
+                   {"name": "circle-4", "circle": {"robots": 4, "radius_m": 0.6}}],
+         "planners": ["prioritized", "fmm"], "repetitions": 2, "modes": ["sim", "twb"], "seed": 3}
+CIRCLE = {"name": "c", "circle": {"robots": 4, "radius_m": 0.6}}
+BASE = {"environments": ["swap"], "planners": ["prioritized"], "plans": [CIRCLE]}
+
+
+# ----------------------------------------------------------------------------- the study file
+
+
+@pytest.mark.parametrize("change,message", [
+    ({"plans": [CIRCLE, "A"]},
+     "plans[0] (c) is a fleet of 4 robots but plans[1] (A) is one robot: a study compares either single robots or "
+     "fleets"),
+    ({"plans": ["A"]}, "planners[0]: `prioritized` plans several robots together: it needs fleet problems"),
+    ({"plans": None}, "planners[0]: `prioritized` plans several robots together"),
+    ({"planners": ["fmm", {"name": "corner", "waypoints": [[0.9, 0.7]]}]},
+     "planners[1]: `waypoints` is an explicit path for one robot"),
+    ({"jitter": {"xy_m": 0.005}}, "`jitter`: multi-robot jobs take no start-pose jitter"),
+    ({"plans": [CIRCLE, CIRCLE]}, "plans[1] repeats the name of plans[0] (c)"),
+    ({"plans": [{"name": "c", "circle": {"robots": 16, "radius_m": 0.2}}]},
+     "plans[0].circle: 16 robots on a circle of radius 0.2 m stand 0.078 m apart; two robots need 0.130 m between "
+     "their centres (a radius of at least 0.333 m)"),
+    ({"plans": [{"name": "c", "circle": {"robots": 17, "radius_m": 0.6}}]},
+     "plans[0].circle.robots must be an integer from 2 to 16, got 17"),
+    ({"plans": [{"name": "c", "circle": {"robots": 1, "radius_m": 0.6}}]}, "plans[0].circle.robots must be"),
+    ({"plans": [{"name": "c", "circle": {"robots": 4, "radius_m": 0}}]},
+     "plans[0].circle.radius_m must be a number > 0 (m), got 0"),
+    ({"plans": [{"name": "c", "circle": {"robots": 4, "radius_m": 0.6, "center": [1, 1]}}]},
+     "plans[0].circle: unknown key(s) center (allowed: centre, radius_m, robots)"),
+    ({"plans": [{"name": "c", "circle": {"robots": 4, "radius_m": 0.6, "centre": [1]}}]},
+     "plans[0].circle.centre must be [x, y] (m)"),
+    ({"plans": [{"name": "c", "robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}]}]},
+     "plans[0].robots must be a list of 2 to 16"),
+    ({"plans": [{"name": "c", "robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5]},
+                                         {"start": [0.35, 0.3], "goal": [0.3, 1.5]}]}]},
+     "plans[0].robots[1].start is 0.050 m from plans[0].robots[0].start: two robots need 0.130 m"),
+    ({"plans": [{"name": "c", "robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5]},
+                                         {"start": [1.5, 0.3], "goal": [0.3, "north"]}]}]},
+     "plans[0].robots[1].goal must be [x, y] or [x, y, theta] (m, rad)"),
+    ({"plans": [{"name": "c", "robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5], "path": []},
+                                         {"start": [1.5, 0.3], "goal": [0.3, 1.5]}]}]},
+     "plans[0].robots[0]: unknown key(s) path"),
+    ({"plans": [{"name": "c", "start": [0.3, 0.3], "goal": [1.5, 1.5], "circle": CIRCLE["circle"]}]},
+     "plans[0] must be a plan name, {\"name\", \"start\", \"goal\"}, {\"name\", \"robots\"} or {\"name\", "
+     "\"circle\"}: give one of circle, start/goal, not both"),
+    ({"plans": [{"name": "c", "circle": CIRCLE["circle"], "seed": 1}]},
+     "plans[0]: unknown key(s) seed (allowed: name, circle)"),
+])
+def test_bad_fleet_study_files_name_the_file_and_the_field(tmp_path, change, message):
+    f = tmp_path / "fleet.json"
+    f.write_text(json.dumps({k: v for k, v in {**BASE, **change}.items() if v is not None}))
+    with pytest.raises(StudySpecError) as err:
+        load_spec(f)
+    assert str(err.value).startswith(f"{f}: ") and message in str(err.value), str(err.value)
+
+
+def test_a_fleet_study_file_round_trips_and_plans_fleet_jobs():
+    spec = StudySpec.from_json({**SMALL, "plans": [*SMALL["plans"], {"name": "pair", "robots": [
+        {"start": [0.3, 0.3, 0.7854], "goal": [1.5, 1.5]}, {"start": [1.5, 1.5], "goal": [0.3, 0.3]}]}]})
+    assert spec.fleet and [p.robot_count for p in spec.plans] == [2, 4, 2]
+    assert StudySpec.from_json(json.loads(json.dumps(spec.to_json()))) == spec
+    jobs = plan_jobs(spec, {"swap": Environment.from_json(SWAP)})
+    assert [(j["plan"], j["configuration"], j["robots"]) for j in jobs] == [
+        (p, c, n) for p, n in (("circle-2", 2), ("circle-4", 4), ("pair", 2)) for c in ("prioritized", "fmm")]
+    body = jobs[2]["body"]
+    assert "start" not in body and "goal" not in body and body["planner"] == "prioritized"
+    assert body["robots"] == circle_robots(4, 0.6, (0.9, 0.9))
+    assert jobs[5]["body"]["robots"][0] == {"start": [0.3, 0.3, 0.7854], "goal": [1.5, 1.5]}
+    assert not StudySpec.from_json({"environments": ["room"], "planners": ["fmm"], "plans": ["A"]}).fleet
+
+
+def test_the_ready_fleet_study_crosses_robot_counts_and_obstacle_scenarios():
+    spec = load_spec("fleet")
+    assert spec == StudySpec.from_json(FLEET) and spec.fleet
+    jobs = plan_jobs(spec, {"swap": Environment.from_json(SWAP), "discs": Environment.from_json(DISCS)})
+    assert len(jobs) == 12 and len(jobs) * spec.runs_per_experiment == 72
+    assert {(j["environment"], j["robots"], j["configuration"]) for j in jobs} == {
+        (e, n, c) for e in ("swap", "discs") for n in (2, 4, 8) for c in ("prioritized", "fmm")}
+    # every robot starts and ends clear of the discs' ways (they stay within 0.4 m of the centre)
+    for job in jobs:
+        for r in job["body"]["robots"]:
+            for pose in (r["start"], r["goal"]):
+                assert math.hypot(pose[0] - 0.9, pose[1] - 0.9) == pytest.approx(0.6)
+
+
+# ----------------------------------------------------------------------------- the circle
+
+
+def test_the_circle_puts_four_robots_at_exact_positions_facing_the_centre():
+    robots = circle_robots(4, 0.6, (0.9, 0.9))
+    assert robots == [
+        {"start": [1.5, 0.9, math.pi], "goal": [0.3, 0.9, math.pi]},
+        {"start": [0.9, 1.5, -math.pi / 2], "goal": [0.9, 0.3, -math.pi / 2]},
+        {"start": [0.3, 0.9, 0.0], "goal": [1.5, 0.9, 0.0]},
+        {"start": [0.9, 0.3, math.pi / 2], "goal": [0.9, 1.5, math.pi / 2]},
+    ]
+
+
+@pytest.mark.parametrize("n", range(2, 17))
+def test_the_circle_geometry(n):
+    radius, centre = 0.7, np.array([0.9, 1.0])
+    robots = circle_robots(n, radius, centre)
+    start = np.array([r["start"] for r in robots])
+    goal = np.array([r["goal"] for r in robots])
+    assert start.shape == goal.shape == (n, 3)
+    angles = 2 * np.pi * np.arange(n) / n
+    assert np.allclose(start[:, :2], centre + radius * np.column_stack([np.cos(angles), np.sin(angles)]), atol=1e-9)
+    assert np.allclose(goal[:, :2], 2 * centre - start[:, :2], atol=1e-9)  # antipodal
+    towards = (centre - start[:, :2]) / radius
+    assert np.allclose(np.column_stack([np.cos(start[:, 2]), np.sin(start[:, 2])]), towards, atol=1e-8)
+    assert np.all((start[:, 2] > -np.pi) & (start[:, 2] <= np.pi)) and np.array_equal(start[:, 2], goal[:, 2])
+    for pts in (start[:, :2], goal[:, :2]):  # clear of each other: neighbours 2 r sin(pi / n) apart
+        d = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
+        d[np.diag_indices(n)] = np.inf
+        assert d.min() == pytest.approx(2 * radius * math.sin(math.pi / n))
+        assert d.min() > SEPARATION_M
+
+
+def test_the_separation_is_the_planners_robot_radius_with_the_margin():
+    from planners.api import DEFAULT_PLANNING_MARGIN, DEFAULT_ROBOT_RADIUS
+
+    assert SEPARATION_M == pytest.approx(2 * (DEFAULT_ROBOT_RADIUS + DEFAULT_PLANNING_MARGIN))
+
+
+# ----------------------------------------------------------------------------- how a fleet's run ended
+
+
+@pytest.mark.parametrize("outcome,metrics,kind", [
+    ("success", {}, "success"),
+    ("collision", {"collisions_robot": 2, "collisions_moving": 1}, "robot-robot collision"),
+    ("collision", {"collisions_robot": 0, "collisions_moving": 1, "collisions_static": 1}, "moving-obstacle collision"),
+    ("collision", {"collisions_static": 1}, "block/wall collision"),
+    ("timeout", {"deadlock": True}, "deadlock"),
+    ("stalled", {"deadlock": True}, "deadlock"),
+    ("timeout", {"deadlock": False}, "timeout"),
+    ("planning", {}, "planning"),
+    ("error", {}, "error"),
+])
+def test_a_fleet_run_ends_in_its_gravest_kind(outcome, metrics, kind):
+    assert fleet_outcome(outcome, metrics) == kind
+
+
+def test_a_fleet_row_renames_the_robot_share_and_lists_each_robot():
+    metrics = {"success_rate": 0.5, "makespan_s": None, "collisions_robot": 1, "settings": {"dt": 0.02},
+               "robots": [{"done": True}, {"done": False, "collision": "robot", "outcome": "COLLISION"}]}
+    row = fleet_row(2, "collision", metrics)
+    assert row == {"robots": 2, "fleet_outcome": "robot-robot collision", "robot_success_rate": 0.5,
+                   "makespan_s": None, "collisions_robot": 1, "robots_arrived": 1, "robot_ends": "arrived hit-robot"}
+
+
+# ----------------------------------------------------------------------------- a study through a real testbed
+
+
+@pytest.fixture(scope="module")
+def testbed(tmp_path_factory):
+    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("fleet-study-tb"))
+
+
+@pytest.fixture(scope="module")
+def fleet_dir(testbed, tmp_path_factory):
+    r, out = study_process(testbed, SMALL, tmp_path_factory.mktemp("fleet-study"), "--no-progress")
+    assert r.returncode == 0, r.stderr  # failed runs (the uncoordinated fleets' crashes) are results
+    assert "study fleet-small: 8/16 runs completed, 8 failed (collision 8)" in r.stdout, r.stdout
+    assert "paper's findings" not in r.stdout  # they concern one robot
+    return out
+
+
+def test_a_fleet_study_counts_every_run_by_how_it_ended(fleet_dir):
+    data = load_study(fleet_dir)
+    assert len(data.rows) == 16 and all(r["status"] in ("completed", "failed") for r in data.rows)
+    by = {(r["configuration"], r["plan"], r["mode"]): r["fleet_outcome"] for r in data.rows}
+    assert {v for (c, *_), v in by.items() if c == "prioritized"} == {"success"}
+    assert {v for (c, *_), v in by.items() if c == "fmm"} == {"robot-robot collision"}  # they meet in the centre
+    fmm4 = next(r for r in data.rows if (r["configuration"], r["plan"]) == ("fmm", "circle-4"))
+    assert fmm4["robots"] == 4 and fmm4["robots_arrived"] == 0 and fmm4["collisions_robot"] == 4
+    assert fmm4["robot_ends"] == "hit-robot hit-robot hit-robot hit-robot" and fmm4["makespan_s"] is None
+    with open(fleet_dir / "fleet_outcomes.csv") as f:
+        outcomes = list(csv.DictReader(f))
+    assert len(outcomes) == 2 * 2 * 2  # configuration x robot count x mode
+    for row in outcomes:  # never silently dropped: every run is in one column
+        assert sum(int(row[k]) for k in (*FLEET_KINDS, "other", "not_counted")) == int(row["runs"]) == 2
+    fmm = [row for row in outcomes if row["configuration"] == "fmm"]
+    assert all(row["robot-robot collision"] == "2" and row["success_rate"] == "0.0" for row in fmm)
+    twb2 = next(row for row in outcomes if (row["configuration"], row["plan"], row["mode"]) ==
+                ("prioritized", "circle-2", "twb"))
+    assert twb2["success"] == "2" and float(twb2["ci_low"]) == pytest.approx(0.342, abs=1e-3)  # Wilson, 2/2
+
+
+def test_a_fleet_study_reports_the_fleet_metrics_with_intervals(fleet_dir):
+    summary = (fleet_dir / "summary.md").read_text()
+    assert "## Fleet outcomes per configuration, environment and robot count" in summary
+    assert "| fmm | swap | 4 | twb | 2 | 0 | 2 | 0 | 0 | 0 | 0 | 0 | 0 | 0/2 (95% CI 0–66 %) |" in summary
+    assert "makespan (s) [completed]" in summary and "closest approach (m) [measured]" in summary
+    # the metrics table (after the outcomes): the field's two repetitions differ, a mean with its t interval over
+    # both; the simulation's repeat themselves and count once
+    row = [line for line in summary.splitlines() if line.startswith("| prioritized | swap | 4 | twb |")][-1]
+    assert row.count("(n = 2)") >= 4 and " [" in row, row
+    row = [line for line in summary.splitlines() if line.startswith("| prioritized | swap | 4 | sim |")][-1]
+    assert "(n = 1)" in row and "(n = 2)" not in row, row
+    assert "- prioritized got every robot to its goal in 4 of 4 runs (95% CI 51–100 %)." in summary
+    assert "- FMM got every robot to its goal in 0 of 4 runs (95% CI 0–49 %); collided 4 times." in summary
+    assert "(no interval: too few runs for the bootstrap; 4 pairs; paired t" in summary  # not "+nan"
+    with open(fleet_dir / "fleet.csv") as f:
+        metrics = list(csv.DictReader(f))
+    makespan = [m for m in metrics if m["metric"] == "makespan_s" and m["mode"] == "twb"
+                and m["configuration"] == "prioritized"]
+    assert len(makespan) == 2 and all(m["n"] == "2" and m["over"] == "completed" for m in makespan)
+    assert all(float(m["ci_low"]) <= float(m["mean"]) <= float(m["ci_high"]) for m in makespan)
+    closest = [m for m in metrics if m["metric"] == "robot_distance_min_m" and m["configuration"] == "fmm"]
+    assert all(m["over"] == "measured" and float(m["mean"]) < 0.1 for m in closest)  # crashed fleets, measured
+    with open(fleet_dir / "comparisons.csv") as f:
+        compared = {(row["metric"], row["mode"]): row for row in csv.DictReader(f)}
+    assert {m for m, _ in compared} == {"success_rate", "makespan_s", "time_sum_s", "path_length_sum_m",
+                                        "robot_distance_min_m", "safety_time_s"}
+    assert compared[("makespan_s", "twb")]["note"] == "no completed run of fmm"
+    assert float(compared[("robot_distance_min_m", "twb")]["diff"]) > 0.05  # prioritized keeps them apart
+
+
+def test_a_fleet_studys_poses_plans_and_figures(fleet_dir):
+    data = load_study(fleet_dir)
+    exp = next(e for e in data.experiments if (e["configuration"], e["plan"]) == ("prioritized", "circle-4"))
+    assert exp["robots"] == circle_robots(4, 0.6, (0.9, 0.9)) and len(exp["planned_paths"]) == 4
+    run = next(r for r in data.rows if r["run_id"] in exp["runs"] and r["mode"] == "twb")
+    assert (fleet_dir / "poses" / f"run-{run['run_id']}.csv").read_text().startswith("t,x,y,theta,robot\n")
+    poses = data.poses(run["run_id"])
+    assert poses.shape[1] == 5 and set(poses[:, 4]) == {0, 1, 2, 3}
+    for k, r in enumerate(exp["robots"]):
+        mine = poses[poses[:, 4] == k]
+        assert math.dist(mine[-1, 1:3], r["goal"][:2]) < 0.03
+    figs = make_figures(data)
+    assert set(figs) == {"fig5_outcomes", "fig6_fleet_metrics", "fig8_fleet_paths"}
+    assert len(figs["fig6_fleet_metrics"].axes) == 3 * 1  # metrics x environments
+    assert len(figs["fig8_fleet_paths"].axes) == 2 * 4  # problems x (configurations x modes)
+    titles = [ax.get_title() for ax in figs["fig8_fleet_paths"].axes]
+    assert titles[:4] == ["swap circle-2 · prioritized · T", "swap circle-2 · prioritized · S",
+                          "swap circle-2 · FMM · T", "swap circle-2 · FMM · S"]
+    for name in figs:
+        for ext in ("png", "svg"):
+            assert (fleet_dir / f"{name}.{ext}").stat().st_size > 1000
+    assert "fleet.csv" in (fleet_dir / "report.html").read_text()
+
+
+def test_a_circle_that_does_not_fit_the_environment_is_refused_before_anything_runs(capsys, monkeypatch, testbed,
+                                                                                     tmp_path):
+    small = {"name": "box", "size": [1.0, 1.0], "blocks": []}
+    f = tmp_path / "s.json"
+    f.write_text(json.dumps({**SMALL, "environments": [small]}))
+    r = invoke(capsys, monkeypatch, "study", str(f), "--url", testbed.url, "--token", testbed.token, "--out",
+               str(tmp_path / "o"), "--no-progress")
+    assert r.returncode == 2 and r.stderr.count("twb: refused: plan 'circle-2': its circle of radius 0.6 m does not "
+                                                "fit in environment 'box' (1 x 1 m)") == 1, r.stderr
