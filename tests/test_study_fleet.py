@@ -268,6 +268,8 @@ def test_a_fleet_studys_poses_plans_and_figures(fleet_dir):
         assert math.dist(mine[-1, 1:3], r["goal"][:2]) < 0.03
     figs = make_figures(data)
     assert set(figs) == {"fig5_outcomes", "fig6_fleet_metrics", "fig8_fleet_paths"}
+    # the outcomes by kind: the uncoordinated fleets' robot-robot collisions
+    assert {t.get_text() for t in figs["fig5_outcomes"].legends[0].get_texts()} == {"success", "robot-robot collision"}
     assert len(figs["fig6_fleet_metrics"].axes) == 3 * 1  # metrics x environments
     assert len(figs["fig8_fleet_paths"].axes) == 2 * 4  # problems x (configurations x modes)
     titles = [ax.get_title() for ax in figs["fig8_fleet_paths"].axes]

@@ -45,7 +45,10 @@ LABELS = {"computed": "computed (planned)", "sim": "simulation (S)", "twb": "Tel
           "direct": "direct comparison (ST)", "failed": "failed run (✕ where it stopped)"}
 SHORT = {"sim": "S", "twb": "T"}
 #: segments of the outcomes figure
-OUTCOME_COLORS = {"success": "#2ca02c", "collision": "#ff7f0e", "timeout": "#9467bd", "other": "#8c564b"}
+OUTCOME_COLORS = {"success": "#2ca02c", "collision": "#ff7f0e", "timeout": "#9467bd", "other": "#8c564b",
+                  # a fleet's runs, by kind (client_sdk.study._fleet_results.FLEET_KINDS)
+                  "robot-robot collision": "#ff7f0e", "moving-obstacle collision": "#d62728",
+                  "block/wall collision": "#e377c2", "deadlock": "#17becf"}
 
 
 def legend_and_title(fig, handles: dict[str, Any], title: str, **legend_kw: Any) -> None:  # type: ignore[no-untyped-def]
@@ -294,14 +297,15 @@ def _outcome_note(ax, exp: dict[str, Any], runs: dict[int, dict[str, Any]]) -> N
                 color="0.15", bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1.5})
 
 
-def figure_outcomes(data: StudyData):  # type: ignore[no-untyped-def]
+def figure_outcomes(data: StudyData, outcomes: Optional[list[Any]] = None):  # type: ignore[no-untyped-def]
     """How the runs ended: one bar per configuration and mode, split into success, collision, timeout and other
-    failures as fractions of the counted runs, with the success rate's Wilson 95% interval as a whisker."""
+    failures (``outcomes``' named columns: a fleet study's by kind) as fractions of the counted runs, with the
+    success rate's Wilson 95% interval as a whisker."""
     from matplotlib.figure import Figure
 
     from ._verdict import MODE_WORDS, display_name
 
-    outcomes = data.outcomes()
+    outcomes = outcomes if outcomes is not None else data.outcomes()
     fig = Figure(figsize=(9, 0.55 * len(outcomes) + 1.6), layout="constrained")
     ax = fig.subplots()
     labels = []
@@ -310,10 +314,10 @@ def figure_outcomes(data: StudyData):  # type: ignore[no-untyped-def]
         labels.append(f"{display_name(o.configuration)} · {MODE_WORDS.get(o.mode, o.mode).split(' (')[0].lower()}")
         left = 0.0
         n = o.counted
-        for col, color in OUTCOME_COLORS.items():
+        for col in (*o.NAMED, "other"):
             k = o.count(col)
             if n and k:
-                ax.barh(y, k / n, left=left, color=color, height=0.6, label=col)
+                ax.barh(y, k / n, left=left, color=OUTCOME_COLORS[col], height=0.6, label=col)
                 left += k / n
         s = o.success
         if s.get("rate") is not None:
@@ -342,8 +346,10 @@ def make_figures(data: StudyData) -> dict[str, Any]:
     "fig8_fleet_paths" (every robot's path)}`` (:mod:`._fleet_figures`)."""
     if data.spec.fleet:
         from ._fleet_figures import figure_fleet_metrics, figure_fleet_paths
+        from ._fleet_results import fleet_outcomes
 
-        return {"fig5_outcomes": figure_outcomes(data), "fig6_fleet_metrics": figure_fleet_metrics(data),
+        return {"fig5_outcomes": figure_outcomes(data, fleet_outcomes(data)),
+                "fig6_fleet_metrics": figure_fleet_metrics(data),
                 "fig8_fleet_paths": figure_fleet_paths(data)}
     return {"fig5_outcomes": figure_outcomes(data), "fig6_metrics": figure_metrics(data),
             "fig7_ratios": figure_ratios(data), "fig8_paths": figure_paths(data)}

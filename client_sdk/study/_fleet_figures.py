@@ -96,6 +96,8 @@ def figure_fleet_metrics(data: StudyData, groups: Optional[list[FleetGroup]] = N
                 what = "no completed run" if spec is not None and spec.over == "completed" else "no counted run"
                 ax.text(0.02, 0.97, textwrap.fill(f"{what} (robots): " + ", ".join(missing), 70),
                         transform=ax.transAxes, va="top", fontsize=7, color="0.3")
+                low, high = ax.get_ylim()
+                ax.set_ylim(low, high + 0.3 * (high - low))  # room for the note above the lines
             ax.set_xscale("log", base=2)
             ax.set_xticks(counts, [str(c) for c in counts])
             ax.minorticks_off()

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, NamedTuple, Optional
 
 from ._data import StudyData
-from ._outcomes import NOT_COUNTED, OutcomeSummary, distinct_runs
+from ._outcomes import NOT_COUNTED, OutcomeSummary, distinct_runs, outcome_table
 
-__all__ = ["FLEET_COMPARED", "FLEET_KINDS", "FLEET_METRICS", "FleetGroup", "FleetMetric", "fleet_groups",
-           "fleet_outcome", "fleet_row", "measured"]
+__all__ = ["FLEET_COMPARED", "FLEET_KINDS", "FLEET_METRICS", "FleetGroup", "FleetMetric", "FleetOutcomes",
+           "fleet_groups", "fleet_outcome", "fleet_outcomes", "fleet_row", "measured"]
 
 
 class FleetMetric(NamedTuple):
@@ -107,16 +107,27 @@ def _runs_over(rows: list[dict[str, Any]], over: str) -> list[dict[str, Any]]:
     return [r for r in rows if (r.get("status") == "completed" if over == "completed" else measured(r))]
 
 
+@dataclass(frozen=True)
+class FleetOutcomes(OutcomeSummary):
+    """How a configuration's fleet runs ended in one mode, by :func:`fleet_outcome` (columns :data:`FLEET_KINDS`,
+    then ``other``); success: every robot arrived."""
+
+    NAMED: ClassVar[tuple[str, ...]] = FLEET_KINDS
+
+
+def fleet_outcomes(data: StudyData) -> list[OutcomeSummary]:
+    """One :class:`FleetOutcomes` per configuration x mode, pooled over the problems (the outcomes figure)."""
+    return outcome_table(data, summary=FleetOutcomes, key="fleet_outcome")
+
+
 @dataclass(frozen=True, kw_only=True)
-class FleetGroup(OutcomeSummary):
+class FleetGroup(FleetOutcomes):
     """One configuration's runs on one fleet problem (environment, plan of ``robots`` robots) in one mode: an
     :class:`~client_sdk.study._outcomes.OutcomeSummary` whose ``counts`` are runs per :func:`fleet_outcome`
     (columns :data:`FLEET_KINDS`) and whose ``success`` is the share of runs in which every robot arrived, over
     the distinct counted runs (Wilson 95% interval), with ``metrics``: :func:`planners.stats.summarize` of each
     of :data:`FLEET_METRICS` over its distinct runs (``n`` says how many).
     """
-
-    NAMED: ClassVar[tuple[str, ...]] = FLEET_KINDS
 
     environment: str
     plan: str
@@ -170,13 +181,6 @@ def fleet_groups(data: StudyData) -> list[FleetGroup]:
                 metrics = {m: summarize(r.get(m) for r in _runs_over(distinct, spec.over))
                            for m, spec in FLEET_METRICS.items()}
                 out.append(FleetGroup(configuration=config, mode=mode, runs=len(rows), not_submitted=refused,
-                                      counts=dict(sorted(counts.items(), key=_order)), success=success,
+                                      counts=FleetGroup.ordered(counts), success=success,
                                       identical=merged, environment=env, plan=plan, robots=robots, metrics=metrics))
     return out
-
-
-def _order(item: tuple[str, int]) -> tuple[int, str]:
-    kind = item[0]
-    if kind in FLEET_KINDS:
-        return FLEET_KINDS.index(kind), kind
-    return (len(FLEET_KINDS) + (1 if kind in NOT_COUNTED else 0)), kind

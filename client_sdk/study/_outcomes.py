@@ -103,6 +103,16 @@ class OutcomeSummary:
     success: dict[str, Any]
     identical: bool = False
 
+    @classmethod
+    def ordered(cls, counts: dict[str, int]) -> dict[str, int]:
+        """``counts`` in the order of the tables: the :attr:`NAMED` outcomes, other failures, then the runs not
+        counted."""
+        def rank(item: tuple[str, int]) -> tuple[int, str]:
+            o = item[0]
+            return (cls.NAMED.index(o) if o in cls.NAMED else len(cls.NAMED) + (o in NOT_COUNTED)), o
+
+        return dict(sorted(counts.items(), key=rank))
+
     @property
     def counted(self) -> int:
         """Runs that ended in the job's own outcome (success or a failure)."""
@@ -154,9 +164,11 @@ class OutcomeSummary:
                 "distinct_runs": s.get("n")}
 
 
-def outcome_table(data: StudyData, modes: Optional[Iterable[str]] = None) -> list[OutcomeSummary]:
+def outcome_table(data: StudyData, modes: Optional[Iterable[str]] = None, *,
+                  summary: type[OutcomeSummary] = OutcomeSummary, key: str = "outcome") -> list[OutcomeSummary]:
     """One :class:`OutcomeSummary` per configuration x mode, in study order; a configuration whose jobs were all
-    refused still appears (every run ``not_submitted``)."""
+    refused still appears (every run ``not_submitted``).  ``summary`` and ``key``: the class and the runs.csv
+    column the runs are counted by (a fleet study's ``fleet_outcome``, by kind)."""
     modes = list(modes) if modes is not None else data.modes
     out = []
     for c in data.configurations:
@@ -164,17 +176,12 @@ def outcome_table(data: StudyData, modes: Optional[Iterable[str]] = None) -> lis
             rows = [r for r in data.rows if r["configuration"] == c and r["mode"] == m]
             counts: dict[str, int] = {}
             for r in rows:
-                counts[r["outcome"]] = counts.get(r["outcome"], 0) + 1
+                kind = r.get(key) or r["outcome"]
+                counts[kind] = counts.get(kind, 0) + 1
             refused = sum(e.get("repetitions", data.spec.repetitions) for e in data.experiments
                           if e["configuration"] == c and e["status"] == "rejected" and m in e.get("modes", [m]))
             distinct, merged = distinct_runs(rows)
             k = sum(r["outcome"] == "success" for r in distinct)
-            out.append(OutcomeSummary(c, m, len(rows), refused, dict(sorted(counts.items(), key=_order)),
-                                      _proportion(k, len(distinct)), merged))
+            out.append(summary(c, m, len(rows), refused, summary.ordered(counts), _proportion(k, len(distinct)),
+                               merged))
     return out
-
-
-def _order(item: tuple[str, int]) -> tuple[int, str]:
-    o = item[0]
-    rank = {"success": 0, "collision": 1, "timeout": 2}.get(o, 4 if o in NOT_COUNTED else 3)
-    return rank, o
