@@ -108,6 +108,13 @@ def test_a_fleet_study_file_round_trips_and_plans_fleet_jobs():
     assert not StudySpec.from_json({"environments": ["room"], "planners": ["fmm"], "plans": ["A"]}).fleet
 
 
+def test_the_example_fleet_study_has_explicit_and_generated_fleets():
+    spec = load_spec(ROOT / "examples" / "studies" / "fleet-swap.json")
+    jobs = plan_jobs(spec, {"swap": Environment.from_json(SWAP)})
+    assert [(j["plan"], j["robots"]) for j in jobs] == [("swap4", 4)] * 2 + [("circle-8", 8)] * 2
+    assert [r["start"] for r in jobs[0]["body"]["robots"]] == [p["start"] for p in SWAP["plans"]]
+
+
 def test_the_ready_fleet_study_crosses_robot_counts_and_obstacle_scenarios():
     spec = load_spec("fleet")
     assert spec == StudySpec.from_json(FLEET) and spec.fleet

@@ -14,7 +14,13 @@ dependency)::
                   {"tracker_noise_xy_m": 0.003}]}
 
 ``plans`` may also hold explicit start/goal pairs, ``{"name": "C", "start":
-[x, y, theta], "goal": [x, y, theta]}`` (m, rad), used in every environment.
+[x, y, theta], "goal": [x, y, theta]}`` (m, rad), used in every environment,
+or fleets of 2 to 16 robots (:mod:`._fleet`; docs/study.md, "Fleets"):
+``{"name": "swap4", "robots": [{"start": [...], "goal": [...]}, ...]}`` or
+``{"name": "circle-8", "circle": {"robots": 8, "radius_m": 0.6}}`` (robots on a
+circle around the environment's centre, each bound for the antipodal point).  A
+study's plans are all single robots or all fleets; planner ``prioritized``
+plans a fleet together, any other planner each robot alone.
 A planner entry may carry a ``"label"`` (the configuration's name in tables;
 default: the name, with the parameters if any) or, instead of a planner,
 ``"waypoints"``: ``{"name": "corner", "waypoints": [[x, y], ...]}`` sends the
