@@ -16,16 +16,8 @@ import numpy as np
 import pytest
 
 from client_sdk import Environment
-from client_sdk.study import (
-    DISCS,
-    FLEET,
-    StudySpec,
-    StudySpecError,
-    load_spec,
-    load_study,
-    make_figures,
-    plan_jobs,
-)
+from client_sdk.study import (DISCS, FLEET, StudySpec, StudySpecError, export_ompl, load_spec, load_study,
+                              make_figures, plan_jobs)
 from client_sdk.study._fleet import SEPARATION_M, circle_robots
 from client_sdk.study._fleet_results import FLEET_KINDS, fleet_outcome, fleet_row
 from servers import serve
@@ -286,6 +278,17 @@ def test_a_fleet_studys_poses_plans_and_figures(fleet_dir):
         for ext in ("png", "svg"):
             assert (fleet_dir / f"{name}.{ext}").stat().st_size > 1000
     assert "fleet.csv" in (fleet_dir / "report.html").read_text()
+
+
+def test_a_fleet_study_exports_to_ompl_without_progress(fleet_dir, tmp_path):
+    import sqlite3
+
+    counts = export_ompl(load_study(fleet_dir), tmp_path / "fleet.db")
+    assert counts["runs"] == 16 and counts["progress"] == 0  # a fleet has a goal per robot, not one
+    con = sqlite3.connect(tmp_path / "fleet.db")
+    setup = json.loads(con.execute("SELECT setup FROM experiments WHERE name = 'swap-circle-4'").fetchone()[0])
+    con.close()
+    assert setup["robots"] == circle_robots(4, 0.6, (0.9, 0.9))
 
 
 def test_a_circle_that_does_not_fit_the_environment_is_refused_before_anything_runs(capsys, monkeypatch, testbed,
