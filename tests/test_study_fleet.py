@@ -274,9 +274,13 @@ def test_a_fleet_studys_poses_plans_and_figures(fleet_dir):
     titles = [ax.get_title() for ax in figs["fig8_fleet_paths"].axes]
     assert titles[:4] == ["swap circle-2 · prioritized · T", "swap circle-2 · prioritized · S",
                           "swap circle-2 · FMM · T", "swap circle-2 · FMM · S"]
-    for name in figs:
+    for name, fig in figs.items():
         for ext in ("png", "svg"):
             assert (fleet_dir / f"{name}.{ext}").stat().st_size > 1000
+        fig.canvas.draw()  # the legend and the title fit the figure (one environment: a narrow one)
+        for artist in (fig.legends[0], fig._suptitle):
+            box = artist.get_window_extent()
+            assert 0 <= box.x0 and box.x1 <= fig.bbox.width, (name, type(artist).__name__)
     assert "fleet.csv" in (fleet_dir / "report.html").read_text()
 
 

@@ -190,19 +190,29 @@ METHOD = ("How to read this: success rates are over the counted runs (completed 
           "count once. Details: docs/study.md.")
 
 
+#: what a fleet study adds to :data:`METHOD`
+FLEET_METHOD = (" In a fleet study a run succeeds when every robot reached its goal; the closest approach of two "
+                "robots is compared over every measured run, failed ones included (docs/study.md, \"Fleets\").")
+
+
+def _method(data: StudyData) -> str:
+    """How to read the answer: :data:`METHOD`, and :data:`FLEET_METHOD` for a fleet study."""
+    return METHOD + (FLEET_METHOD if data.spec.fleet else "")
+
+
 def _what(data: StudyData) -> str:
     """What the study compares: planners, or planner/controller configurations."""
     return "planner" if data.spec.controllers is None else "configuration"
 
 
-def which_is_better_markdown(answers: list[Answer], what: str = "planner") -> list[str]:
+def which_is_better_markdown(answers: list[Answer], what: str = "planner", method: str = METHOD) -> list[str]:
     """The "Which planner (configuration) is better?" section as Markdown lines."""
     lines = [f"## Which {what} is better?", ""]
     for a in answers:
         lines += [f"**{a.title}:** " + " ".join(a.verdicts), ""]
     for a in answers:
         lines += [f"### {a.title}", ""] + [f"- {f}" for f in a.facts] + [""]
-    lines += [f"_{METHOD}_", ""]
+    lines += [f"_{method}_", ""]
     return lines
 
 
@@ -234,7 +244,7 @@ def summary_markdown(data: StudyData, outcomes: Optional[list[OutcomeSummary]] =
               + (f"; wall time {data.meta['wall_s']:.1f} s" if data.meta.get("wall_s") is not None else ""),
               "- S = simulation (ideal robot), T = Teleworkbench (emulated field robot, tracker poses), "
               "ST = direct comparison of T against S; units m, rad, s", ""]
-    lines += which_is_better_markdown(which_is_better(data, comparisons, outcomes), _what(data))
+    lines += which_is_better_markdown(which_is_better(data, comparisons, outcomes), _what(data), _method(data))
     for title, header, body in summary_tables(data, outcomes, comparisons):
         lines += [f"## {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(row) + " |" for row in body]
@@ -278,7 +288,7 @@ _CAPTIONS = {
 }
 
 
-def which_is_better_html(answers: list[Answer], what: str = "planner") -> str:
+def which_is_better_html(answers: list[Answer], what: str = "planner", method: str = METHOD) -> str:
     """The "Which planner is better?" section as HTML."""
     parts = [f"<section class='answer' id='which-is-better'><h2>Which {what} is better?</h2>"]
     for a in answers:
@@ -287,7 +297,7 @@ def which_is_better_html(answers: list[Answer], what: str = "planner") -> str:
     for a in answers:
         parts.append(f"<h3>{html.escape(a.title)}</h3><ul>" +
                      "".join(f"<li>{html.escape(f)}</li>" for f in a.facts) + "</ul>")
-    parts.append(f"<p class='method'>{html.escape(METHOD)}</p></section>")
+    parts.append(f"<p class='method'>{html.escape(method)}</p></section>")
     return "".join(parts)
 
 
@@ -310,7 +320,7 @@ def report_html(data: StudyData, figure_names: list[str], outcomes: Optional[lis
                      "<a href='fleet_outcomes.csv'>fleet_outcomes.csv</a>, <a href='fleet.csv'>fleet.csv</a>, "
                      if spec.fleet else "") + "<a href='summary.md'>summary.md</a>, "
                  "<a href='study.json'>study.json</a>, poses in <code>poses/</code>.</p>")
-    parts.append(which_is_better_html(which_is_better(data, comparisons, outcomes), _what(data)))
+    parts.append(which_is_better_html(which_is_better(data, comparisons, outcomes), _what(data), _method(data)))
     for name in figure_names:
         parts.append(f"<figure><a href='{name}.svg'><img src='{name}.png' alt='{name}'></a>"
                      f"<figcaption>{html.escape(_CAPTIONS.get(name, name))} (<a href='{name}.svg'>SVG</a>)"
