@@ -51,8 +51,10 @@ BASE = {"environments": ["swap"], "planners": ["prioritized"], "plans": [CIRCLE]
     ({"plans": [{"name": "c", "circle": {"robots": 16, "radius_m": 0.2}}]},
      "plans[0].circle: 16 robots on a circle of radius 0.2 m stand 0.078 m apart; two robots need 0.130 m between "
      "their centres (a radius of at least 0.333 m)"),
+    ({"plans": [{"name": "c", "circle": {"robots": 65, "radius_m": 1.5}}], "field": "full"},
+     "plans[0].circle.robots must be an integer from 2 to 64, got 65"),
     ({"plans": [{"name": "c", "circle": {"robots": 17, "radius_m": 0.6}}]},
-     "plans[0].circle.robots must be an integer from 2 to 16, got 17"),
+     "plans[0] (c) has 17 robots: a sub-field holds at most 16 (use \"field\": \"full\" for up to 64)"),
     ({"plans": [{"name": "c", "circle": {"robots": 1, "radius_m": 0.6}}]}, "plans[0].circle.robots must be"),
     ({"plans": [{"name": "c", "circle": {"robots": 4, "radius_m": 0}}]},
      "plans[0].circle.radius_m must be a number > 0 (m), got 0"),
@@ -61,7 +63,7 @@ BASE = {"environments": ["swap"], "planners": ["prioritized"], "plans": [CIRCLE]
     ({"plans": [{"name": "c", "circle": {"robots": 4, "radius_m": 0.6, "centre": [1]}}]},
      "plans[0].circle.centre must be [x, y] (m)"),
     ({"plans": [{"name": "c", "robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}]}]},
-     "plans[0].robots must be a list of 2 to 16"),
+     "plans[0].robots must be a list of 2 to 64"),
     ({"plans": [{"name": "c", "robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5]},
                                          {"start": [0.35, 0.3], "goal": [0.3, 1.5]}]}]},
      "plans[0].robots[1].start is 0.050 m from plans[0].robots[0].start: two robots need 0.130 m"),
@@ -134,9 +136,9 @@ def test_the_circle_puts_four_robots_at_exact_positions_facing_the_centre():
     ]
 
 
-@pytest.mark.parametrize("n", range(2, 17))
+@pytest.mark.parametrize("n", [*range(2, 17), 32, 64])
 def test_the_circle_geometry(n):
-    radius, centre = 0.7, np.array([0.9, 1.0])
+    radius, centre = (0.7, np.array([0.9, 1.0])) if n <= 16 else (1.55, np.array([1.8, 1.8]))  # the whole field
     robots = circle_robots(n, radius, centre)
     start = np.array([r["start"] for r in robots])
     goal = np.array([r["goal"] for r in robots])
@@ -152,6 +154,12 @@ def test_the_circle_geometry(n):
         d[np.diag_indices(n)] = np.inf
         assert d.min() == pytest.approx(2 * radius * math.sin(math.pi / n))
         assert d.min() > SEPARATION_M
+
+
+def test_the_full_field_takes_a_circle_of_64_robots():
+    spec = StudySpec.from_json({**BASE, "field": "full", "plans": [{"name": "c64", "circle": {"robots": 64,
+                                                                                             "radius_m": 1.55}}]})
+    assert spec.plans[0].robot_count == 64
 
 
 def test_the_separation_is_the_planners_robot_radius_with_the_margin():

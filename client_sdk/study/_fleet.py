@@ -2,7 +2,7 @@
 
 A ``plans`` entry of a study file is a fleet problem when it has ``robots``
 (explicit: ``{"name": "swap4", "robots": [{"start": [x, y, theta], "goal":
-[...]}, ...]}``, 2 to 16 robots; m, rad) or ``circle`` (generated:
+[...]}, ...]}``, 2 to 16 robots on a sub-field, 64 on the whole field; m, rad) or ``circle`` (generated:
 ``{"name": "circle-8", "circle": {"robots": 8, "radius_m": 0.6}}``).  The
 circle is the classic multi-robot benchmark: N robots evenly on a circle
 around the environment's centre (or ``"centre": [x, y]``), each facing the
@@ -18,11 +18,11 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["MAX_ROBOTS", "MIN_ROBOTS", "SEPARATION_M", "Circle", "circle_robots", "finite", "is_pose", "parse_circle",
+__all__ = ["MAX_ROBOTS", "MAX_ROBOTS_SUB", "MIN_ROBOTS", "SEPARATION_M", "Circle", "circle_robots", "finite", "is_pose", "parse_circle",
            "parse_robots"]
 
-#: robots of a multi-robot job (the server's bounds)
-MIN_ROBOTS, MAX_ROBOTS = 2, 16
+#: robots of a multi-robot job (the server's bounds): at most 16 on a sub-field, 64 on the whole field
+MIN_ROBOTS, MAX_ROBOTS, MAX_ROBOTS_SUB = 2, 64, 16
 #: the closest two robots' starts (or goals) may stand, centre to centre (m): twice the robot radius with the
 #: testbed's planning margin (the server's pre-flight rule; docs/server.md, "Multi-robot jobs")
 #: (planners.api's DEFAULT_ROBOT_RADIUS and DEFAULT_PLANNING_MARGIN, written out: importing planners takes a second)
@@ -94,7 +94,7 @@ def _closest(points: np.ndarray) -> tuple[float, int, int]:
 
 
 def parse_robots(value: Any, where: str, bad: Bad) -> list[dict[str, list[float]]]:
-    """A fleet problem's explicit ``robots``: 2 to 16 ``{"start", "goal"}`` poses ([x, y] or [x, y, theta]; m,
+    """A fleet problem's explicit ``robots``: 2 to 64 ``{"start", "goal"}`` poses ([x, y] or [x, y, theta]; m,
     rad), no two starts and no two goals closer than :data:`SEPARATION_M`."""
     if not isinstance(value, list) or not MIN_ROBOTS <= len(value) <= MAX_ROBOTS:
         raise bad(f"{where} must be a list of {MIN_ROBOTS} to {MAX_ROBOTS} {{\"start\", \"goal\"}} objects")
@@ -119,7 +119,7 @@ def parse_robots(value: Any, where: str, bad: Bad) -> list[dict[str, list[float]
 
 
 def parse_circle(value: Any, where: str, bad: Bad) -> Circle:
-    """A fleet problem's ``circle``: ``{"robots": 2..16, "radius_m": > 0, "centre"?: [x, y]}`` (m), with
+    """A fleet problem's ``circle``: ``{"robots": 2..64, "radius_m": > 0, "centre"?: [x, y]}`` (m), with
     neighbours at least :data:`SEPARATION_M` apart."""
     if not isinstance(value, Mapping):
         raise bad(f"{where} must be an object such as {{\"robots\": 8, \"radius_m\": 0.6}}")

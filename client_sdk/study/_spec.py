@@ -15,7 +15,7 @@ dependency)::
 
 ``plans`` may also hold explicit start/goal pairs, ``{"name": "C", "start":
 [x, y, theta], "goal": [x, y, theta]}`` (m, rad), used in every environment,
-or fleets of 2 to 16 robots (:mod:`._fleet`; docs/study.md, "Fleets"):
+or fleets of 2 to 16 robots (64 with ``"field": "full"``; :mod:`._fleet`; docs/study.md, "Fleets"):
 ``{"name": "swap4", "robots": [{"start": [...], "goal": [...]}, ...]}`` or
 ``{"name": "circle-8", "circle": {"robots": 8, "radius_m": 0.6}}`` (robots on a
 circle around the environment's centre, each bound for the antipodal point).  A
@@ -45,7 +45,7 @@ from typing import Any, Mapping, Optional
 
 from robot_agent.overrides import OverrideError, check_overrides, overrides_label
 
-from ._fleet import Circle, is_pose, parse_circle, parse_robots
+from ._fleet import MAX_ROBOTS, MAX_ROBOTS_SUB, Circle, is_pose, parse_circle, parse_robots
 from ._fleet import finite as _finite
 
 __all__ = ["CONTROLLERS", "DISCS", "FLEET", "FLEET_PLANNER", "JITTER_LIMITS", "NOISE", "PAPER", "READY", "ControllerChoice",
@@ -268,7 +268,7 @@ class StudySpec:
         if profiles is not None and "twb" not in modes:
             raise bad("`profiles` vary the field robot: `modes` must include \"twb\"")
         controllers = _controllers(data.get("controllers"), bad)
-        _check_fleet(plan_specs, pspecs, jitter, bad)
+        _check_fleet(plan_specs, pspecs, jitter, fld, bad)
         name = data.get("name", Path(source).stem if source != "study" else "study")
         if not isinstance(name, str) or not name:
             raise bad("`name` must be a non-empty string")
@@ -310,9 +310,10 @@ def _plan(p: Any, where: str, bad: Any) -> PlanSpec:
 
 
 def _check_fleet(plans: Optional[list[PlanSpec]], planners: list[PlannerSpec], jitter: Optional[dict[str, float]],
-                 bad: Any) -> None:
+                 fld: str, bad: Any) -> None:
     """A study compares single robots or fleets, not both; ``prioritized`` plans fleets only; a fleet takes no
-    explicit ``waypoints`` path and no start-pose ``jitter`` (the server's rules for multi-robot jobs)."""
+    explicit ``waypoints`` path and no start-pose ``jitter``, and a sub-field at most 16 robots (the server's
+    rules for multi-robot jobs)."""
     problems = plans or []
     fleets = [i for i, p in enumerate(problems) if p.fleet]
     single = [i for i, p in enumerate(problems) if not p.fleet]
@@ -321,6 +322,10 @@ def _check_fleet(plans: Optional[list[PlanSpec]], planners: list[PlannerSpec], j
         raise bad(f"plans[{fleets[0]}] ({f.name}) is a fleet of {f.robot_count} robots but plans[{single[0]}] "
                   f"({s.name}) is one robot: a study compares either single robots or fleets (their metrics "
                   "differ); make two studies")
+    crowded = next((i for i in fleets if fld == "sub" and problems[i].robot_count > MAX_ROBOTS_SUB), None)
+    if crowded is not None:
+        raise bad(f"plans[{crowded}] ({problems[crowded].name}) has {problems[crowded].robot_count} robots: a "
+                  f"sub-field holds at most {MAX_ROBOTS_SUB} (use \"field\": \"full\" for up to {MAX_ROBOTS})")
     names = [p.name for p in problems]
     twin = next((i for i, n in enumerate(names) if n in names[:i]), None)
     if twin is not None:
