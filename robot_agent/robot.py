@@ -256,9 +256,9 @@ class Robot:
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
         self.host.sync_clock()
-        if core.state[self.index] == State.MOVING and not core.driving(self.index):
-            raise ProtocolError(ErrorCode.STATE, "a path is in progress: T,T,V drives a robot without one (T,T,S first)")
         started = not core.driving(self.index)
+        if started and core.moving(self.index):
+            raise ProtocolError(ErrorCode.STATE, "a path is in progress: T,T,V drives a robot without one (T,T,S first)")
         if not started and self.owner is not conn:
             raise ProtocolError(ErrorCode.STATE, "another connection drives this robot")
         core.drive(self.index, cmd.v, cmd.w, self._noise_key() if started else 0, WATCHDOG_S)
@@ -283,7 +283,7 @@ class Robot:
         return [format_status(self.state(), self.host.core.belief(self.index), self.host.core.t)]
 
     def _check_gripper(self) -> None:
-        if self.host.core.state[self.index] == State.MOVING:
+        if self.host.core.moving(self.index):
             raise ProtocolError(ErrorCode.STATE, "the robot is following a path (send T,T,S first)")
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
@@ -304,7 +304,7 @@ class Robot:
         self.gripper_busy = True
         try:
             await self.host.sleep(self.gripper_seconds(placements=1))
-            if self.host.core.state[self.index] == State.MOVING:  # a path arrived meanwhile: impossible, but safe
+            if self.host.core.moving(self.index):  # a path arrived meanwhile: impossible, but safe
                 raise ProtocolError(ErrorCode.STATE, "the robot started moving")
             self.host.core.place(self.index, cmd.pose)
         finally:
