@@ -64,6 +64,7 @@ EventListener = Callable[[str, str], None]
 _SLICE_S = 0.004  # longest run of simulation steps between yields to the event loop
 _CHUNK_ROBOT_STEPS = 4096  # robot-steps per call of the compiled loop (~1 ms) between checks of the slice
 _MAX_LAG_S = 0.5  # wall seconds behind schedule before the clock gives up catching up
+_TIMER_SLACK_S = 0.001  # wall seconds added to every wait of the simulation loop (timer resolution)
 
 
 class AgentHost:
@@ -337,9 +338,13 @@ class AgentHost:
         await fut
 
     async def _wait(self, timeout: float | None) -> None:
+        """Until :meth:`wake` or ``timeout`` wall seconds (None: no limit), a little late rather than early:
+        a loop whose timers have millisecond resolution (uvloop) would otherwise wake before the next
+        step is due and spin."""
         try:
-            await asyncio.wait_for(self._wake.wait(), timeout)
-        except asyncio.TimeoutError:
+            async with asyncio.timeout(None if timeout is None else timeout + _TIMER_SLACK_S):
+                await self._wake.wait()
+        except TimeoutError:
             pass
         self._wake.clear()
 
