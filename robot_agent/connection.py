@@ -221,8 +221,6 @@ class Connection:
         timeout, so a line that starts at ``t`` is looked at again by ``t + line_timeout_s`` at the latest,
         and from then on exactly at its deadline."""
         self._timer = None
-        if self.closed:
-            return
         now = self._loop.time()
         deadline = math.inf
         if self._phase == _LINE:
