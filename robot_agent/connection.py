@@ -5,8 +5,9 @@ After aiosmtpd's connection handler: this class only frames lines
 hands each line to its robot (:class:`robot_agent.robot.Robot`) and writes
 what comes back.  Pure parsing lives in :mod:`robot_agent.protocol`.
 
-Writing never blocks anybody else: lines go into this connection's bounded
-queue and a writer task sends them with ``drain()``.  A client that sends
+Writing never blocks anybody else: a line goes straight to the transport
+while the client keeps up, else into this connection's bounded queue, which
+a writer task sends with ``drain()``.  A client that sends
 commands without reading the replies is throttled (its next line is read only
 when its queue has room again); a client that reads nothing while its robot
 emits events is disconnected once ``max_queue`` lines wait, so the
@@ -26,8 +27,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Awaitable, Callable, TypeVar
+from typing import TYPE_CHECKING
 
 from .protocol import MAX_LINE_BYTES, ErrorCode, RobotState, format_error
 
@@ -43,7 +45,8 @@ TOOLONG = object()  #: marker returned by :func:`read_line` for a discarded over
 TOO_MANY = "too many connections"
 MAX_AUTH_FAILURES = 5  #: wrong secrets after which a connection is closed
 _BIG_LINE = 64 * 1024  # lines longer than this are parsed in a worker thread
-_T = TypeVar("_T")
+_DIRECT_BYTES = 64 * 1024  # bytes the transport may hold unsent for a line to skip the queue
+_WAIT, _LINE, _SERVING = 0, 1, 2  # a connection's phases, for its deadlines
 
 
 @dataclass(frozen=True)
@@ -124,8 +127,12 @@ class Connection:
         self.auth_failures = 0
         self.controller: Selection | None = None  #: the controller of this connection's paths (``T,T,C``)
         self.localisation = False  #: whether this connection gets ``PO`` lines (``T,T,O``)
-        self.opened = asyncio.get_running_loop().time()
+        self._loop = asyncio.get_running_loop()
+        self.opened = self._loop.time()
         self._last_accepted = self.opened
+        self._phase = _WAIT  # what the connection waits for: a line (_WAIT), its end (_LINE), or it serves one
+        self._line_start = self.opened  # loop time of the first byte of the line in progress
+        self._timer: asyncio.TimerHandle | None = None  # the deadline timer (_check_deadline)
         self._queue: asyncio.Queue[str | None] = asyncio.Queue()
         self._room = asyncio.Event()
         self._room.set()
@@ -137,8 +144,15 @@ class Connection:
     # ------------------------------------------------------------------ output
 
     def send(self, line: str) -> None:
-        """Queue one line (without terminator); never blocks.  Overflow disconnects the client."""
+        """Send one line (without terminator); never blocks.  Overflow disconnects the client.
+
+        With nothing queued and the socket keeping up, the line goes to the transport at once (one
+        ``send`` call, no hop through the writer task); otherwise it waits in the queue, in order."""
         if self.closed:
+            return
+        transport = self.writer.transport
+        if self._queue.empty() and transport.get_write_buffer_size() < _DIRECT_BYTES and not transport.is_closing():
+            transport.write((line + "\n").encode("ascii", "replace"))
             return
         if self._queue.qsize() >= self.max_queue:
             log.warning("%r: client does not read; %d lines pending, disconnecting", self, self._queue.qsize())
@@ -199,33 +213,47 @@ class Connection:
             return self.opened + self.limits.probation_s
         return self._last_accepted + self.limits.idle_timeout_s
 
-    async def _until_deadline(self, wait: Callable[[], Awaitable[_T]]) -> _T:
-        """Await ``wait()`` until the wait deadline (``_Expired`` after it); an exempt connection waits on."""
-        while True:
-            try:
-                async with asyncio.timeout_at(self._wait_deadline()):
-                    return await wait()
-            except TimeoutError:
+    def _check_deadline(self) -> None:
+        """The deadline timer: end the connection if the deadline of what it waits for passed, else look again
+        at that deadline, or one line timeout from now, whichever is first.
+
+        Lines themselves never touch the timer (they only note the time): it runs at least once per line
+        timeout, so a line that starts at ``t`` is looked at again by ``t + line_timeout_s`` at the latest,
+        and from then on exactly at its deadline."""
+        self._timer = None
+        now = self._loop.time()
+        deadline = math.inf
+        if self._phase == _LINE:
+            deadline = self._line_start + self.limits.line_timeout_s
+            if self.probation:
+                deadline = min(deadline, self._wait_deadline())
+            if now >= deadline:
+                return self._expire(TOO_MANY if self.probation else "line timeout")
+        elif self._phase == _WAIT:
+            deadline = self._wait_deadline()
+            if now >= deadline:
                 if self.probation:
-                    raise _Expired(TOO_MANY) from None
+                    return self._expire(TOO_MANY)
                 if not self._idle_exempt():
-                    raise _Expired("idle timeout") from None
-                self._last_accepted = asyncio.get_running_loop().time()
+                    return self._expire("idle timeout")
+                self._last_accepted = now  # it drives the moving robot: it waits on
+                deadline = self._wait_deadline()
+        self._timer = self._loop.call_at(min(deadline, now + self.limits.line_timeout_s), self._check_deadline)
+
+    def _expire(self, reason: str) -> None:
+        """A deadline passed: the read in progress (or the next one) raises ``_Expired(reason)``."""
+        self.reader.set_exception(_Expired(reason))
+        self._room.set()  # a connection waiting for room reads next, and learns it
 
     async def _next_line(self) -> bytes | object:
         """The next line or :data:`TOOLONG`; ``_Expired`` when a deadline passes, and
         ``IncompleteReadError`` at the end of the stream."""
-        first = await self._until_deadline(lambda: self.reader.readexactly(1))
+        self._phase = _WAIT
+        first = await self.reader.readexactly(1)
         if first == b"\n":
             return first
-        budget = self.limits.line_timeout_s
-        if self.probation:
-            budget = min(budget, self._wait_deadline() - asyncio.get_running_loop().time())
-        try:
-            async with asyncio.timeout(max(budget, 0.0)):
-                rest = await read_line(self.reader)
-        except TimeoutError:
-            raise _Expired(TOO_MANY if self.probation else "line timeout") from None
+        self._phase, self._line_start = _LINE, self._loop.time()
+        rest = await read_line(self.reader)
         return rest if rest is TOOLONG else first + rest  # type: ignore[operator]
 
     # ------------------------------------------------------------------ input
@@ -234,15 +262,19 @@ class Connection:
         """Greet, then read and dispatch lines until the client leaves, is disconnected or times out."""
         writer_task = asyncio.create_task(self._write_loop(), name=f"twb-writer-{self.peer}")
         self.send(self.robot.hello())
+        self._check_deadline()
         try:
             while not self.closed:
-                await self._until_deadline(self._room.wait)
+                if not self._room.is_set():
+                    self._phase = _WAIT
+                    await self._room.wait()
                 try:
                     line = await self._next_line()
                 except asyncio.IncompleteReadError as exc:
                     if exc.partial:
                         log.info("%r: disconnected after half a line (%d bytes ignored)", self, len(exc.partial))
                     break
+                self._phase = _SERVING
                 if self.closed:
                     break
                 await self._serve(line)
@@ -252,6 +284,8 @@ class Connection:
         except (ConnectionError, OSError) as exc:
             log.info("%r: connection lost: %s", self, exc)
         finally:
+            if self._timer is not None:
+                self._timer.cancel()
             self.robot.disconnected(self)
             self.close()
             try:
@@ -278,4 +312,4 @@ class Connection:
             log.warning("%r: %d wrong secrets; closing", self, self.auth_failures)
             self.close()
         elif replies and not replies[0].startswith("ERR,"):
-            self._last_accepted = asyncio.get_running_loop().time()
+            self._last_accepted = self._loop.time()

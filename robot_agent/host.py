@@ -47,7 +47,7 @@ from . import auth
 from .backends import make_backend
 from .connection import TOO_MANY, Connection, Limits
 from .params import RobotParams, robot_params
-from .protocol import MAX_LINE_BYTES, ErrorCode, check_secret, format_error, format_localisation
+from .protocol import MAX_LINE_BYTES, ErrorCode, check_secret, format_error, format_localisations
 from .robot import Robot
 from .robot_profile import DEFAULT_PROFILE
 from .server_link import ServerLink
@@ -64,6 +64,7 @@ EventListener = Callable[[str, str], None]
 _SLICE_S = 0.004  # longest run of simulation steps between yields to the event loop
 _CHUNK_ROBOT_STEPS = 4096  # robot-steps per call of the compiled loop (~1 ms) between checks of the slice
 _MAX_LAG_S = 0.5  # wall seconds behind schedule before the clock gives up catching up
+_TIMER_SLACK_S = 0.001  # wall seconds added to every wait of the simulation loop (timer resolution)
 
 
 class AgentHost:
@@ -144,7 +145,8 @@ class AgentHost:
         self._chunk = max(1, _CHUNK_ROBOT_STEPS // robots)  # steps per compiled call when running ahead
         # localisation lines (T,T,O): the tracker's poses, due after the mode's latency
         self._po_queue: deque[tuple[float, int, str]] = deque()
-        self._po_robots: set[int] = set()
+        self._po_robots = np.zeros(robots, dtype=bool)  # robots with a subscribed connection
+        self._po_any = False
         self._po_latency = self.params.field.tracker_latency_s if backend == "field" else 0.0
         self.core.poses.listener = self._on_poses
         if robot_ids is None:
@@ -336,9 +338,13 @@ class AgentHost:
         await fut
 
     async def _wait(self, timeout: float | None) -> None:
+        """Until :meth:`wake` or ``timeout`` wall seconds (None: no limit), a little late rather than early:
+        a loop whose timers have millisecond resolution (uvloop) would otherwise wake before the next
+        step is due and spin."""
         try:
-            await asyncio.wait_for(self._wake.wait(), timeout)
-        except asyncio.TimeoutError:
+            async with asyncio.timeout(None if timeout is None else timeout + _TIMER_SLACK_S):
+                await self._wake.wait()
+        except TimeoutError:
             pass
         self._wake.clear()
 
@@ -388,17 +394,20 @@ class AgentHost:
 
     def localisation_changed(self) -> None:
         """A connection subscribed to ``PO`` lines or left: which robots have subscribers now."""
-        self._po_robots = {r.index for r in self.robots if any(c.localisation for c in r.connections)}
-        if self._po_robots:
+        self._po_robots[:] = [any(c.localisation for c in r.connections) for r in self.robots]
+        self._po_any = bool(self._po_robots.any())
+        if self._po_any:
             self.core.log_poses = True  # a host without a tracker sink logs poses for its subscribers
 
     def _on_poses(self, t: np.ndarray, robots: np.ndarray, poses: np.ndarray) -> None:
-        """Tracker poses just logged: queue a ``PO`` line of each subscribed robot's, due after the latency."""
-        if not self._po_robots:
+        """Tracker poses just logged (``t`` s, robot indices, ``(K, 3)`` m/rad): queue a ``PO`` line of each
+        subscribed robot's, due after the latency."""
+        if not self._po_any:
             return
-        for tt, i, pose in zip(t.tolist(), robots.tolist(), poses.tolist()):
-            if i in self._po_robots:
-                self._po_queue.append((tt + self._po_latency, i, format_localisation(pose, tt)))
+        keep = np.flatnonzero(self._po_robots[robots])
+        if len(keep):
+            lines = format_localisations(t[keep], poses[keep])
+            self._po_queue.extend(zip((t[keep] + self._po_latency).tolist(), robots[keep].tolist(), lines))
 
     def _send_localisation(self) -> None:
         """Send the ``PO`` lines that are due by now to their robot's subscribed connections."""
@@ -409,7 +418,7 @@ class AgentHost:
                 if conn.localisation:
                     conn.send(line)
         if self.sink is None and self.core.poses.count:
-            self.core.poses.drain()  # nobody else wants them
+            self.core.poses.clear()  # nobody else wants them
 
     def _dispatch(self, events: list[SimEvent]) -> None:
         for ev in events:

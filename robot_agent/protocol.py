@@ -63,6 +63,7 @@ __all__ = [
     "format_event",
     "format_hello",
     "format_localisation",
+    "format_localisations",
     "format_ok",
     "format_status",
     "parse_arguments",
@@ -235,6 +236,7 @@ _NOT_LIST = np.ones(256, dtype=bool)
 _NOT_LIST[list(_LIST_BYTES)] = False
 _SIGNS = ("+", "-")
 _CONVERT_CHUNK = 4096  # fields per numpy conversion (a few ms at most)
+_SHORT_ITEM = 256  # characters up to which a single item is parsed field by field (_parse_item)
 
 
 def _line_bytes(line: str | bytes) -> bytes:
@@ -386,6 +388,18 @@ def _first_unparsable(fields: list[str]) -> int:
     raise ProtocolError(ErrorCode.SYNTAX, "malformed number list")  # numpy refused what float() accepts
 
 
+def _parse_item(item: str, width: int, what: str) -> np.ndarray:
+    """One short item ``a,b,...`` (``T,T,V``, ``T,T,I``) as ``width`` floats, field by field: the same
+    numbers and the same refusals as the vectorised pass over a list, without its fixed cost."""
+    fields = [f.strip() for f in item.split(",")]
+    if len(fields) != width or not all(len(f) <= MAX_NUMBER_CHARS and _is_decimal(f) for f in fields):
+        raise ProtocolError(ErrorCode.SYNTAX, f"{what} 1: {_item_error(item, width)}")
+    values = [float(f) for f in fields]
+    if not all(map(math.isfinite, values)):  # e.g. 1e999 overflows to inf
+        raise ProtocolError(ErrorCode.SYNTAX, f"{what} 1: numbers must be finite")
+    return np.array(values)
+
+
 def _parse_tuples(payload: str, width: int, what: str, limit: int) -> np.ndarray:
     """Parse ``a,b,c;d,e,f;...`` into a ``(N, width)`` float array of wire units, in linear time.
 
@@ -396,6 +410,8 @@ def _parse_tuples(payload: str, width: int, what: str, limit: int) -> np.ndarray
     count = payload.count(";") + 1
     if count > limit:
         raise ProtocolError(ErrorCode.RANGE, f"too many {what}s: {count} > {limit}")
+    if count == 1 and len(payload) <= _SHORT_ITEM:
+        return _parse_item(payload, width, what)[None, :]
     layout = _layout(payload.encode("ascii"), width, count)
     stop = layout.first_bad  # items from here on are not converted
     long_items = np.unique(layout.item[layout.length > MAX_NUMBER_CHARS])
@@ -734,8 +750,17 @@ def format_event(kind: Event | str, t: float, *, index: int | None = None, reaso
 
 def format_localisation(pose: Sequence[float], t: float) -> str:
     """``PO,<x>,<y>,<a>,<t>`` (mm, mm, deg, s) from a pose in metres/radians measured at ``t`` seconds."""
-    x, y, a = pose
-    return f"PO,{_fmt(x * 1000, 2)},{_fmt(y * 1000, 2)},{_fmt(math.degrees(float(_wrap(a))), 3)},{_fmt(t, 3)}"
+    return format_localisations(np.array([t], dtype=float), np.array([pose], dtype=float))[0]
+
+
+def format_localisations(t: np.ndarray, poses: np.ndarray) -> list[str]:
+    """The ``PO`` line (:func:`format_localisation`) of each pose ``(K, 3)`` (m, m, rad) measured at ``t``
+    ``(K,)`` (s); the units are converted for all of them at once."""
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    mm = (p[:, :2] * 1000.0).tolist()
+    deg = np.degrees(_wrap(p[:, 2])).tolist()
+    return [f"PO,{_fmt(x, 2)},{_fmt(y, 2)},{_fmt(a, 3)},{_fmt(tt, 3)}"
+            for (x, y), a, tt in zip(mm, deg, np.asarray(t, dtype=float).tolist())]
 
 
 def format_error(code: ErrorCode | str, message: str) -> str:

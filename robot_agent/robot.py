@@ -30,7 +30,7 @@ from __future__ import annotations
 import asyncio
 import hmac
 import logging
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Awaitable, Callable
 
 from .connection import MAX_AUTH_FAILURES
 from .controller_specs import ControllerError, select
@@ -136,31 +136,17 @@ class Robot:
 
     async def _dispatch(self, conn: "Connection", cmd: Command) -> list[str]:
         """One method per verb."""
-        if isinstance(cmd, PathCommand):
-            return self.cmd_path(conn, cmd)
-        if isinstance(cmd, StopCommand):
-            return self.cmd_stop()
-        if isinstance(cmd, QueryCommand):
-            return self.cmd_query()
-        if isinstance(cmd, PlaceCommand):
-            return await self.cmd_place(cmd)
-        if isinstance(cmd, BuildCommand):
-            return await self.cmd_build(cmd)
-        if isinstance(cmd, MovingCommand):
-            return self.cmd_moving(cmd)
-        if isinstance(cmd, AuthCommand):
-            return self.cmd_auth(conn, cmd)
-        if isinstance(cmd, LeaseCommand):
-            return self.cmd_lease(conn, cmd)
-        if isinstance(cmd, ControllerCommand):
-            return self.cmd_controller(conn, cmd)
-        if isinstance(cmd, VelocityCommand):
-            return self.cmd_velocity(conn, cmd)
-        if isinstance(cmd, LocalisationCommand):
-            conn.localisation = cmd.on
-            self.host.localisation_changed()
-            return [format_ok("O")]
-        raise ProtocolError(ErrorCode.UNSUPPORTED, "unsupported command")
+        verb = _VERBS.get(type(cmd))
+        if verb is None:
+            raise ProtocolError(ErrorCode.UNSUPPORTED, "unsupported command")
+        replies = verb(self, conn, cmd)
+        return replies if isinstance(replies, list) else await replies
+
+    def cmd_localisation(self, conn: "Connection", cmd: LocalisationCommand) -> list[str]:
+        """``T,T,O``: send (or stop sending) this connection ``PO`` lines."""
+        conn.localisation = cmd.on
+        self.host.localisation_changed()
+        return [format_ok("O")]
 
     # ------------------------------------------------------------------ authentication
 
@@ -255,10 +241,11 @@ class Robot:
         core = self.host.core
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
-        self.host.sync_clock()
-        if core.state[self.index] == State.MOVING and not core.driving(self.index):
-            raise ProtocolError(ErrorCode.STATE, "a path is in progress: T,T,V drives a robot without one (T,T,S first)")
         started = not core.driving(self.index)
+        if started:  # (a robot in velocity mode keeps the clock running: nothing to bring up to date)
+            self.host.sync_clock()
+        if started and core.moving(self.index):
+            raise ProtocolError(ErrorCode.STATE, "a path is in progress: T,T,V drives a robot without one (T,T,S first)")
         if not started and self.owner is not conn:
             raise ProtocolError(ErrorCode.STATE, "another connection drives this robot")
         core.drive(self.index, cmd.v, cmd.w, self._noise_key() if started else 0, WATCHDOG_S)
@@ -269,7 +256,7 @@ class Robot:
             log.info("%s: velocity mode from %s", self.robot_id, conn.peer)
         return [format_ok("V")]
 
-    def cmd_stop(self) -> list[str]:
+    def cmd_stop(self, conn: "Connection", cmd: StopCommand) -> list[str]:
         """``T,T,S``: stop now."""
         self.host.sync_clock()
         ev = self.host.core.stop(self.index)
@@ -277,13 +264,13 @@ class Robot:
             self._deliver(ev)
         return [format_ok("S")]
 
-    def cmd_query(self) -> list[str]:
+    def cmd_query(self, conn: "Connection", cmd: QueryCommand) -> list[str]:
         """``T,T,Q``: state, believed pose (robot frame) and experiment time."""
         self.host.sync_clock()
         return [format_status(self.state(), self.host.core.belief(self.index), self.host.core.t)]
 
     def _check_gripper(self) -> None:
-        if self.host.core.state[self.index] == State.MOVING:
+        if self.host.core.moving(self.index):
             raise ProtocolError(ErrorCode.STATE, "the robot is following a path (send T,T,S first)")
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
@@ -295,7 +282,7 @@ class Robot:
         g = self.host.params.gripper
         return blocks * g.seconds_per_block + placements * g.seconds_per_placement
 
-    async def cmd_place(self, cmd: PlaceCommand) -> list[str]:
+    async def cmd_place(self, conn: "Connection", cmd: PlaceCommand) -> list[str]:
         """``T,T,I``: the gripper places the robot (takes ``seconds_per_placement``)."""
         self._check_gripper()
         why = self.host.world.place_conflict(self.index, cmd.pose, self.host.core.backend.pose)
@@ -304,14 +291,14 @@ class Robot:
         self.gripper_busy = True
         try:
             await self.host.sleep(self.gripper_seconds(placements=1))
-            if self.host.core.state[self.index] == State.MOVING:  # a path arrived meanwhile: impossible, but safe
+            if self.host.core.moving(self.index):  # a path arrived meanwhile: impossible, but safe
                 raise ProtocolError(ErrorCode.STATE, "the robot started moving")
             self.host.core.place(self.index, cmd.pose)
         finally:
             self.gripper_busy = False
         return [format_ok("I")]
 
-    async def cmd_build(self, cmd: BuildCommand) -> list[str]:
+    async def cmd_build(self, conn: "Connection", cmd: BuildCommand) -> list[str]:
         """``T,T,B``: the gripper replaces this robot's blocks (time per block removed and placed)."""
         self._check_gripper()
         removed = len(self.host.world.blocks_local(self.index))
@@ -323,7 +310,7 @@ class Robot:
             self.gripper_busy = False
         return [format_ok("B", len(cmd.blocks))]
 
-    def cmd_moving(self, cmd: MovingCommand) -> list[str]:
+    def cmd_moving(self, conn: "Connection", cmd: MovingCommand) -> list[str]:
         """``T,T,M``: replace this robot's moving obstacles (their time starts with its next path)."""
         self._check_gripper()
         self.host.world.set_moving(self.index, list(cmd.obstacles))
@@ -378,3 +365,19 @@ class Robot:
             "origin": list(self.origin),
             "area": list(self.area),
         }
+
+
+#: the method of each command (every one takes the connection and the command; some are coroutines)
+_VERBS: dict[type, Callable[..., "list[str] | Awaitable[list[str]]"]] = {
+    PathCommand: Robot.cmd_path,
+    StopCommand: Robot.cmd_stop,
+    QueryCommand: Robot.cmd_query,
+    PlaceCommand: Robot.cmd_place,
+    BuildCommand: Robot.cmd_build,
+    MovingCommand: Robot.cmd_moving,
+    AuthCommand: Robot.cmd_auth,
+    LeaseCommand: Robot.cmd_lease,
+    ControllerCommand: Robot.cmd_controller,
+    VelocityCommand: Robot.cmd_velocity,
+    LocalisationCommand: Robot.cmd_localisation,
+}

@@ -42,6 +42,8 @@ from .world import World
 
 __all__ = ["SimCore", "SimEvent", "PoseLog", "State"]
 
+_MOVING = int(State.MOVING)  # a plain int: numpy scalars compare with it faster than with the enum member
+
 
 @dataclass(frozen=True)
 class SimEvent:
@@ -75,6 +77,10 @@ class PoseLog:
         self.count += len(robots)
         if self.listener is not None:
             self.listener(t, robots, poses)
+
+    def clear(self) -> None:
+        """Forget the poses recorded since the last drain."""
+        self._chunks, self.count = [], 0
 
     def drain(self) -> dict[int, np.ndarray]:
         """All poses recorded since the last drain, per robot index, in time order."""
@@ -134,7 +140,7 @@ class SimCore:
 
     def busy(self) -> bool:
         """True while stepping changes anything (a path is followed or a robot still moves)."""
-        return bool((self.state == State.MOVING).any()) or self.backend.busy()
+        return bool((self.state == _MOVING).any()) or self.backend.busy()
 
     def skip(self, steps: int) -> None:
         """Advance the clock by ``steps`` without stepping (only valid when not :meth:`busy`)."""
@@ -188,18 +194,22 @@ class SimCore:
             replaced = self.set_path(i, pose[None, :], key)
             self.cid[i] = DIRECT
         p = self.params
-        self.want[i] = (float(np.clip(v, -p.max_speed_m_s, p.max_speed_m_s)),
-                        float(np.clip(w, -p.max_angular_speed_rad_s, p.max_angular_speed_rad_s)))
+        self.want[i] = (min(max(float(v), -p.max_speed_m_s), p.max_speed_m_s),
+                        min(max(float(w), -p.max_angular_speed_rad_s), p.max_angular_speed_rad_s))
         self.timeout[i] = self.k[i] + max(1, int(round(watchdog_s / self.dt)))
         return replaced
 
+    def moving(self, i: int) -> bool:
+        """Whether robot ``i`` follows a path or drives in velocity mode (state MOVING)."""
+        return int(self.state[i]) == _MOVING
+
     def driving(self, i: int) -> bool:
         """Whether robot ``i`` is in velocity mode (:meth:`drive`)."""
-        return bool(self.state[i] == State.MOVING and self.cid[i] == DIRECT)
+        return int(self.state[i]) == _MOVING and int(self.cid[i]) == DIRECT
 
     def stop(self, i: int) -> SimEvent | None:
         """Stop robot ``i``'s path now; returns its ``FAIL,STOPPED`` event if it was moving."""
-        if self.state[i] != State.MOVING:
+        if not self.moving(i):
             return None
         self.state[i] = State.FAILED
         self.cmd[i] = 0.0

@@ -308,6 +308,25 @@ async def test_a_line_must_be_completed_in_time():
         await other.close()
 
 
+async def test_deadlines_are_kept_from_the_right_moment():
+    """The idle deadline counts from the last accepted line, the line deadline from the line's first byte
+    (a line started late in an idle wait still gets its whole line timeout), neither ends early."""
+    loop = asyncio.get_running_loop()
+    async with running_agents(backend="ideal", idle_timeout_s=0.6, line_timeout_s=0.5) as agents:
+        idle = await LineClient.connect(agents.ports[0])
+        t_accepted = loop.time()  # at the latest when the agent accepts the line
+        assert (await idle.ask("T,T,Q")).startswith("ST,")
+        assert await idle.recv(timeout=LIVENESS_S) == format_error(ErrorCode.STATE, "idle timeout")
+        assert 0.6 <= loop.time() - t_accepted < 0.6 + LIVENESS_S
+
+        slow = await LineClient.connect(agents.ports[0])
+        await asyncio.sleep(0.4)  # most of a line timeout into the idle wait
+        await slow.send(b"T,T,", end=b"")
+        t_first = loop.time()
+        assert await slow.recv(timeout=LIVENESS_S) == format_error(ErrorCode.STATE, "line timeout")
+        assert 0.5 <= loop.time() - t_first < 0.5 + LIVENESS_S
+
+
 async def test_connections_are_bounded_per_peer_and_in_all():
     async with running_agents(backend="ideal", max_connections_per_peer=3, max_connections=5) as agents:
         port = agents.ports[0]

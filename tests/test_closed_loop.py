@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 import pytest
-from agent_support import LineClient, running_agents
+from agent_support import OK_I, LineClient, running_agents
 
 from robot_agent.protocol import ProtocolError, VelocityCommand, encode_path, encode_place, parse_command
 
@@ -77,3 +78,24 @@ async def test_velocity_commands_during_a_path_are_refused_and_parsed_strictly()
     for bad in ("T,T,V", "T,T,V,1", "T,T,V,1,2,3", "T,T,V,1,x"):
         with pytest.raises(ProtocolError):
             parse_command(bad)
+
+
+async def test_sixteen_robots_of_one_host_each_close_their_own_loop_at_once():
+    """Many robots in one host (a world each): placed side by side (every gripper works at once, not one
+    robot after the other), each connection gets its own robot's PO lines and steers it to its own goal."""
+    n = 16
+    async with running_agents(robots=n, backend="field", time_scale=5.0, area=(1.8, 1.8)) as agents:
+        clients = [await LineClient.connect(p) for p in agents.ports]
+        t0 = agents.now()
+        placed = await asyncio.gather(*(c.ask(encode_place((0.9, 0.9, 0.0))) for c in clients))
+        assert placed == [OK_I] * n
+        assert agents.now() - t0 < 2 * agents.params.gripper.seconds_per_placement  # side by side
+        goals = [(0.9 + 0.35 * math.cos(k * math.tau / n), 0.9 + 0.35 * math.sin(k * math.tau / n)) for k in range(n)]
+        ends = await asyncio.gather(*(drive_to_goal(c, g) for c, g in zip(clients, goals)))
+        for k, ((lines, (x, y)), goal) in enumerate(zip(ends, goals)):
+            assert math.hypot(x - goal[0], y - goal[1]) < 0.03, k
+            assert sum(line.startswith("PO,") for line in lines) > 10, k
+            q = agents.core.belief(k)
+            assert math.hypot(q[0] - goal[0], q[1] - goal[1]) < 0.06, k
+        for c in clients:
+            await c.close()

@@ -245,6 +245,30 @@ def test_parser_accepts_exactly_the_numbers_the_old_one_did():
     assert compared > 5000 and accepted > 3000
 
 
+def _outcome(text: str, width: int) -> tuple[str, object]:
+    try:
+        return "ok", _parse_tuples(text, width, "point", 1).tolist()
+    except ProtocolError as exc:
+        return exc.code.value, exc.message
+
+
+def test_short_items_parse_field_by_field_as_the_vectorised_pass_does(monkeypatch):
+    """A single short item (T,T,V, T,T,I, a one-point path) is parsed without the vectorised pass: the same
+    values and the same refusal, word for word, on the seeded corpus of valid and mutated items."""
+    import robot_agent.protocol as protocol
+
+    rng = random.Random(20261124)
+    items = []
+    for _ in range(3000):
+        width = rng.choice([2, 3])
+        item = ",".join(_valid_number(rng) for _ in range(width))
+        items += [(item, width), (_mutate(rng, item).replace(";", ","), width)]
+    fast = [_outcome(text, width) for text, width in items]
+    monkeypatch.setattr(protocol, "_SHORT_ITEM", -1)
+    assert [_outcome(text, width) for text, width in items] == fast
+    assert sum(kind == "ok" for kind, _ in fast) > 2000 and sum(kind != "ok" for kind, _ in fast) > 1000
+
+
 @pytest.mark.parametrize("code", [c for c in range(0x20) if c != 0x0A] + [0x7F])
 def test_control_characters_are_refused_naming_character_and_column(code):
     line = b"T,T,P,1" + bytes([code]) + b"0,2,3\n"

@@ -11,6 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from .errors import fail
+from .event_loop import run as run_loop
 from .poses import parse_time_scale
 
 
@@ -105,6 +106,6 @@ def agent(
         logging.getLogger("robot_agent.host").warning("stopped")
 
     try:
-        asyncio.run(run())
+        run_loop(run())
     except KeyboardInterrupt:
         logging.getLogger("robot_agent.host").warning("stopped")

@@ -15,6 +15,7 @@ import typer
 
 from .datadir import make_data_dir
 from .errors import fail
+from .event_loop import run as run_loop
 from .poses import parse_time_scale
 from .sdk_support import TokenOpt, UrlOpt, sdk_client
 
@@ -60,16 +61,6 @@ async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ig
         # the lifespan stops the testbed in order: runs end interrupted, then the robots stop
         server.should_exit = True
         await asyncio.shield(serving)
-
-
-def _run(main) -> None:  # type: ignore[no-untyped-def]
-    """Run the event loop: uvloop when installed (a faster loop for the API and the robots)."""
-    try:
-        import uvloop
-    except ImportError:
-        asyncio.run(main)
-    else:
-        uvloop.run(main)
 
 
 def _settings(data_dir: Path, token: Optional[str], time_scale: float, **extra):  # type: ignore[no-untyped-def]
@@ -203,7 +194,7 @@ def up(
         await _print_uploads(testbed)
         return None
 
-    _run(_serve(settings, testbed, host, port, ready))
+    run_loop(_serve(settings, testbed, host, port, ready))
 
 
 def server(
@@ -231,7 +222,7 @@ def server(
         await _print_uploads(testbed)
         return None
 
-    _run(_serve(settings, testbed, host, port, ready))
+    run_loop(_serve(settings, testbed, host, port, ready))
 
 
 @users_app.command("create")
