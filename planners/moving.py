@@ -34,7 +34,7 @@ __all__ = ["MAX_MOVING_OBSTACLES", "MAX_OBSTACLE_RADIUS_M", "MAX_OBSTACLE_SPEED_
            "MovingObstacle", "obstacle_at", "parse_moving_obstacles", "positions", "track_arrays"]
 
 #: the tracked-robot budget: the overhead camera tracks the robot and at most this many emulated obstacle robots
-MAX_MOVING_OBSTACLES = 8
+MAX_MOVING_OBSTACLES = 16
 #: fastest an obstacle may move (m/s): what an emulated robot the testbed drives can do
 MAX_OBSTACLE_SPEED_M_S = 0.3
 #: largest obstacle radius (m)

@@ -123,7 +123,7 @@ class EnvironmentCreate(Strict):
     plans: list[PlanIn] = Field(default_factory=list, max_length=100)
     description: str = Field(default="", max_length=10_000)
     moving_obstacles: list[dict[str, Any]] = Field(
-        default_factory=list, max_length=8,
+        default_factory=list, max_length=16,
         description="Discs moving in experiment time: radius (m), waypoints or random_walk, speed (m/s), repeat, "
                     "delay_s (s); see docs/planners.md.")
 

@@ -173,7 +173,7 @@ def test_moving_obstacles_round_trip_and_move_exactly_in_time(tmp_path):
          r"moving_obstacles\[0\]\.random_walk\.step_m is missing"),
         (good(moving_obstacles=[{"radius": 0.04, "speed": 0.1}]), "exactly one of waypoints or random_walk"),
         (good(moving_obstacles=[{"radius": 0.04, "waypoints": [[1, 1]]}]), r"moving_obstacles\[0\]\.speed is missing"),
-        (good(moving_obstacles=[crossing()["moving_obstacles"][0]] * 9), "at most 8 entries"),
+        (good(moving_obstacles=[crossing()["moving_obstacles"][0]] * 17), "at most 16 entries"),
     ],
 )
 def test_invalid_moving_obstacles_name_the_bad_field(data, message):

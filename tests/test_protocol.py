@@ -397,7 +397,7 @@ def test_moving_obstacles_line():
         ("T,T,M,40,50,5,1.5,200,1200", "RANGE", "obstacle 1: radius and speed must be > 0, delay >= 0 and repeat 0"),
         ("T,T,M,40,50,2,1.5,200,nan", "SYNTAX", "obstacle 1: 'nan' is not finite number"),
         ("T,T,M,40,50,2,1.5,200,2000", "RANGE", "obstacle 1 point 1 (200, 2000) mm is outside the field"),
-        ("T,T,M," + ";".join(["40,50,0,0,100,100"] * 9), "RANGE", "too many moving obstacles: 9 > 8"),
+        ("T,T,M," + ";".join(["40,50,0,0,100,100"] * 17), "RANGE", "too many moving obstacles: 17 > 16"),
     ):
         with pytest.raises(ProtocolError) as exc:
             parse_command(bad, field_size=(1.8, 1.8))
