@@ -222,7 +222,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     from planners.fleet_metrics import FleetSettings, fleet_metrics
     from planners.geometry import distance_to_obstacles
     from planners.dependencies import fleet_dependencies
-    from planners.prioritized import fleet_waypoints, plan_prioritized, timed_waypoints
+    from planners.prioritized import plan_prioritized, timed_waypoints
     from robot_agent.fleet import simulate_fleet
     from robot_agent.headless import PlacementRefused
     from robot_agent.overrides import apply_overrides
@@ -244,11 +244,10 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
             dense = execution == "dependencies"
             schedule = [timed_waypoints(t, r["goal"][2] if len(r["goal"]) > 2 else None, dense)
                         for r, t in zip(robots, plan.paths)]
-            for r, timed in zip(robots, plan.paths):
-                g = r["goal"]
-                pts, dep = fleet_waypoints(timed, g[2] if len(g) > 2 else None, dense)
+            for pts, arrive, leave in schedule:
                 paths.append(np.round(pts, 6).tolist())
-                depart.append([None if not math.isfinite(v) else float(v) for v in dep])
+                depart.append([float(b) if b > a + 1e-9 and k < len(pts) - 1 else None
+                               for k, (a, b) in enumerate(zip(arrive, leave))])
             if dense:
                 depends = fleet_dependencies([w for w, _, _ in schedule], [a for _, a, _ in schedule],
                                              [lv for _, _, lv in schedule], plan.conflict_m)
