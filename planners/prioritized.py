@@ -29,7 +29,7 @@ from .environment import Environment, load_environment
 from .errors import NoPathFound, PlanningError
 from .st_astar import SpaceTimeAStar, TimedPath, movers_table, plan_timed
 
-__all__ = ["MultiPlan", "fleet_waypoints", "min_separation", "plan_prioritized"]
+__all__ = ["MultiPlan", "fleet_waypoints", "min_separation", "plan_prioritized", "timed_waypoints"]
 
 #: the space-time defaults for fleets: waits allowed, a smaller time margin (robots that can be timed)
 FLEET_DEFAULTS = {"wait": True, "time_margin_s": 0.5, "clearance": 0.0}
@@ -44,6 +44,9 @@ class MultiPlan:
     makespan_s: float
     planning_time_s: float
     info: list[dict[str, Any]] = field(default_factory=list)
+    #: the centre distance (m) under which the planner kept two robots' lattice points apart in time: two
+    #: radii with the planning margin, half a lattice diagonal and the clearance
+    conflict_m: float = 0.0
 
 
 def min_separation(paths: Sequence[TimedPath], dt: float = 0.05) -> float:
@@ -107,16 +110,19 @@ def plan_prioritized(env: Environment | str, starts: Sequence[Sequence[float]], 
         infos.append(info)
         if r + 1 < len(s_xy):
             table |= movers_table(space, run, horizon, others=[timed])
-    return MultiPlan(paths, max(float(p.times[-1]) for p in paths), time.perf_counter() - t_begin, infos)
+    conflict = 2 * space.radius + float(run["cell"]) * math.sqrt(0.5) + float(run["clearance"])
+    return MultiPlan(paths, max(float(p.times[-1]) for p in paths), time.perf_counter() - t_begin, infos, conflict)
 
 
-def fleet_waypoints(timed: TimedPath, goal_heading: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """A timed path as a follower's path and its holds: waypoints ``(K, 3)`` (m, m, rad; each facing the next,
-    the last ``goal_heading`` or the last segment's direction) at the plan's corners and waits, and
-    departure times ``(K,)`` (s): where the plan waits, the time it leaves the point, NaN elsewhere.
+def timed_waypoints(timed: TimedPath, goal_heading: float | None = None,
+                    dense: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A timed path as waypoints ``(K, 3)`` (m, m, rad; each facing the next, the last ``goal_heading`` or the
+    last segment's direction) with the plan's arrival and departure times ``(K,)`` (s) at each; the last
+    point's departure is ``inf`` (the robot stands at its goal for good).
 
-    Straight runs of lattice moves become one segment; a wait (a repeated point) becomes one waypoint the
-    robot holds at (:func:`robot_agent.fleet.simulate_fleet`)."""
+    The waypoints are the plan's corners and waits (straight runs of lattice moves merged) or, ``dense``,
+    every distinct lattice point (one waypoint per move: what execution by dependencies needs,
+    :func:`planners.dependencies.fleet_dependencies`)."""
     pts, t = np.asarray(timed.points, dtype=float), np.asarray(timed.times, dtype=float)
     same = np.r_[False, (np.diff(pts, axis=0) == 0).all(axis=1)]  # point k repeats point k - 1
     keep = ~same
@@ -127,11 +133,26 @@ def fleet_waypoints(timed: TimedPath, goal_heading: float | None = None) -> tupl
     seg = np.diff(xy, axis=0)
     turn = np.r_[True, np.abs(seg[1:, 0] * seg[:-1, 1] - seg[1:, 1] * seg[:-1, 0]) > 1e-12, True] if len(xy) > 1 \
         else np.array([True])
-    corner = turn | waits
+    corner = turn | waits | dense
     corner[0] = corner[-1] = True
-    xy, depart = xy[corner], np.where(waits, leave, np.nan)[corner]
+    xy, arrive, leave = xy[corner], arrive[corner], leave[corner]
+    leave[-1] = np.inf
     d = np.diff(xy, axis=0)
     head = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
     last = goal_heading if goal_heading is not None else (float(head[-1]) if len(head) else 0.0)
+    return np.column_stack([xy, np.r_[head, last]]), arrive, leave
+
+
+def fleet_waypoints(timed: TimedPath, goal_heading: float | None = None,
+                    dense: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """A timed path as a follower's path and its holds: waypoints ``(K, 3)`` (m, m, rad; each facing the next,
+    the last ``goal_heading`` or the last segment's direction) at the plan's corners and waits (``dense``: at
+    every lattice point, :func:`timed_waypoints`), and departure times ``(K,)`` (s): where the plan waits,
+    the time it leaves the point, NaN elsewhere.
+
+    Straight runs of lattice moves become one segment; a wait (a repeated point) becomes one waypoint the
+    robot holds at (:func:`robot_agent.fleet.simulate_fleet`)."""
+    wps, arrive, leave = timed_waypoints(timed, goal_heading, dense)
+    depart = np.where(leave > arrive + 1e-9, leave, np.nan)
     depart[-1] = np.nan
-    return np.column_stack([xy, np.r_[head, last]]), depart
+    return wps, depart

@@ -199,25 +199,30 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
               params: dict[str, Any], seed: int, max_s: float, robot_radius: float, backend: str = "ideal",
               controller: str = "schema", controller_params: Optional[dict[str, float]] = None,
               platform: str = "BeBot", overrides: Optional[dict[str, float]] = None,
-              plan_seed: Optional[int] = None) -> dict[str, Any]:
+              plan_seed: Optional[int] = None, execution: str = "dependencies") -> dict[str, Any]:
     """A multi-robot run as one task (issue 17): plan every robot, run them all in one world on one clock
     (:func:`robot_agent.fleet.simulate_fleet`), measure them (:func:`planners.fleet_metrics.fleet_metrics`).
 
     ``robots``: per robot ``{"start", "goal", "path"?}`` (m, rad).  ``planner`` ``prioritized`` plans them
-    together (timed paths: robots hold where the plan waits); any other planner plans each robot alone,
+    together (timed paths) and ``execution`` says how the robots keep to it: ``dependencies`` (a robot
+    leaves a waypoint once the robots planned to pass there before it have passed, and not before the
+    plan's wait there ends: :mod:`planners.dependencies`) or ``timed`` (by the clock alone: robots hold
+    where the plan waits, late ones drive on); any other planner plans each robot alone,
     uncoordinated (the baseline); a robot's explicit ``path`` is driven as given.  Planning keeps
     ``robot_radius`` (m) and samples with ``plan_seed`` (default ``seed``); ``seed`` gives the robots' noise.
     The robots are ``backend`` robots (``ideal``, or ``field``: the emulated field robot of ``platform``'s
     profile with the field parameters ``overrides``) following with ``controller`` for at most ``max_s``
     experiment seconds.  Returns ``{"robots": [per robot {"path", "depart", "poses" (N, 4) t s, x m, y m,
-    theta rad, "lines", "t_start", "t_end", "outcome", "obstacle", "holds"}], "planning_time_s", "metrics"}``,
+    theta rad, "lines", "t_start", "t_end", "outcome", "obstacle", "holds" [[waypoint, s held], ...],
+    "waited_for" [[robot, ...] per hold]}], "planning_time_s", "metrics"}``,
     or ``{"planning_error": why}`` / ``{"placement_error": why}``."""
     import time
 
     from planners import PlanningError, parse_environment, plan_path
     from planners.fleet_metrics import FleetSettings, fleet_metrics
     from planners.geometry import distance_to_obstacles
-    from planners.prioritized import fleet_waypoints, plan_prioritized
+    from planners.dependencies import fleet_dependencies
+    from planners.prioritized import plan_prioritized, timed_waypoints
     from robot_agent.fleet import simulate_fleet
     from robot_agent.headless import PlacementRefused
     from robot_agent.overrides import apply_overrides
@@ -229,15 +234,23 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     t0 = time.perf_counter()
     paths: list[list[list[float]]] = []
     depart: list[Optional[list[float]]] = []
+    depends = None
+    if execution not in ("dependencies", "timed"):
+        raise ValueError(f"execution is 'dependencies' or 'timed', got {execution!r}")
     try:
         if planner == "prioritized":
             plan = plan_prioritized(env, [r["start"] for r in robots], [r["goal"] for r in robots],
                                     robot_radius=robot_radius, params=params)
-            for r, timed in zip(robots, plan.paths):
-                g = r["goal"]
-                pts, dep = fleet_waypoints(timed, g[2] if len(g) > 2 else None)
+            dense = execution == "dependencies"
+            schedule = [timed_waypoints(t, r["goal"][2] if len(r["goal"]) > 2 else None, dense)
+                        for r, t in zip(robots, plan.paths)]
+            for pts, arrive, leave in schedule:
                 paths.append(np.round(pts, 6).tolist())
-                depart.append([None if not math.isfinite(v) else float(v) for v in dep])
+                depart.append([float(b) if b > a + 1e-9 and k < len(pts) - 1 else None
+                               for k, (a, b) in enumerate(zip(arrive, leave))])
+            if dense:
+                depends = fleet_dependencies([w for w, _, _ in schedule], [a for _, a, _ in schedule],
+                                             [lv for _, _, lv in schedule], plan.conflict_m)
         else:
             for i, r in enumerate(robots):
                 if r.get("path") is not None:
@@ -262,7 +275,8 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     try:
         fleet = simulate_fleet(paths, starts, seed=seed, depart=dep_arrays, blocks=block_tuples(env_data),
                                moving=moving_tuples(env_data), backend=backend, profile=profile, area=env.size,
-                               max_s=max_s, controller=controller, controller_params=controller_params)
+                               max_s=max_s, controller=controller, controller_params=controller_params,
+                               depends=depends)
     except PlacementRefused as exc:
         return {"placement_error": str(exc)}
     settings = FleetSettings(robot_radius=robot_params().collision_radius_m)
@@ -277,7 +291,8 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
         lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
         out.append({"path": paths[i], "depart": depart[i], "poses": run.poses, "lines": lines,
                     "t_start": run.t_start, "t_end": run.t_end, "outcome": run.outcome, "obstacle": run.obstacle,
-                    "holds": [[int(k), float(s)] for k, s in fleet.holds[i]]})
+                    "holds": [[int(k), float(s)] for k, s in fleet.holds[i]],
+                    "waited_for": [[int(h) for h in w] for w in fleet.waited_for[i]]})
     return {"robots": out, "planning_time_s": planning_time_s, "metrics": _clean(metrics)}
 
 

@@ -167,8 +167,8 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     for k, r in enumerate(robots):
         for direction, line, t in r["lines"]:
             ctx.on_line(direction, f"robot {k}: {line}", t, False)
-        for w, held in r["holds"]:
-            ctx.on_line("s", f"robot {k}: held at waypoint {w} for {held:.2f} s, as planned", None, False)
+        for (w, held), why in zip(r["holds"], r.get("waited_for") or [[] for _ in r["holds"]]):
+            ctx.on_line("s", f"robot {k}: held at waypoint {w} for {held:.2f} s, {_held_for(why)}", None, False)
     ctx.end_poses = fleet_poses(robots)  # stored with the run's end, in its one transaction
     for k, r in enumerate(robots):  # shown live now
         svc.tracker.show(ctx.robot.robot_id, ctx.run_id, job.owner_id, np.asarray(r["poses"]).reshape(-1, 4), member=k)
@@ -183,6 +183,13 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
         if len(last):
             ctx.end_fields["stopped_at"] = [round(float(last[-1, 1]), 4), round(float(last[-1, 2]), 4)]
         raise failure
+
+
+def _held_for(robots: list[int]) -> str:
+    """Why a robot was held: for the robots it waited for (to pass first, as planned), else the plan's time."""
+    if not robots:
+        return "as planned"
+    return "for robot" + ("s " if len(robots) > 1 else " ") + ", ".join(str(h) for h in robots) + " to pass first"
 
 
 async def _keep_plan(svc: RunServices, job: RunJob, robots: list[dict[str, Any]],
