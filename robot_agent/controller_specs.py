@@ -109,7 +109,7 @@ BUILTINS: dict[str, ControllerSpec] = {s.name: s for s in (
                        Param("max_lookahead_m", "m", 0.1, 0.02, 2.0, "... and at most this"),
                        Param("min_radius_m", "m", 0.25, 0.0, 5.0, "curves of a smaller radius scale the speed by "
                              "radius / min_radius_m (0: no curvature regulation)"),
-                       Param("proximity_m", "m", 0.04, 0.0, 1.0, "closer to a block or wall than this (robot edge) "
+                       Param("proximity_m", "m", 0.04, 0.0, 1.0, "closer to a block, wall, moving obstacle or robot than this (robot edge) "
                              "scales the speed by distance / proximity_m (0: no proximity regulation)"),
                        Param("approach_m", "m", 0.15, 0.0, 1.0, "within this of the goal the speed scales by "
                              "distance / approach_m"),

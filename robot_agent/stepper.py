@@ -25,12 +25,13 @@ Array groups (each passed as a tuple, modified in place):
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum
 
 import numpy as np
 
 from .compiled import kernel
-from .contact import block_distance, collide, wall_distance
+from .contact import block_distance, collide, obstacle_position, wall_distance
 from .controllers import RPP
 from .follower import DONE, STALLED, TIMED_OUT, Gains, control
 from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
@@ -52,14 +53,23 @@ class State(IntEnum):
 
 
 @kernel
-def clearance(i: int, x: float, y: float, world: tuple, radius: float) -> float:
-    """Distance (m) from the edge of robot ``i`` believed at ``(x, y)`` (its frame) to the nearest wall or
-    block of its world (``radius`` the robot's collision radius); moving obstacles do not count."""
-    origin, world_of, sizes, centre, half, cs, nblocks = world[0], world[1], world[2], world[3], world[4], world[5], \
-        world[6]
+def clearance(i: int, x: float, y: float, t: float, believed: np.ndarray, world: tuple, radius: float) -> float:
+    """Distance (m) from the edge of robot ``i`` believed at ``(x, y)`` (its frame) to the nearest wall, block,
+    moving obstacle (at its time ``t``, s since the path began) or other robot of its world (where those
+    robots believe they are, ``believed`` ``(N, 3)`` in their frames); ``radius`` is the robots' collision
+    radius (m).  What regulated pure pursuit slows down by, as nav2's reads its costmap."""
+    origin, world_of, sizes, centre, half, cs, nblocks, shared = world[0], world[1], world[2], world[3], \
+        world[4], world[5], world[6], world[7]
+    mo_first, mo_par, mo_pts, mo_cum, mo_n = world[9], world[10], world[11], world[12], world[13]
     wx, wy = x + origin[i, 0], y + origin[i, 1]
     w = world_of[i]
     d = min(wall_distance(wx, wy, sizes[w, 0], sizes[w, 1]), block_distance(wx, wy, w, centre, half, cs, nblocks))
+    for m in range(mo_first[i], mo_first[i + 1]):
+        ox, oy = obstacle_position(m, t, mo_par, mo_pts, mo_cum, mo_n)
+        d = min(d, math.hypot(wx - ox, wy - oy) - mo_par[m, 0])
+    for j in shared:
+        if j != i and world_of[j] == w:
+            d = min(d, math.hypot(wx - believed[j, 0] - origin[j, 0], wy - believed[j, 1] - origin[j, 1]) - radius)
     return d - radius
 
 
@@ -73,7 +83,8 @@ def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains,
     for i in range(len(belief)):
         old[i] = wp[i]
         if moving[i]:
-            near = clearance(i, belief[i, 0], belief[i, 1], world, radius) if cid[i] == RPP else np.inf
+            near = clearance(i, belief[i, 0], belief[i, 1], k[i] * g.dt, belief, world, radius) if cid[i] == RPP \
+                else np.inf
             flags[i] = control(i, belief[i, 0], belief[i, 1], belief[i, 2], points, offset, count, wp, aligning,
                                cmd, anchor, anchor_k, k, timeout, g, cid, cpar, cmem, want, near)
         else:

@@ -112,6 +112,33 @@ def test_regulated_pure_pursuit_slows_in_curves_and_near_obstacles():
     assert slow.outcome == fast.outcome == "DONE" and slow.t_end > 1.5 * fast.t_end
 
 
+def test_regulated_pure_pursuit_slows_near_moving_obstacles_and_other_robots():
+    """The proximity term sees what moves too, as nav2's costmap does: a disc parked 2 cm (edges) beside the
+    path, and a robot standing beside it in the same world, slow the robot down where they are."""
+    path = densify([(0.3, 0.9), (1.5, 0.9)], step=0.1, final_angle=0.0)
+    parked = [([0.04, 0.01, 0.0, 0.0], [[0.9, 0.9 + 0.04 + 0.04 + 0.02]])]  # radius, speed, once, delay; 2 cm gap
+
+    def slowest_beside(run) -> float:
+        p = run.poses
+        v = np.hypot(*np.diff(p[:, 1:3], axis=0).T) / np.diff(p[:, 0])
+        return float(v[np.abs(p[1:, 1] - 0.9) < 0.02].min())
+
+    near = simulate_run(path, (0.3, 0.9, 0.0), seed=1, controller="regulated_pure_pursuit", moving=parked)
+    blind = simulate_run(path, (0.3, 0.9, 0.0), seed=1, controller="regulated_pure_pursuit", moving=parked,
+                         controller_params={"proximity_m": 0.0})
+    assert near.outcome == blind.outcome == "DONE"
+    assert slowest_beside(near) < 0.7 * slowest_beside(blind) and near.t_end > blind.t_end
+
+    from robot_agent.fleet import simulate_fleet
+
+    bystander = np.array([[0.9, 1.0, 0.0], [0.9, 1.0, 0.0]])  # stands 0.1 m off the path (2 cm between edges)
+    runs = [simulate_fleet([path, bystander], [(0.3, 0.9, 0.0), (0.9, 1.0, 0.0)], seed=1, area=(1.8, 1.8),
+                           controller="regulated_pure_pursuit", controller_params=params).runs[0]
+            for params in ({}, {"proximity_m": 0.0})]
+    assert runs[0].outcome == runs[1].outcome == "DONE"
+    assert slowest_beside(runs[0]) < 0.7 * slowest_beside(runs[1])
+
+
 def test_kanayama_converges_to_a_path_it_starts_beside():
     run = simulate_run(L_PATH, (0.3, 0.32, 0.0), seed=1, controller="kanayama")
     xte = _cross_track(run.poses[:, 1:], L_PATH)
