@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from servers import TOKEN, TWB, Process, wait_for
+from servers import TOKEN, TWB, serve, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples" / "controllers"
@@ -54,14 +54,8 @@ def b64(data: str | bytes) -> str:
 
 @pytest.fixture(scope="module")
 def testbed(tmp_path_factory):
-    with pytest.MonkeyPatch.context() as mp:
-        for k, v in LIMITS.items():
-            mp.setenv(k, v)
-        p = Process(["up", "--time-scale", "2", "--sim-robots", "8", "--enable-uploads"],
-                    tmp_path_factory.mktemp("controllers"))
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+    yield from serve(["up", "--time-scale", "2", "--sim-robots", "8", "--enable-uploads"],
+                     tmp_path_factory.mktemp("controllers"), env=LIMITS)
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ import httpx
 import numpy as np
 import pytest
 
-from servers import TOKEN, Process, wait_for
+from servers import TOKEN, serve, wait_for
 
 CHROMIUM = Path(os.environ.get("TWB_CHROMIUM") or "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"]
@@ -56,10 +56,7 @@ def _missing_browser() -> str | None:
 
 @pytest.fixture(scope="module")
 def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("dash"))
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("dash"))
 
 
 @pytest.fixture(scope="module")

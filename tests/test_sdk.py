@@ -27,7 +27,7 @@ from client_sdk import (
     send_path,
 )
 from sdk_helpers import agent_process
-from servers import Process
+from servers import serve
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 1, "seed": 3}
@@ -35,10 +35,7 @@ JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.570
 
 @pytest.fixture(scope="module")
 def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("sdk"))
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("sdk"))
 
 
 @pytest.fixture(scope="module")

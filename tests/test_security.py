@@ -14,7 +14,7 @@ import pytest
 
 from server.access import event_for
 from server.core.security import Principal
-from servers import Process, wait_for
+from servers import Process, serve, wait_for
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim"], "repetitions": 1, "seed": 3}
@@ -22,10 +22,7 @@ JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.570
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    p = Process(["server"], tmp_path_factory.mktemp("secure"))
-    yield p
-    assert p.stop() == 0
-    assert "Traceback" not in p.output(), p.output()
+    yield from serve(["server"], tmp_path_factory.mktemp("secure"))
 
 
 def agent_token(server, user: str) -> str:

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from servers import EventListener, Process, wait_for
+from servers import EventListener, Process, serve, wait_for
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 1}
@@ -14,10 +14,7 @@ JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.570
 
 @pytest.fixture(scope="module")
 def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("up"))
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("up"))
 
 
 @pytest.fixture(scope="module")

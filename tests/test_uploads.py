@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from servers import Process, wait_for
+from servers import Process, serve, wait_for
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "uploads.md"
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,14 +48,8 @@ def sandbox_processes() -> list[str]:
 
 @pytest.fixture(scope="module")
 def testbed(tmp_path_factory):
-    with pytest.MonkeyPatch.context() as mp:
-        for k, v in LIMITS.items():
-            mp.setenv(k, v)
-        p = Process(["up", "--time-scale", "max", "--sim-robots", "16", "--enable-uploads"],
-                    tmp_path_factory.mktemp("uploads"))
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+    yield from serve(["up", "--time-scale", "max", "--sim-robots", "16", "--enable-uploads"],
+                     tmp_path_factory.mktemp("uploads"), env=LIMITS)
 
 
 @pytest.fixture(scope="module")
