@@ -31,7 +31,7 @@ import numpy as np
 
 from .backends import make_backend
 from .controller_specs import select
-from .frames import FIELD_SIZE
+from .frames import FIELD_SIZE, MAX_ROBOTS
 from .headless import HeadlessRun, PlacementRefused
 from .noise import path_key
 from .params import robot_params
@@ -44,7 +44,7 @@ from .world import World
 __all__ = ["FleetRun", "MAX_FLEET", "simulate_fleet"]
 
 #: the most robots one fleet run takes: what the field's tracker follows
-MAX_FLEET = 64
+MAX_FLEET = MAX_ROBOTS
 _CHUNK = 4096  # control steps per compiled call when no robot waits for a leg
 
 

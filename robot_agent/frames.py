@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FIELD_SIZE", "SUBFIELD_ORIGINS", "SUBFIELD_SIZE", "field_layout"]
+__all__ = ["FIELD_SIZE", "MAX_ROBOTS", "MAX_ROBOTS_SUBFIELD", "SUBFIELD_ORIGINS", "SUBFIELD_SIZE", "field_layout"]
 
 FIELD_SIZE = (3.6, 3.6)
 SUBFIELD_SIZE = (1.8, 1.8)
+#: robots one multi-robot run may put on the whole field (what the overhead tracker follows), and on one sub-field
+MAX_ROBOTS = 64
+MAX_ROBOTS_SUBFIELD = 16
 #: origins of sub-fields 1..4: lower-left, lower-right, upper-left, upper-right
 SUBFIELD_ORIGINS = ((0.0, 0.0), (1.8, 0.0), (0.0, 1.8), (1.8, 1.8))
 

@@ -14,6 +14,8 @@ from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
 
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from robot_agent.frames import MAX_ROBOTS  # robots a multi-robot job may have (issue 17)
+
 from .status import RunStatus
 
 __all__ = [
@@ -157,9 +159,6 @@ class Jitter(Strict):
     theta_rad: float = Field(default=0.0, ge=0, le=0.5)
 
 
-#: robots a multi-robot job may have (issue 17): 16 on a sub-field, 64 (what the tracker follows) on the whole field
-MAX_ROBOTS = 64
-MAX_ROBOTS_SUB = 16
 #: the planner that plans a multi-robot job's robots together (timed paths, robots hold where it waits)
 FLEET_PLANNER = "prioritized"
 

@@ -19,10 +19,10 @@ from planners import Environment, PlanningError, check_query, get_planner, parse
 from planners.moving import obstacle_at
 from robot_agent.controller_specs import ControllerError
 from robot_agent.controller_specs import select as select_controller
-from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
+from robot_agent.frames import FIELD_SIZE, MAX_ROBOTS_SUBFIELD, SUBFIELD_SIZE
 
 from .errors import PreflightError
-from .schemas import FLEET_PLANNER, MAX_ROBOTS, MAX_ROBOTS_SUB, ExperimentCreate
+from .schemas import FLEET_PLANNER, MAX_ROBOTS, ExperimentCreate
 
 __all__ = ["FIELD_SIZE", "MAX_ROBOTS", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight",
            "preflight_fleet"]
@@ -119,7 +119,7 @@ def _fleet_robots(body: ExperimentCreate, env: Environment, robot_radius: float,
     assert body.robots is not None
     robots = [r.model_dump(exclude_none=True) for r in body.robots]
     margin = planning_margin if body.planner is not None else 0.0
-    preflight_fleet(env, robots, robot_radius, margin, most=MAX_ROBOTS if body.field == "full" else MAX_ROBOTS_SUB)
+    preflight_fleet(env, robots, robot_radius, margin, most=MAX_ROBOTS if body.field == "full" else MAX_ROBOTS_SUBFIELD)
     for i, r in enumerate(robots):
         explicit = r.get("path") is not None
         try:
@@ -139,9 +139,9 @@ def _fleet_robots(body: ExperimentCreate, env: Environment, robot_radius: float,
 
 
 def preflight_fleet(env: Environment, robots: list[dict[str, Any]], robot_radius: float,
-                    planning_margin: float = 0.0, most: int = MAX_ROBOTS_SUB) -> None:
+                    planning_margin: float = 0.0, most: int = MAX_ROBOTS_SUBFIELD) -> None:
     """Check a multi-robot job's ``robots`` (``{"start", "goal"}``, m, rad) in ``env``: 2 to ``most`` robots
-    (:data:`MAX_ROBOTS_SUB` on a sub-field, :data:`MAX_ROBOTS` on the whole field), every start and goal free for ``robot_radius + planning_margin`` (m) and clear of the moving
+    (:data:`MAX_ROBOTS_SUBFIELD` on a sub-field, :data:`MAX_ROBOTS` on the whole field), every start and goal free for ``robot_radius + planning_margin`` (m) and clear of the moving
     obstacles at time 0 (starts), no two starts or goals closer than twice that.  Raises
     :class:`PreflightError` naming the field (``robots[i].start`` ...)."""
     if not 2 <= len(robots) <= most:

@@ -189,6 +189,13 @@ def test_default_radius_matches_the_bebot_profile():
     assert load_profile("bebot")["radius_m"] == DEFAULT_ROBOT_RADIUS
 
 
+def test_an_environment_takes_as_many_moving_obstacles_as_a_robot_does():
+    from planners.moving import MAX_MOVING_OBSTACLES
+    from robot_agent.protocol import MAX_MOVING
+
+    assert MAX_MOVING_OBSTACLES == MAX_MOVING  # planners import nothing from robot_agent: the value is repeated
+
+
 @pytest.mark.parametrize("env_name", ["room", "blocks"])
 def test_random_queries_always_give_valid_paths(env_name):
     """Many seeded random start/goal pairs: every planner succeeds or reports a clean error."""

@@ -18,11 +18,14 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
+from robot_agent.frames import MAX_ROBOTS
+from robot_agent.frames import MAX_ROBOTS_SUBFIELD as MAX_ROBOTS_SUB
+
 __all__ = ["MAX_ROBOTS", "MAX_ROBOTS_SUB", "MIN_ROBOTS", "SEPARATION_M", "Circle", "circle_robots", "finite", "is_pose", "parse_circle",
            "parse_robots"]
 
-#: robots of a multi-robot job (the server's bounds): at most 16 on a sub-field, 64 on the whole field
-MIN_ROBOTS, MAX_ROBOTS, MAX_ROBOTS_SUB = 2, 64, 16
+#: robots of a multi-robot job: at least 2; at most MAX_ROBOTS_SUB (16) on a sub-field, MAX_ROBOTS (64) in all
+MIN_ROBOTS = 2
 #: the closest two robots' starts (or goals) may stand, centre to centre (m): twice the robot radius with the
 #: testbed's planning margin (the server's pre-flight rule; docs/server.md, "Multi-robot jobs")
 #: (planners.api's DEFAULT_ROBOT_RADIUS and DEFAULT_PLANNING_MARGIN, written out: importing planners takes a second)

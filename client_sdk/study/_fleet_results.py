@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, NamedTuple, Optional
 
 from ._data import StudyData
-from ._outcomes import NOT_COUNTED, OutcomeSummary, distinct_runs, outcome_table
+from ._outcomes import OutcomeSummary, distinct_runs, outcome_table
 
 __all__ = ["FLEET_COMPARED", "FLEET_KINDS", "FLEET_METRICS", "FleetGroup", "FleetMetric", "FleetOutcomes",
            "fleet_groups", "fleet_outcome", "fleet_outcomes", "fleet_row", "measured"]
