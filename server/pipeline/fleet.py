@@ -31,6 +31,7 @@ from ..status import SubfieldState
 from ..store.runs import RunJob
 from . import compute
 from .context import RunContext, RunServices
+from .steps import timeout_for_length_s
 
 __all__ = ["fleet_failure", "fleet_poses", "fleet_timeout_s", "run_fleet"]
 
@@ -54,8 +55,7 @@ def fleet_timeout_s(svc: RunServices, robots: list[dict[str, Any]]) -> float:
         pts = r.get("path") or [r["start"], r["goal"]]
         straight = sum(math.dist(a[:2], b[:2]) for a, b in zip(pts[:-1], pts[1:]))
         length += straight if r.get("path") else 1.5 * straight
-    s = svc.settings
-    return max(s.run_timeout_min_s, s.run_timeout_factor * compute.expected_duration_s(length, 0))
+    return timeout_for_length_s(svc, length)
 
 
 def fleet_poses(robots: list[dict[str, Any]]) -> np.ndarray:

@@ -17,7 +17,8 @@ from . import compute
 from .context import RunContext, RunServices
 from .paths import Plan
 
-__all__ = ["PARK", "analyze", "build", "collect_poses", "connect", "drive", "fail_fields", "failure_of", "place", "run_timeout_s", "start_pose"]
+__all__ = ["PARK", "analyze", "build", "collect_poses", "connect", "drive", "fail_fields", "failure_of", "place", "run_timeout_s", "start_pose",
+           "timeout_for_length_s"]
 
 #: park positions (robot frame) of sub-field robots 2-4 during full-field runs: their outer corners
 PARK = {2: (1.7, 0.1, 0.0), 3: (0.1, 1.7, 0.0), 4: (1.7, 1.7, 0.0)}
@@ -54,9 +55,14 @@ def fail_fields(fields: tuple[str, ...]) -> tuple[str, Optional[int]]:
 
 def run_timeout_s(svc: RunServices, path: list[list[float]]) -> float:
     """Experiment seconds a run along ``path`` may take before it is stopped (``failed``, timeout)."""
-    length = sum(math.dist(a[:2], b[:2]) for a, b in zip(path[:-1], path[1:]))
+    return timeout_for_length_s(svc, sum(math.dist(a[:2], b[:2]) for a, b in zip(path[:-1], path[1:])))
+
+
+def timeout_for_length_s(svc: RunServices, length_m: float) -> float:
+    """Experiment seconds a run driving ``length_m`` (m) may take before it is stopped: the testbed's factor
+    times the expected duration, at least its minimum."""
     settings = svc.settings
-    return max(settings.run_timeout_min_s, settings.run_timeout_factor * compute.expected_duration_s(length, 0))
+    return max(settings.run_timeout_min_s, settings.run_timeout_factor * compute.expected_duration_s(length_m, 0))
 
 
 def start_pose(job: RunJob) -> list[float]:
