@@ -20,8 +20,10 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(VENV)/bin/twb up
 
+# Two workers (CI has two cores); --dist loadfile keeps a test file on one worker, so a module's
+# testbed fixture starts once.  One file alone: $(PY) -m pytest tests/test_x.py
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 bench: $(STAMP)
 	$(PY) bench/planners.py && $(PY) bench/metrics.py && $(PY) bench/sim.py && $(PY) bench/controllers.py && $(PY) bench/protocol.py && $(PY) bench/scheduler.py && $(PY) bench/server.py && $(PY) bench/study.py && $(PY) bench/closed_loop.py && $(PY) bench/fleet_live.py && $(PY) bench/scale.py --runs 1000
