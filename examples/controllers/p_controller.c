@@ -79,7 +79,8 @@ int main(void) {
     while (fgets(line, sizeof line, in)) {
         if (!strncmp(line, "EV,FAIL", 7) || !strncmp(line, "ERR", 3)) {
             printf("robot: %s", line);
-            return strncmp(line, "EV,FAIL,STOPPED", 15) == 0 ? 0 : 1;
+            /* the run is over: stopped at the goal, or a T,T,V sent after its end (ERR,STATE) */
+            return strncmp(line, "EV,FAIL,STOPPED", 15) == 0 || strncmp(line, "ERR,STATE", 9) == 0 ? 0 : 1;
         }
         double xm, ym, adeg, t;
         if (sscanf(line, "PO,%lf,%lf,%lf,%lf", &xm, &ym, &adeg, &t) != 4) continue;

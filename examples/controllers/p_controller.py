@@ -25,8 +25,8 @@ k = 1  # the waypoint we head for
 for line in robot:
     line = line.strip()
     if line.startswith(("EV,FAIL", "ERR")):
-        print("robot:", line)
-        sys.exit(0 if line.startswith("EV,FAIL,STOPPED") else 1)
+        print("robot:", line)  # the run is over (stopped at the goal, or a T,T,V after its end: ERR,STATE)
+        sys.exit(0 if line.startswith(("EV,FAIL,STOPPED", "ERR,STATE")) else 1)
     if not line.startswith("PO,"):
         continue
     _, xs, ys, a, _t = line.split(",")

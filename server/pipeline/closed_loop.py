@@ -12,7 +12,10 @@ robot's 0.5 s watchdog holds.  The run ends when:
   tolerance: the server stops it) — ``completed`` within the goal tolerance,
   else ``failed`` (program);
 - the program exits, crashes or hits a sandbox limit — the robot is stopped;
-  ``completed`` only after a clean exit with the robot within the tolerance;
+  ``completed`` only after a clean exit with the robot within the tolerance
+  (how a program exits after the run has ended, e.g. on the
+  ``ERR,STATE,the run has ended`` of a ``T,T,V`` sent too late, does not
+  change the run's outcome);
 - the robot ends velocity mode itself: ``EV,FAIL,WATCHDOG`` (no ``T,T,V`` for
   0.5 s of experiment time), ``EV,FAIL,COLLISION`` — ``failed``.
 """
@@ -160,7 +163,8 @@ async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job:
     events = asyncio.create_task(relay.follow_events(), name=f"twb-controller-events-{ctx.run_id}")
     try:
         await asyncio.wait({program, relay.ended}, return_when=asyncio.FIRST_COMPLETED)
-        if not relay.ended.done() and relay.armed:  # the program ended first: stop the robot
+        program_first = not relay.ended.done()
+        if program_first and relay.armed:  # the program ended first: stop the robot
             await link.request("T,T,S", ctx.wall(0))
             await asyncio.wait({relay.ended}, timeout=ctx.wall(5))
         relay.close()
@@ -176,7 +180,7 @@ async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job:
     t_end = relay.t_end if relay.t_end is not None else link.now()
     await rec.update(ctx.run_id, t_start=relay.t_start, t_end=t_end)
     await collect_poses(svc, robot_id, t_end or 0.0)
-    _verdict(relay, outcome.reason)
+    _verdict(relay, outcome.reason if program_first else None)
 
 
 def program_metrics(steps: int, responses_s: list[float], info: dict[str, Any]) -> dict[str, Any]:
@@ -198,7 +202,8 @@ def program_metrics(steps: int, responses_s: list[float], info: dict[str, Any]) 
 
 
 def _verdict(relay: ControllerRelay, program_reason: Optional[str]) -> None:
-    """Raise why the run failed, if it did: the robot's ending first, then the program's, then where it stopped."""
+    """Raise why the run failed, if it did: the robot's ending first, then the program's (``program_reason``:
+    None when the run had ended before the program), then where it stopped."""
     fields = relay.ended.result() if relay.ended.done() else ()
     reason = fields[1] if len(fields) > 1 else ""
     if reason == "WATCHDOG":
