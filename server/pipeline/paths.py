@@ -10,7 +10,7 @@ program is not tried again.
 An uploaded program runs sandboxed (:mod:`server.sandbox`); its output and
 its robot-port conversation go to the log of the run that executed it, and
 the path it sent must go from the start to the goal clear of obstacles by
-the robot radius (:func:`server.validation.check_program_path`), like an
+the robot radius (:func:`server.validation.check_program_paths`), like an
 explicit path.  A multi-robot job's program gets a robot port per robot and
 sends each robot's path on its port; every path is checked so, and the plan
 has them all (:attr:`Plan.robots`), which its runs then drive as explicit
@@ -31,11 +31,11 @@ from sqlalchemy.orm import Session, sessionmaker
 from planners import PlanningError
 
 from ..core.settings import Settings
-from ..errors import FailureKind, PreflightError, ProgramFailed, RunFailed
+from ..errors import FailureKind, ProgramFailed, RunFailed
 from ..models import Experiment, Program
 from ..sandbox import ProgramSpec, Sandbox
 from ..sandbox.outcome import robots_phrase
-from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_path, check_program_paths
+from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_paths
 from . import compute
 from .pool import ComputePool
 from .recorder import RunRecorder
@@ -149,79 +149,51 @@ class PathService:
 
     async def _from_program(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
                             on_line: Optional[LineLog]) -> tuple[Any, Optional[float], dict[str, Any]]:
-        """Run the experiment's uploaded program; its path (a multi-robot job's: every robot's), planning time
-        and info, or :class:`ProgramFailed`."""
+        """Run the experiment's uploaded program; its path (a multi-robot job's: every robot's, one per robot
+        port, each checked as a single robot's; the info then has them in ``robots``), planning time and info,
+        or :class:`ProgramFailed` (naming the robots without a usable path)."""
         try:
-            if exp.robots is not None:
-                return await self._run_fleet_program(exp, run_id, robot_id, platform, on_line)
             return await self._run_program(exp, run_id, robot_id, platform, on_line)
         except ProgramFailed as exc:
             await self._recorder.store_planning_info(exp.id, exc.info)
             raise
 
     async def _run_program(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
-                           on_line: Optional[LineLog]) -> tuple[list[list[float]], Optional[float], dict[str, Any]]:
-        spec = await self._spec(exp)
-        start = placed(exp.start, exp.goal)  # the heading the gripper places the robot with (steps.place)
-        outcome = await self._sandbox.run(
-            spec, env_data=exp.environment_data, start=start, goal=list(exp.goal),
-            field_size=SUBFIELD_SIZE if exp.field == "sub" else FIELD_SIZE, seed=exp.seed,
-            robot_radius=exp.robot_radius, planning_margin=exp.planning_margin, robot_id=robot_id,
-            platform=platform)
-        if on_line is not None:
-            for direction, line in outcome.log:
-                on_line(direction, line, None, False)
-        info = {"program": {**outcome.info, "run_id": run_id}}
-        if outcome.path is None:
-            raise ProgramFailed(outcome.reason or "program sent no path", info)
-        try:
-            await self._pool.run(check_program_path, exp.environment_data, start, list(exp.goal), outcome.path,
-                                 exp.robot_radius)
-        except PreflightError as exc:
-            reason = f"program's path is unusable: {exc}"
-            if on_line is not None:
-                on_line("s", reason, None, False)
-            raise ProgramFailed(reason, info) from None
-        return outcome.path, outcome.planning_time_s, info
-
-    async def _spec(self, exp: Experiment) -> ProgramSpec:
-        """The experiment's program, or :class:`ProgramFailed` when uploads are off or it is gone."""
+                           on_line: Optional[LineLog]) -> tuple[Any, Optional[float], dict[str, Any]]:
         if not self._settings.uploads_enabled:
             raise ProgramFailed("uploads are disabled on this testbed")
         spec = await self.program_spec(exp.program_id)
         if spec is None:
             raise ProgramFailed("the experiment's program no longer exists")
-        return spec
-
-    async def _run_fleet_program(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
-                                 on_line: Optional[LineLog]) -> tuple[list[list[list[float]]], Optional[float],
-                                                                      dict[str, Any]]:
-        """A multi-robot job's program: a robot port per robot, each robot's path checked as a single robot's;
-        (the paths, the planning time, the info with ``program`` and ``robots``), or :class:`ProgramFailed`
-        naming the robots without a usable path."""
-        spec = await self._spec(exp)
-        starts = [placed(r["start"], r["goal"]) for r in exp.robots]
-        goals = [list(r["goal"]) for r in exp.robots]
-        outcome = await self._sandbox.run_fleet(
-            spec, env_data=exp.environment_data, starts=starts, goals=goals,
-            field_size=SUBFIELD_SIZE if exp.field == "sub" else FIELD_SIZE, seed=exp.seed,
-            robot_radius=exp.robot_radius, planning_margin=exp.planning_margin, robot_id=robot_id,
-            platform=platform)
+        fleet = exp.robots is not None
+        # each robot's start with the heading the gripper places it with (steps.place), and its goal
+        robots = exp.robots if fleet else [{"start": exp.start, "goal": exp.goal}]
+        starts = [placed(r["start"], r["goal"]) for r in robots]
+        goals = [list(r["goal"]) for r in robots]
+        common = dict(env_data=exp.environment_data, field_size=SUBFIELD_SIZE if exp.field == "sub" else FIELD_SIZE,
+                      seed=exp.seed, robot_radius=exp.robot_radius, planning_margin=exp.planning_margin,
+                      robot_id=robot_id, platform=platform)
+        outcome = await (self._sandbox.run_fleet(spec, starts=starts, goals=goals, **common) if fleet
+                         else self._sandbox.run(spec, start=starts[0], goal=goals[0], **common))
         if on_line is not None:
             for direction, line in outcome.log:
                 on_line(direction, line, None, False)
         info: dict[str, Any] = {"program": {**outcome.info, "run_id": run_id}}
-        if outcome.paths is None:
-            raise ProgramFailed(outcome.reason or "program sent no paths", info)
-        problems = await self._pool.run(check_program_paths, exp.environment_data, starts, goals, outcome.paths,
+        paths = outcome.paths if fleet else None if outcome.path is None else [outcome.path]
+        if paths is None:
+            raise ProgramFailed(outcome.reason or "program sent no path", info)
+        problems = await self._pool.run(check_program_paths, exp.environment_data, starts, goals, paths,
                                         exp.robot_radius)
         bad = [k for k, why in enumerate(problems) if why is not None]
         if bad:
-            reason = (f"program's path for robot {bad[0]} is unusable: {problems[bad[0]]}" if len(bad) == 1 else
+            reason = (f"program's path is unusable: {problems[0]}" if not fleet else
+                      f"program's path for robot {bad[0]} is unusable: {problems[bad[0]]}" if len(bad) == 1 else
                       f"program's paths for {robots_phrase(bad)} are unusable: "
                       + "; ".join(f"robot {k}: {problems[k]}" for k in bad))
             if on_line is not None:
                 on_line("s", reason, None, False)
             raise ProgramFailed(reason, info)
-        info["robots"] = [{"path": p, "depart": None} for p in outcome.paths]
-        return outcome.paths, outcome.planning_time_s, info
+        if not fleet:
+            return paths[0], outcome.planning_time_s, info
+        info["robots"] = [{"path": p, "depart": None} for p in paths]
+        return paths, outcome.planning_time_s, info
