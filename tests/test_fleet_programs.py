@@ -93,7 +93,7 @@ def lines(client, run_id: int) -> list[str]:
 
 
 def test_a_program_sends_each_robot_its_path_on_its_port_and_each_robot_drives_its_own(client):
-    exp = submit(client, upload(client, "lanes", STRAIGHT.format(order=[0, 1, 2])), LANES, repetitions=2)
+    exp = submit(client, upload(client, "lanes", STRAIGHT.format(order=[0, 1, 2])), LANES, modes=["sim", "twb"])
     assert exp["status"] == "completed", exp
     assert [r["status"] for r in exp["runs"]] == ["completed", "completed"]
     info = exp["planning_info"]
@@ -103,12 +103,13 @@ def test_a_program_sends_each_robot_its_path_on_its_port_and_each_robot_drives_i
     for k, r in enumerate(LANES):  # the paths as sent: start -> goal, headings 0
         assert planned[k] == [[*r["start"], 0.0], [*r["goal"][:2], 0.0]]
     assert exp["planned_path"] == planned[0] and exp["planning_time_s"] > 0
-    for run in exp["runs"]:
+    for run in exp["runs"]:  # both modes follow the one plan: ideal robots, emulated field robots
         assert run["metrics"]["success_rate"] == 1.0 and run["metrics"]["planning_time_s"] == exp["planning_time_s"]
         for k, r in enumerate(LANES):
             mine = poses(client, run["id"], k)
             assert len(mine) > 10 and set(mine[:, 4]) == {k}
-            assert np.abs(mine[:, 2] - r["start"][1]).max() < 0.01  # robot k stays on its own lane
+            lane = 0.001 if run["mode"] == "sim" else 0.1  # the field: tracker noise, wheel bias (lanes 0.5 m apart)
+            assert np.abs(mine[:, 2] - r["start"][1]).max() < lane, run["mode"]  # robot k keeps to its own lane
             assert np.hypot(*(mine[-1, 1:3] - r["goal"][:2])) < 0.02
     # the program ran once, in the first run's log, each port's conversation named by its robot
     logs = [lines(client, run["id"]) for run in sorted(exp["runs"], key=lambda r: r["id"])]

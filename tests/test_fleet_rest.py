@@ -157,6 +157,13 @@ def test_bad_multi_robot_jobs_are_refused_naming_the_field(client, job, detail):
     assert r.status_code == 422 and detail in r.json()["detail"], r.text
 
 
+def test_a_multi_robot_program_job_needs_uploads(client):
+    """Uploads are off on this testbed: a multi-robot job naming a program is refused as a single robot's is
+    (tests/test_fleet_programs.py runs them where uploads are on)."""
+    r = client.post("/api/v1/experiments", json={"environment": "swap", "robots": TWO, "program": 1, "modes": ["sim"]})
+    assert r.status_code == 403 and r.json()["detail"] == "uploads are disabled on this testbed", r.text
+
+
 def test_a_field_fleet_on_a_sub_field_is_the_emulated_field_robots_shown_live(testbed, client):
     """`twb` mode: the field robots of the run's sub-field, computed as one task; every robot's last pose is
     published live as robot "<field robot>/<k>" in field coordinates."""
