@@ -214,7 +214,8 @@ class Client(BaseClient):
         ``robots`` makes it a multi-robot job instead of ``start``/``goal``:
         2 to 16 ``{"start", "goal", "path"?}`` in one world on one clock;
         ``planner="prioritized"`` plans them together, any other planner each
-        robot alone (docs/server.md, "Multi-robot jobs").
+        robot alone, an uploaded ``program`` sends each robot's path on its own
+        robot port (docs/server.md, "Multi-robot jobs"; docs/uploads.md).
         :class:`ValidationError` carries the server's reason when the job
         cannot run.
         """

@@ -224,7 +224,8 @@ class ExperimentCreate(Strict):
         "A multi-robot job instead of `start`/`goal`: 2 to 16 robots on a sub-field, to 64 on the whole field "
         "(`field: \"full\"`), in one world on one clock, each "
         "{\"start\", \"goal\", \"path\"?} (m, rad). Planner `prioritized` plans them together; any other "
-        "planner plans each robot alone (uncoordinated); a robot's `path` is driven as given."))
+        "planner plans each robot alone (uncoordinated); a robot's `path` is driven as given; an uploaded "
+        "`program` sends every robot's path, one T,T,P per robot port (docs/uploads.md)."))
     planner: Optional[str] = Field(default=None, max_length=64)
     planner_params: dict[str, Any] = Field(default_factory=dict)
     path: Optional[list[Pose]] = Field(default=None, max_length=10_000)
@@ -307,17 +308,25 @@ class ExperimentCreate(Strict):
     def _fleet(self) -> "ExperimentCreate":
         """A multi-robot job: ``robots`` alone say where the robots go; what it cannot have is refused."""
         assert self.robots is not None
-        for name in ("start", "goal", "path", "program", "controller_program", "jitter"):
+        for name in ("start", "goal", "path", "controller_program", "jitter"):
             if getattr(self, name) is not None:
                 why = {"start": "give either `start`/`goal` or `robots`, not both",
                        "goal": "give either `start`/`goal` or `robots`, not both",
                        "path": "a multi-robot job takes each robot's path as `robots[i].path`",
-                       "program": "an uploaded planner program plans one robot; it cannot plan a multi-robot job",
                        "controller_program": "a controller program drives one robot; it cannot drive a "
                                              "multi-robot job",
                        "jitter": "start-pose jitter is not available for multi-robot jobs"}[name]
                 raise ValueError(f"{name}: {why}")
         explicit = [r.path is not None for r in self.robots]
+        if self.program is not None:  # it sends every robot's path, one T,T,P per robot port
+            if self.planner is not None:
+                raise ValueError("give either `planner` or `program`, not both")
+            if self.planner_params:
+                raise ValueError("`planner_params` needs a `planner`")
+            if any(explicit):
+                raise ValueError(f"robots[{explicit.index(True)}].path: the program sends every robot's path; "
+                                 "give no `path`")
+            return self
         if self.planner == FLEET_PLANNER and any(explicit):
             i = explicit.index(True)
             raise ValueError(f"robots[{i}].path: `{FLEET_PLANNER}` plans every robot together; it cannot keep "

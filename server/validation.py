@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -24,8 +24,8 @@ from robot_agent.frames import FIELD_SIZE, MAX_ROBOTS_SUBFIELD, SUBFIELD_SIZE
 from .errors import PreflightError
 from .schemas import FLEET_PLANNER, MAX_ROBOTS, ExperimentCreate
 
-__all__ = ["FIELD_SIZE", "MAX_ROBOTS", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path", "preflight",
-           "preflight_fleet"]
+__all__ = ["FIELD_SIZE", "MAX_ROBOTS", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path",
+           "check_program_paths", "preflight", "preflight_fleet"]
 
 
 @dataclass(frozen=True)
@@ -206,6 +206,20 @@ def check_program_path(env_data: dict[str, Any], start: list[float], goal: list[
             raise PreflightError(f"the path must {name} ({q[0]:g}, {q[1]:g}) within {tolerance_m * 100:g} cm; "
                                  f"it is {d:.3f} m away at ({p[0]:g}, {p[1]:g})")
     _check_clear(space, pts, robot_radius)
+
+
+def check_program_paths(env_data: dict[str, Any], starts: list[list[float]], goals: list[list[float]],
+                        paths: list[list[list[float]]], robot_radius: float) -> list[Optional[str]]:
+    """Each robot's path a multi-robot job's program sent, checked as :func:`check_program_path` checks one
+    (m, rad): per robot, None or why its path is unusable.  Pure; run it in a worker process."""
+    problems: list[Optional[str]] = []
+    for start, goal, path in zip(starts, goals, paths):
+        try:
+            check_program_path(env_data, start, goal, path, robot_radius)
+            problems.append(None)
+        except PreflightError as exc:
+            problems.append(str(exc))
+    return problems
 
 
 def _pose(p: np.ndarray) -> list[float]:

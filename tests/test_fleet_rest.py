@@ -141,7 +141,9 @@ def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(cl
     ({"start": [0.3, 0.3], "goal": [1.5, 1.5], "planner": "prioritized"}, "planner: `prioritized` plans several robots"),
     ({"robots": TWO, "start": [0.3, 0.3]}, "start: give either `start`/`goal` or `robots`, not both"),
     ({"robots": TWO, "path": [[0.3, 0.3], [1.5, 1.5]]}, "path: a multi-robot job takes each robot's path"),
-    ({"robots": TWO, "program": 1}, "program: an uploaded planner program plans one robot"),
+    ({"robots": TWO, "program": 1}, "give either `planner` or `program`, not both"),
+    ({"robots": [TWO[0], {**TWO[1], "path": [[1.5, 0.3], [0.3, 1.5]]}], "program": 1, "planner": None},
+     "robots[1].path: the program sends every robot's path; give no `path`"),
     ({"robots": TWO, "controller_program": 1}, "controller_program: a controller program drives one robot"),
     ({"robots": [TWO[0], {**TWO[1], "path": [[1.5, 0.3], [0.3, 1.5]]}], "planner": "prioritized"},
      "robots[1].path: `prioritized` plans every robot together"),
@@ -153,6 +155,13 @@ def test_bad_multi_robot_jobs_are_refused_naming_the_field(client, job, detail):
         body.pop("planner")
     r = client.post("/api/v1/experiments", json=body)
     assert r.status_code == 422 and detail in r.json()["detail"], r.text
+
+
+def test_a_multi_robot_program_job_needs_uploads(client):
+    """Uploads are off on this testbed: a multi-robot job naming a program is refused as a single robot's is
+    (tests/test_fleet_programs.py runs them where uploads are on)."""
+    r = client.post("/api/v1/experiments", json={"environment": "swap", "robots": TWO, "program": 1, "modes": ["sim"]})
+    assert r.status_code == 403 and r.json()["detail"] == "uploads are disabled on this testbed", r.text
 
 
 def test_a_field_fleet_on_a_sub_field_is_the_emulated_field_robots_shown_live(testbed, client):

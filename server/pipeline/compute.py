@@ -208,7 +208,8 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     leaves a waypoint once the robots planned to pass there before it have passed, and not before the
     plan's wait there ends: :mod:`planners.dependencies`) or ``timed`` (by the clock alone: robots hold
     where the plan waits, late ones drive on); any other planner plans each robot alone,
-    uncoordinated (the baseline); a robot's explicit ``path`` is driven as given.  Planning keeps
+    uncoordinated (the baseline); a robot's explicit ``path`` is driven as given (its headings facing the next
+    point; with ``"headings": "sent"``, an uploaded program's ``[x, y, theta]`` path, as they are).  Planning keeps
     ``robot_radius`` (m) and samples with ``plan_seed`` (default ``seed``); ``seed`` gives the robots' noise.
     The robots are ``backend`` robots (``ideal``, or ``field``: the emulated field robot of ``platform``'s
     profile with the field parameters ``overrides``) following with ``controller`` for at most ``max_s``
@@ -253,7 +254,9 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
                                              [lv for _, _, lv in schedule], plan.conflict_m)
         else:
             for i, r in enumerate(robots):
-                if r.get("path") is not None:
+                if r.get("headings") == "sent":  # an uploaded program's path: headings as it sent them
+                    paths.append(np.round(np.asarray(r["path"], dtype=float), 6).tolist())
+                elif r.get("path") is not None:
                     paths.append(explicit_path(r["path"], r["goal"]))
                 else:
                     try:

@@ -3,7 +3,8 @@
 The robots of a multi-robot job (``robots`` on the experiment) run together
 in :func:`server.pipeline.compute.fleet_job`, one task in the compute pool
 (the worker processes, or Ray): planning (``prioritized`` together, any
-other planner robot by robot), the simulation of all robots in one world
+other planner robot by robot; an uploaded program's paths, one per robot
+port, had once per experiment before the task, are driven as sent), the simulation of all robots in one world
 (they collide with each other), the fleet metrics.  A ``sim`` run is the
 ideal robots; a ``twb`` run is the emulated field robots of the platform of
 the field robot the scheduler gave it, computed as a task while the run
@@ -27,10 +28,11 @@ from typing import Any, Optional
 import numpy as np
 
 from ..errors import FailureKind, RunFailed, TestbedFault
-from ..status import SubfieldState
+from ..status import RunStatus, SubfieldState
 from ..store.runs import RunJob
 from . import compute
 from .context import RunContext, RunServices
+from .paths import Plan, placed
 from .steps import timeout_for_length_s
 
 __all__ = ["fleet_failure", "fleet_poses", "fleet_timeout_s", "run_fleet"]
@@ -151,11 +153,14 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
                 + f") on the field of {ctx.robot.robot_id}")
     else:
         what = f"{len(job.robots)} ideal robots on {ctx.robot.engine or 'the worker pool'} ({ctx.robot.robot_id})"
+    robots, program_plan = job.robots, None
+    if job.program is not None:
+        robots, program_plan = await _program_paths(ctx, svc, job, platform)
     ctx.on_line("s", f"a multi-robot run of {what}, computed as one task in one world on one clock: the lines "
                      "below are the ones each robot would have exchanged, prefixed `robot k:`", None, False)
-    timeout_s = fleet_timeout_s(svc, job.robots)
+    timeout_s = fleet_timeout_s(svc, robots)
     out: dict[str, Any] = await svc.pool.run(
-        compute.fleet_job, job.environment_data, job.robots, job.planner, job.planner_params, job.seed, timeout_s,
+        compute.fleet_job, job.environment_data, robots, job.planner, job.planner_params, job.seed, timeout_s,
         job.robot_radius + job.planning_margin, "field" if on_field else "ideal", job.controller,
         job.controller_params, platform, job.profile_overrides if on_field else None, job.experiment_seed)
     if "planning_error" in out:
@@ -175,6 +180,8 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     failure = fleet_failure(robots, out["metrics"], timeout_s)
     t_start, t_end = _span(robots)
     metrics = dict(out["metrics"])
+    if program_plan is not None:  # the program's time to its last path, as a single robot's program's
+        metrics["planning_time_s"] = program_plan.planning_time_s
     metrics["collided"] = any(r["outcome"] == "COLLISION" for r in robots)
     ctx.end_fields.update(t_start=t_start, t_end=t_end, metrics=metrics)
     if failure is not None:
@@ -183,6 +190,21 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
         if len(last):
             ctx.end_fields["stopped_at"] = [round(float(last[-1, 1]), 4), round(float(last[-1, 2]), 4)]
         raise failure
+
+
+async def _program_paths(ctx: RunContext, svc: RunServices, job: RunJob,
+                         platform: str) -> tuple[list[dict[str, Any]], Plan]:
+    """The robots with the paths the experiment's program sent, one per robot port (run once per experiment,
+    in this run's log: :meth:`~server.pipeline.paths.PathService.path_for`; the run is ``planning`` until
+    then), placed as the program was told; raises :class:`~server.errors.ProgramFailed` naming the robots without a usable path."""
+    assert job.robots is not None
+    plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
+                                    platform=platform, on_line=ctx.on_line)
+    assert plan.robots is not None and len(plan.robots) == len(job.robots)
+    await svc.recorder.update(ctx.run_id, status=RunStatus.RUNNING)
+    robots = [{"start": placed(r["start"], r["goal"]), "goal": r["goal"], "path": path, "headings": "sent"}
+              for r, path in zip(job.robots, plan.robots)]
+    return robots, plan
 
 
 def _held_for(robots: list[int]) -> str:

@@ -10,8 +10,11 @@ program is not tried again.
 An uploaded program runs sandboxed (:mod:`server.sandbox`); its output and
 its robot-port conversation go to the log of the run that executed it, and
 the path it sent must go from the start to the goal clear of obstacles by
-the robot radius (:func:`server.validation.check_program_path`), like an
-explicit path.
+the robot radius (:func:`server.validation.check_program_paths`), like an
+explicit path.  A multi-robot job's program gets a robot port per robot and
+sends each robot's path on its port; every path is checked so, and the plan
+has them all (:attr:`Plan.robots`), which its runs then drive as explicit
+per-robot paths (:mod:`server.pipeline.fleet`).
 """
 
 from __future__ import annotations
@@ -28,15 +31,16 @@ from sqlalchemy.orm import Session, sessionmaker
 from planners import PlanningError
 
 from ..core.settings import Settings
-from ..errors import FailureKind, PreflightError, ProgramFailed, RunFailed
+from ..errors import FailureKind, ProgramFailed, RunFailed
 from ..models import Experiment, Program
 from ..sandbox import ProgramSpec, Sandbox
-from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_path
+from ..sandbox.outcome import robots_phrase
+from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_paths
 from . import compute
 from .pool import ComputePool
 from .recorder import RunRecorder
 
-__all__ = ["LineLog", "PathService", "Plan"]
+__all__ = ["LineLog", "PathService", "Plan", "placed"]
 
 #: ``on_line(direction, line, t, t_estimated)``: one line for the run's protocol log
 LineLog = Callable[[str, str, Optional[float], bool], None]
@@ -44,10 +48,19 @@ LineLog = Callable[[str, str, Optional[float], bool], None]
 
 @dataclass(frozen=True)
 class Plan:
-    """A path ``[[x, y, theta], ...]`` (m, m, rad) and how long planning took (s; None for explicit paths)."""
+    """A path ``[[x, y, theta], ...]`` (m, m, rad) and how long planning took (s; None for explicit paths);
+    for a multi-robot job's program, every robot's path in ``robots`` (``path`` is robot 0's)."""
 
     path: list[list[float]]
     planning_time_s: Optional[float]
+    robots: Optional[list[list[list[float]]]] = None
+
+
+def placed(start: list[float], goal: list[float]) -> list[float]:
+    """The pose the gripper places a robot at (m, m, rad): ``start`` with its heading, else facing the goal."""
+    if len(start) > 2:
+        return list(start[:3])
+    return [*start[:2], math.atan2(goal[1] - start[1], goal[0] - start[0])]
 
 
 class PathService:
@@ -114,7 +127,12 @@ class PathService:
 
         exp = await asyncio.to_thread(load)
         if exp.planned_path is not None:
-            return Plan(exp.planned_path, exp.planning_time_s)
+            robots = (exp.planning_info or {}).get("robots") if exp.robots is not None else None
+            return Plan(exp.planned_path, exp.planning_time_s, [r["path"] for r in robots] if robots else None)
+        if exp.robots is not None:
+            paths, seconds, info = await self._from_program(exp, run_id, robot_id, platform, on_line)
+            await self._recorder.store_plan(experiment_id, paths[0], seconds, info)
+            return Plan(paths[0], seconds, paths)
         if exp.explicit_path is not None:
             path, seconds, info = compute.explicit_path(exp.explicit_path, exp.goal), None, {"explicit": True}
         elif exp.program_id is not None or exp.planner is None:
@@ -130,8 +148,10 @@ class PathService:
         return Plan(path, seconds)
 
     async def _from_program(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
-                            on_line: Optional[LineLog]) -> tuple[list[list[float]], Optional[float], dict[str, Any]]:
-        """Run the experiment's uploaded program; its path, planning time and info, or :class:`ProgramFailed`."""
+                            on_line: Optional[LineLog]) -> tuple[Any, Optional[float], dict[str, Any]]:
+        """Run the experiment's uploaded program; its path (a multi-robot job's: every robot's, one per robot
+        port, each checked as a single robot's; the info then has them in ``robots``), planning time and info,
+        or :class:`ProgramFailed` (naming the robots without a usable path)."""
         try:
             return await self._run_program(exp, run_id, robot_id, platform, on_line)
         except ProgramFailed as exc:
@@ -139,33 +159,41 @@ class PathService:
             raise
 
     async def _run_program(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
-                           on_line: Optional[LineLog]) -> tuple[list[list[float]], Optional[float], dict[str, Any]]:
+                           on_line: Optional[LineLog]) -> tuple[Any, Optional[float], dict[str, Any]]:
         if not self._settings.uploads_enabled:
             raise ProgramFailed("uploads are disabled on this testbed")
-
         spec = await self.program_spec(exp.program_id)
         if spec is None:
             raise ProgramFailed("the experiment's program no longer exists")
-        start = list(exp.start)
-        if len(start) < 3:  # the heading the gripper places the robot with (steps.place)
-            start.append(math.atan2(exp.goal[1] - start[1], exp.goal[0] - start[0]))
-        outcome = await self._sandbox.run(
-            spec, env_data=exp.environment_data, start=start, goal=list(exp.goal),
-            field_size=SUBFIELD_SIZE if exp.field == "sub" else FIELD_SIZE, seed=exp.seed,
-            robot_radius=exp.robot_radius, planning_margin=exp.planning_margin, robot_id=robot_id,
-            platform=platform)
+        fleet = exp.robots is not None
+        # each robot's start with the heading the gripper places it with (steps.place), and its goal
+        robots = exp.robots if fleet else [{"start": exp.start, "goal": exp.goal}]
+        starts = [placed(r["start"], r["goal"]) for r in robots]
+        goals = [list(r["goal"]) for r in robots]
+        common = dict(env_data=exp.environment_data, field_size=SUBFIELD_SIZE if exp.field == "sub" else FIELD_SIZE,
+                      seed=exp.seed, robot_radius=exp.robot_radius, planning_margin=exp.planning_margin,
+                      robot_id=robot_id, platform=platform)
+        outcome = await (self._sandbox.run_fleet(spec, starts=starts, goals=goals, **common) if fleet
+                         else self._sandbox.run(spec, start=starts[0], goal=goals[0], **common))
         if on_line is not None:
             for direction, line in outcome.log:
                 on_line(direction, line, None, False)
-        info = {"program": {**outcome.info, "run_id": run_id}}
-        if outcome.path is None:
+        info: dict[str, Any] = {"program": {**outcome.info, "run_id": run_id}}
+        paths = outcome.paths if fleet else None if outcome.path is None else [outcome.path]
+        if paths is None:
             raise ProgramFailed(outcome.reason or "program sent no path", info)
-        try:
-            await self._pool.run(check_program_path, exp.environment_data, start, list(exp.goal), outcome.path,
-                                 exp.robot_radius)
-        except PreflightError as exc:
-            reason = f"program's path is unusable: {exc}"
+        problems = await self._pool.run(check_program_paths, exp.environment_data, starts, goals, paths,
+                                        exp.robot_radius)
+        bad = [k for k, why in enumerate(problems) if why is not None]
+        if bad:
+            reason = (f"program's path is unusable: {problems[0]}" if not fleet else
+                      f"program's path for robot {bad[0]} is unusable: {problems[bad[0]]}" if len(bad) == 1 else
+                      f"program's paths for {robots_phrase(bad)} are unusable: "
+                      + "; ".join(f"robot {k}: {problems[k]}" for k in bad))
             if on_line is not None:
                 on_line("s", reason, None, False)
-            raise ProgramFailed(reason, info) from None
-        return outcome.path, outcome.planning_time_s, info
+            raise ProgramFailed(reason, info)
+        if not fleet:
+            return paths[0], outcome.planning_time_s, info
+        info["robots"] = [{"path": p, "depart": None} for p in paths]
+        return paths, outcome.planning_time_s, info

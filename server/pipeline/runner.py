@@ -161,10 +161,10 @@ async def _carry_out(ctx: RunContext, svc: RunServices) -> None:
 
 
 def _first_status(ctx: RunContext, svc: RunServices, job: RunJob) -> RunStatus:
-    """The state a run starts in: a multi-robot run ``running`` (its task plans too), another task as
-    :func:`start_status` says, a run on a robot ``building``."""
+    """The state a run starts in: a multi-robot run ``running`` (its task plans too; ``planning`` while an
+    uploaded program plans it), another task as :func:`start_status` says, a run on a robot ``building``."""
     if job.robots is not None:
-        return RunStatus.RUNNING
+        return RunStatus.PLANNING if job.program is not None else RunStatus.RUNNING
     return start_status(svc, job) if ctx.as_task or _as_task(job) else RunStatus.BUILDING
 
 

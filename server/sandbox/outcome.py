@@ -8,7 +8,8 @@ from typing import Any, Optional
 
 from .program import ProgramSpec
 
-__all__ = ["ProgramOutcome", "explain", "explain_controller", "to_controller_outcome", "to_outcome"]
+__all__ = ["ProgramOutcome", "explain", "explain_controller", "explain_fleet", "robots_phrase",
+           "to_controller_outcome", "to_outcome"]
 
 _FORK_SIGNS = ("Resource temporarily unavailable", "BlockingIOError", "fork: retry", "Cannot fork",
                "can't fork", "fork failed")
@@ -26,6 +27,8 @@ class ProgramOutcome:
     log: list[tuple[str, str]] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
     planning_time_s: Optional[float] = None
+    #: a multi-robot job's paths, robot by robot (m, m, rad; ``path`` is robot 0's), or None
+    paths: Optional[list[list[list[float]]]] = None
 
 
 def explain(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
@@ -39,6 +42,8 @@ def explain(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
     """
     if r.get("launch_error"):
         return f"program could not start: {r['launch_error']}"
+    if len(r.get("ports") or []) > 1:
+        return explain_fleet(r, limits)
     if r.get("path") is not None:
         return None
     err = r.get("stderr") or ""
@@ -62,6 +67,50 @@ def explain(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
     if not r.get("connected"):
         return "program sent no path: it exited without connecting to the robot port"
     return "program sent no path: it exited without sending a T,T,P line"
+
+
+def explain_fleet(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
+    """Why a multi-robot job's program did not give every robot its path (``None``: it did), naming the
+    robots without one and what their ports saw; ``r["ports"]`` is the launcher's per robot port."""
+    if r.get("launch_error"):
+        return f"program could not start: {r['launch_error']}"
+    ports = r["ports"]
+    missing = [k for k, p in enumerate(ports) if p.get("path") is None]
+    if not missing:
+        return None
+    who = robots_phrase(missing)
+    sig, err = r.get("signal"), r.get("stderr") or ""
+    refused = [k for k in missing if ports[k].get("refused")]
+    limit = _limit_reason(r, limits)
+    if limit:
+        head = f"{limit}; no path for {who}"
+    elif r.get("timed_out"):
+        head = f"program time limit: no path for {who} within {limits['wall_s']:g} s"
+    elif r.get("exit_code") not in (None, 0):
+        head = f"program crashed: exit code {r['exit_code']}{_last_line(err)}; no path for {who}"
+    elif sig is not None:
+        head = f"program crashed: killed by signal {_signame(sig)}{_last_line(err)}; no path for {who}"
+    elif refused == missing:
+        head = f"program sent an invalid path for {who}"
+    else:
+        head = f"program sent no path for {who}"
+    unheard = [k for k in missing if not ports[k].get("connected")]
+    silent = [k for k in missing if ports[k].get("connected") and not ports[k].get("refused")]
+    details = [f"robot {k}'s port refused its last line: {ports[k]['refused'][-1]}" for k in refused]
+    if unheard:
+        details.append("it never connected to " + (f"robot {unheard[0]}'s port" if len(unheard) == 1
+                                                     else f"the ports of {robots_phrase(unheard)}"))
+    if silent:
+        details.append("it sent no T,T,P line on " + (f"robot {silent[0]}'s port" if len(silent) == 1
+                                                       else f"the ports of {robots_phrase(silent)}"))
+    return f"{head} ({'; '.join(details)})"
+
+
+def robots_phrase(ks: list[int]) -> str:
+    """``robot 1``, ``robots 1 and 3``, ``robots 0, 1 and 3``."""
+    if len(ks) == 1:
+        return f"robot {ks[0]}"
+    return "robots " + ", ".join(map(str, ks[:-1])) + f" and {ks[-1]}"
 
 
 def _limit_reason(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
@@ -107,8 +156,17 @@ def to_outcome(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: di
     """The outcome of the launcher's result ``r`` for ``spec`` run as ``argv`` under ``limits`` (the job's)."""
     reason = explain(r, limits)
     info = _info(spec, r)
-    return ProgramOutcome(r.get("path") if reason is None else None, reason, _log(spec, argv, r, limits, reason),
-                          info, r.get("path_at_s"))
+    log = _log(spec, argv, r, limits, reason)
+    ports = r.get("ports") or []
+    if len(ports) > 1:
+        info["robot_ports"] = [{"robot": k, "port": p["robot_port"], "connected": p["connected"],
+                                "path_points": None if p["path"] is None else len(p["path"])}
+                               for k, p in enumerate(ports)]
+        if reason is not None:
+            return ProgramOutcome(None, reason, log, info)
+        return ProgramOutcome(ports[0]["path"], None, log, info, max(p["path_at_s"] for p in ports),
+                              [p["path"] for p in ports])
+    return ProgramOutcome(r.get("path") if reason is None else None, reason, log, info, r.get("path_at_s"))
 
 
 def to_controller_outcome(spec: ProgramSpec, argv: list[str], r: dict[str, Any],
@@ -143,10 +201,16 @@ def _log(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str
         ("s", f"program {spec.name!r} (#{spec.id}) started: {shown}; isolation: "
               f"{'+'.join(iso.get('namespaces') or []) or 'no namespaces'}"
               f"{', own uid' if iso.get('uid') is not None else ''}, {memory}")]
-    for direction, text in r.get("port_log", []):
-        lines.append(("s", f"robot port {'<' if direction == '<' else '>'} {text}"))
-    if r.get("port_unlogged"):
-        lines.append(("s", f"robot port: {r['port_unlogged']} more lines not logged"))
+    ports = r.get("ports") or []
+    fleet = len(ports) > 1
+    for k, port in enumerate(ports if fleet else [r]):
+        name = f"robot {k} port" if fleet else "robot port"
+        if fleet:
+            lines.append(("s", f"{name} is 127.0.0.1:{port['robot_port']}"))
+        for direction, text in port.get("port_log", []):
+            lines.append(("s", f"{name} {'<' if direction == '<' else '>'} {text}"))
+        if port.get("port_unlogged"):
+            lines.append(("s", f"{name}: {port['port_unlogged']} more lines not logged"))
     for d, name in (("o", "stdout"), ("e", "stderr")):
         for ln in (r.get(name) or "").splitlines():
             lines.append((d, ln[:10_000]))
@@ -157,6 +221,12 @@ def _log(spec: ProgramSpec, argv: list[str], r: dict[str, Any], limits: dict[str
               else f"signal {_signame(r['signal'])}" if r.get("signal") is not None
               else "stopped by the sandbox")
     peak = f", memory {r['memory_peak_kib'] / 1024:.1f} MiB" if r.get("memory_peak_kib") is not None else ""
+    if fleet:
+        got = [k for k, p in enumerate(ports) if p["path"] is not None]
+        lines.append(("s", f"program ended ({status}) after {r.get('wall_s', 0):.2f} s, CPU {r.get('cpu_s', 0):.2f} s"
+                           + peak + f"; paths received for {robots_phrase(got) if got else 'no robot'} of "
+                           f"{len(ports)}" + (f"; {reason}" if reason else "")))
+        return lines
     lines.append(("s", f"program ended ({status}) after {r.get('wall_s', 0):.2f} s, CPU {r.get('cpu_s', 0):.2f} s"
                        + peak + (f"; {reason}" if reason else f"; path of {len(r['path'])} points received"
                                  if r.get("path") is not None else f"; {r['run_ended']}" if r.get("run_ended")

@@ -57,13 +57,20 @@ def program_files(spec: ProgramSpec, env_data: dict[str, Any],
 
 def program_env(*, start: list[float], goal: list[float], field_size: tuple[float, float], seed: int,
                 robot_radius: float, planning_margin: float, robot_id: str, wall_s: float,
-                path: Optional[list[list[float]]] = None) -> dict[str, str]:
+                path: Optional[list[list[float]]] = None,
+                fleet: Optional[list[tuple[list[float], list[float]]]] = None) -> dict[str, str]:
     """The program's environment (lengths in m, angles in rad, ``wall_s`` in s); the launcher adds the rest.
 
-    A controller program (``path`` given) also gets ``TWB_PATH_FILE`` and ``TWB_PATH_POINTS``.
+    A controller program (``path`` given) also gets ``TWB_PATH_FILE`` and ``TWB_PATH_POINTS``; a
+    multi-robot job's program (``fleet``: each robot's (start, goal), robot 0 being ``start``/``goal``)
+    ``TWB_ROBOTS`` (their number) and ``TWB_STARTS`` / ``TWB_GOALS`` (``x,y,theta;x,y,theta;...``).
     """
     extra = {} if path is None else {"TWB_PATH_FILE": PATH_FILE, "TWB_PATH_POINTS": str(len(path)),
                                      "TWB_ROLE": "controller"}
+    if fleet is not None:
+        extra = {"TWB_ROBOTS": str(len(fleet)),
+                 "TWB_STARTS": ";".join(",".join(map(_num, s)) for s, _ in fleet),
+                 "TWB_GOALS": ";".join(",".join(map(_num, g)) for _, g in fleet)}
     return {**extra,
         "PATH": "/usr/local/bin:/usr/bin:/bin", "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8",
         "PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1",

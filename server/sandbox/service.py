@@ -181,6 +181,16 @@ class Sandbox:
                                robot_radius=robot_radius, planning_margin=planning_margin, robot_id=robot_id,
                                platform=platform)
 
+    async def run_fleet(self, spec: ProgramSpec, *, env_data: dict[str, Any], starts: list[list[float]],
+                        goals: list[list[float]], field_size: tuple[float, float], seed: int, robot_radius: float,
+                        planning_margin: float, robot_id: str, platform: str) -> ProgramOutcome:
+        """Run ``spec`` once for a multi-robot job: one robot port per robot (``starts``/``goals``, m, rad, robot
+        0 first; ``robot_id``/k greets on port k); the outcome's ``paths`` are the paths sent on each port, or its
+        ``reason`` names the robots without one.  Never raises for the program's faults."""
+        return await self._run(spec, env_data=env_data, start=starts[0], goal=goals[0], field_size=field_size,
+                               seed=seed, robot_radius=robot_radius, planning_margin=planning_margin,
+                               robot_id=robot_id, platform=platform, fleet=list(zip(starts, goals)))
+
     async def run_controller(self, spec: ProgramSpec, relay: Relay, *, env_data: dict[str, Any], start: list[float],
                              goal: list[float], path: list[list[float]], field_size: tuple[float, float], seed: int,
                              robot_radius: float, planning_margin: float, robot_id: str,
@@ -196,7 +206,8 @@ class Sandbox:
     async def _run(self, spec: ProgramSpec, *, env_data: dict[str, Any], start: list[float], goal: list[float],
                    field_size: tuple[float, float], seed: int, robot_radius: float, planning_margin: float,
                    robot_id: str, platform: str, path: Optional[list[list[float]]] = None,
-                   relay: Optional[Relay] = None) -> ProgramOutcome:
+                   relay: Optional[Relay] = None,
+                   fleet: Optional[list[tuple[list[float], list[float]]]] = None) -> ProgramOutcome:
         s = self.settings
         try:
             argv = program_argv(spec, s.sandbox_interpreters)
@@ -206,11 +217,13 @@ class Sandbox:
             self._running = asyncio.Semaphore(s.sandbox_workers)
         env = program_env(start=start, goal=goal, field_size=field_size, seed=seed, robot_radius=robot_radius,
                           planning_margin=planning_margin, robot_id=robot_id, wall_s=s.sandbox_wall_s,
-                          path=path)
+                          path=path, fleet=fleet)
         job = {"files": program_files(spec, env_data, path), "argv": argv, "env": env,
                "namespaces": s.sandbox_namespaces, "hide": self.hidden_paths(), "limits": self._job_limits(),
                "field_size": list(field_size), "robot_id": robot_id, "platform": platform,
                "start_pose": list(start[:3]), "grace_s": 1.0, "relay": relay is not None}
+        if fleet is not None:
+            job["start_poses"] = [list(st[:3]) for st, _ in fleet]
         async with self._running:
             uid, lock = await _take_uid_off_loop(s.sandbox_uid_base)
             try:

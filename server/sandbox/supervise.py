@@ -2,8 +2,13 @@
 
 Runs as pid 1 of the sandbox's pid namespace, or in the launcher itself
 when there is none.  The end comes when the program exited (its last output
-drained), ``grace_s`` after its path, at the wall-time limit, or when the
-launcher must end early (:class:`~.lifetime.EndRequest`).
+drained), ``grace_s`` after its path (a multi-robot job's: after the last
+robot port's path), at the wall-time limit, or when the launcher must end
+early (:class:`~.lifetime.EndRequest`).
+
+A job has one robot port, or one per robot of a multi-robot job
+(``start_poses``: one pose per robot); each listens on its own loopback
+port, takes one connection and keeps the first valid path sent on it.
 """
 
 from __future__ import annotations
@@ -36,19 +41,26 @@ COUNT_EVERY_S = 0.05
 
 
 @dataclass
+class PortLink:
+    """One robot port: its conversation, its TCP port number and sockets (None once closed)."""
+
+    robot: RobotPort
+    number: int
+    listener: Optional[socket.socket]
+    conn: Optional[socket.socket] = None
+
+
+@dataclass
 class Program:
     """A running program and what its supervision gathered."""
 
     proc: subprocess.Popen  # type: ignore[type-arg]
-    port: RobotPort
-    listener: socket.socket
-    port_no: int  # the robot port's TCP port
+    ports: list[PortLink]  # robot 0's first
     work: str
     private_tmp: bool
     uid: Optional[int]
     output_bytes: int  # kept of each of stdout and stderr
     t0: float  # monotonic s at the start
-    conn: Optional[socket.socket] = None
     out: dict[str, bytearray] = field(default_factory=lambda: {"stdout": bytearray(), "stderr": bytearray()})
     dropped: dict[str, int] = field(default_factory=lambda: {"stdout": 0, "stderr": 0})
     procs_max: int = 0
@@ -58,12 +70,17 @@ class Program:
     relay_buf: bytes = b""  # relay: a partial line from the server
     run_ended: Optional[str] = None  # relay: the server ended the run (why)
 
+    @property
+    def port(self) -> RobotPort:
+        """Robot 0's port (the only one of a single-robot job)."""
+        return self.ports[0].robot
+
 
 def blank_result() -> dict[str, Any]:
     """A result with every field, for a program that never ran."""
     return {"exit_code": None, "signal": None, "timed_out": False, "launch_error": None, "procs_max": 0,
             "robot_port": None, "path": None, "path_at_s": None, "connected": False, "port_log": [], "refused": [],
-            "port_unlogged": 0, "run_ended": None,
+            "port_unlogged": 0, "run_ended": None, "ports": [],
             "wall_s": 0.0, "cpu_s": 0.0, "max_rss_kib": 0, "memory_peak_kib": None, "memory_oom_kills": None,
             "fork_refusals": None, "stdout": "", "stderr": "", "stdout_dropped": 0, "stderr_dropped": 0}
 
@@ -78,17 +95,15 @@ def supervise(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[Prog
     uid, gid = _program_user(job, iso)
     iso["uid"] = uid
     _prepare(job, iso)
-    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    listener.bind(("127.0.0.1", 0))
-    listener.listen(1)
+    listeners = [_listen() for _ in job.get("start_poses") or [job["start_pose"]]]
     work = make_workdir(job, private_tmp="mount" in iso["namespaces"], uid=uid, gid=gid)
     try:
-        prog = spawn(job, iso, listener, work, cgroup=cgroup, uid=uid, gid=gid)
+        prog = spawn(job, iso, listeners, work, cgroup=cgroup, uid=uid, gid=gid)
     except (OSError, subprocess.SubprocessError) as exc:
-        port_no = listener.getsockname()[1]
-        listener.close()
-        return {**blank_result(), "launch_error": f"{type(exc).__name__}: {exc}", "robot_port": port_no}
+        numbers = [sock.getsockname()[1] for sock in listeners]
+        for sock in listeners:
+            sock.close()
+        return {**blank_result(), "launch_error": f"{type(exc).__name__}: {exc}", "robot_port": numbers[0]}
     pid_namespace = "pid" in iso["namespaces"] and iso.get("proc") == "private"
     me = os.getpid()
     timed_out, stopped = pump(prog, wall_s=float(limits["wall_s"]), grace_s=float(job.get("grace_s", 1.0)),
@@ -97,6 +112,15 @@ def supervise(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[Prog
     ended_itself = reap(prog, is_pid1="pid" in iso["namespaces"] and me == 1, cgroup=cgroup)
     return {**report(prog, ended_itself=ended_itself, wall_s=wall, cgroup=cgroup),
             "timed_out": timed_out, "launch_error": stopped}
+
+
+def _listen() -> socket.socket:
+    """A robot port's listening socket on a free loopback port."""
+    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(1)
+    return listener
 
 
 def _program_user(job: dict[str, Any], iso: dict[str, Any]) -> tuple[Optional[int], Optional[int]]:
@@ -119,13 +143,14 @@ def _prepare(job: dict[str, Any], iso: dict[str, Any]) -> None:
         prctl(PR_SET_CHILD_SUBREAPER, 1)  # orphans of the program come back to us, to be reaped and killed
 
 
-def spawn(job: dict[str, Any], iso: dict[str, Any], listener: socket.socket, work: str, *,
+def spawn(job: dict[str, Any], iso: dict[str, Any], listeners: list[socket.socket], work: str, *,
           cgroup: Optional[ProgramCgroup], uid: Optional[int], gid: Optional[int]) -> Program:
-    """Start the program in ``work``, confined; raises OSError or SubprocessError if it cannot."""
+    """Start the program in ``work``, confined, with a robot port on each of ``listeners`` (robot 0's first);
+    raises OSError or SubprocessError if it cannot."""
     limits = job["limits"]
     private_tmp = "mount" in iso["namespaces"]
-    port_no = listener.getsockname()[1]
-    argv, env = program_command(job, work, port_no)
+    numbers = [sock.getsockname()[1] for sock in listeners]
+    argv, env = program_command(job, work, numbers)
     seccomp = seccomp_program() if job.get("seccomp", True) else None
     iso["seccomp"] = seccomp is not None
     in_userns = iso["user_namespace"]
@@ -140,9 +165,13 @@ def spawn(job: dict[str, Any], iso: dict[str, Any], listener: socket.socket, wor
         if not private_tmp:
             shutil.rmtree(work, ignore_errors=True)
         raise
-    port = RobotPort(robot_id=job["robot_id"], platform=job["platform"], field_size=tuple(job["field_size"]),
-                     start_pose=tuple(job["start_pose"]), relay=bool(job.get("relay")))
-    return Program(proc, port, listener, port_no, work, private_tmp, uid, int(limits["output_bytes"]), t0)
+    fleet = job.get("start_poses")
+    poses = fleet or [job["start_pose"]]
+    ports = [PortLink(RobotPort(robot_id=f"{job['robot_id']}/{k}" if fleet else job["robot_id"],
+                                platform=job["platform"], field_size=tuple(job["field_size"]),
+                                start_pose=tuple(pose), relay=bool(job.get("relay"))), number, sock)
+             for k, (pose, number, sock) in enumerate(zip(poses, numbers, listeners))]
+    return Program(proc, ports, work, private_tmp, uid, int(limits["output_bytes"]), t0)
 
 
 def pump(prog: Program, *, wall_s: float, grace_s: float, stop: Callable[[], Optional[str]],
@@ -156,8 +185,10 @@ def pump(prog: Program, *, wall_s: float, grace_s: float, stop: Callable[[], Opt
         pipe = getattr(prog.proc, name)
         os.set_blocking(pipe.fileno(), False)
         sel.register(pipe, selectors.EVENT_READ, name)
-    prog.listener.setblocking(False)
-    sel.register(prog.listener, selectors.EVENT_READ, "listen")
+    for k, link in enumerate(prog.ports):
+        assert link.listener is not None
+        link.listener.setblocking(False)
+        sel.register(link.listener, selectors.EVENT_READ, ("listen", k))
     if prog.port.relay:  # the server's lines for the program come on stdin
         os.set_blocking(0, False)
         sel.register(0, selectors.EVENT_READ, "relay")
@@ -182,7 +213,10 @@ def pump(prog: Program, *, wall_s: float, grace_s: float, stop: Callable[[], Opt
                 next_count = now + COUNT_EVERY_S
             _reap_exited(prog, now)
             for key, _ in sel.select(max(0.0, min(0.05, end_at - now))):
-                {"listen": _accept, "conn": _converse, "relay": _relay_in}.get(key.data, _collect)(prog, sel, key)
+                if isinstance(key.data, tuple):  # ("listen" | "conn", robot k)
+                    (_accept if key.data[0] == "listen" else _converse)(prog, sel, prog.ports[key.data[1]])
+                else:
+                    (_relay_in if key.data == "relay" else _collect)(prog, sel, key)
     finally:
         sel.close()
 
@@ -201,19 +235,21 @@ def _reap_exited(prog: Program, now: float) -> None:
             prog.exited_at = now
 
 
-def _accept(prog: Program, sel: selectors.BaseSelector, key: selectors.SelectorKey) -> None:
-    """The program connects: greet it; no other connection is taken."""
+def _accept(prog: Program, sel: selectors.BaseSelector, link: PortLink) -> None:
+    """The program connects to a robot port: greet it; no other connection is taken on that port."""
+    assert link.listener is not None
     try:
-        conn, _ = prog.listener.accept()
+        conn, _ = link.listener.accept()
     except OSError:
         return
-    sel.unregister(prog.listener)
-    prog.listener.close()
-    prog.conn = conn
+    sel.unregister(link.listener)
+    link.listener.close()
+    link.listener = None
+    link.conn = conn
     conn.setblocking(False)
-    send(conn, prog.port.greeting())
-    sel.register(conn, selectors.EVENT_READ, "conn")
-    if prog.port.relay:
+    send(conn, link.robot.greeting())
+    sel.register(conn, selectors.EVENT_READ, ("conn", prog.ports.index(link)))
+    if link.robot.relay:
         _to_server(b"C\n")
 
 
@@ -247,29 +283,32 @@ def _relay_in(prog: Program, sel: selectors.BaseSelector, key: selectors.Selecto
             out += prog.port.from_robot(text[2:])
         elif text.startswith("E"):
             prog.run_ended = text[2:] or "the run ended"
-    if prog.conn is not None and out:
-        send(prog.conn, out)
+    conn = prog.ports[0].conn
+    if conn is not None and out:
+        send(conn, out)
 
 
-def _converse(prog: Program, sel: selectors.BaseSelector, key: selectors.SelectorKey) -> None:
-    """Bytes from the program on the robot port: answer; hang up once the path came or the program did."""
-    assert prog.conn is not None
+def _converse(prog: Program, sel: selectors.BaseSelector, link: PortLink) -> None:
+    """Bytes from the program on a robot port: answer; hang up once the path came or the program did.
+    Every port's path in: the end is near (``grace_s``)."""
+    assert link.conn is not None
+    port = link.robot
     try:
-        data = prog.conn.recv(65536)
+        data = link.conn.recv(65536)
     except BlockingIOError:
         return
     except OSError:
         data = b""
-    replies, done = prog.port.feed(data, time.monotonic() - prog.t0)
-    send(prog.conn, replies)
-    if prog.port.forward:
-        _to_server(b"".join(b"R " + line.encode() + b"\n" for line in prog.port.forward))
-        prog.port.forward.clear()
+    replies, done = port.feed(data, time.monotonic() - prog.t0)
+    send(link.conn, replies)
+    if port.forward:
+        _to_server(b"".join(b"R " + line.encode() + b"\n" for line in port.forward))
+        port.forward.clear()
     if done:
-        sel.unregister(prog.conn)
-        prog.conn.close()
-        prog.conn = None
-        if prog.port.path is not None:
+        sel.unregister(link.conn)
+        link.conn.close()
+        link.conn = None
+        if all(p.robot.path is not None for p in prog.ports):
             prog.path_mono = time.monotonic()
 
 
@@ -319,7 +358,7 @@ def reap(prog: Program, *, is_pid1: bool, cgroup: Optional[ProgramCgroup]) -> bo
             break
         if pid == 0:
             break
-    for f in (prog.proc.stdout, prog.proc.stderr, prog.conn, prog.listener):
+    for f in (prog.proc.stdout, prog.proc.stderr, *(s for p in prog.ports for s in (p.conn, p.listener))):
         try:
             f.close()  # type: ignore[union-attr]
         except (OSError, AttributeError):
@@ -330,17 +369,21 @@ def reap(prog: Program, *, is_pid1: bool, cgroup: Optional[ProgramCgroup]) -> bo
 
 
 def report(prog: Program, *, ended_itself: bool, wall_s: float, cgroup: Optional[ProgramCgroup]) -> dict[str, Any]:
-    """The result of a reaped program (all but ``timed_out`` and ``launch_error``); times in s, sizes in KiB."""
+    """The result of a reaped program (all but ``timed_out`` and ``launch_error``); times in s, sizes in KiB.
+
+    The robot port's fields (``robot_port``, ``path``, ``path_at_s``, ``connected``, ``port_log``,
+    ``refused``, ``port_unlogged``) are robot 0's; ``ports`` has them for each robot port.
+    """
     rc = prog.proc.returncode
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
     peak = cgroup.peak_bytes() if cgroup is not None else None
+    ports = [{"robot_port": p.number, "path": p.robot.path, "path_at_s": p.robot.path_at,
+              "connected": p.robot.connected, "port_log": p.robot.log, "refused": p.robot.refused,
+              "port_unlogged": p.robot.unlogged} for p in prog.ports]
     return {
         "exit_code": rc if ended_itself and rc is not None and rc >= 0 else None,
         "signal": -rc if ended_itself and rc is not None and rc < 0 else None,
-        "procs_max": prog.procs_max, "robot_port": prog.port_no,
-        "path": prog.port.path, "path_at_s": prog.port.path_at, "connected": prog.port.connected,
-        "port_log": prog.port.log, "refused": prog.port.refused, "port_unlogged": prog.port.unlogged,
-        "run_ended": prog.run_ended,
+        "procs_max": prog.procs_max, **ports[0], "ports": ports, "run_ended": prog.run_ended,
         "wall_s": round(wall_s, 3), "cpu_s": round(ru.ru_utime + ru.ru_stime, 3), "max_rss_kib": ru.ru_maxrss,
         "memory_peak_kib": None if peak is None else peak >> 10,
         "memory_oom_kills": cgroup.oom_kills() if cgroup is not None else None,

@@ -34,15 +34,19 @@ def make_workdir(job: dict[str, Any], *, private_tmp: bool, uid: Optional[int], 
     return work
 
 
-def program_command(job: dict[str, Any], work: str, port: int) -> tuple[list[str], dict[str, str]]:
-    """(argv, environment) of the program whose robot port is 127.0.0.1:``port``.
+def program_command(job: dict[str, Any], work: str, ports: list[int]) -> tuple[list[str], dict[str, str]]:
+    """(argv, environment) of the program whose robot ports are 127.0.0.1:``ports`` (robot 0's first).
 
     Arguments may name the inputs: ``{robot_port}``, ``{env_file}``, ``{start}``,
-    ... (each ``TWB_<NAME>`` of the environment, in lower case).
+    ... (each ``TWB_<NAME>`` of the environment, in lower case).  A multi-robot
+    job (``start_poses`` in the job) also gets ``TWB_ROBOT_PORTS``, every port
+    in robot order, comma-separated; ``TWB_ROBOT_PORT`` is robot 0's.
     """
     env = {k: str(v) for k, v in job["env"].items()}
-    env.update({"TWB_ROBOT_HOST": "127.0.0.1", "TWB_ROBOT_PORT": str(port), "HOME": work, "TMPDIR": work,
+    env.update({"TWB_ROBOT_HOST": "127.0.0.1", "TWB_ROBOT_PORT": str(ports[0]), "HOME": work, "TMPDIR": work,
                 "TWB_WORKDIR": work})
+    if job.get("start_poses"):
+        env["TWB_ROBOT_PORTS"] = ",".join(map(str, ports))
     env["TWB_ENV_FILE"] = os.path.join(work, env.get("TWB_ENV_FILE", "environment.json"))
     if "TWB_PATH_FILE" in env:  # a controller program's planned path
         env["TWB_PATH_FILE"] = os.path.join(work, env["TWB_PATH_FILE"])

@@ -46,6 +46,8 @@ class RunJob:
     planner_params: dict[str, Any] = dc_field(default_factory=dict)
     experiment_seed: int = 0
     planning_margin: float = 0.0
+    #: the uploaded planner program of the experiment (a multi-robot job's sends every robot's path), or None
+    program: Optional[int] = None
 
 
 def job_of(run: Run) -> RunJob:
@@ -54,7 +56,7 @@ def job_of(run: Run) -> RunJob:
     return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
                   list(e.goal), e.field, e.robot_radius, e.jitter, e.profile_overrides, e.controller or "schema",
                   dict(e.controller_params or {}), e.controller_program_id, e.robots, e.planner,
-                  dict(e.planner_params or {}), e.seed, e.planning_margin or 0.0)
+                  dict(e.planner_params or {}), e.seed, e.planning_margin or 0.0, e.program_id)
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:
