@@ -301,6 +301,12 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     metrics = fleet_metrics([r.poses for r in fleet.runs], fleet.outcomes, [r.t_end for r in fleet.runs],
                             [r.obstacle for r in fleet.runs], settings, clearance)
     metrics["planning_time_s"] = planning_time_s
+    if replanning(controller_params):
+        per = [replan_metrics([(e.index or 0, e.seconds or 0.0) for e in r.events if e.kind == "REPLAN"])
+               for r in fleet.runs]
+        for row, m in zip(metrics["robots"], per):
+            row.update(m)
+        metrics.update({k: sum(m[k] for m in per) for k in ("replans", "replan_failures", "replan_time_s")})
     out = []
     for i, run in enumerate(fleet.runs):
         lines = [[">", encode_path(paths[i]), run.t_start]]
