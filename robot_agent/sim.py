@@ -455,6 +455,7 @@ def warm_up() -> None:
     global _warm
     if _warm:
         return
+    from . import replan  # noqa: F401 - the planners it uses load here, not on the loop when a robot first replans
     from .backends import make_backend
     from .frames import field_layout
     from .params import robot_params
