@@ -42,6 +42,8 @@ from .stepper import COLLIDED, ENDED, State, control_fleet, run, settle_fleet
 from .world import World
 
 if TYPE_CHECKING:
+    from planners.environment import Environment
+
     from .replan import Replanner, Request, Result
 
 __all__ = ["SimCore", "SimEvent", "PoseLog", "State"]
@@ -148,7 +150,7 @@ class SimCore:
         #: runs :meth:`replan_requests` / :func:`robot_agent.replan.solve` / :meth:`apply_replan` (an agent,
         #: which plans in a worker thread)
         self.inline_replan = True
-        self._maps: dict[int, object] = {}  # replanning robots' static maps of their current path
+        self._maps: dict[int, "Environment"] = {}  # replanning robots' static maps of their current path
 
     # ------------------------------------------------------------------ time
 
