@@ -49,7 +49,8 @@ from .errors import NoPathFound
 from .grid import ConfigSpace
 from .moving import MovingObstacle, positions
 
-__all__ = ["SpaceTimeAStar", "TimedPath", "conflict_table", "mover_positions", "movers_table", "plan_timed"]
+__all__ = ["SpaceTimeAStar", "TimedPath", "conflict_table", "mover_positions", "movers_table", "plan_timed",
+           "without_waits"]
 
 _MOVES = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
 #: samples of each mover per time bucket
@@ -74,10 +75,11 @@ class TimedPath:
 
 
 def mover_positions(obstacles: Sequence[MovingObstacle], others: Sequence[TimedPath],
-                    t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centres ``(M, T, 2)`` (m) at times ``t`` (s) and radii ``(M,)`` (m) of moving obstacles, then timed paths."""
+                    t: np.ndarray, obstacle_time_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Centres ``(M, T, 2)`` (m) at times ``t`` (s) and radii ``(M,)`` (m) of moving obstacles, then timed paths;
+    the obstacles are where they are at their own time ``obstacle_time_s + t`` (a replan mid-run)."""
     tt = np.asarray(t, dtype=float)
-    centres = [positions(obstacles, tt)] if obstacles else []
+    centres = [positions(obstacles, tt + obstacle_time_s)] if obstacles else []
     centres += [o.position(tt)[None] for o in others]
     radii = [o.radius for o in obstacles] + [o.radius for o in others]
     return (np.concatenate(centres) if centres else np.zeros((0, len(tt), 2))), np.array(radii, dtype=float)
@@ -169,12 +171,18 @@ class SpaceTimeAStar(Planner):
     def solve(self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any],
               seed: int) -> tuple[np.ndarray, dict[str, Any]]:
         timed, info = plan_timed(space, start, goal, params)
-        # a wait repeats a point: keep it once, with the time the robot arrives there
-        first = np.flatnonzero(np.concatenate([[True], np.hypot(*np.diff(timed.points, axis=0).T) > 1e-9]))
-        path = timed.points[first]
-        path[-1] = timed.points[-1]  # the exact goal
-        info["times_s"] = [round(float(t), 4) for t in timed.times[first]]
+        path, times = without_waits(timed)
+        info["times_s"] = [round(float(t), 4) for t in times]
         return path, info
+
+
+def without_waits(timed: TimedPath) -> tuple[np.ndarray, np.ndarray]:
+    """The points ``(N, 2)`` (m) of a timed path with each wait (a repeated point) kept once, and the times (s)
+    the robot arrives at them: what a follower that cannot wait drives."""
+    first = np.flatnonzero(np.concatenate([[True], np.hypot(*np.diff(timed.points, axis=0).T) > 1e-9]))
+    path = timed.points[first]
+    path[-1] = timed.points[-1]  # the exact goal
+    return path, timed.times[first]
 
 
 def _search(table: np.ndarray, edges: np.ndarray, h_s: np.ndarray, s_cell: tuple[int, int],
@@ -225,27 +233,32 @@ def _search(table: np.ndarray, edges: np.ndarray, h_s: np.ndarray, s_cell: tuple
 
 
 def movers_table(space: ConfigSpace, params: dict[str, Any], horizon_s: float,
-                 obstacles: Sequence[MovingObstacle] = (), others: Sequence[TimedPath] = ()) -> np.ndarray:
-    """The conflict table of ``obstacles`` and ``others`` on ``space``'s lattice over ``horizon_s`` (s), in
-    buckets of ``cell / speed`` s, inflated and widened as :class:`SpaceTimeAStar`'s parameters say."""
+                 obstacles: Sequence[MovingObstacle] = (), others: Sequence[TimedPath] = (),
+                 obstacle_time_s: float = 0.0) -> np.ndarray:
+    """The conflict table of ``obstacles`` (from their time ``obstacle_time_s``, s) and ``others`` on
+    ``space``'s lattice over ``horizon_s`` (s), in buckets of ``cell / speed`` s, inflated and widened as
+    :class:`SpaceTimeAStar`'s parameters say."""
     cell, dt = float(params["cell"]), float(params["cell"]) / float(params["speed"])
     buckets = min(int(math.ceil(horizon_s / dt)) + 1, MAX_BUCKETS)
     free, _ = _lattice(space, cell)
     centres, radii = mover_positions(obstacles, others, np.arange(buckets * SAMPLES_PER_BUCKET + 1)
-                                     * (dt / SAMPLES_PER_BUCKET))
+                                     * (dt / SAMPLES_PER_BUCKET), obstacle_time_s)
     inflate = space.radius + cell * math.sqrt(0.5) + float(params["clearance"])
     return conflict_table(centres, radii, free.shape, cell, buckets, inflate,
                           int(math.ceil(float(params["time_margin_s"]) / dt)))
 
 
 def plan_timed(space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any],
-               others: Sequence[TimedPath] = (), table: np.ndarray | None = None) -> tuple[TimedPath, dict[str, Any]]:
+               others: Sequence[TimedPath] = (), table: np.ndarray | None = None,
+               obstacle_time_s: float = 0.0) -> tuple[TimedPath, dict[str, Any]]:
     """The earliest path from ``start`` to ``goal`` (m) avoiding the environment's moving obstacles and the
     ``others`` (timed paths: other robots), under :class:`SpaceTimeAStar`'s parameters; its points ``(N, 2)``
     with their times (a wait repeats a point) as a :class:`TimedPath` of the robot's radius, and an info dict.
 
     ``table``: a conflict table already built for this lattice and buckets of ``cell / speed`` s
-    (:func:`movers_table`); then ``others`` and the environment's moving obstacles are in it already."""
+    (:func:`movers_table`); then ``others`` and the environment's moving obstacles are in it already.
+    ``obstacle_time_s`` (s): the path starts at that obstacle time (a robot replanning mid-run); the
+    path's own times still count from 0."""
     cell, speed = float(params["cell"]), float(params["speed"])
     free, edges = _lattice(space, cell)
     s_cell, g_cell = _attach(space, start, free, cell), _attach(space, goal, free, cell)
@@ -259,9 +272,9 @@ def plan_timed(space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: 
     t0 = math.hypot(*(np.array([s_cell[1], s_cell[0]]) * cell - start)) / speed
     obstacles = space.env.moving_obstacles
     if table is None:
-        latest = max([o.delay_s for o in obstacles] + [float(o.times[-1]) for o in others] + [0.0])
+        latest = max([o.delay_s - obstacle_time_s for o in obstacles] + [float(o.times[-1]) for o in others] + [0.0])
         horizon = float(params["horizon_s"]) or 3.0 * (h[s_cell] / speed + t0) + params["arrive_s"] + 20.0 + latest
-        table = movers_table(space, params, horizon, obstacles, others)
+        table = movers_table(space, params, horizon, obstacles, others, obstacle_time_s)
     buckets = len(table)
     stay = int(math.ceil(float(params["arrive_s"]) / dt))
     times, cells, expanded = _search(table, edges, h / speed, s_cell, g_cell, t0, dt, stay, bool(params["wait"]))

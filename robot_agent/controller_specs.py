@@ -18,6 +18,10 @@ path), the validated ``params`` dict and the control step ``dt`` (s).  The
 follower's arrival, alignment, stall, timeout and limits apply as for the
 built-ins.  Built-in names cannot be taken over.  Everything here is plain
 Python (no numba): the server and the sandbox import it cheaply.
+
+Parameters with ``compiled=False`` (regulated pure pursuit's ``replan*``) are
+not in the compiled row: the agent reads them in Python
+(:mod:`robot_agent.replan`), so the kernels and their numbers stay as they were.
 """
 
 from __future__ import annotations
@@ -30,8 +34,8 @@ from typing import Any, Mapping, Optional, Protocol, Sequence
 
 import numpy as np
 
-__all__ = ["BUILTINS", "DEFAULT_CONTROLLER", "ENTRY_POINT_GROUP", "ControllerError", "ControllerSpec", "Param",
-           "PluginController", "Selection", "available_controllers", "controller_report", "controller_spec",
+__all__ = ["BUILTINS", "DEFAULT_CONTROLLER", "ENTRY_POINT_GROUP", "REPLAN_PARAMS", "ControllerError", "ControllerSpec",
+           "Param", "PluginController", "Selection", "available_controllers", "controller_report", "controller_spec",
            "register_controller", "select"]
 
 ENTRY_POINT_GROUP = "teleworkbench.controllers"
@@ -52,7 +56,8 @@ class ControllerError(ValueError):
 @dataclass(frozen=True)
 class Param:
     """One controller parameter: ``name`` (its unit as the suffix), ``unit``, ``default`` and the
-    closed range ``[low, high]`` it must lie in, and what it does."""
+    closed range ``[low, high]`` it must lie in, and what it does; an ``integer`` one takes whole numbers
+    only (a switch: 0 or 1); one not ``compiled`` is read in Python, not by the compiled controller."""
 
     name: str
     unit: str
@@ -60,11 +65,28 @@ class Param:
     low: float
     high: float
     doc: str = ""
+    integer: bool = False
+    compiled: bool = True
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form (what ``GET /api/v1/controllers`` lists)."""
-        return {"name": self.name, "unit": self.unit, "default": self.default, "range": [self.low, self.high],
-                "description": self.doc}
+        """JSON form (what ``GET /api/v1/controllers`` lists); integer parameters say so."""
+        out = {"name": self.name, "unit": self.unit, "default": self.default, "range": [self.low, self.high],
+               "description": self.doc}
+        if self.integer:
+            out["integer"] = True
+        return out
+
+
+#: replanning (robot_agent.replan): off by default, so every run without it stays as it was
+REPLAN_PARAMS = (
+    Param("replan", "0|1", 0, 0, 1, "1: check the path ahead 5 times a second and, when a moving obstacle "
+          "(where it will be) or another robot (where it is) blocks it, replan to the goal with st_astar "
+          "around the obstacles' known trajectories", integer=True, compiled=False),
+    Param("replan_horizon_s", "s", 3.0, 0.5, 30.0, "how far ahead the check looks, in seconds of driving at "
+          "speed_m_s", compiled=False),
+    Param("replan_min_interval_s", "s", 1.0, 0.2, 60.0, "at least this long between two replans",
+          compiled=False),
+)
 
 
 @dataclass(frozen=True)
@@ -113,7 +135,8 @@ BUILTINS: dict[str, ControllerSpec] = {s.name: s for s in (
                              "scales the speed by distance / proximity_m (0: no proximity regulation)"),
                        Param("approach_m", "m", 0.15, 0.0, 1.0, "within this of the goal the speed scales by "
                              "distance / approach_m"),
-                       Param("min_speed_m_s", "m/s", 0.03, 0.0, 0.5, "floor of the regulated speed"))),
+                       Param("min_speed_m_s", "m/s", 0.03, 0.0, 0.5, "floor of the regulated speed"),
+                       *REPLAN_PARAMS)),
     ControllerSpec("kanayama", 3, "Kanayama's trajectory tracking: a reference pose moves along the path; "
                    "feedback on its error in the robot frame",
                    "Kanayama, Kimura, Miyazaki, Noguchi 1990, ICRA, 'A stable tracking control method for an "
@@ -220,10 +243,16 @@ class Selection:
 
     @property
     def row(self) -> np.ndarray:
-        """The parameters in spec order, zero-padded to the table's width."""
+        """The compiled parameters in spec order, zero-padded to the table's width."""
         out = np.zeros(_SLOTS)
-        out[:len(self.spec.params)] = [self.params[p.name] for p in self.spec.params]
+        values = [self.params[p.name] for p in self.spec.params if p.compiled]
+        out[:len(values)] = values
         return out
+
+    @property
+    def replans(self) -> bool:
+        """Whether the robot replans around what blocks its path (``replan`` = 1)."""
+        return self.params.get("replan", 0.0) == 1.0
 
 
 def select(name: Optional[str] = None, params: Optional[Mapping[str, Any]] = None) -> Selection:
@@ -244,6 +273,9 @@ def select(name: Optional[str] = None, params: Optional[Mapping[str, Any]] = Non
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not p.low <= v <= p.high:
             raise ControllerError(f"controller_params.{p.name}", f"controller_params.{p.name} must be a number in "
                                                                  f"[{p.low:g}, {p.high:g}] ({p.unit}), got {v!r}")
+        if p.integer and v != int(v):
+            raise ControllerError(f"controller_params.{p.name}", f"controller_params.{p.name} must be a whole "
+                                                                 f"number in [{p.low:g}, {p.high:g}], got {v!r}")
         out[p.name] = float(v)
     if spec.name == "regulated_pure_pursuit" and out["min_lookahead_m"] > out["max_lookahead_m"]:
         raise ControllerError("controller_params.min_lookahead_m", "controller_params.min_lookahead_m must not "

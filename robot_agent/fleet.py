@@ -98,9 +98,11 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
     (NaN: no hold); see the module's docstring.  ``depends[i]`` ``(N, N_i)`` (optional, int): execute by
     the plan's order of passage instead of the clock: robot ``i`` leaves waypoint ``k`` only once every
     robot ``h`` reached its waypoint ``depends[i][h, k]``
-    (:func:`planners.dependencies.fleet_dependencies`; the departure times stay lower bounds).  The seed gives every robot's noise.  Raises
-    :class:`~robot_agent.headless.PlacementRefused` naming the robot whose start is not free and
-    ``ValueError`` for mismatched or too many robots."""
+    (:func:`planners.dependencies.fleet_dependencies`; the departure times stay lower bounds).  The seed gives every robot's noise.
+    A replanning controller (``replan`` = 1) replans each robot around the moving obstacles and the other
+    robots where they stand (:mod:`robot_agent.replan`), in uncoordinated fleets only (no ``depart`` or
+    ``depends``).  Raises :class:`~robot_agent.headless.PlacementRefused` naming the robot whose start is not
+    free and ``ValueError`` for mismatched or too many robots or a coordinated fleet that would replan."""
     n = len(paths)
     if not 1 <= n <= MAX_FLEET:
         raise ValueError(f"a fleet has 1 to {MAX_FLEET} robots, got {n}")
@@ -111,6 +113,9 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
     if depends is not None and len(depends) != n:
         raise ValueError(f"{n} paths but {len(depends)} dependency tables")
     chosen = select(controller, controller_params)
+    if chosen.replans and (depends is not None or any(d is not None for d in depart or ())):
+        raise ValueError("controller_params.replan: a coordinated fleet (departure times or dependencies) cannot "
+                         "replan: a new path would break its coordination")
     params = robot_params(profile)
     size = (float(area[0]), float(area[1]))
     world = World(np.array([size]), np.zeros(n, dtype=np.int64), np.zeros((n, 2)), np.tile(size, (n, 1)),
@@ -239,6 +244,8 @@ def _run_timed(job: _Job) -> tuple[list[list[SimEvent]], list[list[tuple[int, fl
                     events[i].append(e)
             elif e.kind == "WP":
                 events[i].append(SimEvent(i, "WP", e.t, index=(e.index or 0) + first))
+            elif e.kind == "REPLAN":  # only uncoordinated fleets replan: one leg, numbered as the robot does
+                events[i].append(e)
             elif e.kind == "DONE":
                 if last_leg:
                     events[i].append(e)

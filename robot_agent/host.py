@@ -142,6 +142,7 @@ class AgentHost:
         self._shipping = asyncio.Lock()  # one tracker shipment at a time (see _ship_poses)
         self.core = SimCore(self.params, make_backend(backend, robots, self.params), self.world,
                             log_poses=self.sink is not None)
+        self.core.inline_replan = False  # replans are planned in a worker thread (_replan)
         self._chunk = max(1, _CHUNK_ROBOT_STEPS // robots)  # steps per compiled call when running ahead
         # localisation lines (T,T,O): the tracker's poses, due after the mode's latency
         self._po_queue: deque[tuple[float, int, str]] = deque()
@@ -385,12 +386,27 @@ class AgentHost:
                     self._dispatch(events)
                 if self._timers and self._timers[0][0] <= core.step_count:
                     self._fire_timers()
-                if not core.busy() or time.perf_counter() > end:
+                if not core.busy() or time.perf_counter() > end or core.replan_pending():
                     break
+            if core.replan_pending():
+                await self._replan()
+                continue
             if not core.busy() or core.step_count + 1 <= self._due():
                 await asyncio.sleep(0)
             else:
                 await self._wait((core.step_count + 1 - self._due()) / steps_per_s)
+
+    async def _replan(self) -> None:
+        """The replanning checks due now (:mod:`robot_agent.replan`): the blocked robots' new paths are planned
+        in a worker thread while the simulation waits (so a run replans the same at every time scale); the
+        event loop serves the connections meanwhile, and a path that changed meanwhile drops its replan."""
+        from .replan import solve
+
+        for req in self.core.replan_requests():
+            res = await asyncio.to_thread(solve, req)
+            ev = self.core.apply_replan(req, res)
+            if ev is not None:
+                self._dispatch([ev])
 
     def localisation_changed(self) -> None:
         """A connection subscribed to ``PO`` lines or left: which robots have subscribers now."""

@@ -109,10 +109,12 @@ class RobotState(str, Enum):
 
 
 class Event(str, Enum):
-    """Kinds of ``EV`` lines; ``FAIL`` carries a reason (COLLISION, TIMEOUT, STALLED, STOPPED)."""
+    """Kinds of ``EV`` lines; ``FAIL`` carries a reason (COLLISION, TIMEOUT, STALLED, STOPPED); ``REPLAN`` the
+    new path's number of points and the planning time (a replanning controller, docs/controllers.md)."""
 
     START = "START"
     WP = "WP"
+    REPLAN = "REPLAN"
     DONE = "DONE"
     FAIL = "FAIL"
 
@@ -730,15 +732,21 @@ def format_status(state: RobotState | str, pose: Sequence[float], t: float) -> s
     )
 
 
-def format_event(kind: Event | str, t: float, *, index: int | None = None, reason: str | None = None) -> str:
+def format_event(kind: Event | str, t: float, *, index: int | None = None, reason: str | None = None,
+                 seconds: float | None = None) -> str:
     """``EV,START,t``, ``EV,WP,i,t``, ``EV,DONE,t`` or ``EV,FAIL,<reason>,t`` (t in seconds); a collision
-    with moving obstacle ``index`` is ``EV,FAIL,COLLISION,OBSTACLE,<index>,t``."""
+    with moving obstacle ``index`` is ``EV,FAIL,COLLISION,OBSTACLE,<index>,t``; a replan
+    ``EV,REPLAN,<index points>,<seconds as ms>,t`` (0 points: none found)."""
     k = Event(kind)
     ts = _fmt(t, 3)
     if k is Event.WP:
         if index is None:
             raise ValueError("`index` is required for WP events")
         return f"EV,WP,{index},{ts}"
+    if k is Event.REPLAN:
+        if index is None:
+            raise ValueError("`index` is required for REPLAN events")
+        return f"EV,REPLAN,{int(index)},{_fmt((seconds or 0.0) * 1000.0, 1)},{ts}"
     if k is Event.FAIL:
         if reason not in FAIL_REASONS:
             raise ValueError(f"`reason` must be one of {', '.join(FAIL_REASONS)}")

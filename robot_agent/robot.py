@@ -320,8 +320,8 @@ class Robot:
 
     def _deliver(self, ev: SimEvent) -> None:
         """Send a core event to the path's sender (log it when nobody is left)."""
-        line = format_event(ev.kind, ev.t, index=ev.index, reason=ev.reason)
-        if ev.kind in ("DONE", "FAIL"):
+        line = ev.line
+        if ev.kind in ("DONE", "FAIL", "REPLAN"):
             log.info("%s: %s", self.robot_id, line)
         owner = self.owner
         if ev.kind in ("DONE", "FAIL"):

@@ -27,8 +27,8 @@ since the path began.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -37,8 +37,14 @@ from .controller_specs import Selection
 from .controllers import DIRECT, MEMORY, PARAM_SLOTS, SCHEMA
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .params import RobotParams
+from .protocol import format_event
 from .stepper import COLLIDED, ENDED, State, control_fleet, run, settle_fleet
 from .world import World
+
+if TYPE_CHECKING:
+    from planners.environment import Environment
+
+    from .replan import Replanner, Request, Result
 
 __all__ = ["SimCore", "SimEvent", "PoseLog", "State"]
 
@@ -49,10 +55,12 @@ _MOVING = int(State.MOVING)  # a plain int: numpy scalars compare with it faster
 class SimEvent:
     """An event of robot ``robot`` at experiment time ``t`` (s).
 
-    ``kind`` is START, WP, DONE or FAIL; ``index`` the path point of a WP
-    (0-based), or of a ``FAIL,COLLISION`` the moving obstacle hit (None:
-    a block, a wall or a robot); ``reason`` the FAIL reason (COLLISION,
-    TIMEOUT, STALLED, STOPPED).
+    ``kind`` is START, WP, REPLAN, DONE or FAIL; ``index`` the path point of
+    a WP (0-based), of a ``FAIL,COLLISION`` the moving obstacle hit (None:
+    a block, a wall or a robot), of a REPLAN the new path's number of points
+    (0: none was found); ``reason`` the FAIL reason (COLLISION, TIMEOUT,
+    STALLED, STOPPED); ``seconds`` the wall time a REPLAN took (not compared:
+    it is the machine's, not the run's).
     """
 
     robot: int
@@ -60,6 +68,12 @@ class SimEvent:
     t: float
     index: int | None = None
     reason: str | None = None
+    seconds: float | None = field(default=None, compare=False)
+
+    @property
+    def line(self) -> str:
+        """The ``EV`` line of this event (docs/protocol.md)."""
+        return format_event(self.kind, self.t, index=self.index, reason=self.reason, seconds=self.seconds)
 
 
 class PoseLog:
@@ -130,6 +144,13 @@ class SimCore:
                          np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(3))
         self._dirty = True
         self._rebuild_paths()
+        #: replanning robots' state (robot_agent.replan), made with the first path that replans
+        self.replanner: "Replanner | None" = None
+        #: True: :meth:`advance` replans itself when a check is due; False: it stops there and the caller
+        #: runs :meth:`replan_requests` / :func:`robot_agent.replan.solve` / :meth:`apply_replan` (an agent,
+        #: which plans in a worker thread)
+        self.inline_replan = True
+        self._maps: dict[int, "Environment"] = {}  # replanning robots' static maps of their current path
 
     # ------------------------------------------------------------------ time
 
@@ -181,7 +202,19 @@ class SimCore:
         mask[i] = True
         self.backend.begin_path(mask, self.keys, from_rest)
         self.timeout[i] = timeout_steps(self._paths[i], self.belief(i), self.params)
+        self._begin_replanning(i, controller)
         return replaced
+
+    def _begin_replanning(self, i: int, controller: Selection | None) -> None:
+        """Robot ``i``'s new path replans when its controller says so (:mod:`robot_agent.replan`)."""
+        self._maps.pop(i, None)
+        if self.replanner is None and (controller is None or not controller.replans):
+            return
+        from .replan import Replanner, Settings  # planners load only where a robot replans
+
+        if self.replanner is None:
+            self.replanner = Replanner(self.n, self.dt)
+        self.replanner.begin(i, Settings.of(controller, self.params.max_speed_m_s), self.step_count)
 
     def drive(self, i: int, v: float, w: float, key: int, watchdog_s: float) -> SimEvent | None:
         """Robot ``i`` drives with body velocities ``(v, w)`` (m/s, rad/s; clipped to the profile's top speeds)
@@ -243,14 +276,23 @@ class SimCore:
     def advance(self, max_steps: int) -> list[SimEvent]:
         """Advance up to ``max_steps`` control steps, stopping early once nothing moves any more
         (then :meth:`busy` is false); returns the events of those steps in order."""
-        if self._dirty:
-            self._rebuild_paths()
         events: list[SimEvent] = []
         left = int(max_steps)
         while left > 0 and self.busy():
+            chunk = left
+            check = self._next_check()
+            if check is not None:
+                if check <= self.step_count:
+                    if not self.inline_replan:
+                        break  # the caller replans (replan_pending)
+                    events += self.replan()
+                    continue
+                chunk = min(left, check - self.step_count)
+            if self._dirty:
+                self._rebuild_paths()
             if isinstance(self.backend, Emulated) and not self._plugin_moving():
                 steps, n_ev, n_pose = run(
-                    self.backend.kind, left, self.step_count, self.log_poses, self._ctrl(), self.backend.arrays,
+                    self.backend.kind, chunk, self.step_count, self.log_poses, self._ctrl(), self.backend.arrays,
                     self.world.arrays, self.world.radius, self.world.step_travel,
                     (self._events, self._pose_rows, self._pose_xyt, *self._scratch), self.gains, self.backend.fg)
                 if n_pose:
@@ -263,6 +305,77 @@ class SimCore:
             left -= steps
             if len(records):
                 events += self._records_to_events(records)
+        return events
+
+    # ------------------------------------------------------------------ replanning
+
+    def _next_check(self) -> int | None:
+        """The step of the next replanning check of a moving robot, None when no moving robot replans."""
+        if self.replanner is None or not self.replanner.settings:
+            return None
+        return self.replanner.next_step(self.state == _MOVING)
+
+    def replan_pending(self) -> bool:
+        """Whether a replanning check is due now (:meth:`advance` stopped there when not ``inline_replan``)."""
+        check = self._next_check()
+        return check is not None and check <= self.step_count
+
+    def replan_requests(self) -> list["Request"]:
+        """Check the path ahead of every robot whose check is due now; the replans of those it finds
+        blocked (cheap: numpy over the samples ahead; :mod:`robot_agent.replan`)."""
+        from .replan import Request, blocked, path_ahead, standing, static_map
+
+        rp, world = self.replanner, self.world
+        if rp is None:
+            return []
+        out = []
+        belief = self.backend.belief
+        for i in rp.due(self.step_count, self.state == _MOVING):
+            if self.aligning[i] or not rp.may_replan(i, self.step_count):
+                continue
+            s = rp.settings[i]
+            ahead, dist = path_ahead(self._paths[i], int(self.cmem[i, 0]), float(self.cmem[i, 1]),
+                                     s.horizon_s * s.speed_m_s)
+            env = self._maps.get(i)
+            if env is None:
+                env = self._maps[i] = static_map(world.area[i], world.world_blocks_local(i), world.moving_local(i))
+            same = np.flatnonzero((world.world_of == world.world_of[i]) & (np.arange(self.n) != i))
+            others = belief[same, :2] + world.origin[same] - world.origin[i]
+            t_obs = float(self.k[i]) * self.dt
+            if blocked(ahead, dist / s.speed_m_s, env.moving_obstacles, t_obs, others, world.radius):
+                goal = self._paths[i][-1]
+                out.append(Request(i, int(rp.generation[i]), env, world.radius, (float(belief[i, 0]),
+                                   float(belief[i, 1])), (float(goal[0]), float(goal[1]), float(goal[2])), t_obs,
+                                   standing(others, world.radius)))
+        return out
+
+    def apply_replan(self, req: "Request", res: "Result") -> SimEvent | None:
+        """Follow a replan's new path from the next step (when the robot still follows the path it was
+        planned for); the ``REPLAN`` event (0 points when none was found), or None when it came too late."""
+        rp, i = self.replanner, req.robot
+        if rp is None or rp.generation[i] != req.generation or not self.moving(i) or self.aligning[i]:
+            return None
+        rp.last[i] = self.step_count
+        if res.path is None:
+            return SimEvent(i, "REPLAN", self.t, index=0, seconds=res.seconds)
+        points = np.ascontiguousarray(res.path, dtype=float).reshape(-1, 3)
+        self._paths[i] = points
+        self._dirty = True
+        self.wp[i] = 0
+        self.cmem[i] = 0.0
+        self.timeout[i] = max(int(self.timeout[i]), int(self.k[i]) + timeout_steps(points, self.belief(i),
+                                                                                      self.params))
+        return SimEvent(i, "REPLAN", self.t, index=len(points), seconds=res.seconds)
+
+    def replan(self) -> list[SimEvent]:
+        """Check the due robots and replan the blocked ones now, in this thread; their ``REPLAN`` events."""
+        from .replan import solve
+
+        events = []
+        for req in self.replan_requests():
+            ev = self.apply_replan(req, solve(req))
+            if ev is not None:
+                events.append(ev)
         return events
 
     def _ctrl(self) -> tuple:
@@ -344,6 +457,7 @@ def warm_up() -> None:
     global _warm
     if _warm:
         return
+    from . import replan  # noqa: F401 - the planners it uses load here, not on the loop when a robot first replans
     from .backends import make_backend
     from .frames import field_layout
     from .params import robot_params

@@ -79,6 +79,14 @@ class World:
         b[:, :2] -= self.origin[owner]
         return b
 
+    def world_blocks_local(self, i: int) -> np.ndarray:
+        """Every block of robot ``i``'s world (whoever built it), ``(B, 5)`` in its frame: its static map."""
+        w = self.world_of[i]
+        mine = [b for owner, b in sorted(self._blocks.items()) if self.world_of[owner] == w]
+        out = np.concatenate(mine) if mine else np.zeros((0, 5))
+        out[:, :2] -= self.origin[i]
+        return out
+
     def _rebuild(self) -> None:
         """Per-world block tables ``(W, Bmax, 2)``, blocks packed at the front."""
         per_world: list[list[np.ndarray]] = [[] for _ in range(len(self.sizes))]
@@ -114,6 +122,10 @@ class World:
                                    for par, pts in obstacles]
         self._rebuild_moving()
         return old
+
+    def moving_local(self, owner: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Robot ``owner``'s moving obstacles as :meth:`set_moving` took them (params, waypoints in its frame)."""
+        return [(par.copy(), pts - self.origin[owner]) for par, pts in self._moving.get(owner, [])]
 
     def moving_count(self, owner: int) -> int:
         """How many moving obstacles robot ``owner`` has."""

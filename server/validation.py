@@ -58,6 +58,9 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
         raise PreflightError(f"{exc.field}: {exc}" if exc.field == "controller" else str(exc)) from None
     params = _planner_params(body)
     if body.robots is not None:
+        if body.planner == FLEET_PLANNER and controller.replans:
+            raise PreflightError("controller_params.replan: the robots of a prioritized plan keep to its "
+                                 "coordination and cannot replan (replan with an uncoordinated planner, e.g. fmm)")
         robots = _fleet_robots(body, env, robot_radius, planning_margin)
         return Preflight(env, robots[0]["start"], robots[0]["goal"], params, None, controller.params, robots)
     radius = robot_radius + (planning_margin if body.planner is not None else 0.0)

@@ -212,3 +212,35 @@ def test_fleet_preflight_names_the_field():
     for robots, match in cases:
         with pytest.raises(PreflightError, match=match):
             preflight_fleet(env, robots, 0.045)
+
+
+def test_an_uncoordinated_fleet_that_replans_swaps_some_corners_and_counts_the_replans():
+    """Replanning robots (regulated pure pursuit, ``replan`` = 1) of the uncoordinated swap avoid each other
+    where they stand: without it all four collide in the middle, with it some arrive; the replans are
+    counted per robot and in all, and the same seed replays them."""
+    from robot_agent.controller_specs import select
+
+    env = json.loads((Path(__file__).resolve().parents[1] / "planners" / "data" / "swap.json").read_text())
+    job = json.loads((EXAMPLES / "swap-uncoordinated.json").read_text())
+    runs = {}
+    for on in (0, 1, 1):
+        params = select("regulated_pure_pursuit", {"replan": on}).params
+        runs.setdefault(on, []).append(compute.fleet_job(env, job["robots"], job["planner"], {}, job["seed"], 120.0,
+                                                         0.045, controller="regulated_pure_pursuit",
+                                                         controller_params=params))
+    off, on, again = runs[0][0], runs[1][0], runs[1][1]
+    assert [r["outcome"] for r in off["robots"]] == ["COLLISION"] * 4 and "replans" not in off["metrics"]
+    m = on["metrics"]
+    assert m["success_rate"] > 0 and m["replans"] >= 1
+    assert m["replans"] == sum(r["replans"] for r in m["robots"])
+    assert m["replans"] + m["replan_failures"] == sum(1 for r in on["robots"] for _, line, _ in r["lines"]
+                                                      if line.startswith("EV,REPLAN,"))
+    for a, b in zip(on["robots"], again["robots"]):
+        assert np.array_equal(a["poses"], b["poses"]) and a["outcome"] == b["outcome"]
+
+
+def test_a_coordinated_fleet_refuses_to_replan():
+    with pytest.raises(ValueError, match="controller_params.replan: a coordinated fleet"):
+        simulate_fleet([straight(CORNERS[0], OPPOSITE[0])] * 2, [[0.3, 0.3, 0.0], [1.5, 1.5, 0.0]], seed=1,
+                       depart=[None, np.full(2, np.nan)], controller="regulated_pure_pursuit",
+                       controller_params={"replan": 1})

@@ -148,6 +148,8 @@ def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(cl
     ({"robots": [TWO[0], {**TWO[1], "path": [[1.5, 0.3], [0.3, 1.5]]}], "planner": "prioritized"},
      "robots[1].path: `prioritized` plans every robot together"),
     ({"robots": TWO, "planner": "prioritized", "planner_params": {"speeed": 1}}, "planner_params: planner"),
+    ({"robots": TWO, "planner": "prioritized", "controller": "regulated_pure_pursuit",
+      "controller_params": {"replan": 1}}, "controller_params.replan: the robots of a prioritized plan"),
 ])
 def test_bad_multi_robot_jobs_are_refused_naming_the_field(client, job, detail):
     body = {"environment": "swap", "planner": "prioritized", "modes": ["sim"], **job}

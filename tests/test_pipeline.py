@@ -315,3 +315,29 @@ async def test_run_ends_arriving_together_are_stored_together_and_one_bad_end_is
             run, n_poses, n_messages = run_row(tb, run_id)
             assert run.status == "completed" and run.metrics == {"k": run_id}, run_id
             assert n_poses == 20 and n_messages == 1
+
+
+async def test_a_replanning_run_counts_its_replans_on_the_agent_and_as_a_task(tmp_path):
+    """Issue 17: fmm's path of `crossing` A with regulated pure pursuit replanning, on the agent's robot and
+    as an engine task: both reach the goal around the disc, log the EV,REPLAN lines and count them in the
+    same metrics (``replans``; ``replan_time_s`` is the machine's)."""
+    from planners import load_environment
+
+    crossing = load_environment("crossing").to_dict()
+    async with running(tmp_path) as tb:
+        tb.field.add_engine_slots("engine", 1)
+        found = []
+        for robot in ("sim-1", "engine-1"):
+            _, run_id = add_experiment(tb, env=crossing, start=(0.3, 0.3, 0.0), goal=(1.5, 1.5, 1.5708),
+                                       mode="sim", controller="regulated_pure_pursuit",
+                                       controller_params={"replan": 1})
+            end = await run_and_store(tb, Assignment(run_id, robot, ()), stopping=lambda: False)
+            assert end.status is RunStatus.COMPLETED, end
+            run, _, _ = run_row(tb, run_id)
+            with tb.sessions() as s:
+                got = s.scalars(select(Message.line).where(Message.run_id == run_id, Message.direction == "<")).all()
+            replans = [line for line in got if line.startswith("EV,REPLAN,")]
+            assert len(replans) == run.metrics["replans"] >= 1 and run.metrics["replan_failures"] == 0
+            assert run.metrics["replan_time_s"] > 0 and run.metrics["collisions_obstacle"] == 0
+            found.append((run.metrics["replans"], [line.split(",")[2] for line in replans]))
+        assert found[0] == found[1]

@@ -152,6 +152,14 @@ def test_submit_returns_202_with_runs_and_others_get_404(alice, bob):
         ({"controller": "pure_pursuit", "controller_params": {"lookahead_m": 9}}, 422,
          r"controller_params.lookahead_m must be a number in \[0.02, 1\] \(m\)"),
         ({"controller_params": {"gain": 1}}, 422, "controller_params.gain: controller 'schema' has no parameter"),
+        ({"controller": "regulated_pure_pursuit", "controller_params": {"replan": 2}}, 422,
+         r"controller_params.replan must be a number in \[0, 1\]"),
+        ({"controller": "regulated_pure_pursuit", "controller_params": {"replan": 0.5}}, 422,
+         r"controller_params.replan must be a whole number"),
+        ({"controller": "regulated_pure_pursuit", "controller_params": {"replan": 1, "replan_horizon_s": 99}}, 422,
+         r"controller_params.replan_horizon_s must be a number in \[0.5, 30\] \(s\)"),
+        ({"controller": "pure_pursuit", "controller_params": {"replan": 1}}, 422,
+         "controller_params.replan: controller 'pure_pursuit' has no parameter 'replan'"),
     ],
 )
 def test_preflight_refuses_bad_jobs_with_a_reason(alice, change, status, message):
@@ -167,6 +175,8 @@ def test_controllers_are_listed_chosen_stored_and_shown(alice):
     listed = alice.get("/api/v1/controllers").json()
     names = [c["name"] for c in listed["data"]]
     assert names[:4] == ["schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama"]
+    rpp = {p["name"]: p for p in listed["data"][2]["parameters"]}
+    assert rpp["replan"]["default"] == 0 and rpp["replan"]["integer"] and rpp["replan_horizon_s"]["unit"] == "s"
     pp = listed["data"][1]
     assert pp["compiled"] and pp["parameters"][0] == {
         "name": "lookahead_m", "unit": "m", "default": 0.06, "range": [0.02, 1.0],

@@ -13,7 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 __all__ = ["TooFewPoses", "block_tuples", "collision_counts", "moving_tuples", "compare_runs", "expected_duration_s", "explicit_path", "fleet_job", "jittered", "measure_run",
-           "plan_job", "simulate_job", "warm_up"]
+           "plan_job", "replan_metrics", "replanning", "simulate_job", "warm_up"]
 
 
 class TooFewPoses(Exception):
@@ -122,6 +122,19 @@ def moving_tuples(env_data: dict[str, Any]) -> list[tuple[list[float], list[list
             for o in env.moving_obstacles]
 
 
+def replanning(controller_params: Optional[dict[str, float]]) -> bool:
+    """Whether a job's controller replans (``replan`` = 1, docs/controllers.md)."""
+    return bool(controller_params) and controller_params.get("replan") == 1
+
+
+def replan_metrics(replans: list[tuple[int, float]]) -> dict[str, Any]:
+    """A replanning run's metrics (docs/metrics.md) from its ``REPLAN`` events, each (points of the new path,
+    0 when none was found; planning time s): ``replans`` (new paths followed), ``replan_failures`` and
+    ``replan_time_s`` (planning time of them all, s)."""
+    return {"replans": sum(1 for n, _ in replans if n > 0), "replan_failures": sum(1 for n, _ in replans if n == 0),
+            "replan_time_s": float(sum(s for _, s in replans))}
+
+
 def collision_counts(collided: bool, obstacle: Optional[int]) -> dict[str, int]:
     """A run's collisions by kind (docs/metrics.md): ``collisions_obstacle`` (a moving obstacle) and
     ``collisions_block`` (a block, the wall or another robot); a collision ends a run, so each is 0 or 1."""
@@ -154,7 +167,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
 
     from robot_agent.headless import PlacementRefused, simulate_run
     from robot_agent.overrides import apply_overrides
-    from robot_agent.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place, format_event
+    from robot_agent.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
     from robot_agent.robot_profile import load_profile, profile_for_platform
 
     pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
@@ -183,13 +196,16 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     if controller != "schema":
         lines.append([">", encode_controller(controller, controller_params), None])
     lines.append([">", encode_path(path), run.t_start])
-    lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
+    lines += [["<", e.line, e.t] for e in run.events]
     out: dict[str, Any] = {"poses": run.poses, "lines": lines, "t_start": run.t_start, "t_end": run.t_end,
                            "outcome": run.outcome, "obstacle": run.obstacle, "metrics": None, "metrics_error": None}
     t_end = run.t_end if run.t_end is not None else (float(run.poses[-1, 0]) if len(run.poses) else None)
     try:
         out["metrics"] = measure_run(env_data, path, run.poses, run.t_start, t_end, goal, robot_radius,
                                      planning_time_s)
+        if replanning(controller_params):
+            out["metrics"].update(replan_metrics([(e.index or 0, e.seconds or 0.0) for e in run.events
+                                                  if e.kind == "REPLAN"]))
     except TooFewPoses as exc:
         out["metrics_error"] = str(exc)
     return out
@@ -228,7 +244,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     from robot_agent.headless import PlacementRefused
     from robot_agent.overrides import apply_overrides
     from robot_agent.params import robot_params
-    from robot_agent.protocol import encode_path, format_event
+    from robot_agent.protocol import encode_path
     from robot_agent.robot_profile import load_profile, profile_for_platform
 
     env = parse_environment(env_data)
@@ -288,10 +304,16 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     metrics = fleet_metrics([r.poses for r in fleet.runs], fleet.outcomes, [r.t_end for r in fleet.runs],
                             [r.obstacle for r in fleet.runs], settings, clearance)
     metrics["planning_time_s"] = planning_time_s
+    if replanning(controller_params):
+        per = [replan_metrics([(e.index or 0, e.seconds or 0.0) for e in r.events if e.kind == "REPLAN"])
+               for r in fleet.runs]
+        for row, m in zip(metrics["robots"], per):
+            row.update(m)
+        metrics.update({k: sum(m[k] for m in per) for k in ("replans", "replan_failures", "replan_time_s")})
     out = []
     for i, run in enumerate(fleet.runs):
         lines = [[">", encode_path(paths[i]), run.t_start]]
-        lines += [["<", format_event(e.kind, e.t, index=e.index, reason=e.reason), e.t] for e in run.events]
+        lines += [["<", e.line, e.t] for e in run.events]
         out.append({"path": paths[i], "depart": depart[i], "poses": run.poses, "lines": lines,
                     "t_start": run.t_start, "t_end": run.t_end, "outcome": run.outcome, "obstacle": run.obstacle,
                     "holds": [[int(k), float(s)] for k, s in fleet.holds[i]],

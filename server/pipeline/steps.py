@@ -177,6 +177,9 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
     await link.request(encode_path(path), ctx.wall(0))
     await rec.add_messages(ctx.take_messages())  # the log up to the path, kept even if the server dies now
     t_start: Optional[float] = None
+    replans: list[tuple[int, float]] = []  # (points, planning s) of each EV,REPLAN,<points>,<ms>,<t>
+    if compute.replanning(job.controller_params):
+        ctx.end_metrics.update(compute.replan_metrics(replans))
     loop = asyncio.get_running_loop()
     deadline = loop.time() + ctx.wall(timeout_exp)
     while True:
@@ -199,6 +202,9 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
         if kind == "START":
             t_start = ev.time
             await rec.update(ctx.run_id, t_start=t_start)
+        elif kind == "REPLAN" and len(ev.fields) == 4:
+            replans.append((int(float(ev.fields[1])), float(ev.fields[2]) / 1000.0))
+            ctx.end_metrics.update(compute.replan_metrics(replans))
         elif kind in ("DONE", "FAIL"):
             await rec.update(ctx.run_id, t_start=t_start, t_end=ev.time)
             await collect_poses(svc, robot_id, ev.time or 0.0)

@@ -429,7 +429,7 @@ export class SubmitPage {
   }
 
   /** One number input per parameter of the chosen controller: empty keeps the default (its placeholder);
-   * the range and unit are in the input's limits and title. */
+   * the range and unit are in the input's limits and title; integer ones (a switch such as `replan`) step by 1. */
   onController() {
     const c = (this.controllers || []).find((q) => q.name === $("#f-controller").value);
     $("#controller-desc").textContent = c ? `${c.description}${c.source ? ` (${c.source})` : ""}` : "";
@@ -438,7 +438,7 @@ export class SubmitPage {
     box.replaceChildren(...(params.length ? params.map((p) => {
       const id = `f-cparam-${p.name}`;
       const [low, high] = p.range || [null, null];
-      const input = h("input", { id, type: "number", step: "any", "data-cparam": p.name, placeholder: String(p.default),
+      const input = h("input", { id, type: "number", step: p.integer ? "1" : "any", "data-cparam": p.name, placeholder: String(p.default),
         min: low, max: high, title: `${p.description} (${p.unit}; ${low} to ${high})`,
         "aria-describedby": "err-controller_params" });
       return h("label", { for: id }, `${p.name}`, input);
