@@ -6,10 +6,7 @@ from the first submission to the last run's end:
 
 - ``local-sqlite``: ``twb up`` (local agents, ``--sim-robots`` of them) on SQLite;
 - ``local-postgresql``: the same on PostgreSQL;
-- ``ray-postgresql``: ``twb up --sim-engine ray`` on PostgreSQL (a local Ray cluster; up to 8 runs per
-  Ray task, the default ``TWB_RAY_BATCH``);
-- ``ray-postgresql-unbatched``: the same with a Ray task per run (``TWB_RAY_BATCH=1``), the baseline of
-  the batches;
+- ``ray-postgresql``: ``twb up --sim-engine ray`` on PostgreSQL (a local Ray cluster);
 
 beside ``in-process``, the same runs in one Python loop with no server (plan
 once per experiment, then simulate and measure each run: the functions a Ray
@@ -17,7 +14,7 @@ task runs), the limit.  PostgreSQL is started from the machine's binaries as
 the tests do (tests/pg_support.py).  Prints JSON; ``ratio`` is runs/s over the
 in-process loop's runs/s, measured in the same invocation.
 
-    python bench/scale.py [--runs 2000] [--only ray-postgresql --only ray-postgresql-unbatched] [--sim-robots 4]
+    python bench/scale.py [--runs 2000] [--only ray-postgresql] [--sim-robots 4]
 """
 
 from __future__ import annotations
@@ -41,7 +38,6 @@ sys.path.append(str(ROOT / "tests"))  # pg_support: PostgreSQL from the machine'
 from bench._common import report  # noqa: E402
 
 PLANNERS = ["fmm", "fm2", "astar", "prm"]
-PATHS = ["local-sqlite", "local-postgresql", "ray-postgresql", "ray-postgresql-unbatched"]
 REPETITIONS = 20
 
 
@@ -118,12 +114,11 @@ def _cpu_by_part(server_pid: int, pg_port: int | None) -> dict[str, float]:
     }
 
 
-def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data_dir: Path,
-                    env: dict[str, str] | None = None) -> dict[str, Any]:
-    """Submit the sweep to a fresh testbed (``env``: settings of its server) and time it to the last run's end."""
+def through_testbed(name: str, args: list[str], jobs: list[dict[str, Any]], data_dir: Path) -> dict[str, Any]:
+    """Submit the sweep to a fresh testbed and time it to the last run's end."""
     from twb.launch import LocalTestbed
 
-    env = {"TWB_MAX_QUEUED_PER_USER": "100000", **(env or {})}
+    env = {"TWB_MAX_QUEUED_PER_USER": "100000"}
     url = args[args.index("--database-url") + 1] if "--database-url" in args else ""
     m = re.search(r":(\d+)/", url)
     pg_port = int(m.group(1)) if m else None
@@ -163,7 +158,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=2000)
     ap.add_argument("--sim-robots", type=int, default=4)
-    ap.add_argument("--only", action="append", choices=PATHS)
+    ap.add_argument("--only", action="append", choices=["local-sqlite", "local-postgresql", "ray-postgresql"])
     args = ap.parse_args()
     jobs = sweep(args.runs)
     limit = in_process(jobs)
@@ -171,11 +166,11 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="twb-scale-"))
     work.chmod(0o755)  # PostgreSQL runs as its own user when this runs as root
     pg = None
-    wanted = args.only or PATHS
+    wanted = args.only or ["local-sqlite", "local-postgresql", "ray-postgresql"]
     try:
         for name in wanted:
             extra: list[str] = []
-            if "postgresql" in name:
+            if name.endswith("postgresql"):
                 if pg is None:
                     from pg_support import PostgresServer, postgres_bin
 
@@ -185,8 +180,7 @@ def main() -> None:
                     pg = PostgresServer(work / "pg")
                 extra += ["--database-url", pg.database()]
             extra += ["--sim-engine", "ray"] if name.startswith("ray") else ["--sim-robots", str(args.sim_robots)]
-            r = through_testbed(name, extra, jobs, work / name,
-                                {"TWB_RAY_BATCH": "1"} if name.endswith("unbatched") else None)
+            r = through_testbed(name, extra, jobs, work / name)
             r["ratio"] = round(r["runs_per_s"] / limit["runs_per_s"], 3)
             results.append(r)
     finally:

@@ -28,7 +28,6 @@ from .core.settings import Settings
 from .dispatch import Dispatcher, pending_of
 from .embedded import EmbeddedField
 from .field import FieldState
-from .pipeline import compute
 from .pipeline.paths import PathService
 from .pipeline.pool import WorkerPool
 from .pipeline.ray_pool import RayPool
@@ -70,7 +69,7 @@ class Testbed:
         #: planning and metrics, off the loop: worker processes, or Ray tasks (then simulation runs too)
         self.pool: WorkerPool | RayPool = (
             RayPool(address=settings.ray_address, cpus=settings.ray_cpus, slots=settings.ray_slots,
-                    log_dir=settings.data_dir, batched={compute.simulate_job}, batch_size=settings.ray_batch) if settings.sim_engine == "ray" else WorkerPool(settings.planning_workers))
+                    log_dir=settings.data_dir) if settings.sim_engine == "ray" else WorkerPool(settings.planning_workers))
         #: runs uploaded planner programs (docs/uploads.md)
         self.sandbox = Sandbox(settings)
         self.recorder = RunRecorder(self.sessions, self.broker, self.views)

@@ -1,18 +1,17 @@
-"""Calls of one function coalesced into batches: one remote task computes several runs.
+"""Calls of one function coalesced into batches, each call handed its own result (group commit).
 
-A Ray task costs its worker and the server a few milliseconds of CPU of its
-own (scheduling, the way back), as much as a simulation run's work itself;
-so the Ray pool sends the runs that wait at the same time as one task
-(:func:`call_each` on the worker) and hands each run its own result.
+The run recorder writes the run ends that wait at the same time in one
+transaction (:meth:`server.pipeline.recorder.RunRecorder.finish`); the
+submit function computes a batch as :func:`call_each` describes.
 
-How batches form (no timer holds work back while a CPU is idle): a call
+How batches form (no timer holds work back while a writer is free): a call
 goes out at once, after a ``window_s`` pause for others arriving with it,
 while fewer than ``parallel`` batches are under way; otherwise calls wait
 until a batch comes back, or until ``max_size`` of them wait.  Each call
-gets its own result or its own exception; a batch lost as a whole (its
-worker died) fails every call in it.  A call cancelled while it waits
+gets its own result or its own exception; a batch that fails as a whole
+fails every call in it.  A call cancelled while it waits
 leaves the batch; when every call of a batch under way is cancelled, the
-task is cancelled.
+batch's cancel is called.
 """
 
 from __future__ import annotations

@@ -27,10 +27,9 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any, Awaitable, Callable, Collection, Optional
+from typing import Any, Callable, Optional
 
 from ..errors import EngineFault
-from .batching import Batcher, call_each
 
 __all__ = ["EngineUnavailable", "RayPool", "INSTALL_HINT"]
 
@@ -116,15 +115,9 @@ class RayPool:
 
     engine = "ray"
 
-    def __init__(self, *, address: str = "", cpus: int = 0, slots: int = 0, log_dir: Path = Path("."),
-                 batched: Collection[Callable[..., Any]] = (), batch_size: int = 1) -> None:
+    def __init__(self, *, address: str = "", cpus: int = 0, slots: int = 0, log_dir: Path = Path(".")) -> None:
         self.address = address
         self.slots = slots
-        #: functions whose calls go out in batches of up to ``batch_size`` per Ray task (:mod:`.batching`)
-        self._batched = frozenset(batched) if batch_size > 1 else frozenset()
-        self.batch_size = batch_size
-        self._batchers: dict[Callable[..., Any], Batcher] = {}
-        self._cpus = 1
         self._head = None if address else _LocalHead(cpus, log_dir / "ray-head.log")
         self._remote: dict[Callable[..., Any], Any] = {}
         self._ray: Any = None
@@ -169,48 +162,24 @@ class RayPool:
             self.stop()
             raise EngineUnavailable(f"cannot connect to the Ray cluster at {address}: {why}")
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        self._cpus = max(1, cpus)
-        # with batches, a CPU's batch forms while the others compute: runs at once are CPUs x batch size
-        self.slots = self.slots or self._cpus * (self.batch_size if self._batched else 1)
+        self.slots = self.slots or max(1, cpus)
         where = "a local Ray cluster" if self._head is not None else f"the Ray cluster at {address}"
-        batches = f", up to {self.batch_size} runs per task" if self._batched else ""
-        self.description = f"{where}, {cpus} CPUs, {self.slots} runs at once{batches}"
+        self.description = f"{where}, {cpus} CPUs, {self.slots} runs at once"
 
     async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)`` as a Ray task (one CPU); a task Ray lost raises :class:`EngineFault`."""
         ray = self._ray
         if ray is None:
             raise RuntimeError("the Ray pool is not started")
-        if fn in self._batched:
-            batcher = self._batchers.get(fn)
-            if batcher is None:
-                batcher = self._batchers[fn] = Batcher(lambda calls: self._submit_batch(fn, calls),
-                                                       parallel=self._cpus, max_size=self.batch_size)
-            return await batcher.call(*args)
-        ref = self._remote_of(fn).remote(*args)
+        remote = self._remote.get(fn)
+        if remote is None:
+            remote = self._remote[fn] = ray.remote(num_cpus=1, max_retries=0)(fn)
+        ref = remote.remote(*args)
         try:
-            return await self._result(ref)
+            return await ref
         except asyncio.CancelledError:
             ray.cancel(ref)
             raise
-
-    def _remote_of(self, fn: Callable[..., Any]) -> Any:
-        remote = self._remote.get(fn)
-        if remote is None:
-            remote = self._remote[fn] = self._ray.remote(num_cpus=1, max_retries=0)(fn)
-        return remote
-
-    def _submit_batch(self, fn: Callable[..., Any],
-                      calls: list[tuple[Any, ...]]) -> tuple[Awaitable[Any], Callable[[], None]]:
-        # named for the function, as its process title shows (`ray::simulate_job`)
-        ref = self._remote_of(call_each).options(name=fn.__name__).remote(fn, calls)
-        return self._result(ref), lambda: self._ray.cancel(ref)
-
-    async def _result(self, ref: Any) -> Any:
-        """A task's result; its own exception as it is; a task Ray lost as :class:`EngineFault`."""
-        ray = self._ray
-        try:
-            return await ref
         except ray.exceptions.RayTaskError as exc:  # the function's own exception, without Ray's traceback text
             cause = getattr(exc, "cause", None)
             if isinstance(cause, Exception):
