@@ -294,28 +294,6 @@ async def test_the_crossing_disc_fails_an_uncoordinated_run_and_not_a_space_time
         assert "T,T,M" in sent
 
 
-async def test_run_ends_arriving_together_are_stored_together_and_one_bad_end_is_its_own(tmp_path, database_url):
-    """Group commit (RunRecorder.finish): ends of one loop turn go in one transaction; when it fails (an end
-    for a run that is not there), each is written alone, and only that end's caller hears the error."""
-    async with running(tmp_path, database_url=database_url) as tb:
-        runs = [add_experiment(tb, seed=k)[1] for k in range(4)]
-        rec = tb.services.recorder
-        poses = np.column_stack([np.linspace(0, 1, 20), np.full(20, 0.3), np.full(20, 0.3), np.zeros(20)])
-
-        def end(run_id: int):
-            return rec.finish(run_id, RunStatus.COMPLETED, "", fields={"metrics": {"k": run_id}}, poses=poses,
-                              messages=[{"run_id": run_id, "t": 0.5, "t_estimated": False, "direction": "s",
-                                         "line": f"end of {run_id}"}])
-
-        assert await asyncio.gather(end(runs[0]), end(runs[1])) == [None, None]
-        out = await asyncio.gather(end(runs[2]), end(10 ** 6), end(runs[3]), return_exceptions=True)
-        assert out[0] is None and out[2] is None and isinstance(out[1], Exception), out
-        assert rec._ends.sizes == [2, 3]  # two transactions for five ends (the second redone end by end)
-        for run_id in runs:
-            run, n_poses, n_messages = run_row(tb, run_id)
-            assert run.status == "completed" and run.metrics == {"k": run_id}, run_id
-            assert n_poses == 20 and n_messages == 1
-
 
 async def test_a_replanning_run_counts_its_replans_on_the_agent_and_as_a_task(tmp_path):
     """Issue 17: fmm's path of `crossing` A with regulated pure pursuit replanning, on the agent's robot and

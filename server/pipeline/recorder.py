@@ -5,12 +5,6 @@ transaction, forgets the experiment's cached view, and is published as a
 live event (``run``, and ``experiment`` when the experiment's status
 changed or it is finished).  Database work runs in threads; the loop never
 blocks on it.
-
-Run ends are group-committed: the ends that arrive while one is being
-written are written next, together, in one transaction (at full speed many
-runs end at once, and each transaction is round trips to the database).
-When that transaction fails, each end is written alone, so one end's
-trouble (or the database going away) is that end's answer only.
 """
 
 from __future__ import annotations
@@ -31,7 +25,6 @@ from ..store import poses as pose_store
 from ..store import runs as run_store
 from ..store.runs import RunJob
 from ..views import FinishedViews
-from .batching import Batcher
 
 __all__ = ["RunRecorder"]
 
@@ -43,9 +36,6 @@ class RunRecorder:
         self._sessions = sessions
         self._broker = broker
         self._views = views
-        #: run ends, one writer at a time; those waiting go together (window 0: the ends of one loop turn)
-        self._ends = Batcher(lambda ends: (asyncio.to_thread(self._write_ends, ends), lambda: None),
-                             parallel=1, max_size=64, window_s=0.0)
 
     async def start(self, run_id: int, *, status: RunStatus | Callable[[RunJob], RunStatus],
                     **fields: Any) -> RunJob:
@@ -103,46 +93,27 @@ class RunRecorder:
         Returns the run and experiment rows when the run is queued again, else None.  All or nothing:
         when the database is away nothing is written and the call can be repeated.
         """
-        rows, events = await self._ends.call(run_id, status, error, failure, fields, poses, list(messages), retry,
-                                             resume)
+
+        def write() -> tuple[Optional[tuple[Run, Experiment]], list[dict[str, Any]]]:
+            with self._sessions.begin() as s:
+                run_store.add_messages(s, list(messages))
+                again = (run_store.resume_run(s, run_id, error) if resume
+                         else run_store.requeue_run(s, run_id, error) if retry else None)
+                if again is not None:
+                    return (again, again.experiment), self._events([again], {again.experiment_id: resume})
+                if poses is not None:
+                    pose_store.add_poses(s, run_id, poses)
+                end: dict[str, Any] = dict(fields or {}, status=status, finished_at=utcnow())
+                if error:
+                    end["error"] = error
+                if failure is not None:
+                    end["failure"] = failure
+                run, exp, changed = run_store.update_run(s, run_id, end)
+                return None, self._events([run], {exp.id: changed})
+
+        rows, events = await asyncio.to_thread(write)
         self._publish(events)
         return rows
-
-    def _write_ends(self, ends: list[tuple[Any, ...]]) -> list[tuple[bool, Any]]:
-        """:meth:`finish`'s writes of ``ends`` (its arguments each) in one transaction, or each alone when that
-        fails; per end ``(True, (rows, events))`` or ``(False, exception)``, as :mod:`.batching` hands them out."""
-        try:
-            with self._sessions.begin() as s:
-                return [(True, self._write_end(s, *end)) for end in ends]
-        except Exception:
-            if len(ends) == 1:
-                raise
-        out: list[tuple[bool, Any]] = []
-        for end in ends:
-            try:
-                with self._sessions.begin() as s:
-                    out.append((True, self._write_end(s, *end)))
-            except Exception as exc:  # noqa: BLE001 - that end's caller hears it
-                out.append((False, exc))
-        return out
-
-    def _write_end(self, s: Session, run_id: int, status: RunStatus, error: str, failure: Optional[str],
-                   fields: Optional[dict[str, Any]], poses: Optional[np.ndarray], messages: list[dict[str, Any]],
-                   retry: bool, resume: bool) -> tuple[Optional[tuple[Run, Experiment]], list[dict[str, Any]]]:
-        run_store.add_messages(s, messages)
-        again = (run_store.resume_run(s, run_id, error) if resume
-                 else run_store.requeue_run(s, run_id, error) if retry else None)
-        if again is not None:
-            return (again, again.experiment), self._events([again], {again.experiment_id: resume})
-        if poses is not None:
-            pose_store.add_poses(s, run_id, poses)
-        end: dict[str, Any] = dict(fields or {}, status=status, finished_at=utcnow())
-        if error:
-            end["error"] = error
-        if failure is not None:
-            end["failure"] = failure
-        run, exp, changed = run_store.update_run(s, run_id, end)
-        return None, self._events([run], {exp.id: changed})
 
     async def fail_experiment(self, experiment_id: int, error: str) -> None:
         """The experiment's error text (its path could not be had)."""
