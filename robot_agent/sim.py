@@ -373,6 +373,7 @@ def warm_up() -> None:
         sizes, world_of, origin, area = field_layout(2, "shared")
         core = SimCore(p, make_backend(name, 2, p), World(sizes, world_of, origin, area, p.collision_radius_m))
         core.world.set_blocks(0, np.array([[1.0, 1.0, 0.1, 0.1, 0.0]]))
+        core.world.set_moving(0, [(np.array([0.04, 0.1, 2.0, 0.0]), np.array([[1.2, 0.3], [1.4, 0.3]]))])
         core.world.place_conflict(1, (0.5, 0.5, 0.0), core.backend.pose)
         for i in range(2):
             core.place(i, (0.3, 0.3, 0.0))
