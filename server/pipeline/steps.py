@@ -96,6 +96,9 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
     """
     field = svc.field
     key = job.environment + (":full" if job.field == "full" else "")
+    if job.mode == "twb" and job.environment_data.get("moving_obstacles"):
+        ctx.on_line("s", await svc.pool.run(compute.obstacle_robots_note, job.environment_data,
+                                            ctx.robot.platform or "BeBot"), None, False)
     if len(ctx.subfields) == 4:
         for k in (2, 3, 4):
             other = field.field_robot(k)
@@ -111,9 +114,6 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
     if job.environment_data.get("moving_obstacles") or rid in field.moving:  # set them, or clear the last ones
         moving = await svc.pool.run(compute.moving_tuples, job.environment_data)
         await link.request(encode_moving(moving), ctx.wall(0))
-        if moving and job.mode == "twb":
-            ctx.on_line("s", compute.obstacle_robots_note(job.environment_data, ctx.robot.platform or "BeBot"), None,
-                        False)
         if moving:
             field.moving.add(rid)
         else:
