@@ -170,3 +170,27 @@ async def test_a_field_agents_run_and_the_same_run_as_a_task_meet_the_same_obsta
         for log in (la, lb):
             assert "the 1 moving obstacle(s) are emulated BeBot robots the testbed drives" in log
             assert "so the radius 0.06 m the environment gives does not apply on the field" in log
+
+
+def test_obstacle_gaps_measure_against_where_the_obstacles_were():
+    """With tracks, the gap is to the track interpolated at the robot's times (each obstacle of
+    ``obstacle_radius``), against a brute-force reference; a bad track is refused naming it."""
+    from planners import parse_environment
+    from planners.metrics import obstacle_gaps
+
+    env = parse_environment({"name": "g", "size": [1.8, 1.8], "moving_obstacles": [
+        {"radius": 0.06, "speed": 0.1, "waypoints": [[0.2, 0.2], [1.2, 0.2]]},
+        {"radius": 0.06, "speed": 0.1, "waypoints": [[0.2, 1.2], [1.2, 1.2]]}]})
+    t = np.linspace(0.0, 8.0, 41)
+    path = np.column_stack([np.linspace(0.3, 1.0, 41), np.full(41, 0.5)])
+    tracks = [np.column_stack([np.arange(0.0, 9.0, 0.5), 0.2 + 0.09 * np.arange(0.0, 9.0, 0.5), np.full(18, y),
+                               np.zeros(18)]) for y in (0.25, 1.2)]
+    got = obstacle_gaps(env, path, t, 0.045, tracks, 0.045)
+    want = np.min([np.hypot(np.interp(t, tr[:, 0], tr[:, 1]) - path[:, 0], np.interp(t, tr[:, 0], tr[:, 2]) - path[:, 1])
+                   for tr in tracks], axis=0) - 0.09
+    assert np.allclose(got, want, atol=1e-12)
+    assert not np.allclose(got, obstacle_gaps(env, path, t, 0.045))  # not the exact discs
+    with pytest.raises(ValueError, match=r"`tracks\[1\]` must be \(T >= 1, 3\+\) rows t, x, y"):
+        obstacle_gaps(env, path, t, 0.045, [tracks[0], np.zeros((0, 4))])
+    with pytest.raises(ValueError, match="one track per moving obstacle"):
+        obstacle_gaps(env, path, t, 0.045, tracks[:1])
