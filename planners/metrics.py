@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -717,23 +717,43 @@ def path_metrics(
     return out
 
 
-def obstacle_gaps(env: Environment, path: np.ndarray, t: np.ndarray, robot_radius: float = 0.0) -> np.ndarray:
+def obstacle_gaps(env: Environment, path: np.ndarray, t: np.ndarray, robot_radius: float = 0.0,
+                  tracks: Sequence[np.ndarray] | None = None, obstacle_radius: float | None = None) -> np.ndarray:
     """Per point of ``path`` ``(N, 2+)`` (m) at obstacle times ``t`` ``(N,)`` (s from the path start), the gap
     (m) between the robot's disc of ``robot_radius`` and the nearest moving obstacle's disc: centre distance
-    minus both radii, negative when they overlap; ``inf`` without moving obstacles."""
+    minus both radii, negative when they overlap; ``inf`` without moving obstacles.
+
+    ``tracks`` (optional): where the obstacles really were, one ``(T, 3+)`` array per obstacle (t s on the
+    same clock as ``t``, x m, y m; e.g. the tracker's poses of the field's obstacle robots), interpolated
+    at ``t``, instead of their exact tracks; ``obstacle_radius`` (m) replaces every obstacle's radius (the
+    field's robots are all one size).
+    """
     p = _path_iv(path, "path")
     tt = _times_iv(t, len(p))
     obs = env.moving_obstacles
     if not obs:
         return np.full(len(p), math.inf)
-    centres = positions(obs, tt)  # (M, N, 2)
-    radii = np.array([o.radius for o in obs])[:, None]
+    if tracks is None:
+        centres = positions(obs, tt)  # (M, N, 2)
+    else:
+        if len(tracks) != len(obs):
+            raise ValueError(f"`tracks` must give one track per moving obstacle ({len(obs)}), got {len(tracks)}")
+        centres = np.empty((len(obs), len(tt), 2))
+        for m, tr in enumerate(tracks):  # a loop over the few obstacles; times are vectorised
+            tr = np.asarray(tr, dtype=float)
+            if tr.ndim != 2 or tr.shape[1] < 3 or len(tr) == 0:
+                raise ValueError(f"`tracks[{m}]` must be (T >= 1, 3+) rows t, x, y of moving obstacle {m}, got shape "
+                                 f"{tr.shape}")
+            centres[m, :, 0] = np.interp(tt, tr[:, 0], tr[:, 1])
+            centres[m, :, 1] = np.interp(tt, tr[:, 0], tr[:, 2])
+    radii = np.array([o.radius if obstacle_radius is None else obstacle_radius for o in obs])[:, None]
     gaps = np.hypot(centres[..., 0] - p[:, 0], centres[..., 1] - p[:, 1]) - radii - robot_radius
     return gaps.min(axis=0)
 
 
 def obstacle_metrics(env: Environment, path: np.ndarray, t: np.ndarray, *, start_time: float | None = None,
-                     settings: MetricSettings = MetricSettings()) -> dict[str, float | None]:
+                     settings: MetricSettings = MetricSettings(), tracks: Sequence[np.ndarray] | None = None,
+                     obstacle_radius: float | None = None) -> dict[str, float | None]:
     """``obstacle_distance_min_m`` and ``obstacle_time_within_s`` of a performed path ``(N, 2+)`` (m) logged at
     experiment times ``t`` ``(N,)`` (s); obstacle time counts from ``start_time`` (the ``EV,START`` time; the
     first sample's when None).
@@ -742,12 +762,14 @@ def obstacle_metrics(env: Environment, path: np.ndarray, t: np.ndarray, *, start
     ``settings.robot_radius`` to obstacle disc); the time sums the sample
     intervals ``t[j+1] - t[j]`` whose first sample's gap is below
     ``settings.obstacle_safety``.  Both None without moving obstacles.
+    ``tracks`` and ``obstacle_radius``: where the obstacles really were
+    (times on the obstacle clock) and their size, as :func:`obstacle_gaps`.
     """
     if not env.moving_obstacles:
         return {key: None for key in OBSTACLE_KEYS}
     tt = _times_iv(t, len(path))
     t0 = float(tt[0]) if start_time is None else float(start_time)
-    gaps = obstacle_gaps(env, path, tt - t0, settings.robot_radius)
+    gaps = obstacle_gaps(env, path, tt - t0, settings.robot_radius, tracks, obstacle_radius)
     within = gaps[:-1] < settings.obstacle_safety
     return {"obstacle_distance_min_m": float(gaps.min()),
             "obstacle_time_within_s": float(np.diff(tt)[within].sum())}
@@ -809,12 +831,16 @@ def run_metrics(
     goal: np.ndarray | None = None,
     planning_time_s: float | None = None,
     settings: MetricSettings = MetricSettings(),
+    obstacle_tracks: Sequence[np.ndarray] | None = None,
+    obstacle_radius: float | None = None,
 ) -> dict[str, Any]:
     """All metrics of one run: the performed path's, the comparison with P0, the ratios, and P0's own.
 
     Parameters are those of :func:`path_metrics` (``t``, ``start_time`` and
     ``done_time`` belong to the performed path); ``goal`` defaults to the
-    planned path's last point; ``planning_time_s`` (s) is passed through.
+    planned path's last point; ``planning_time_s`` (s) is passed through;
+    ``obstacle_tracks`` and ``obstacle_radius`` say where the moving
+    obstacles really were (:func:`obstacle_metrics`; on the field).
 
     Returns
     -------
@@ -831,7 +857,8 @@ def run_metrics(
     plan = path_metrics(p0, env=env, goal=goal, settings=settings)
     moving = {}
     if env is not None and env.moving_obstacles and t is not None:
-        moving = obstacle_metrics(env, pr, t, start_time=start_time, settings=settings)
+        moving = obstacle_metrics(env, pr, t, start_time=start_time, settings=settings, tracks=obstacle_tracks,
+                                  obstacle_radius=obstacle_radius)
     return {
         **done,
         **moving,

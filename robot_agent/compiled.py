@@ -23,7 +23,7 @@ __all__ = ["KERNEL_SOURCES", "cache_dir", "kernel"]
 
 #: the modules whose compiled code depends on each other
 KERNEL_SOURCES = ("compiled.py", "noise.py", "kinematics.py", "controllers.py", "follower.py", "physics.py", "contact.py",
-                  "stepper.py", "backends.py")
+                  "movers.py", "stepper.py", "backends.py")
 
 
 def _writable(path: Path) -> bool:

@@ -11,7 +11,11 @@ since its path began, :mod:`planners.moving`): robot ``i``'s are rows
 ``mo_first[i]`` to ``mo_first[i + 1]`` of ``mo_par`` ``(M, 4)`` (radius m,
 speed m/s, repeat code, delay s), ``mo_pts`` ``(M, K, 2)`` their tracks
 (world frame, a ``loop`` closed) with ``mo_cum`` ``(M, K)`` the arc length
-at each point and ``mo_n`` ``(M,)`` the points used.
+at each point and ``mo_n`` ``(M,)`` the points used; rows ``mo_first[N]`` to
+``mo_first[N + 1]`` are shared by every robot of world 0 (a fleet's).  On the
+field an obstacle is an emulated robot (``mv_on``, :mod:`robot_agent.movers`)
+standing at ``mv_pose`` in its owner's frame instead of on its exact track;
+``mv_halt`` records the step it was hit in, after which it stands.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ import numpy as np
 
 from .compiled import kernel
 
-__all__ = ["block_distance", "collide", "obstacle_contact", "obstacle_position", "robot_contacts", "wall_distance"]
+__all__ = ["block_distance", "collide", "obstacle_contact", "obstacle_position", "obstacle_xy", "robot_contacts",
+           "wall_distance"]
 
 ONCE, LOOP, PINGPONG = 0, 1, 2  #: repeat codes (planners.moving.REPEAT_MODES)
 
@@ -108,12 +113,23 @@ def obstacle_position(m: int, t: float, mo_par: np.ndarray, mo_pts: np.ndarray, 
 
 
 @kernel
+def obstacle_xy(m: int, t: float, mo_par: np.ndarray, mo_pts: np.ndarray, mo_cum: np.ndarray, mo_n: np.ndarray,
+                mv_on: np.ndarray, mv_pose: np.ndarray, gx: float, gy: float) -> tuple[float, float]:
+    """Centre (m, world frame) of moving obstacle ``m`` at obstacle time ``t`` (s): on its track, or where the
+    obstacle robot stands (its owner's frame has origin ``(gx, gy)``)."""
+    if mv_on[m]:
+        return mv_pose[m, 0] + gx, mv_pose[m, 1] + gy
+    return obstacle_position(m, t, mo_par, mo_pts, mo_cum, mo_n)
+
+
+@kernel
 def obstacle_contact(i: int, x: float, y: float, t: float, radius: float, mo_first: np.ndarray, mo_par: np.ndarray,
-                     mo_pts: np.ndarray, mo_cum: np.ndarray, mo_n: np.ndarray) -> int:
-    """Index (among robot ``i``'s) of the first moving obstacle closer than ``radius`` plus its own radius to
-    ``(x, y)`` (world, m) at obstacle time ``t`` (s), or -1."""
+                     mo_pts: np.ndarray, mo_cum: np.ndarray, mo_n: np.ndarray, mv_on: np.ndarray,
+                     mv_pose: np.ndarray, gx: float, gy: float) -> int:
+    """Index (among owner ``i``'s) of the first moving obstacle closer than ``radius`` plus its own radius to
+    ``(x, y)`` (world, m) at obstacle time ``t`` (s), or -1; ``(gx, gy)`` the owner's frame origin."""
     for m in range(mo_first[i], mo_first[i + 1]):
-        ox, oy = obstacle_position(m, t, mo_par, mo_pts, mo_cum, mo_n)
+        ox, oy = obstacle_xy(m, t, mo_par, mo_pts, mo_cum, mo_n, mv_on, mv_pose, gx, gy)
         if math.hypot(x - ox, y - oy) < radius + mo_par[m, 0]:
             return m - mo_first[i]
     return -1
@@ -133,7 +149,7 @@ def collide(pose: np.ndarray, check: np.ndarray, step: int, k: np.ndarray, hit: 
     simulation steps); moving obstacles are checked every step.
     """
     (origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until, mo_first, mo_par, mo_pts, mo_cum,
-     mo_n, what) = world
+     mo_n, what, mv_on, mv_pose, mv_halt, mv_clock) = world
     n = len(pose)
     hit[:] = False
     robot_contacts(pose, origin, world_of, shared, radius, hit)
@@ -145,10 +161,22 @@ def collide(pose: np.ndarray, check: np.ndarray, step: int, k: np.ndarray, hit: 
             what[i] = -1
         x, y = pose[i, 0] + origin[i, 0], pose[i, 1] + origin[i, 1]
         if mo_first[i + 1] > mo_first[i] and not hit[i]:
-            m = obstacle_contact(i, x, y, (k[i] + 1) * dt, radius, mo_first, mo_par, mo_pts, mo_cum, mo_n)
+            m = obstacle_contact(i, x, y, (k[i] + 1) * dt, radius, mo_first, mo_par, mo_pts, mo_cum, mo_n, mv_on,
+                                 mv_pose, origin[i, 0], origin[i, 1])
             if m >= 0:
                 hit[i] = True
                 what[i] = m
+                if mv_on[mo_first[i] + m] and mv_halt[mo_first[i] + m] < 0:
+                    mv_halt[mo_first[i] + m] = k[i]  # the obstacle robot stops where it was hit
+                continue
+        if mo_first[n + 1] > mo_first[n] and not hit[i] and world_of[i] == 0:
+            m = obstacle_contact(n, x, y, 0.0, radius, mo_first, mo_par, mo_pts, mo_cum, mo_n, mv_on, mv_pose,
+                                 0.0, 0.0)
+            if m >= 0:
+                hit[i] = True
+                what[i] = m
+                if mv_halt[mo_first[n] + m] < 0:
+                    mv_halt[mo_first[n] + m] = mv_clock[mo_first[n] + m] - 1
                 continue
         if safe_until[i] > step:
             continue

@@ -19,6 +19,12 @@ leg is a new path for the robot (a new noise key, ``path_key(seed, "robot-i",
 leg)``, as an agent counts its paths), so a leg's moving obstacles are
 re-sent with their clock shifted to the fleet's.  Events are reported per
 robot as one path: one START, WP indices of the whole path, one DONE or FAIL.
+
+**On the field** (backend ``field``) the moving obstacles are emulated robots
+the testbed drives (:mod:`robot_agent.movers`), one per obstacle, shared by
+every robot of the fleet and driven on the fleet's clock from time 0; a robot
+that hits one stops it for everyone.  What the tracker logged of them is in
+:attr:`FleetRun.obstacles`.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ from .backends import make_backend
 from .controller_specs import select
 from .frames import FIELD_SIZE, MAX_ROBOTS
 from .headless import HeadlessRun, PlacementRefused
+from .movers import mover_tracks
 from .noise import path_key
 from .params import robot_params
 from .protocol import (BuildCommand, MovingCommand, PathCommand, PlaceCommand, encode_build, encode_moving, encode_path,
@@ -53,12 +60,15 @@ class FleetRun:
     """What a fleet run gave: one :class:`~robot_agent.headless.HeadlessRun` per robot (its tracker poses
     ``(N, 4)`` t s, x m, y m, theta rad on the fleet's clock, its events, start and end times), the
     ``holds`` each robot made (waypoint index, s held), ``dt`` (s, the control step) and, per hold, the
-    robots it ``waited_for`` (executed by dependencies; empty: it waited for the plan's clock)."""
+    robots it ``waited_for`` (executed by dependencies; empty: it waited for the plan's clock); on the field
+    the tracker's poses of the obstacle robots, ``obstacles`` (per obstacle ``(T, 4)`` t s on the fleet's
+    clock, x m, y m, theta rad; None: exact discs)."""
 
     runs: list[HeadlessRun]
     holds: list[list[tuple[int, float]]] = field(default_factory=list)
     dt: float = 0.02
     waited_for: list[list[list[int]]] = field(default_factory=list)
+    obstacles: list[np.ndarray] | None = None
 
     @property
     def outcomes(self) -> list[str]:
@@ -145,10 +155,14 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
         raise PlacementRefused(f"cannot place robot {b}: robot {a} stands {gap[a, b]:.3f} m from it, closer than "
                                f"two collision radii ({2 * world.radius:.3f} m)")
     away = np.full((n, 3), 1e6)  # the robots' mutual distances are checked above
+    driven = world.driven is not None
+    if driven:  # the field's obstacle robots: one each, for every robot, on the fleet's clock
+        world.set_shared_moving(list(movers.obstacles), _obstacle_key(seed))
     for i in range(n):
         placed = parse_command(encode_place(starts[i]), field_size=size)
         assert isinstance(placed, PlaceCommand)
-        world.set_moving(i, list(movers.obstacles))
+        if not driven:
+            world.set_moving(i, list(movers.obstacles))
         why = world.place_conflict(i, placed.pose, away)
         if why:
             raise PlacementRefused(f"cannot place robot {i}: {why}")
@@ -156,7 +170,7 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
     core.poses.drain()
 
     end_step = math.ceil(max_s / core.dt)
-    job = _Job(core, world, sent, holds_at, list(movers.obstacles), seed, chosen, end_step)
+    job = _Job(core, world, sent, holds_at, [] if driven else list(movers.obstacles), seed, chosen, end_step)
     if depends is None:
         events, holds = _run_timed(job)
         waited: list[list[list[int]]] = [[[] for _ in h] for h in holds]
@@ -169,7 +183,16 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
         t_start = next((e.t for e in ev if e.kind == "START"), None)
         t_end = next((e.t for e in ev if e.kind in ("DONE", "FAIL")), None)
         runs.append(HeadlessRun(logged.get(i, np.zeros((0, 4))), ev, t_start, t_end))
-    return FleetRun(runs, holds, core.dt, waited)
+    tracks = None
+    if driven and movers.obstacles:
+        tracks = mover_tracks(list(movers.obstacles), _obstacle_key(seed), params, core.step_count * core.dt,
+                              world.halted(n))
+    return FleetRun(runs, holds, core.dt, waited, tracks)
+
+
+def _obstacle_key(seed: int) -> int:
+    """The noise key a fleet's obstacle robots' keys derive from (:func:`robot_agent.movers.mover_key`)."""
+    return path_key(seed, "obstacles")
 
 
 @dataclass
@@ -191,8 +214,9 @@ class _Job:
         """Robot ``i`` follows its points ``first..last`` (inclusive) from the next step, as its leg ``leg``
         (noise key), with the moving obstacles re-sent on the fleet's clock."""
         now, dt = self.core.step_count, self.core.dt
-        shifted = [(np.array([par[0], par[1], par[2], par[3] - now * dt]), pts) for par, pts in self.movers]
-        self.world.set_moving(i, shifted)
+        if self.movers:  # exact discs: re-sent with the leg, on the fleet's clock
+            shifted = [(np.array([par[0], par[1], par[2], par[3] - now * dt]), pts) for par, pts in self.movers]
+            self.world.set_moving(i, shifted)
         self.core.set_path(i, self.sent[i][first:last + 1], path_key(self.seed, f"robot-{i}", leg), self.chosen)
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from .backends import make_backend
 from .controller_specs import select
 from .frames import FIELD_SIZE, field_layout
+from .movers import mover_tracks
 from .noise import path_key
 from .params import robot_params
 from .protocol import (BuildCommand, MovingCommand, PathCommand, PlaceCommand, encode_build, encode_moving, encode_path,
@@ -40,12 +41,15 @@ _CHUNK = 4096  # control steps per compiled call
 @dataclass
 class HeadlessRun:
     """What one run gave: tracker ``poses`` ``(N, 4)`` (t s, x m, y m, theta rad; the robot's frame),
-    its ``events`` in order, and the experiment times (s) of its start and end (None if none)."""
+    its ``events`` in order, the experiment times (s) of its start and end (None if none) and, on the
+    field, the tracker's poses of its obstacle robots (``obstacles``: per moving obstacle ``(T, 4)`` on the
+    run's clock, as ``poses``; None: exact discs, :mod:`robot_agent.movers`)."""
 
     poses: np.ndarray
     events: list[SimEvent] = field(default_factory=list)
     t_start: float | None = None
     t_end: float | None = None
+    obstacles: list[np.ndarray] | None = None
 
     @property
     def outcome(self) -> str:
@@ -72,7 +76,8 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
     """Run ``path`` ``(N, 3)`` (m, m, rad) from ``start`` (x, y, theta) among ``blocks`` (cx, cy, w, h,
     angle: m, rad) and ``moving`` obstacles (params, waypoints: as :func:`~robot_agent.protocol.encode_moving`
     takes them) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
-    ``max_s`` of experiment time passed, with ``controller`` (a name of
+    ``max_s`` of experiment time passed (on the ``field`` backend the moving obstacles are robots the
+    testbed drives, :mod:`robot_agent.movers`), with ``controller`` (a name of
     :mod:`robot_agent.controller_specs`, default the motor schema) and its ``controller_params`` (SI
     units; defaults filled in).  ``track_gains`` (left, right; field backend) replaces the run's drawn
     track gains (calibration re-simulates runs with fitted ones).  Raises :class:`PlacementRefused`
@@ -109,4 +114,8 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
     poses = core.poses.drain().get(0, np.zeros((0, 4)))
     t_start = next((e.t for e in events if e.kind == "START"), None)
     t_end = next((e.t for e in events if e.kind in ("DONE", "FAIL")), None)
-    return HeadlessRun(poses, events, t_start, t_end)
+    tracks = None
+    if world.driven is not None and movers.obstacles:
+        tracks = [tr + [t_start or 0.0, 0.0, 0.0, 0.0] for tr in mover_tracks(
+            list(movers.obstacles), path_key(seed), params, int(core.k[0]) * core.dt, world.halted(0))]
+    return HeadlessRun(poses, events, t_start, t_end, tracks)

@@ -36,9 +36,10 @@ from .backends import Backend, Emulated
 from .controller_specs import Selection
 from .controllers import DIRECT, MEMORY, PARAM_SLOTS, SCHEMA
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
+from .movers import drive_movers, drive_shared, mover_gains
 from .params import RobotParams
 from .protocol import format_event
-from .stepper import COLLIDED, ENDED, State, control_fleet, run, settle_fleet
+from .stepper import COLLIDED, ENDED, FIELD, State, control_fleet, run, settle_fleet
 from .world import World
 
 if TYPE_CHECKING:
@@ -118,6 +119,10 @@ class SimCore:
         self.dt = params.dt
         self.gains = gains(params)
         world.step_travel = 2.0 * params.max_speed_m_s * self.dt  # generous bound: gains and noise stay far below 2x
+        self._field = isinstance(backend, Emulated) and backend.kind == FIELD
+        if self._field:  # on the emulated field moving obstacles are robots the testbed drives
+            world.drive(params)
+        self.mover_gains = mover_gains(params)
         self.step_count = 0
         self.log_poses = log_poses
         self.poses = PoseLog()
@@ -164,7 +169,11 @@ class SimCore:
         return bool((self.state == _MOVING).any()) or self.backend.busy()
 
     def skip(self, steps: int) -> None:
-        """Advance the clock by ``steps`` without stepping (only valid when not :meth:`busy`)."""
+        """Advance the clock by ``steps`` without stepping the robots (only valid when not :meth:`busy`); a
+        fleet's obstacle robots drive on."""
+        if self._field and self.world.mo_first[-1] > self.world.mo_first[-2]:
+            drive_shared(steps, self.k, self.world.arrays, self.world.tables, self.world.movers.arrays,
+                         self.backend.fg, self.mover_gains)
         self.step_count += steps
 
     # ------------------------------------------------------------------ commands
@@ -201,6 +210,7 @@ class SimCore:
         mask = np.zeros(self.n, dtype=bool)
         mask[i] = True
         self.backend.begin_path(mask, self.keys, from_rest)
+        self.world.restart_movers(i, key)
         self.timeout[i] = timeout_steps(self._paths[i], self.belief(i), self.params)
         self._begin_replanning(i, controller)
         return replaced
@@ -294,7 +304,8 @@ class SimCore:
                 steps, n_ev, n_pose = run(
                     self.backend.kind, chunk, self.step_count, self.log_poses, self._ctrl(), self.backend.arrays,
                     self.world.arrays, self.world.radius, self.world.step_travel,
-                    (self._events, self._pose_rows, self._pose_xyt, *self._scratch), self.gains, self.backend.fg)
+                    (self._events, self._pose_rows, self._pose_xyt, *self._scratch), self.gains, self.backend.fg,
+                    self._movers(), self.mover_gains)
                 if n_pose:
                     rows = self._pose_rows[:n_pose]
                     self.poses.add(rows[:, 0] * self.dt, rows[:, 1].copy(), self._pose_xyt[:n_pose].copy())
@@ -306,6 +317,12 @@ class SimCore:
             if len(records):
                 events += self._records_to_events(records)
         return events
+
+    def _movers(self) -> tuple:
+        """``(tables, phys)`` of the world's obstacle robots for the compiled loop (the backend's arrays stand in
+        when obstacles are exact: never touched then)."""
+        movers = self.world.movers
+        return self.world.tables, (movers.arrays if movers is not None else self.backend.arrays)
 
     # ------------------------------------------------------------------ replanning
 
@@ -408,6 +425,9 @@ class SimCore:
         self._plugin_commands(belief)
         control_fleet(belief, moving, self._ctrl(), self.gains, flags, old, self.world.arrays, self.world.radius)
         self.backend.actuate(self.cmd)
+        if self._field:
+            drive_movers(self.k, self.world.arrays, self.world.tables, self.world.movers.arrays, np.zeros(3),
+                         self.backend.fg, self.mover_gains, False)
         still = moving & (flags & ENDED == 0)
         collided = self.world.collisions(self.backend.pose, still | self.backend.in_motion(), self.step_count, self.k,
                                          self.dt)
@@ -467,6 +487,7 @@ def warm_up() -> None:
         sizes, world_of, origin, area = field_layout(2, "shared")
         core = SimCore(p, make_backend(name, 2, p), World(sizes, world_of, origin, area, p.collision_radius_m))
         core.world.set_blocks(0, np.array([[1.0, 1.0, 0.1, 0.1, 0.0]]))
+        core.world.set_moving(0, [(np.array([0.04, 0.1, 2.0, 0.0]), np.array([[1.2, 0.3], [1.4, 0.3]]))])
         core.world.place_conflict(1, (0.5, 0.5, 0.0), core.backend.pose)
         for i in range(2):
             core.place(i, (0.3, 0.3, 0.0))

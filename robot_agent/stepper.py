@@ -31,9 +31,10 @@ from enum import IntEnum
 import numpy as np
 
 from .compiled import kernel
-from .contact import block_distance, collide, obstacle_position, wall_distance
+from .contact import block_distance, collide, obstacle_xy, wall_distance
 from .controllers import RPP
 from .follower import DONE, STALLED, TIMED_OUT, Gains, control
+from .movers import MoverGains, drive_movers
 from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
 
 __all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "clearance", "control_fleet", "run", "settle_fleet"]
@@ -61,12 +62,17 @@ def clearance(i: int, x: float, y: float, t: float, believed: np.ndarray, world:
     origin, world_of, sizes, centre, half, cs, nblocks, shared = world[0], world[1], world[2], world[3], \
         world[4], world[5], world[6], world[7]
     mo_first, mo_par, mo_pts, mo_cum, mo_n = world[9], world[10], world[11], world[12], world[13]
+    mv_on, mv_pose = world[15], world[16]
     wx, wy = x + origin[i, 0], y + origin[i, 1]
     w = world_of[i]
     d = min(wall_distance(wx, wy, sizes[w, 0], sizes[w, 1]), block_distance(wx, wy, w, centre, half, cs, nblocks))
     for m in range(mo_first[i], mo_first[i + 1]):
-        ox, oy = obstacle_position(m, t, mo_par, mo_pts, mo_cum, mo_n)
+        ox, oy = obstacle_xy(m, t, mo_par, mo_pts, mo_cum, mo_n, mv_on, mv_pose, origin[i, 0], origin[i, 1])
         d = min(d, math.hypot(wx - ox, wy - oy) - mo_par[m, 0])
+    n = len(mo_first) - 2
+    if w == 0:
+        for m in range(mo_first[n], mo_first[n + 1]):  # a fleet's obstacle robots
+            d = min(d, math.hypot(wx - mv_pose[m, 0], wy - mv_pose[m, 1]) - mo_par[m, 0])
     for j in shared:
         if j != i and world_of[j] == w:
             d = min(d, math.hypot(wx - believed[j, 0] - origin[j, 0], wy - believed[j, 1] - origin[j, 1]) - radius)
@@ -127,8 +133,10 @@ def _busy(kind: int, state: np.ndarray, tracks: np.ndarray) -> bool:
 
 @kernel
 def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phys: tuple, world: tuple,
-        radius: float, step_travel: float, out: tuple, g: Gains, fg: FieldGains) -> tuple[int, int, int]:
-    """Advance the fleet up to ``max_steps`` steps from simulation step ``step0``.
+        radius: float, step_travel: float, out: tuple, g: Gains, fg: FieldGains, movers: tuple,
+        mg: MoverGains) -> tuple[int, int, int]:
+    """Advance the fleet up to ``max_steps`` steps from simulation step ``step0``; on the field the obstacle
+    robots (``movers`` = ``(tables, phys)`` of :mod:`robot_agent.movers`) step after the robots moved.
 
     Returns ``(steps done, event rows, pose rows)``.
     """
@@ -160,6 +168,8 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
             else:
                 ideal_actuate(i, cmd[i, 0], cmd[i, 1], pose, g.dt)
                 check[i] = moving[i] and not flags[i] & ENDED
+        if kind == FIELD:
+            drive_movers(k, world, movers[0], movers[1], meas, fg, mg, False)
         collide(pose, check, step, k, hit, world, radius, step_travel, g.dt)
         if kind == FIELD:
             for i in range(n):

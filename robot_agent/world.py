@@ -17,17 +17,26 @@ compiled (:mod:`robot_agent.contact`).
 Moving obstacles (``T,T,M``, :mod:`planners.moving`) belong to the robot
 that was sent them: their time is that robot's time since its path began,
 so they collide with that robot only.  In a simulation they move exactly as
-the environment says; on the emulated field they stand for robots the
-testbed drives along the same tracks (docs/protocol.md).
+the environment says.  On the emulated field (:meth:`World.drive`) each is
+an emulated robot the testbed drives along its track
+(:mod:`robot_agent.movers`): it starts again from its first waypoint with
+every path of its robot, touches that robot as a robot does (two collision
+radii between centres) and stops where it was hit.  A fleet's obstacles
+are shared by all its robots (:meth:`World.set_shared_moving`), on the
+fleet's clock.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .contact import LOOP, block_distance, collide, obstacle_contact, wall_distance
+from .contact import block_distance, collide, obstacle_contact, wall_distance
+from .movers import mover_key, reset_mover, track_tables
+from .params import RobotParams
 
 __all__ = ["World"]
+
+_NO_POSE = np.zeros((1, 3))  # the obstacle robots' poses in compiled code when obstacles are exact
 
 
 class World:
@@ -54,9 +63,11 @@ class World:
         #: broad phase: the step until which each robot cannot touch a wall or block
         self.safe_until = np.zeros(self.n, dtype=np.int64)
         self._hit = np.zeros(self.n, dtype=bool)
-        self._moving: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}  # owner -> [(params (4,), pts (K, 2))]
+        # owner (a robot, or n: shared by the fleet) -> [(params (4,), pts (K, 2) its frame)]
+        self._moving: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
         #: per robot, the moving obstacle (its index among the robot's) of its last collision, -1 for others
         self.what = np.full(self.n, -1, dtype=np.int64)
+        self.driven: RobotParams | None = None  #: the obstacle robots' parameters on the field (None: exact)
         self._rebuild()
         self._rebuild_moving()
 
@@ -118,50 +129,110 @@ class World:
         old = len(self._moving.pop(owner, []))
         if obstacles:
             self._moving[owner] = [(np.asarray(par, dtype=float).reshape(4).copy(),
-                                    np.asarray(pts, dtype=float).reshape(-1, 2) + self.origin[owner])
-                                   for par, pts in obstacles]
-        self._rebuild_moving()
+                                    np.asarray(pts, dtype=float).reshape(-1, 2).copy()) for par, pts in obstacles]
+        self._rebuild_moving(owner)
         return old
 
     def moving_local(self, owner: int) -> list[tuple[np.ndarray, np.ndarray]]:
         """Robot ``owner``'s moving obstacles as :meth:`set_moving` took them (params, waypoints in its frame)."""
-        return [(par.copy(), pts - self.origin[owner]) for par, pts in self._moving.get(owner, [])]
+        return [(par.copy(), pts.copy()) for par, pts in self._moving.get(owner, [])]
+
+    def drive(self, params: RobotParams) -> None:
+        """From now on moving obstacles are emulated field robots of ``params`` (:mod:`robot_agent.movers`)."""
+        self.driven = params
+        self._rebuild_moving()
+
+    def set_shared_moving(self, obstacles: list[tuple[np.ndarray, np.ndarray]], key: int) -> None:
+        """Obstacle robots every robot of world 0 meets (a fleet's, on its clock from now; noise ``key``); as
+        :meth:`set_moving` takes them, in world 0's frame.  Only on the field (:meth:`drive`)."""
+        if self.driven is None:
+            raise ValueError("shared moving obstacles are driven obstacle robots: call drive() first")
+        self._moving.pop(self.n, None)
+        if obstacles:
+            self._moving[self.n] = [(np.asarray(par, dtype=float).reshape(4).copy(),
+                                     np.asarray(pts, dtype=float).reshape(-1, 2).copy()) for par, pts in obstacles]
+        self._rebuild_moving(self.n)
+        self.restart_movers(self.n, key)
+
+    def restart_movers(self, owner: int, key: int) -> None:
+        """Owner ``owner``'s obstacle robots stand at their first waypoints, their runs begun with noise from
+        ``key`` (a path of the robot begins); nothing when obstacles are exact."""
+        if self.driven is None:
+            return
+        fg = self.movers.fg
+        for j, m in enumerate(range(self.mo_first[owner], self.mo_first[owner + 1])):
+            reset_mover(m, np.uint64(mover_key(key, j)), self.mo_par, self.mv_pts, self.mo_n, self.movers.arrays, fg)
+            self.mv_halt[m] = -1
+            self.mv_clock[m] = 0
+
+    def halted(self, owner: int) -> np.ndarray:
+        """The step (since their track began) each of owner ``owner``'s obstacle robots was hit in (-1: not)."""
+        return self.mv_halt[self.mo_first[owner]:self.mo_first[owner + 1]].copy()
 
     def moving_count(self, owner: int) -> int:
         """How many moving obstacles robot ``owner`` has."""
         return len(self._moving.get(owner, []))
 
-    def _rebuild_moving(self) -> None:
-        """Tables of every robot's obstacle tracks, robot by robot (see :mod:`robot_agent.contact`)."""
-        tracks: list[tuple[np.ndarray, np.ndarray]] = []
-        first = np.zeros(self.n + 1, dtype=np.int64)
-        for i in range(self.n):
+    def _rebuild_moving(self, changed: int = -1) -> None:
+        """Tables of every robot's obstacle tracks, robot by robot, then the shared ones (see
+        :mod:`robot_agent.contact`): in the world's frame for exact discs, in the owner's for obstacle robots;
+        the obstacle robots of owners other than ``changed`` keep their state."""
+        from .backends import FieldBackend
+
+        world: list[tuple[np.ndarray, np.ndarray]] = []
+        local: list[tuple[np.ndarray, np.ndarray]] = []
+        first = np.zeros(self.n + 2, dtype=np.int64)
+        for i in range(self.n + 1):
+            at = self.origin[i] if i < self.n else np.zeros(2)
             for par, pts in self._moving.get(i, []):
-                if int(par[2]) == LOOP and len(pts) > 1:
-                    pts = np.vstack([pts, pts[:1]])
-                tracks.append((par, pts))
-            first[i + 1] = len(tracks)
-        k = max((len(p) for _, p in tracks), default=1)
+                world.append((par, pts + at))
+                local.append((par, pts))
+            first[i + 1] = len(world)
         self.mo_first = first
-        self.mo_par = np.zeros((max(len(tracks), 1), 4))
-        self.mo_pts = np.zeros((len(self.mo_par), k, 2))
-        self.mo_cum = np.zeros((len(self.mo_par), k))
-        self.mo_n = np.ones(len(self.mo_par), dtype=np.int64)
-        for m, (par, pts) in enumerate(tracks):
-            self.mo_par[m] = par
-            self.mo_pts[m, : len(pts)] = pts
-            self.mo_cum[m, 1 : len(pts)] = np.cumsum(np.hypot(*np.diff(pts, axis=0).T))
-            self.mo_n[m] = len(pts)
+        self.mo_par, self.mo_pts, self.mo_cum, self.mo_n = track_tables(world)
+        m = len(self.mo_par)
+        kept = getattr(self, "movers", None), getattr(self, "mv_halt", None), getattr(self, "mv_clock", None)
+        old_first = getattr(self, "_mv_first", None)
+        self.mv_on = np.zeros(m, dtype=bool)
+        self.mv_halt = np.full(m, -1, dtype=np.int64)
+        self.mv_clock = np.zeros(m, dtype=np.int64)
+        self._mv_first = first
+        if self.driven is None:
+            self.movers = None
+            self.mv_pts, self.mv_cum = self.mo_pts, self.mo_cum
+            return
+        _, self.mv_pts, self.mv_cum, _ = track_tables(local)
+        self.movers = FieldBackend(m, self.driven)
+        self.mv_on[: len(world)] = True
+        self.mo_par[: len(world), 0] = self.radius  # a robot: it touches robots at two collision radii
+        for owner in range(self.n + 1):
+            a, b = first[owner], first[owner + 1]
+            if owner != changed and kept[0] is not None and old_first is not None \
+                    and old_first[owner + 1] - old_first[owner] == b - a:
+                old = slice(old_first[owner], old_first[owner + 1])  # an obstacle robot under way drives on
+                for new_arr, old_arr in zip(self.movers.arrays, kept[0].arrays):
+                    new_arr[a:b] = old_arr[old]
+                self.mv_halt[a:b], self.mv_clock[a:b] = kept[1][old], kept[2][old]
+            else:
+                self.restart_movers(owner, 0)
 
     # ------------------------------------------------------------------ geometry
 
     @property
     def arrays(self) -> tuple:
         """``(origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until, mo_first, mo_par, mo_pts,
-        mo_cum, mo_n, what)`` for :func:`robot_agent.contact.collide`, the arrays themselves."""
+        mo_cum, mo_n, what, mv_on, mv_pose, mv_halt, mv_clock)`` for :func:`robot_agent.contact.collide`, the
+        arrays themselves; ``mv_*`` the obstacle robots' (:mod:`robot_agent.movers`): driven or not, poses in
+        their owner's frame, the step each was hit in (-1: not), the shared ones' clocks."""
+        pose = self.movers.pose if self.movers is not None else _NO_POSE
         return (self.origin, self.world_of, self.sizes, self.centre, self.half, self.cs, self.nblocks,
                 self.shared, self.safe_until, self.mo_first, self.mo_par, self.mo_pts, self.mo_cum, self.mo_n,
-                self.what)
+                self.what, self.mv_on, pose, self.mv_halt, self.mv_clock)
+
+    @property
+    def tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """The obstacle robots' tracks in their owners' frames, ``(pts (M, K, 2), cum (M, K))``."""
+        return self.mv_pts, self.mv_cum
 
     def to_world(self, pose_local: np.ndarray) -> np.ndarray:
         """World ``(N, 2)`` positions of local poses ``(N, 2+)``."""
@@ -191,10 +262,12 @@ class World:
             return "the robot would touch the field's wall there"
         if block_distance(x, y, w, self.centre, self.half, self.cs, self.nblocks) < self.radius:
             return "the robot would touch a block there"
-        m = obstacle_contact(i, x, y, 0.0, self.radius, self.mo_first, self.mo_par, self.mo_pts, self.mo_cum,
-                             self.mo_n)
-        if m >= 0:
-            return f"moving obstacle {m} stands there when the path starts"
+        pose = self.movers.pose if self.movers is not None else _NO_POSE
+        for g, (gx, gy) in ((i, self.origin[i]), (self.n, (0.0, 0.0))):
+            m = obstacle_contact(g, x, y, 0.0, self.radius, self.mo_first, self.mo_par, self.mo_pts, self.mo_cum,
+                                 self.mo_n, self.mv_on, pose, float(gx), float(gy))
+            if m >= 0:
+                return f"moving obstacle {m} stands there when the path starts"
         same = np.flatnonzero((self.world_of == w) & (np.arange(self.n) != i))
         if len(same):
             others = self.to_world(poses_local)[same]

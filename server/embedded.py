@@ -97,10 +97,11 @@ class EmbeddedField:
 
     # ------------------------------------------------------------------ RobotHooks
 
-    def seed_next_path(self, robot_id: str, seed: int) -> None:
+    def seed_next_path(self, robot_id: str, seed: int) -> bool:
         host = self._host_of.get(robot_id)
         if host is not None:
             host.set_path_seed(robot_id, seed)
+        return host is not None
 
     async def flush_tracker(self, robot_id: str) -> bool:
         host: Optional["AgentHost"] = self._host_of.get(robot_id)

@@ -57,6 +57,7 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
     except ControllerError as exc:
         raise PreflightError(f"{exc.field}: {exc}" if exc.field == "controller" else str(exc)) from None
     params = _planner_params(body)
+    _tracked_robots(body, env)
     if body.robots is not None:
         if body.planner == FLEET_PLANNER and controller.replans:
             raise PreflightError("controller_params.replan: the robots of a prioritized plan keep to its "
@@ -82,6 +83,25 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
         _check_clear(space, pts, robot_radius)
         path = [list(map(float, p)) for p in body.path]
     return Preflight(env, _pose(s), _pose(g), params, path, controller.params)
+
+
+def _tracked_robots(body: ExperimentCreate, env: Environment) -> None:
+    """On the field (mode ``twb``) each moving obstacle is a robot of the field the testbed drives: the job's
+    robots and its moving obstacles must fit what the field's part holds (:data:`MAX_ROBOTS_SUBFIELD` on a
+    sub-field, :data:`MAX_ROBOTS` on the whole field); PreflightError naming ``moving_obstacles``."""
+    if "twb" not in body.modes or not env.moving_obstacles:
+        return
+    robots = len(body.robots) if body.robots is not None else 1
+    most = MAX_ROBOTS if body.field == "full" else MAX_ROBOTS_SUBFIELD
+    need = robots + len(env.moving_obstacles)
+    if need > most:
+        where = "a sub-field" if body.field == "sub" else "the field"
+        hint = ' (use "field": "full" for up to 64)' if body.field == "sub" and need <= MAX_ROBOTS else ""
+        raise PreflightError(
+            f"moving_obstacles: {len(env.moving_obstacles)} moving obstacles and {robots} robot"
+            f"{'s' if robots > 1 else ''} need {need} robots of the field (on the field each moving obstacle is a "
+            f"robot the testbed drives); {where} holds {most}{hint}, or run mode \"sim\" alone, where they are "
+            "exact discs")
 
 
 def _environment(body: ExperimentCreate, env_data: dict[str, Any]) -> Environment:

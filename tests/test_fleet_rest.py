@@ -193,6 +193,30 @@ def test_a_field_fleet_on_a_sub_field_is_the_emulated_field_robots_shown_live(te
         assert (e["x"], e["y"]) == pytest.approx((mine[-1, 1] + origin[0], mine[-1, 2] + origin[1]))
 
 
+def test_a_field_job_counts_its_moving_obstacles_as_robots_of_the_field(client):
+    """On the field each moving obstacle is a robot the testbed drives: 12 of them and 6 robots do not fit a
+    sub-field's 16 (422 naming the field); 2 of them and 2 robots run, measured against the obstacle robots."""
+    movers = [{"radius": 0.04, "speed": 0.1, "waypoints": [[0.2 + 0.1 * k, 1.6], [0.2 + 0.1 * k, 1.3]],
+               "repeat": "pingpong"} for k in range(12)]
+    for name, obstacles in (("twelve-movers", movers), ("two-movers", movers[:2])):
+        env = {"name": name, "size": [1.8, 1.8], "blocks": [], "moving_obstacles": obstacles}
+        assert client.post("/api/v1/environments", json=env).status_code == 201
+    six = [{"start": [0.2 + 0.2 * k, 0.2], "goal": [0.2 + 0.2 * k, 0.8]} for k in range(6)]
+    r = client.post("/api/v1/experiments", json={"environment": "twelve-movers", "robots": six, "planner": "astar",
+                                                 "modes": ["sim", "twb"]})
+    assert r.status_code == 422 and r.json()["detail"].startswith(
+        "moving_obstacles: 12 moving obstacles and 6 robots need 18 robots of the field"), r.text
+    job = {"environment": "two-movers", "robots": six[:2], "planner": "astar", "modes": ["twb"]}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=120)
+    run = exp["runs"][0]
+    assert exp["status"] == "completed", (exp["error"], run["error"])
+    m = run["metrics"]
+    assert 0.3 < m["obstacle_distance_min_m"] < 1.0
+    assert m["obstacle_distance_min_m"] == min(r["obstacle_distance_min_m"] for r in m["robots"])
+    assert any("the 2 moving obstacle(s) are emulated BeBot robots the testbed drives" in line
+               for line in lines(client, run["id"]))
+
+
 def test_a_full_field_fleet_holds_the_whole_field(client):
     """`field: "full"`: the emulated field robots in the whole field's frame, the run on all four sub-fields;
     two robots pass each other in lanes 0.6 m apart across the middle of the field."""

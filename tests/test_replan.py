@@ -64,14 +64,17 @@ def test_a_replanning_run_replays_exactly(fmm_path):
 
 
 def test_replan_off_gives_mains_poses_bit_for_bit(fmm_path):
-    """Replanning is off by default: the same run as before it existed (main at 73f6cc8 gave these numbers:
-    195 tracker poses, the collision at 6.7 s), and the same as ``replan`` = 0 given explicitly."""
-    run = drive(fmm_path, "field")
-    assert len(run.poses) == 195 and run.outcome == "COLLISION"
-    assert [round(v, 9) for v in run.poses[-1]] == [6.7, 0.748426001, 1.183257334, 0.786833112]
-    assert round(float(run.poses[:, 1].sum()), 6) == 91.444697
-    off = drive(fmm_path, "field", replan=0, replan_horizon_s=5.0)
-    assert np.array_equal(off.poses, run.poses) and off.events == run.events
+    """Replanning is off by default: the same run as before it existed (main at f65a5cb gave these numbers for
+    the ideal robot: 333 tracker poses, the collision at 6.64 s), and on the field the same as ``replan`` = 0
+    given explicitly (the field's numbers changed since with the obstacle robots, tests/test_field_movers.py)."""
+    run = drive(fmm_path, "ideal")
+    assert len(run.poses) == 333 and run.outcome == "COLLISION"
+    assert [round(v, 9) for v in run.poses[-1]] == [6.64, 0.754505274, 1.195764155, 0.788659044]
+    assert round(float(run.poses[:, 1].sum()), 6) == 162.423903
+    for backend in ("ideal", "field"):
+        default = drive(fmm_path, backend)
+        off = drive(fmm_path, backend, replan=0, replan_horizon_s=5.0)
+        assert np.array_equal(off.poses, default.poses) and off.events == default.events
 
 
 def test_checking_without_anything_in_the_way_changes_nothing():

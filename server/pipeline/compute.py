@@ -12,8 +12,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "moving_tuples", "compare_runs", "expected_duration_s", "explicit_path", "fleet_job", "jittered", "measure_run",
-           "plan_job", "replan_metrics", "replanning", "simulate_job", "warm_up"]
+__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "field_obstacle_tracks", "moving_tuples",
+           "obstacle_robots_note", "compare_runs", "expected_duration_s", "explicit_path", "fleet_job", "jittered",
+           "measure_run", "plan_job", "replan_metrics", "replanning", "simulate_job", "warm_up"]
 
 
 class TooFewPoses(Exception):
@@ -71,9 +72,11 @@ def expected_duration_s(path_length_m: float, n_blocks: int, *, speed_m_s: float
 
 def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: list[list[float]],
                 t_start: Optional[float], t_done: Optional[float], goal: list[float], robot_radius: float,
-                planning_time_s: Optional[float]) -> dict[str, Any]:
+                planning_time_s: Optional[float], obstacles: Optional[list] = None) -> dict[str, Any]:
     """The metrics of one run (docs/metrics.md), the controller's too, from its planned path and logged poses
-    ``[t, x, y, theta]``.
+    ``[t, x, y, theta]``; ``obstacles`` (on the field): the tracker's poses of the obstacle robots, one
+    ``[[t, x, y, theta], ...]`` per moving obstacle on the run's clock, which the obstacle metrics then
+    measure against (each a robot of ``robot_radius``) instead of the exact tracks.
 
     Raises :class:`TooFewPoses` when fewer than two poses lie in the run.
     """
@@ -92,8 +95,13 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
         raise TooFewPoses(f"only {len(pr)} pose(s) were logged for this run; metrics need at least 2")
     settings = MetricSettings(robot_radius=robot_radius)
     g = np.asarray(goal[:2], dtype=float)
+    tracks = None
+    if obstacles is not None:  # the obstacle clock starts with the path
+        t0 = float(pr[0, 0]) if t_start is None else float(t_start)
+        tracks = [np.asarray(o, dtype=float).reshape(-1, 4) - [t0, 0.0, 0.0, 0.0] for o in obstacles]
     out = run_metrics(np.asarray(planned, dtype=float), pr[:, 1:4], env=env, t=pr[:, 0], start_time=t_start,
-                      done_time=t_done, goal=g, planning_time_s=planning_time_s, settings=settings)
+                      done_time=t_done, goal=g, planning_time_s=planning_time_s, settings=settings,
+                      obstacle_tracks=tracks, obstacle_radius=None if tracks is None else robot_radius)
     profile = robot_params()  # the testbed's robots: a collision is what their own check counts
     control = ControlSettings(collision_radius=profile.collision_radius_m, goal_tolerance=settings.goal_tolerance,
                               max_speed=profile.max_speed_m_s)
@@ -135,6 +143,44 @@ def replan_metrics(replans: list[tuple[int, float]]) -> dict[str, Any]:
             "replan_time_s": float(sum(s for _, s in replans))}
 
 
+def obstacle_robots_note(env_data: dict[str, Any], platform: str) -> str:
+    """The run log's line on a field run's moving obstacles: emulated robots of ``platform`` the testbed
+    drives, and, when the environment gives them another radius, that on the field they have the robot's."""
+    from robot_agent.params import robot_params
+    from robot_agent.robot_profile import profile_for_platform
+
+    radius = robot_params(profile_for_platform(platform)).collision_radius_m
+    obstacles = env_data.get("moving_obstacles") or []
+    other = sorted({float(o["radius"]) for o in obstacles if float(o["radius"]) != radius})
+    text = (f"the {len(obstacles)} moving obstacle(s) are emulated {platform} robots the testbed drives along their "
+            f"tracks (they lag and deviate from the exact tracks, count toward the robots the tracker follows, "
+            f"and stop when hit)")
+    if other:
+        text += (f"; a {platform} touches another robot at {2 * radius:.3f} m between centres (collision radius "
+                 f"{radius:.3f} m), so the radius {', '.join(f'{r:g}' for r in other)} m the environment gives "
+                 f"does not apply on the field: obstacle metrics measure them as robots of the run's radius")
+    return text
+
+
+def field_obstacle_tracks(env_data: dict[str, Any], seed: int, platform: str, t_start: float,
+                          t_end: float) -> list[np.ndarray]:
+    """The tracker's poses of a field run's obstacle robots from its path start ``t_start`` to its end
+    ``t_end`` (s, the run's clock), replayed as the agent drove them for a path of noise seed ``seed``
+    (:func:`robot_agent.movers.mover_tracks`; the robot ``platform``'s profile): per moving obstacle
+    ``(T, 4)`` t s, x m, y m, theta rad."""
+    from robot_agent.movers import mover_tracks
+    from robot_agent.noise import path_key
+    from robot_agent.params import robot_params
+    from robot_agent.protocol import MovingCommand, encode_moving, parse_command
+    from robot_agent.robot_profile import load_profile, profile_for_platform
+
+    sent = parse_command(encode_moving(moving_tuples(env_data)))  # what the agent got: the wire's rounding
+    assert isinstance(sent, MovingCommand)
+    params = robot_params(load_profile(profile_for_platform(platform)))
+    return [tr + [t_start, 0.0, 0.0, 0.0]
+            for tr in mover_tracks(list(sent.obstacles), path_key(seed), params, t_end - t_start)]
+
+
 def collision_counts(collided: bool, obstacle: Optional[int]) -> dict[str, int]:
     """A run's collisions by kind (docs/metrics.md): ``collisions_obstacle`` (a moving obstacle) and
     ``collisions_block`` (a block, the wall or another robot); a collision ends a run, so each is 0 or 1."""
@@ -158,7 +204,8 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     Returns ``{"poses"`` ``(N, 4)`` t s, x m, y m, theta rad (field frame), ``"lines"`` the protocol
     lines an agent would have exchanged (``[direction, line, t]``), ``"t_start"``, ``"t_end"``,
     ``"outcome"`` (``DONE``, a ``FAIL`` reason or ``TIMEOUT_SIM``), ``"obstacle"`` (the moving obstacle of a
-    collision, else None), ``"metrics"`` (None with
+    collision, else None), ``"obstacles"`` (on the field: the tracker's poses of the obstacle robots, per
+    obstacle ``(T, 4)`` on the run's clock; else None), ``"metrics"`` (None with
     ``"metrics_error"`` when too few poses were logged)``}``; or ``{"placement_error": why, "lines"}`` when no
     pose of ``starts`` is free.
     """
@@ -179,6 +226,8 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     lines: list[list[Any]] = [[">", encode_build(blocks), None]]
     if moving:
         lines.append([">", encode_moving(moving), None])
+        if backend == "field":
+            lines.append(["s", obstacle_robots_note(env_data, platform), None])
     run = None
     for i, start in enumerate(starts):
         lines.append([">", encode_place(start), None])
@@ -198,11 +247,12 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     lines.append([">", encode_path(path), run.t_start])
     lines += [["<", e.line, e.t] for e in run.events]
     out: dict[str, Any] = {"poses": run.poses, "lines": lines, "t_start": run.t_start, "t_end": run.t_end,
-                           "outcome": run.outcome, "obstacle": run.obstacle, "metrics": None, "metrics_error": None}
+                           "outcome": run.outcome, "obstacle": run.obstacle, "metrics": None, "metrics_error": None,
+                           "obstacles": run.obstacles}
     t_end = run.t_end if run.t_end is not None else (float(run.poses[-1, 0]) if len(run.poses) else None)
     try:
         out["metrics"] = measure_run(env_data, path, run.poses, run.t_start, t_end, goal, robot_radius,
-                                     planning_time_s)
+                                     planning_time_s, run.obstacles)
         if replanning(controller_params):
             out["metrics"].update(replan_metrics([(e.index or 0, e.seconds or 0.0) for e in run.events
                                                   if e.kind == "REPLAN"]))
@@ -303,6 +353,9 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     clearance = [None if p is None else float(distance_to_obstacles(env, p[None])[0]) for p in last]
     metrics = fleet_metrics([r.poses for r in fleet.runs], fleet.outcomes, [r.t_end for r in fleet.runs],
                             [r.obstacle for r in fleet.runs], settings, clearance)
+    if env.moving_obstacles:
+        _fleet_obstacle_distances(env, fleet, robot_params(profile).collision_radius_m if backend == "field" else None,
+                                  metrics)
     metrics["planning_time_s"] = planning_time_s
     if replanning(controller_params):
         per = [replan_metrics([(e.index or 0, e.seconds or 0.0) for e in r.events if e.kind == "REPLAN"])
@@ -312,13 +365,36 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
         metrics.update({k: sum(m[k] for m in per) for k in ("replans", "replan_failures", "replan_time_s")})
     out = []
     for i, run in enumerate(fleet.runs):
-        lines = [[">", encode_path(paths[i]), run.t_start]]
+        lines = [] if i or backend != "field" or not env.moving_obstacles else \
+            [["s", obstacle_robots_note(env_data, platform), None]]
+        lines.append([">", encode_path(paths[i]), run.t_start])
         lines += [["<", e.line, e.t] for e in run.events]
         out.append({"path": paths[i], "depart": depart[i], "poses": run.poses, "lines": lines,
                     "t_start": run.t_start, "t_end": run.t_end, "outcome": run.outcome, "obstacle": run.obstacle,
                     "holds": [[int(k), float(s)] for k, s in fleet.holds[i]],
                     "waited_for": [[int(h) for h in w] for w in fleet.waited_for[i]]})
     return {"robots": out, "planning_time_s": planning_time_s, "metrics": _clean(metrics)}
+
+
+def _fleet_obstacle_distances(env: Any, fleet: Any, obstacle_radius: Optional[float], metrics: dict[str, Any]) -> None:
+    """``obstacle_distance_min_m`` (m) of every robot of a fleet run (``metrics["robots"]``) while under way, and
+    the fleet's smallest: robot discs of the fleet settings' radius to the moving obstacles where they were
+    (on the field the obstacle robots' tracker poses, each a robot of ``obstacle_radius``; else the exact
+    tracks), on the fleet's clock."""
+    from planners.metrics import obstacle_gaps
+
+    radius = metrics["settings"]["robot_radius"]
+    smallest = None
+    for run, row in zip(fleet.runs, metrics["robots"]):
+        p = run.poses
+        end = run.t_end if run.t_end is not None else math.inf
+        p = p[p[:, 0] <= end + 1e-9] if len(p) else p
+        gap = None
+        if len(p):
+            gap = float(obstacle_gaps(env, p[:, 1:3], p[:, 0], radius, fleet.obstacles, obstacle_radius).min())
+            smallest = gap if smallest is None else min(smallest, gap)
+        row["obstacle_distance_min_m"] = gap
+    metrics["obstacle_distance_min_m"] = smallest
 
 
 def compare_runs(sim_poses: list[list[float]], twb_poses: list[list[float]]) -> dict[str, Any]:

@@ -24,8 +24,9 @@ __all__ = ["NoHooks", "RobotHooks", "RunContext", "RunServices"]
 class RobotHooks(Protocol):
     """What the server can do to robot agents that run in its own process (``twb up``)."""
 
-    def seed_next_path(self, robot_id: str, seed: int) -> None:
-        """Seed the noise of the robot's next path (exact replay); a no-op for other robots."""
+    def seed_next_path(self, robot_id: str, seed: int) -> bool:
+        """Seed the noise of the robot's next path (exact replay); whether it could (False: another process's
+        robot, whose noise its agent keys)."""
 
     async def flush_tracker(self, robot_id: str) -> bool:
         """Deliver the robot's pending tracker poses now; False if the robot is not in this process."""
@@ -34,8 +35,8 @@ class RobotHooks(Protocol):
 class NoHooks:
     """Robots elsewhere: nothing to seed or flush directly."""
 
-    def seed_next_path(self, robot_id: str, seed: int) -> None:
-        return None
+    def seed_next_path(self, robot_id: str, seed: int) -> bool:
+        return False
 
     async def flush_tracker(self, robot_id: str) -> bool:
         return False
@@ -75,6 +76,8 @@ class RunContext:
         self.end_poses: Optional[np.ndarray] = None
         #: metrics a step measured itself (a controller program's compute time), added to the run's metrics
         self.end_metrics: dict[str, Any] = {}
+        #: the robot's path noise was keyed by the run's seed (then its field obstacle robots can be replayed)
+        self.seeded = False
 
     @property
     def subfields(self) -> tuple[int, ...]:

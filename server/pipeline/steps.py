@@ -96,6 +96,9 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
     """
     field = svc.field
     key = job.environment + (":full" if job.field == "full" else "")
+    if job.mode == "twb" and job.environment_data.get("moving_obstacles"):
+        ctx.on_line("s", await svc.pool.run(compute.obstacle_robots_note, job.environment_data,
+                                            ctx.robot.platform or "BeBot"), None, False)
     if len(ctx.subfields) == 4:
         for k in (2, 3, 4):
             other = field.field_robot(k)
@@ -169,7 +172,7 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
     for k in ctx.subfields:
         await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id, owner_id=job.owner_id)
     timeout_exp = run_timeout_s(svc, path)
-    svc.hooks.seed_next_path(robot_id, job.seed)
+    ctx.seeded = svc.hooks.seed_next_path(robot_id, job.seed)
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
     t_sent = (await link.request("T,T,Q", ctx.wall(0))).time or 0.0  # the robot's clock, not ours
     if job.controller != DEFAULT_CONTROLLER:  # the default needs no line: robots without T,T,C run it
@@ -237,9 +240,18 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
     """
     rec = svc.recorder
     poses, t0, t1 = await rec.driven(ctx.run_id)
+    obstacles = None
+    if job.mode == "twb" and job.environment_data.get("moving_obstacles") and t0 is not None and t1 is not None:
+        if ctx.seeded:  # the obstacle robots' trajectories, replayed as the agent drove them
+            obstacles = await svc.pool.run(compute.field_obstacle_tracks, job.environment_data, job.seed,
+                                           ctx.robot.platform or "BeBot", t0, t1)
+        else:
+            ctx.on_line("s", "the obstacle metrics measure against the moving obstacles' exact tracks: this robot's "
+                             "agent keys its noise itself, so its obstacle robots cannot be replayed here", None,
+                        False)
     try:
         metrics = await svc.pool.run(compute.measure_run, job.environment_data, plan.path, poses, t0, t1, job.goal,
-                                     job.robot_radius, plan.planning_time_s)
+                                     job.robot_radius, plan.planning_time_s, obstacles)
     except compute.TooFewPoses as exc:
         raise TestbedFault(f"cannot compute metrics: {exc}") from None
     metrics["collided"] = collided
