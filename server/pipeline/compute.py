@@ -181,6 +181,11 @@ def field_obstacle_tracks(env_data: dict[str, Any], seed: int, platform: str, t_
             for tr in mover_tracks(list(sent.obstacles), path_key(seed), params, t_end - t_start)]
 
 
+def _replans(events: list[Any]) -> list[tuple[int, float]]:
+    """A simulated run's ``REPLAN`` events as :func:`replan_metrics` takes them (points, planning time s)."""
+    return [(e.index or 0, e.seconds or 0.0) for e in events if e.kind == "REPLAN"]
+
+
 def collision_counts(collided: bool, obstacle: Optional[int]) -> dict[str, int]:
     """A run's collisions by kind (docs/metrics.md): ``collisions_obstacle`` (a moving obstacle) and
     ``collisions_block`` (a block, the wall or another robot); a collision ends a run, so each is 0 or 1."""
@@ -254,8 +259,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
         out["metrics"] = measure_run(env_data, path, run.poses, run.t_start, t_end, goal, robot_radius,
                                      planning_time_s, run.obstacles)
         if replanning(controller_params):
-            out["metrics"].update(replan_metrics([(e.index or 0, e.seconds or 0.0) for e in run.events
-                                                  if e.kind == "REPLAN"]))
+            out["metrics"].update(replan_metrics(_replans(run.events)))
     except TooFewPoses as exc:
         out["metrics_error"] = str(exc)
     return out
@@ -358,8 +362,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
                                   metrics)
     metrics["planning_time_s"] = planning_time_s
     if replanning(controller_params):
-        per = [replan_metrics([(e.index or 0, e.seconds or 0.0) for e in r.events if e.kind == "REPLAN"])
-               for r in fleet.runs]
+        per = [replan_metrics(_replans(r.events)) for r in fleet.runs]
         for row, m in zip(metrics["robots"], per):
             row.update(m)
         metrics.update({k: sum(m[k] for m in per) for k in ("replans", "replan_failures", "replan_time_s")})
