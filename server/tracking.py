@@ -111,16 +111,21 @@ class PoseRouter:
         self._seen(robot_id, rows, w)
         return stored, (w.run_id if w else None)
 
-    def show(self, robot_id: str, run_id: int, owner_id: int, rows: np.ndarray, member: Optional[int] = None) -> None:
+    def show(self, robot_id: str, run_id: int, owner_id: int, rows: np.ndarray, member: Optional[int] = None,
+             last: bool = True) -> None:
         """Poses ``(N, 4)`` of a run that are stored with its end (a compute engine's run): known as the
         robot's last pose and shown live, not stored here.  ``member``: the poses are fleet member
         ``member``'s of a multi-robot run on ``robot_id``: known and shown as robot ``"<robot_id>/<member>"``
-        (in ``robot_id``'s frame), the live event also carrying ``"robot": member``."""
+        (in ``robot_id``'s frame), the live event also carrying ``"robot": member``.  ``last``: the rows end
+        the run's poses, so the live event goes out whenever the one before it did (the robot is shown
+        where it stopped)."""
         if len(rows):
-            self._seen(robot_id, rows, _Window(run_id, owner_id), member)
+            self._seen(robot_id, rows, _Window(run_id, owner_id), member, force=last)
 
-    def _seen(self, robot_id: str, rows: np.ndarray, w: Optional[_Window], member: Optional[int] = None) -> None:
-        """The robot's last pose and time, its waiters woken, and a live event (at most every 0.1 s)."""
+    def _seen(self, robot_id: str, rows: np.ndarray, w: Optional[_Window], member: Optional[int] = None,
+              force: bool = False) -> None:
+        """The robot's last pose and time, its waiters woken, and a live event (at most every 0.1 s unless
+        ``force``)."""
         last = float(rows[:, 0].max())
         t_last, x_last, y_last, a_last = (float(v) for v in rows[-1])
         ox, oy = self._origin_of(robot_id)
@@ -136,7 +141,7 @@ class PoseRouter:
         for fut, loop in wake:
             loop.call_soon_threadsafe(lambda f=fut: f.done() or f.set_result(True))
         now = time.monotonic()
-        if now - self._last_live.get(robot_id, 0.0) >= _LIVE_INTERVAL_S:
+        if force or now - self._last_live.get(robot_id, 0.0) >= _LIVE_INTERVAL_S:
             self._last_live[robot_id] = now
             event = {
                 "type": "pose", "robot_id": robot_id, "run_id": w.run_id if w else None,

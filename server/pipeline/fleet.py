@@ -12,9 +12,12 @@ holds that robot and its sub-field (or the whole field), as a field run
 with profile overrides is (:mod:`server.pipeline.remote`): no agent drives
 them, the lines logged are the ones they would have exchanged.
 
-Back on the server the poses are stored per robot (the ``robot`` column),
-each robot's last pose is shown live as robot ``"<robot_id>/<k>"``, the
-protocol lines go to the run's log prefixed ``robot k:``, and the run ends
+Back on the server the run is played out at the time scale on a robot's
+slot (:mod:`server.pipeline.playback`; at once on a compute engine's):
+each robot is shown live as robot ``"<robot_id>/<k>"`` as its poses come
+due and the protocol lines go to the run's log at their time, prefixed
+``robot k:``.  The poses played are stored per robot (the ``robot``
+column) with the run's end, and the run ends
 ``completed`` when every robot reached its goal, else ``failed`` naming
 the robots and what they hit (:func:`fleet_failure`) -- measured either way.
 """
@@ -33,6 +36,7 @@ from ..store.runs import RunJob
 from . import compute
 from .context import RunContext, RunServices
 from .paths import Plan, placed
+from .playback import Playback, play_run
 from .steps import timeout_for_length_s
 
 __all__ = ["fleet_failure", "fleet_poses", "fleet_timeout_s", "run_fleet"]
@@ -170,13 +174,9 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     robots = out["robots"]
     await _keep_plan(svc, job, robots, out["planning_time_s"])
     for k, r in enumerate(robots):
-        for direction, line, t in r["lines"]:
-            ctx.on_line(direction, f"robot {k}: {line}", t, False)
         for (w, held), why in zip(r["holds"], r.get("waited_for") or [[] for _ in r["holds"]]):
             ctx.on_line("s", f"robot {k}: held at waypoint {w} for {held:.2f} s, {_held_for(why)}", None, False)
-    ctx.end_poses = fleet_poses(robots)  # stored with the run's end, in its one transaction
-    for k, r in enumerate(robots):  # shown live now
-        svc.tracker.show(ctx.robot.robot_id, ctx.run_id, job.owner_id, np.asarray(r["poses"]).reshape(-1, 4), member=k)
+    await _play(ctx, svc, job, robots)
     failure = fleet_failure(robots, out["metrics"], timeout_s)
     t_start, t_end = _span(robots)
     metrics = dict(out["metrics"])
@@ -190,6 +190,18 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
         if len(last):
             ctx.end_fields["stopped_at"] = [round(float(last[-1, 1]), 4), round(float(last[-1, 2]), 4)]
         raise failure
+
+
+async def _play(ctx: RunContext, svc: RunServices, job: RunJob, robots: list[dict[str, Any]]) -> None:
+    """Every robot's poses shown live and its lines logged (``robot k:``) as the run's experiment time passes
+    at the time scale, on a robot's slot (at once on a compute engine's, as its single-robot runs are);
+    the poses stored with the run's end are the ones played, all of them unless the run is cancelled."""
+    lines = [(d, f"robot {k}: {line}", t) for k, r in enumerate(robots) for d, line, t in r["lines"]]
+    playback = Playback([np.asarray(r["poses"], dtype=float).reshape(-1, 4) for r in robots], lines)
+    try:
+        await play_run(ctx, svc, job.owner_id, playback, fleet=True)
+    finally:  # stored with the run's end, in its one transaction
+        ctx.end_poses = fleet_poses([{"poses": playback.played(k)} for k in range(len(robots))])
 
 
 async def _program_paths(ctx: RunContext, svc: RunServices, job: RunJob,

@@ -2,7 +2,8 @@
 
 A field run whose job has profile overrides runs the same way, as the emulated field robot with those
 parameters (:func:`server.pipeline.compute.simulate_job` with the field backend), while it holds the robot
-and sub-field the scheduler gave it.
+and sub-field the scheduler gave it; it is then played out at the time scale, as the robot would have
+driven it (:mod:`server.pipeline.playback`).
 
 The steps of :mod:`server.pipeline.runner` collapse into one task
 (:func:`server.pipeline.compute.simulate_job`): the gripper's build and
@@ -29,6 +30,7 @@ from ..status import RunStatus
 from ..store.runs import RunJob
 from . import compute, steps
 from .context import RunContext, RunServices
+from .playback import Playback, play_run
 
 __all__ = ["run_on_engine", "start_status"]
 
@@ -73,14 +75,16 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
                                              job.robot_radius, plan.planning_time_s,
                                              "field" if job.mode == "twb" else "ideal", platform,
                                              job.profile_overrides, area, job.controller, job.controller_params)
-    for direction, line, t in out["lines"]:
-        ctx.on_line(direction, line, t, False)
     if "placement_error" in out:
+        for direction, line, t in out["lines"]:
+            ctx.on_line(direction, line, t, False)
         raise TestbedFault(f"the gripper could not place the robot at the start: {out['placement_error']}")
     poses = np.asarray(out["poses"], dtype=float).reshape(-1, 4)
-    # stored with the run's end, in its one transaction; shown live now
-    ctx.end_poses = poses
-    svc.tracker.show(ctx.robot.robot_id, ctx.run_id, job.owner_id, poses)
+    playback = Playback([poses], out["lines"])
+    try:  # on the field it takes its time (shown live, logged as it happens); on an engine's slot, at once
+        await play_run(ctx, svc, job.owner_id, playback, fleet=False)
+    finally:  # stored with the run's end, in its one transaction: what was played
+        ctx.end_poses = playback.played(0)
     outcome = out["outcome"]
     t_end = out["t_end"]
     failure: RunFailed | TestbedFault | None = None
