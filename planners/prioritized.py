@@ -33,6 +33,9 @@ __all__ = ["MultiPlan", "fleet_waypoints", "min_separation", "plan_prioritized",
 
 #: the space-time defaults for fleets: waits allowed, a smaller time margin (robots that can be timed)
 FLEET_DEFAULTS = {"wait": True, "time_margin_s": 0.5, "clearance": 0.0}
+#: how the robots keep to a prioritized plan (a job's ``planner_params.execution``, not the planner's):
+#: ``dependencies`` (in the plan's order of passing each shared place) or ``timed`` (by the clock alone)
+EXECUTIONS = ("dependencies", "timed")
 
 
 @dataclass

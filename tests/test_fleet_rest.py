@@ -81,19 +81,39 @@ def test_the_prioritized_swap_completes_with_the_robots_apart_and_poses_per_robo
         assert mine[0].startswith(f"robot {k}: T,T,P,") and mine[-1].startswith(f"robot {k}: EV,DONE,")
 
 
-def test_the_same_seed_gives_the_same_poses_as_the_task_run_directly(client, prioritized):
-    """compute.fleet_job called here with the run's arguments: the server's stored poses, bit for bit."""
-    exp, run = prioritized
+def direct(client, exp: dict, run: dict) -> dict:
+    """compute.fleet_job called here with the run's arguments."""
     env = client.get("/api/v1/environments/swap").json()
     platform = next(r["platform"] for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])
     timeout_s = fleet_timeout_s(SimpleNamespace(settings=Settings()), exp["robots"])
-    out = compute.fleet_job({k: env[k] for k in ("name", "size", "blocks", "plans", "description")}, exp["robots"],
-                            exp["planner"], exp["planner_params"], run["seed"], timeout_s,
-                            exp["robot_radius"] + exp["planning_margin"], "ideal", exp["controller"],
-                            exp["controller_params"], platform or "BeBot", None, exp["seed"])
+    return compute.fleet_job({k: env[k] for k in ("name", "size", "blocks", "plans", "description")}, exp["robots"],
+                             exp["planner"], exp["planner_params"], run["seed"], timeout_s,
+                             exp["robot_radius"] + exp["planning_margin"], "ideal", exp["controller"],
+                             exp["controller_params"], platform or "BeBot", None, exp["seed"])
+
+
+def test_the_same_seed_gives_the_same_poses_as_the_task_run_directly(client, prioritized):
+    """compute.fleet_job called here with the run's arguments: the server's stored poses, bit for bit."""
+    exp, run = prioritized
+    assert exp["planner_params"]["execution"] == "dependencies"  # the default, shown
+    out = direct(client, exp, run)
     for k, r in enumerate(out["robots"]):
         assert np.array_equal(poses(client, run["id"], robot=k)[:, :4], r["poses"]), k
     assert out["metrics"]["robot_distance_min_m"] == run["metrics"]["robot_distance_min_m"]
+
+
+def test_a_job_can_have_its_prioritized_plan_executed_by_the_clock(client, prioritized):
+    """`planner_params.execution: "timed"`: the same plan kept by the clock alone (docs/planners.md), as
+    fleet_job's `execution="timed"` drives it, and not as the default (in the plan's order of passing) does."""
+    job = {**JOBS["prioritized"], "planner_params": {"execution": "timed"}}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=120)
+    run = exp["runs"][0]
+    assert exp["planner_params"]["execution"] == "timed" and run["status"] == "completed", exp
+    out = direct(client, exp, run)
+    by_deps = poses(client, prioritized[1]["id"])
+    for k, r in enumerate(out["robots"]):
+        assert np.array_equal(poses(client, run["id"], robot=k)[:, :4], r["poses"]), k
+    assert not np.array_equal(poses(client, run["id"]), by_deps)
 
 
 def test_the_uncoordinated_swap_fails_with_its_collisions_counted_and_measured(client):
@@ -148,6 +168,8 @@ def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(cl
     ({"robots": [TWO[0], {**TWO[1], "path": [[1.5, 0.3], [0.3, 1.5]]}], "planner": "prioritized"},
      "robots[1].path: `prioritized` plans every robot together"),
     ({"robots": TWO, "planner": "prioritized", "planner_params": {"speeed": 1}}, "planner_params: planner"),
+    ({"robots": TWO, "planner": "prioritized", "planner_params": {"execution": "clock"}},
+     "planner_params.execution: 'dependencies' or 'timed' (how the robots keep to the plan"),
     ({"robots": TWO, "planner": "prioritized", "controller": "regulated_pure_pursuit",
       "controller_params": {"replan": 1}}, "controller_params.replan: the robots of a prioritized plan"),
 ])

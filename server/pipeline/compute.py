@@ -277,7 +277,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     together (timed paths) and ``execution`` says how the robots keep to it: ``dependencies`` (a robot
     leaves a waypoint once the robots planned to pass there before it have passed, and not before the
     plan's wait there ends: :mod:`planners.dependencies`) or ``timed`` (by the clock alone: robots hold
-    where the plan waits, late ones drive on); any other planner plans each robot alone,
+    where the plan waits, late ones drive on; ``params["execution"]``, a job's choice, wins); any other planner plans each robot alone,
     uncoordinated (the baseline); a robot's explicit ``path`` is driven as given (its headings facing the next
     point; with ``"headings": "sent"``, an uploaded program's ``[x, y, theta]`` path, as they are).  Planning keeps
     ``robot_radius`` (m) and samples with ``plan_seed`` (default ``seed``); ``seed`` gives the robots' noise.
@@ -293,7 +293,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     from planners.fleet_metrics import FleetSettings, fleet_metrics
     from planners.geometry import distance_to_obstacles
     from planners.dependencies import fleet_dependencies
-    from planners.prioritized import plan_prioritized, timed_waypoints
+    from planners.prioritized import EXECUTIONS, plan_prioritized, timed_waypoints
     from robot_agent.fleet import simulate_fleet
     from robot_agent.headless import PlacementRefused
     from robot_agent.overrides import apply_overrides
@@ -306,7 +306,10 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     paths: list[list[list[float]]] = []
     depart: list[Optional[list[float]]] = []
     depends = None
-    if execution not in ("dependencies", "timed"):
+    if planner == "prioritized":  # the job's own choice, kept with its planner's parameters
+        params = dict(params)
+        execution = params.pop("execution", execution)
+    if execution not in EXECUTIONS:
         raise ValueError(f"execution is 'dependencies' or 'timed', got {execution!r}")
     try:
         if planner == "prioritized":
