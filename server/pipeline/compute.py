@@ -22,10 +22,13 @@ class TooFewPoses(Exception):
 
 
 def warm_up() -> bool:
-    """Import the numerical stack in a fresh worker (first jobs then start at once)."""
+    """Ready a fresh worker: import the numerical stack and load the compiled simulation core with one short
+    run (about 1.4 s of CPU on this machine's cores), so its first real run starts at once."""
     import planners  # noqa: F401
     import planners.metrics  # noqa: F401
 
+    simulate_job({"name": "warm-up", "size": [1.0, 1.0], "blocks": []}, [[0.3, 0.3, 0.0], [0.6, 0.3, 0.0]],
+                 [[0.3, 0.3, 0.0]], 0, 60.0, [0.6, 0.3, 0.0], 0.045, 0.0)
     return True
 
 

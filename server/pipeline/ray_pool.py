@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from ..errors import EngineFault
+from . import compute
 
 __all__ = ["EngineUnavailable", "RayPool", "INSTALL_HINT"]
 
@@ -165,6 +166,19 @@ class RayPool:
         self.slots = self.slots or max(1, cpus)
         where = "a local Ray cluster" if self._head is not None else f"the Ray cluster at {address}"
         self.description = f"{where}, {cpus} CPUs, {self.slots} runs at once"
+        self._warm_up(cpus, connect_timeout_s)
+
+    def _warm_up(self, workers: int, timeout_s: float) -> None:
+        """One :func:`~server.pipeline.compute.warm_up` task per CPU, waited for (blocking, at most ``timeout_s``):
+        each worker pays its imports and the compiled core's loading (about 1.4 s of CPU) before the first
+        run rather than during it.  Workers not ready in time warm up with their first run; nothing fails."""
+        ray = self._ray
+        warm = ray.remote(num_cpus=1, max_retries=0)(compute.warm_up)
+        refs = [warm.remote() for _ in range(workers)]
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout_s)
+        if len(ready) < len(refs):
+            log.warning("%d of %d Ray workers were not warmed up within %.0f s", len(refs) - len(ready), len(refs),
+                        timeout_s)
 
     async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)`` as a Ray task (one CPU); a task Ray lost raises :class:`EngineFault`."""
