@@ -1,10 +1,11 @@
 """Multi-robot jobs made in the dashboard's submit form (issue 17), in Chromium against a real `twb up --time-scale max`.
 
-A two-robot job placed on the map and typed in is stored with `robots` as entered and its runs complete; the
-"Swap scenario" shortcut fills the built-in environment's four corners with `prioritized`; the preview draws
+A two-robot job placed on the map and typed in is stored with `robots` as entered and its runs complete; with
+"an explicit path" each robot gets its own waypoints, sent as its `path`; the "Swap scenario" shortcut fills the built-in environment's four corners with `prioritized`; the preview draws
 every robot's start and goal in its colour; a start too close to another robot's is refused by the server and
 the refusal is shown under that robot.  The browser, fixtures and console check are those of
-``test_dashboard.py``; screenshots go to ``tests/output/dashboard/`` (``submit-fleet.png``).
+``test_dashboard.py``; screenshots go to ``tests/output/dashboard/`` (``submit-fleet.png``,
+``submit-swap.png``).
 """
 
 from __future__ import annotations
@@ -98,6 +99,42 @@ def test_a_two_robot_job_from_the_form_is_stored_as_entered_and_completes(page, 
     assert page.console.errors == []
 
 
+def test_each_robot_gets_its_own_explicit_path(page, testbed):  # noqa: F811
+    """With "an explicit path" the waypoints box is the chosen robot's: waypoints clicked for robot 0 and typed for
+    robot 1 are sent as each robot's `path` (start, waypoints, goal) and driven as given."""
+    from playwright.sync_api import expect
+
+    open_fleet_form(page, testbed.url)
+    page.select_option("#f-environment", "swap")
+    page.check("input[name=source][value=path]")
+    poses = [((0.3, 0.3, 0.0), (1.5, 0.3, 0.0)), ((0.3, 1.5, 0.0), (1.5, 1.5, 0.0))]
+    for k, pair in enumerate(poses):
+        for which, pose in zip(("start", "goal"), pair):
+            for c, v in zip("xya", pose):
+                page.fill(f"#f-r{k}-{which}-{c}", str(v))
+    page.check('input[name=robot-pick][value="0"]')
+    page.check("input[name=pick][value=waypoint]")
+    page.wait_for_timeout(200)
+    page.mouse.click(*world_to_page(canvas_geometry(page, "#submit-canvas"), 0.9, 0.6))
+    expect(page.locator("#f-path")).to_have_value("0.900, 0.600")
+    page.check('input[name=robot-pick][value="1"]')
+    expect(page.locator("#path-whose")).to_have_text("robot 1's start and goal")
+    expect(page.locator("#f-path")).to_have_value("")
+    page.fill("#f-path", "0.9, 1.3")
+    page.check('input[name=robot-pick][value="0"]')
+    expect(page.locator("#f-path")).to_have_value("0.900, 0.600")
+    page.wait_for_timeout(200)
+    assert count_pixels(page, "#submit-canvas", FLEET_RGB[1], tol=40, region=near(0.9, 1.3, 0.03)) > 3  # its path
+    page.uncheck("input[name=modes][value=twb]")
+
+    exp = submit_and_wait(page, testbed)
+    assert exp["planner"] is None
+    assert exp["robots"][0]["path"] == [[0.3, 0.3, 0.0], [0.9, 0.6], [1.5, 0.3, 0.0]]
+    assert exp["robots"][1]["path"] == [[0.3, 1.5, 0.0], [0.9, 1.3], [1.5, 1.5, 0.0]]
+    assert [r["status"] for r in exp["runs"]] == ["completed"]
+    assert page.console.errors == []
+
+
 def test_the_swap_shortcut_and_a_refused_robot_shown_under_it(page, testbed):  # noqa: F811
     from playwright.sync_api import expect
 
@@ -120,6 +157,15 @@ def test_the_swap_shortcut_and_a_refused_robot_shown_under_it(page, testbed):  #
     page.wait_for_timeout(200)
     for k, plan in enumerate(SWAP["plans"]):  # every robot's start in its colour (each corner is another's goal)
         assert count_pixels(page, "#submit-canvas", FLEET_RGB[k], tol=40, region=near(*plan["start"][:2])) > 5, k
+    page.screenshot(path=OUTPUT / "submit-swap.png")
+    # the keyboard: r chooses the next robot, s its start, the arrows move it
+    page.focus("#submit-canvas")
+    page.keyboard.press("r")
+    expect(page.locator('input[name=robot-pick][value="1"]')).to_be_checked()
+    page.keyboard.press("s")
+    page.keyboard.press("Shift+ArrowUp")  # 10 cm
+    assert robot_pose(page, 1, "start") == pytest.approx([1.5, 0.4, SWAP["plans"][1]["start"][2]], abs=1e-3)
+    expect(page.locator("#map-readout")).to_contain_text("Placing robot 1's start at (1.50, 0.40) m")
 
     # the client's own checks: an emptied coordinate, then a single robot, are refused without asking the server
     page.fill("#f-r2-goal-y", "")

@@ -160,9 +160,9 @@ export class RobotList {
       ...(paths ? { path: [r.start, ...r.waypoints, r.goal] } : {}) }));
   }
 
-  /** The map layers: every robot's start (a ring, numbered) and goal (a smaller ring) in its colour, the one
-   * being placed drawn thicker, and each robot's way: its explicit path dashed (`paths`), else a faint line
-   * pairing start and goal. */
+  /** The map layers, as the experiment page draws a fleet: every robot's start (a ring, numbered) and goal (a
+   * smaller ring) in its colour, the one being placed drawn thicker, and each robot's way: its explicit path
+   * dashed (`paths`), else a faint line pairing start and goal. */
   layers(pick, paths) {
     const markers = [];
     const lines = [];
@@ -171,7 +171,7 @@ export class RobotList {
       const active = k === this.active;
       if (r.start) markers.push({ x: r.start[0], y: r.start[1], theta: r.start[2], color, label: `${k}`, radius: 0.045,
         active: active && pick === "start" });
-      if (r.goal) markers.push({ x: r.goal[0], y: r.goal[1], theta: r.goal[2], color, label: `${k}→`, radius: 0.025,
+      if (r.goal) markers.push({ x: r.goal[0], y: r.goal[1], theta: r.goal[2], color, radius: 0.025,
         active: active && pick === "goal" });
       if (paths) {
         r.waypoints.forEach(([x, y], i) => markers.push({ x, y, radius: 0.02, color, label: active ? String(i + 1) : null,
