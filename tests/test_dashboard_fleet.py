@@ -167,6 +167,19 @@ def test_the_swap_shortcut_and_a_refused_robot_shown_under_it(page, testbed):  #
     assert robot_pose(page, 1, "start") == pytest.approx([1.5, 0.4, SWAP["plans"][1]["start"][2]], abs=1e-3)
     expect(page.locator("#map-readout")).to_contain_text("Placing robot 1's start at (1.50, 0.40) m")
 
+    # where the server's messages go: the robot a message or a request-model location names, the list, a field
+    keys = page.evaluate('''async () => {
+      const { errorKey } = await import("/static/js/submit.js");
+      return [errorKey("robots: a multi-robot job has 2 to 16 robots, got 17; a sub-field holds at most 16"),
+              errorKey("Input should be a valid number", ["body", "robots", 1, "start", 0]),
+              errorKey("List should have at least 2 items after validation, not 1", ["body", "robots"]),
+              errorKey("robots[0].path: `prioritized` plans every robot together", ["body"]),
+              errorKey("robots[2].goal: goal (0.9, 0.45) is inside an obstacle"),
+              errorKey("planner_params: `cell` must be > 0, got -1.0")];
+    }''')
+    assert keys == ["robots", {"robot": 1, "part": "start"}, "robots", {"robot": 0, "part": "path"},
+                    {"robot": 2, "part": "goal"}, "planner_params"]
+
     # the client's own checks: an emptied coordinate, then a single robot, are refused without asking the server
     page.fill("#f-r2-goal-y", "")
     page.click("#submit-button")
