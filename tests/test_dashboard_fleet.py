@@ -16,8 +16,8 @@ import math
 import pytest
 
 from servers import serve
-from test_dashboard import (FLEET_RGB, OUTPUT, ROOT, canvas_geometry, count_pixels, login, submit_and_wait,
-                            world_to_page)
+from test_dashboard import (FLEET_RGB, LAPTOP, OUTPUT, ROOT, TABLET, canvas_geometry, count_pixels, login,
+                            no_horizontal_overflow, submit_and_wait, world_to_page)
 from test_dashboard import browser, page  # noqa: F401  (the shared fixtures)
 
 SWAP = json.loads((ROOT / "planners" / "data" / "swap.json").read_text())
@@ -158,6 +158,10 @@ def test_the_swap_shortcut_and_a_refused_robot_shown_under_it(page, testbed):  #
     for k, plan in enumerate(SWAP["plans"]):  # every robot's start in its colour (each corner is another's goal)
         assert count_pixels(page, "#submit-canvas", FLEET_RGB[k], tol=40, region=near(*plan["start"][:2])) > 5, k
     page.screenshot(path=OUTPUT / "submit-swap.png")
+    page.set_viewport_size(TABLET)  # the four robots' rows fit a tablet too: nothing scrolls sideways
+    page.wait_for_timeout(100)
+    assert no_horizontal_overflow(page)
+    page.set_viewport_size(LAPTOP)
     # the keyboard: r chooses the next robot, s its start, the arrows move it
     page.focus("#submit-canvas")
     page.keyboard.press("r")

@@ -96,6 +96,11 @@ export class SubmitPage {
     return radioValue(this.form, "source");
   }
 
+  set source(which) {
+    checkRadio(this.form, "source", which);
+    this.onSource();
+  }
+
   /** Several robots ("robots" in the job) rather than one. */
   get multi() {
     return radioValue(this.form, "robots") === "fleet";
@@ -104,11 +109,6 @@ export class SubmitPage {
   /** What the map and the plan buttons place: the one robot, or the robot chosen in the list (null: none). */
   target() {
     return this.multi ? this.robotList.current : this.single;
-  }
-
-  set source(which) {
-    checkRadio(this.form, "source", which);
-    this.onSource();
   }
 
   get pick() {
