@@ -1,15 +1,16 @@
 // The submit form: environment, start and goal placed on the map (click; drag for the
-// heading; keys too), where the path comes from (a planner and its parameters, one of your
-// uploaded programs, or an explicit path through waypoints), the robots' controller, modes, repetitions, seed.
-// The server validates; its message is shown next to the field it is about.
+// heading; keys too), or several robots each with its own (fleetform.js), where the path comes from (a planner
+// and its parameters, one of your uploaded programs, or an explicit path through waypoints), the robots'
+// controller, modes, repetitions, seed.  The server validates; its message is shown next to the field it is about.
 
 import { $, $$, TERMINAL, checkRadio, deg, h, num, radioValue, report, retoast, toast } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
+import { FLEET_PLANNER, MAX_ROBOTS, RobotList, fleetPlanner, robotOfLoc, robotOfMessage } from "./fleetform.js";
 import { obstacleLayers } from "./moving.js";
 import { programLabel } from "./programs.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
 
-const KEYS = ["environment", "field", "start", "goal", "planner", "planner_params", "program", "path", "controller", "controller_params", "modes", "repetitions", "seed"];
+const KEYS = ["environment", "field", "start", "goal", "robots", "planner", "planner_params", "program", "path", "controller", "controller_params", "modes", "repetitions", "seed"];
 const DRAG_PX = 8;
 const TURN = Math.PI / 12;
 
@@ -31,21 +32,32 @@ export function fieldOfMessage(msg) {
   return null;
 }
 
+/** Where a server message goes: a form field, `{robot, part}` for one robot of several, or null (the top of the
+ * form); `loc`: a request-model error's location. */
+export function errorKey(msg, loc = null) {
+  const robot = loc && loc.length > 1 ? robotOfLoc(loc) : robotOfMessage(msg);
+  if (robot) return robot.index === null ? "robots" : { robot: robot.index, part: robot.part };
+  if (loc && loc.length > 1) return loc[0] === "body" && KEYS.includes(loc[1]) ? loc[1] : null;
+  return fieldOfMessage(msg);
+}
+
 export class SubmitPage {
   constructor(store, { onSubmitted }) {
     this.store = store;
     this.onSubmitted = onSubmitted;
     this.form = $("#submit-form");
     this.map = new MapView($("#submit-canvas"), { world: SUBFIELD_SIZE, padding: 14 });
-    this.poses = { start: null, goal: null };
-    this.waypoints = []; // [x, y] between start and goal, for an explicit path
+    // the one robot's start and goal and, for an explicit path, the [x, y] between them; several robots: robotList
+    this.single = { start: null, goal: null, waypoints: [] };
+    this.robotList = new RobotList($("#f-robots"), { onChange: () => this.onRobotList() });
     this.programs = [];
     this.uploads = null; // GET /programs/sandbox
     this.planners = [];
     this.envs = [];
     this.loaded = false;
     this.wire();
-    this.onSource(); // the browser may have restored the radios of an earlier visit
+    this.onRobots(); // the browser may have restored the radios of an earlier visit
+    this.onSource();
   }
 
   /** params: the route's query (#/submit?program=ID preselects that program). */
@@ -89,6 +101,16 @@ export class SubmitPage {
     this.onSource();
   }
 
+  /** Several robots ("robots" in the job) rather than one. */
+  get multi() {
+    return radioValue(this.form, "robots") === "fleet";
+  }
+
+  /** What the map and the plan buttons place: the one robot, or the robot chosen in the list (null: none). */
+  target() {
+    return this.multi ? this.robotList.current : this.single;
+  }
+
   get pick() {
     return radioValue(this.form, "pick");
   }
@@ -101,11 +123,62 @@ export class SubmitPage {
   fillSelects() {
     const envSel = $("#f-environment");
     envSel.replaceChildren(...this.envs.map((e) => h("option", { value: e.name }, `${e.name}${e.builtin ? "" : ` (${e.owner || "yours"})`}`)));
-    const plSel = $("#f-planner");
-    plSel.replaceChildren(...this.planners.map((p) => h("option", { value: p.name }, p.name)));
-    plSel.value = this.planners.some((p) => p.name === "fm2") ? "fm2" : plSel.value;
+    this.fillPlanners(this.multi ? FLEET_PLANNER : null);
     this.onEnvironment(true);
+  }
+
+  /** The planners to choose from: the server's, and for several robots `prioritized` first. */
+  plannerChoices() {
+    return this.multi ? [fleetPlanner(this.planners), ...this.planners] : this.planners;
+  }
+
+  /** The planner select for one robot or several; `prefer` is chosen if given, else the choice is kept when it is
+   * offered, else fm2 (one robot). */
+  fillPlanners(prefer = null) {
+    const plSel = $("#f-planner");
+    const keep = prefer || plSel.value;
+    const choices = this.plannerChoices();
+    plSel.replaceChildren(...choices.map((p) => h("option", { value: p.name }, p.name)));
+    const fallback = choices.some((p) => p.name === "fm2") ? "fm2" : plSel.value;
+    plSel.value = choices.some((p) => p.name === keep) ? keep : fallback;
     this.onPlanner();
+  }
+
+  /** One robot or several: show that part of the form; several start as the one robot and a second to place. */
+  onRobots() {
+    const multi = this.multi;
+    for (const el of $$("[data-robots]", this.form)) el.hidden = el.dataset.robots !== (multi ? "fleet" : "one");
+    if (multi && !this.robotList.robots.length) {
+      const { start, goal, waypoints } = this.single;
+      this.robotList.set([{ start, goal, waypoints }, {}], start && goal ? 1 : 0);
+      this.pick = "start";
+    }
+    if (this.loaded) this.fillPlanners(multi ? FLEET_PLANNER : null);
+    this.renderPlans();
+    this.showWaypoints();
+    this.draw();
+  }
+
+  /** The robot list changed (a robot added, removed, chosen or typed). */
+  onRobotList() {
+    $("#add-robot").disabled = this.robotList.robots.length >= MAX_ROBOTS;
+    if (this.waypointsOf !== this.target()) this.showWaypoints();
+    this.draw();
+  }
+
+  /** The built-in scenario `swap` (its environment's plans A to D): four robots exchange diagonally opposite
+   * corners of a sub-field, planned together. */
+  fillSwap() {
+    const env = this.envs.find((e) => e.name === "swap" && e.builtin);
+    if (!env) {
+      toast("This testbed has no built-in environment swap", true);
+      return;
+    }
+    $("#f-environment").value = env.name;
+    checkRadio(this.form, "field", "sub");
+    this.onEnvironment(false);
+    this.robotList.set(env.plans);
+    this.fillPlanners(FLEET_PLANNER);
   }
 
   /** Your programs (re-read whenever the form is shown: you may just have uploaded one) and whether uploads are on. */
@@ -160,6 +233,9 @@ export class SubmitPage {
     $("#f-controller").addEventListener("change", () => this.onController());
     for (const r of $$('input[name="field"]', this.form)) r.addEventListener("change", () => this.onEnvironment(false));
     for (const r of $$('input[name="pick"]', this.form)) r.addEventListener("change", () => this.draw());
+    for (const r of $$('input[name="robots"]', this.form)) r.addEventListener("change", () => this.onRobots());
+    $("#add-robot").addEventListener("click", () => { this.robotList.add(); this.pick = "start"; });
+    $("#fill-swap").addEventListener("click", () => this.fillSwap());
     for (const which of ["start", "goal"]) {
       for (const c of ["x", "y", "a"]) {
         $(`#f-${which}-${c}`).addEventListener("input", () => this.fromInputs(which));
@@ -183,11 +259,21 @@ export class SubmitPage {
     if (env && (env.size[0] > SUBFIELD_SIZE[0] + 1e-9 || env.size[1] > SUBFIELD_SIZE[1] + 1e-9)) {
       checkRadio(this.form, "field", "full");
     }
-    const plans = env?.plans || [];
-    $("#env-plans").replaceChildren(...plans.map((p) => h("button", { type: "button", class: "small",
-      onclick: () => this.applyPlan(p) }, `Plan ${p.name}`)));
-    if (applyPlan && plans.length && !this.poses.start && !this.poses.goal) this.applyPlan(plans[0]);
+    const plans = this.renderPlans();
+    if (applyPlan && !this.multi && plans.length && !this.single.start && !this.single.goal) this.applyPlan(plans[0]);
     this.draw();
+  }
+
+  /** The environment's plans as buttons (for several robots: the chosen robot's, and all of them as robots). */
+  renderPlans() {
+    const plans = this.env?.plans || [];
+    const whose = this.multi ? " (the chosen robot)" : "";
+    const all = this.multi && plans.length >= 2
+      ? [h("button", { type: "button", class: "small", onclick: () => this.robotList.set(plans) }, `All ${plans.length} plans as robots`)]
+      : [];
+    $("#env-plans").replaceChildren(...plans.map((p) => h("button", { type: "button", class: "small",
+      title: `Plan ${p.name}'s start and goal${whose}`, onclick: () => this.applyPlan(p) }, `Plan ${p.name}`)), ...all);
+    return plans;
   }
 
   applyPlan(p) {
@@ -196,7 +282,7 @@ export class SubmitPage {
   }
 
   onPlanner() {
-    const p = this.planners.find((q) => q.name === $("#f-planner").value);
+    const p = this.plannerChoices().find((q) => q.name === $("#f-planner").value);
     $("#planner-desc").textContent = p?.description || "";
     const box = $("#f-params");
     if (!p || p.defaults === null) {
@@ -246,7 +332,14 @@ export class SubmitPage {
   }
 
   setPose(which, p) {
-    this.poses[which] = p;
+    const target = this.target();
+    if (!target) return;
+    target[which] = p;
+    if (this.multi) {
+      this.robotList.showPose(this.robotList.active, which);
+      this.draw();
+      return;
+    }
     const [x, y, a] = p || [];
     $(`#f-${which}-x`).value = Number.isFinite(x) ? x.toFixed(3) : "";
     $(`#f-${which}-y`).value = Number.isFinite(y) ? y.toFixed(3) : "";
@@ -259,15 +352,25 @@ export class SubmitPage {
     const x = parseFloat($(`#f-${which}-x`).value);
     const y = parseFloat($(`#f-${which}-y`).value);
     const a = parseFloat($(`#f-${which}-a`).value);
-    this.poses[which] = Number.isFinite(x) && Number.isFinite(y) ? [x, y, ...(Number.isFinite(a) ? [a] : [])] : null;
+    this.single[which] = Number.isFinite(x) && Number.isFinite(y) ? [x, y, ...(Number.isFinite(a) ? [a] : [])] : null;
     $(`#${which}-deg`).textContent = Number.isFinite(a) ? `heading ${deg(a)}` : "heading: any";
     this.draw();
   }
 
   setWaypoints(points) {
-    this.waypoints = points;
-    $("#f-path").value = points.map(([x, y]) => `${x.toFixed(3)}, ${y.toFixed(3)}`).join("\n");
+    const target = this.target();
+    if (!target) return;
+    target.waypoints = points;
+    this.showWaypoints();
     this.draw();
+  }
+
+  /** The waypoints box shows the one robot's waypoints, or the chosen robot's. */
+  showWaypoints() {
+    const target = this.target();
+    this.waypointsOf = target;
+    $("#f-path").value = (target?.waypoints || []).map(([x, y]) => `${x.toFixed(3)}, ${y.toFixed(3)}`).join("\n");
+    $("#path-whose").textContent = this.multi ? `robot ${this.robotList.active}'s start and goal` : "start and goal";
   }
 
   /** The waypoints typed (one "x, y" or "x y" a line); null when a line is not a point. */
@@ -284,7 +387,8 @@ export class SubmitPage {
 
   fromPathText() {
     const pts = this.parsePath();
-    if (pts) this.waypoints = pts;
+    const target = this.target();
+    if (pts && target) target.waypoints = pts;
     this.draw();
   }
 
@@ -292,31 +396,42 @@ export class SubmitPage {
     const [w, hgt] = this.world();
     this.map.world = [w, hgt];
     const env = this.env;
+    const withPath = this.source === "path";
+    const { markers, paths } = this.multi ? this.robotList.layers(this.pick, withPath) : this.singleLayers(withPath);
+    this.map.update({ blocks: env ? env.blocks : [], ...obstacleLayers(env?.moving_tracks, 0), markers, paths,
+      subfields: this.fieldMode === "full" ? [[0, 0], [1.8, 0], [0, 1.8], [1.8, 1.8]].map((o) => ({ origin: o, size: SUBFIELD_SIZE, state: "idle" })) : [] });
+    const target = this.target();
+    const whose = this.multi ? `robot ${this.robotList.active}'s` : "the";
+    if (!target) {
+      $("#map-readout").textContent = "No robot to place: add one.";
+    } else if (this.pick === "waypoint") {
+      const n = target.waypoints.length;
+      const last = target.waypoints[n - 1];
+      $("#map-readout").textContent = `Placing ${this.multi ? `${whose} ` : ""}waypoints: ${n} so far` +
+        (last ? `, the last at (${last[0].toFixed(2)}, ${last[1].toFixed(2)}) m` : "") + ".";
+    } else {
+      const p = target[this.pick];
+      $("#map-readout").textContent = `Placing ${whose} ${this.pick}` + (p ? ` at (${p[0].toFixed(2)}, ${p[1].toFixed(2)}) m` +
+        (Number.isFinite(p[2]) ? `, heading ${deg(p[2])}` : "") : "") + ".";
+    }
+  }
+
+  /** The one robot's map layers: start (green) and goal (red) and an explicit path through its waypoints. */
+  singleLayers(withPath) {
+    const { start, goal, waypoints } = this.single;
     const markers = [];
-    for (const which of ["start", "goal"]) {
-      const p = this.poses[which];
+    for (const [which, p] of [["start", start], ["goal", goal]]) {
       if (p) markers.push({ x: p[0], y: p[1], theta: p[2], color: which === "start" ? COLORS.start : COLORS.goal, label: which,
         active: this.pick === which });
     }
     const paths = [];
-    if (this.source === "path") {
-      this.waypoints.forEach(([x, y], i) => markers.push({ x, y, radius: 0.02, color: COLORS.planned, label: String(i + 1),
-        active: this.pick === "waypoint" && i === this.waypoints.length - 1 }));
-      const pts = [this.poses.start, ...this.waypoints, this.poses.goal].filter(Boolean);
+    if (withPath) {
+      waypoints.forEach(([x, y], i) => markers.push({ x, y, radius: 0.02, color: COLORS.planned, label: String(i + 1),
+        active: this.pick === "waypoint" && i === waypoints.length - 1 }));
+      const pts = [start, ...waypoints, goal].filter(Boolean);
       paths.push({ points: pts.map((q) => [q[0], q[1]]), color: COLORS.planned, width: 2, dash: [7, 5] });
     }
-    this.map.update({ blocks: env ? env.blocks : [], ...obstacleLayers(env?.moving_tracks, 0), markers, paths,
-      subfields: this.fieldMode === "full" ? [[0, 0], [1.8, 0], [0, 1.8], [1.8, 1.8]].map((o) => ({ origin: o, size: SUBFIELD_SIZE, state: "idle" })) : [] });
-    if (this.pick === "waypoint") {
-      const n = this.waypoints.length;
-      const last = this.waypoints[n - 1];
-      $("#map-readout").textContent = `Placing waypoints: ${n} so far` +
-        (last ? `, the last at (${last[0].toFixed(2)}, ${last[1].toFixed(2)}) m` : "") + ".";
-      return;
-    }
-    const p = this.poses[this.pick];
-    $("#map-readout").textContent = `Placing the ${this.pick}` + (p ? ` at (${p[0].toFixed(2)}, ${p[1].toFixed(2)}) m` +
-      (Number.isFinite(p[2]) ? `, heading ${deg(p[2])}` : "") : "") + ".";
+    return { markers, paths };
   }
 
   local(ev) {
@@ -329,16 +444,17 @@ export class SubmitPage {
     const [px, py] = this.local(ev);
     const [x, y] = this.map.toWorld(px, py);
     const [w, hgt] = this.world();
-    if (x < 0 || y < 0 || x > w || y > hgt) return;
+    const target = this.target();
+    if (!target || x < 0 || y < 0 || x > w || y > hgt) return;
     ev.preventDefault();
     this.map.canvas.focus();
     const which = this.pick;
     if (which === "waypoint") {
-      this.setWaypoints([...this.waypoints, [round(x), round(y)]]);
+      this.setWaypoints([...target.waypoints, [round(x), round(y)]]);
       return;
     }
     this.map.canvas.setPointerCapture?.(ev.pointerId);
-    const old = this.poses[which];
+    const old = target[which];
     this.drag = { which, px, py };
     this.setPose(which, [round(x), round(y), ...(old && Number.isFinite(old[2]) ? [old[2]] : [])]);
   }
@@ -349,7 +465,7 @@ export class SubmitPage {
     const dx = px - this.drag.px;
     const dy = py - this.drag.py;
     if (Math.hypot(dx, dy) < DRAG_PX) return;
-    const p = this.poses[this.drag.which];
+    const p = this.target()[this.drag.which];
     this.setPose(this.drag.which, [p[0], p[1], round(Math.atan2(-dy, dx), 3)]);
   }
 
@@ -359,6 +475,16 @@ export class SubmitPage {
     const which = this.drag.which;
     this.drag = null;
     if (which === "start") this.pick = "goal"; // then the goal, as one places them
+    else if (this.multi) this.nextUnplaced();
+  }
+
+  /** After a robot's goal: on to the next robot without a start, if there is one. */
+  nextUnplaced() {
+    const list = this.robotList;
+    const k = list.robots.findIndex((r, i) => i > list.active && !r.start);
+    if (k < 0) return;
+    list.choose(k);
+    this.pick = "start";
   }
 
   key(ev) {
@@ -368,30 +494,38 @@ export class SubmitPage {
       ev.preventDefault();
       return;
     }
+    if (ev.key === "r" && this.multi && this.robotList.robots.length) {
+      this.robotList.choose((this.robotList.active + 1) % this.robotList.robots.length);
+      ev.preventDefault();
+      return;
+    }
+    const target = this.target();
+    if (!target) return;
     const moves = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, 1], ArrowDown: [0, -1] };
     const [w, hgt] = this.world();
+    const wps = target.waypoints;
     if (ev.key === "w" && this.source === "path") {
-      const last = this.waypoints[this.waypoints.length - 1] || this.poses.start || [w / 2, hgt / 2];
+      const last = wps[wps.length - 1] || target.start || [w / 2, hgt / 2];
       checkRadio(this.form, "pick", "waypoint");
-      this.setWaypoints([...this.waypoints, [round(clamp(last[0] + 0.1, 0, w)), round(last[1])]]);
+      this.setWaypoints([...wps, [round(clamp(last[0] + 0.1, 0, w)), round(last[1])]]);
       ev.preventDefault();
       return;
     }
     if (which === "waypoint") {
-      const n = this.waypoints.length;
+      const n = wps.length;
       if (n && moves[ev.key]) {
         const step = ev.shiftKey ? 0.1 : 0.01;
         const [dx, dy] = moves[ev.key];
-        const [x, y] = this.waypoints[n - 1];
-        this.setWaypoints([...this.waypoints.slice(0, -1), [round(clamp(x + dx * step, 0, w)), round(clamp(y + dy * step, 0, hgt))]]);
+        const [x, y] = wps[n - 1];
+        this.setWaypoints([...wps.slice(0, -1), [round(clamp(x + dx * step, 0, w)), round(clamp(y + dy * step, 0, hgt))]]);
         ev.preventDefault();
       } else if (n && (ev.key === "Delete" || ev.key === "Backspace")) {
-        this.setWaypoints(this.waypoints.slice(0, -1));
+        this.setWaypoints(wps.slice(0, -1));
         ev.preventDefault();
       }
       return;
     }
-    const p = this.poses[which] || [w / 2, hgt / 2];
+    const p = target[which] || [w / 2, hgt / 2];
     if (moves[ev.key]) {
       const step = ev.shiftKey ? 0.1 : 0.01;
       const [dx, dy] = moves[ev.key];
@@ -414,6 +548,7 @@ export class SubmitPage {
       const el = $(`#err-${k}`);
       if (el) el.textContent = "";
     }
+    this.robotList.clearErrors();
     for (const el of $$("[aria-invalid]", this.form)) el.removeAttribute("aria-invalid");
   }
 
@@ -455,7 +590,10 @@ export class SubmitPage {
     return out;
   }
 
+  /** Show `message` under the field `key` (a robot's: `{robot, part}`; null: the top of the form) with its inputs
+   * marked; the element to focus. */
   showError(key, message) {
+    if (key && typeof key === "object") return this.robotList.showError(key.robot, key.part, message) || this.showError("robots", message);
     const target = key && $(`#err-${key}`);
     if (!target) {
       $("#submit-error").textContent = message;
@@ -483,8 +621,14 @@ export class SubmitPage {
   body() {
     const modes = $$('input[name="modes"]:checked', this.form).map((el) => el.value);
     const problems = [];
-    if (!this.poses.start) problems.push(["start", "place the start on the map or type x and y"]);
-    if (!this.poses.goal) problems.push(["goal", "place the goal on the map or type x and y"]);
+    const multi = this.multi;
+    const { start, goal } = this.single;
+    if (multi) {
+      for (const [k, msg] of this.robotList.problems()) problems.push(k === null ? ["robots", msg] : [{ robot: k }, msg]);
+    } else {
+      if (!start) problems.push(["start", "place the start on the map or type x and y"]);
+      if (!goal) problems.push(["goal", "place the goal on the map or type x and y"]);
+    }
     if (!modes.length) problems.push(["modes", "choose at least one mode"]);
     const source = {};
     if (this.source === "planner") {
@@ -501,7 +645,7 @@ export class SubmitPage {
     } else {
       const pts = this.parsePath();
       if (!pts) problems.push(["path", "each line must be one point: x, y in metres"]);
-      else if (this.poses.start && this.poses.goal) source.path = [this.poses.start, ...pts, this.poses.goal];
+      else if (!multi && start && goal) source.path = [start, ...pts, goal];
     }
     const intOf = (sel) => {
       const v = $(sel).value.trim();
@@ -511,8 +655,7 @@ export class SubmitPage {
       problems,
       body: {
         environment: $("#f-environment").value,
-        start: this.poses.start,
-        goal: this.poses.goal,
+        ...(multi ? { robots: this.robotList.body(this.source === "path") } : { start, goal }),
         ...source,
         controller: $("#f-controller").value || "schema",
         controller_params: this.controllerParams(),
@@ -567,12 +710,13 @@ export class SubmitPage {
         const pyd = (err.errors || []).filter((e) => Array.isArray(e.loc));
         if (pyd.length) {
           for (const e of pyd) {
-            const key = e.loc[0] === "body" && KEYS.includes(e.loc[1]) ? e.loc[1] : null;
-            const el = this.showError(key, key ? e.msg : err.detail);
+            const msg = e.msg.replace(/^Value error, /, "");
+            const key = errorKey(msg, e.loc);
+            const el = this.showError(key, key ? msg : err.detail);
             first = first || el;
           }
         } else {
-          first = this.showError(fieldOfMessage(err.detail), err.detail);
+          first = this.showError(errorKey(err.detail), err.detail);
         }
         first?.focus?.();
       } else {
