@@ -114,14 +114,16 @@ class ControllerSpec:
 
 BUILTINS: dict[str, ControllerSpec] = {s.name: s for s in (
     ControllerSpec("schema", 0, "motor-schema P-controller: move-to-waypoint schema and a heading P-control "
-                   "(the default; its gains are the robot profile's)", "Arkin 1989; the Teleworkbench robots"),
+                   "(the default; its gains are the robot profile's)", "Arkin 1989; the Teleworkbench robots",
+                   REPLAN_PARAMS),
     ControllerSpec("pure_pursuit", 1, "pure pursuit: the arc through the path point a fixed lookahead ahead",
                    "Coulter 1992, CMU-RI-TR-92-01", (
                        Param("lookahead_m", "m", 0.06, 0.02, 1.0, "arc length from the robot's projection on the "
                              "path to the pursued point"),
                        Param("speed_m_s", "m/s", 0.2, 0.01, 1.0, "cruise speed (at most the robot's top speed)"),
                        Param("rotate_to_heading_rad", "rad", 1.2, 0.1, math.pi,
-                             "turn on the spot while the pursued point lies further off the heading"))),
+                             "turn on the spot while the pursued point lies further off the heading"),
+                       *REPLAN_PARAMS)),
     ControllerSpec("regulated_pure_pursuit", 2, "regulated pure pursuit (nav2): speed-scaled lookahead, slower "
                    "in curves, near obstacles and on the approach to the goal",
                    "Macenski, Singh, Martin, Gines 2023, Autonomous Robots (arXiv:2305.20026)", (
@@ -148,7 +150,8 @@ BUILTINS: dict[str, ControllerSpec] = {s.name: s for s in (
                        Param("max_lead_m", "m", 0.03, 0.005, 1.0, "the reference waits while it is this far ahead "
                              "of the robot's projection"),
                        Param("rotate_to_heading_rad", "rad", 0.5, 0.1, math.pi,
-                             "turn on the spot while the reference's heading is further off"))),
+                             "turn on the spot while the reference's heading is further off"),
+                       *REPLAN_PARAMS)),
 )}
 
 

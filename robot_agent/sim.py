@@ -34,7 +34,7 @@ import numpy as np
 
 from .backends import Backend, Emulated
 from .controller_specs import Selection
-from .controllers import DIRECT, MEMORY, PARAM_SLOTS, SCHEMA
+from .controllers import DIRECT, MEMORY, PARAM_SLOTS, SCHEMA, project
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .movers import drive_movers, drive_shared, mover_gains
 from .params import RobotParams
@@ -351,8 +351,12 @@ class SimCore:
             if self.aligning[i] or not rp.may_replan(i, self.step_count):
                 continue
             s = rp.settings[i]
-            ahead, dist = path_ahead(self._paths[i], int(self.cmem[i, 0]), float(self.cmem[i, 1]),
-                                     s.horizon_s * s.speed_m_s)
+            if self.cid[i] == SCHEMA:  # the schema keeps no projection: the robot's, from the leg it drives
+                seg, frac = project(float(belief[i, 0]), float(belief[i, 1]), self._paths[i],
+                                    max(int(self.wp[i]) - 1, 0), 0.0)
+            else:
+                seg, frac = int(self.cmem[i, 0]), float(self.cmem[i, 1])
+            ahead, dist = path_ahead(self._paths[i], seg, frac, s.horizon_s * s.speed_m_s)
             env = self._maps.get(i)
             if env is None:
                 env = self._maps[i] = static_map(world.area[i], world.world_blocks_local(i), world.moving_local(i))

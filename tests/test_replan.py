@@ -1,4 +1,4 @@
-"""Replanning in regulated pure pursuit (issue 17): the path-ahead check, the replan around the moving
+"""Replanning in the built-in controllers (issue 17): the path-ahead check, the replan around the moving
 obstacles' known tracks, its events, its determinism, and that a run without it is the run it was."""
 
 from __future__ import annotations
@@ -30,17 +30,20 @@ def fmm_path() -> np.ndarray:
     return plan_path(CROSSING, PLAN.start, PLAN.goal, "fmm", planning_margin=DEFAULT_PLANNING_MARGIN).path
 
 
-def drive(path: np.ndarray, backend: str = "ideal", seed: int = 5, **params):
+def drive(path: np.ndarray, backend: str = "ideal", seed: int = 5, controller: str = RPP, **params):
     return simulate_run(path, PLAN.start, seed=seed, blocks=block_tuples(DATA), moving=moving_tuples(DATA),
-                        area=CROSSING.size, backend=backend, controller=RPP, controller_params=params)
+                        area=CROSSING.size, backend=backend, controller=controller, controller_params=params)
 
 
+@pytest.mark.parametrize("controller", [RPP, "pure_pursuit", "kanayama", "schema"])
 @pytest.mark.parametrize("backend", ["ideal", "field"])
-def test_without_replanning_rpp_hits_the_disc_and_with_it_reaches_the_goal(fmm_path, backend):
-    hit = drive(fmm_path, backend)
+def test_without_replanning_a_robot_hits_the_disc_and_with_it_reaches_the_goal(fmm_path, backend, controller):
+    """Every built-in controller replans (the schema, which keeps no projection on the path, from the robot's
+    projection on the leg it drives)."""
+    hit = drive(fmm_path, backend, controller=controller)
     assert hit.outcome == "COLLISION" and hit.obstacle == 0
     assert not [e for e in hit.events if e.kind == "REPLAN"]
-    run = drive(fmm_path, backend, replan=1)
+    run = drive(fmm_path, backend, controller=controller, replan=1)
     replans = [e for e in run.events if e.kind == "REPLAN"]
     assert run.outcome == "DONE" and run.obstacle is None
     assert replans and all(e.index > 1 for e in replans) and all(e.seconds > 0 for e in replans)

@@ -158,8 +158,8 @@ def test_submit_returns_202_with_runs_and_others_get_404(alice, bob):
          r"controller_params.replan must be a whole number"),
         ({"controller": "regulated_pure_pursuit", "controller_params": {"replan": 1, "replan_horizon_s": 99}}, 422,
          r"controller_params.replan_horizon_s must be a number in \[0.5, 30\] \(s\)"),
-        ({"controller": "pure_pursuit", "controller_params": {"replan": 1}}, 422,
-         "controller_params.replan: controller 'pure_pursuit' has no parameter 'replan'"),
+        ({"controller": "kanayama", "controller_params": {"replan": 1, "lookahead_m": 0.1}}, 422,
+         "controller_params.lookahead_m: controller 'kanayama' has no parameter 'lookahead_m'"),
     ],
 )
 def test_preflight_refuses_bad_jobs_with_a_reason(alice, change, status, message):
@@ -186,11 +186,13 @@ def test_controllers_are_listed_chosen_stored_and_shown(alice):
     assert r.status_code == 202, r.text
     exp = alice.get(f"/api/v1/experiments/{r.json()['id']}").json()
     assert exp["controller"] == "pure_pursuit"
-    assert exp["controller_params"] == {"lookahead_m": 0.1, "speed_m_s": 0.2, "rotate_to_heading_rad": 1.2}
+    assert exp["controller_params"] == {"lookahead_m": 0.1, "speed_m_s": 0.2, "rotate_to_heading_rad": 1.2,
+                                        "replan": 0, "replan_horizon_s": 3.0, "replan_min_interval_s": 1.0}
     listed = alice.get("/api/v1/experiments").json()["data"]
     assert next(e for e in listed if e["id"] == exp["id"])["controller"] == "pure_pursuit"
     default = alice.post("/api/v1/experiments", json=JOB).json()
-    assert default["controller"] == "schema" and default["controller_params"] == {}
+    assert default["controller"] == "schema"  # the motor schema's gains are the profile's; its only parameters:
+    assert default["controller_params"] == {"replan": 0, "replan_horizon_s": 3.0, "replan_min_interval_s": 1.0}
     for eid in (exp["id"], default["id"]):
         alice.post(f"/api/v1/experiments/{eid}/cancel")
 
