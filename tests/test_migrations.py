@@ -41,7 +41,7 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0010",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0011",)]
 
 
 def test_multi_robot_migration_up_and_down_keeps_data(database_url):

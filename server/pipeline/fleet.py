@@ -175,6 +175,7 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
         for (w, held), why in zip(r["holds"], r.get("waited_for") or [[] for _ in r["holds"]]):
             ctx.on_line("s", f"robot {k}: held at waypoint {w} for {held:.2f} s, {_held_for(why)}", None, False)
     ctx.end_poses = fleet_poses(robots)  # stored with the run's end, in its one transaction
+    ctx.end_obstacles = out["obstacles"]  # the field's obstacle robots (None in simulation: exact discs)
     for k, r in enumerate(robots):  # shown live now
         svc.tracker.show(ctx.robot.robot_id, ctx.run_id, job.owner_id, np.asarray(r["poses"]).reshape(-1, 4), member=k)
     failure = fleet_failure(robots, out["metrics"], timeout_s)

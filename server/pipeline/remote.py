@@ -80,6 +80,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     poses = np.asarray(out["poses"], dtype=float).reshape(-1, 4)
     # stored with the run's end, in its one transaction; shown live now
     ctx.end_poses = poses
+    ctx.end_obstacles = out["obstacles"]  # a field run's obstacle robots (None in simulation: exact discs)
     svc.tracker.show(ctx.robot.robot_id, ctx.run_id, job.owner_id, poses)
     outcome = out["outcome"]
     t_end = out["t_end"]
