@@ -206,12 +206,13 @@ export class MapView {
       }
     }
 
-    // moving obstacles: their tracks (dotted) and the discs, hatched grey, at true size
+    // moving obstacles: their tracks (dotted: exact; solid: where the tracker saw an obstacle robot) and the
+    // discs at true size
     ctx.strokeStyle = COLORS.obstacle;
     ctx.lineWidth = 1;
-    ctx.setLineDash([2, 3]);
     for (const tr of L.obstacleTracks || []) {
       if (tr.points.length < 2) continue;
+      ctx.setLineDash(tr.solid ? [] : [2, 3]);
       ctx.beginPath();
       tr.points.forEach(([x, y], i) => (i ? ctx.lineTo(X(x), Y(y)) : ctx.moveTo(X(x), Y(y))));
       ctx.stroke();
