@@ -78,3 +78,40 @@ def test_multi_robot_migration_up_and_down_keeps_data(database_url):
         assert c.execute(text("select environment, start from experiments")).all()[0][0] == "room"
     engine.dispose()
     command.upgrade(cfg, "head")
+
+
+def test_obstacle_poses_migration_up_and_down(database_url):
+    """0011 (an obstacle robot's poses beside the run's) on both databases: old rows get NULL and stay the run's,
+    obstacle rows are written and kept apart, and the downgrade drops them (they would read as the robot's own)
+    and keeps every other row."""
+    from sqlalchemy import inspect, text
+
+    from server.core.db import make_session_factory
+    from server.store.poses import obstacle_poses, run_poses
+
+    cfg = config(database_url)
+    command.upgrade(cfg, "0010")
+    engine = make_engine(database_url)
+    with engine.begin() as c:
+        c.execute(text("insert into users (id, name, is_admin, created_at) values (1, 'old', false, '2026-01-01')"))
+        c.execute(text(
+            "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner_params,"
+            " modes, repetitions, seed, field, robot_radius, planning_info, error, created_at) values (1, 1, 'completed',"
+            " 'room', '{}', '[0.3, 0.3]', '[1.5, 1.5]', '{}', '[\"twb\"]', 1, 0, 'sub', 0.045, '{}', '', '2026-01-01')"))
+        c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
+                       " created_at) values (7, 1, 'twb', 1, 'completed', 0, 1, '{}', '', '2026-01-01')"))
+        c.execute(text("insert into poses (run_id, t, x, y, theta, robot) values (7, 0.5, 0.3, 0.3, 0.0, null)"))
+    command.upgrade(cfg, "0011")
+    with engine.begin() as c:
+        assert c.execute(text("select t, x, obstacle from poses")).all() == [(0.5, 0.3, None)]
+        c.execute(text("insert into poses (run_id, t, x, y, theta, obstacle) values (7, 0.5, 1.2, 0.9, 0.0, 0)"))
+    with make_session_factory(engine)() as s:
+        assert run_poses(s, 7) == [[0.5, 0.3, 0.3, 0.0]] and obstacle_poses(s, 7) == {0: [[0.5, 1.2, 0.9, 0.0]]}
+    engine.dispose()
+    command.downgrade(cfg, "0010")
+    engine = make_engine(database_url)
+    assert "obstacle" not in {c["name"] for c in inspect(engine).get_columns("poses")}
+    with engine.begin() as c:
+        assert c.execute(text("select t, x from poses")).all() == [(0.5, 0.3)]
+    engine.dispose()
+    command.upgrade(cfg, "head")

@@ -87,8 +87,8 @@ def _off_exact(tracks: dict, t_zero: float, env: dict = SIDE) -> list[np.ndarray
 
 async def test_a_field_run_stores_its_obstacle_robots_with_its_end_and_nothing_else_changes(tmp_path, database_url):
     """On SQLite and on PostgreSQL (its COPY path): the agent's field run stores the obstacle robots the server
-    replayed for its metrics, bit for bit; they lag their exact tracks by the documented 1 to 5 cm; the run's
-    own poses leave them out and its metrics are main's bit for bit.  The same run as a task (profile overrides
+    replayed for its metrics, bit for bit, and they give its obstacle metrics again; they lag their exact tracks
+    by the documented 1 to 5 cm; the run's own poses leave them out and its metrics are main's bit for bit.  The same run as a task (profile overrides
     equal to the shipped values) stores the obstacle robots it drove: the same robots."""
     shipped = P.field.tracker_noise_xy_m
     async with running(tmp_path, database_url=database_url) as tb:
@@ -117,6 +117,11 @@ async def test_a_field_run_stores_its_obstacle_robots_with_its_end_and_nothing_e
         # the run's own poses are the rest: none of the obstacle robots' is among them
         assert len(got.own) == got.rows - sum(len(tr) for tr in got.tracks.values()) > 100
         assert not {tuple(p) for p in got.own} & {tuple(p) for tr in got.tracks.values() for p in tr}
+        # what is stored gives the run's obstacle metrics again
+        again = compute.measure_run(SIDE, STRAIGHT, got.own, got.run.t_start, got.run.t_end, [1.5, 0.3, 0.0], 0.045,
+                                    None, [got.tracks[k] for k in (0, 1)])
+        for k in ("obstacle_distance_min_m", "obstacle_time_within_s", "length_m"):
+            assert again[k] == got.run.metrics[k], k
     assert (_digest(agent.run.metrics), _digest(task.run.metrics)) == (MAIN_METRICS["agent"], MAIN_METRICS["task"])
     # the task drove the same obstacle robots (same seed, same parameters) on its own clock
     for k in (0, 1):

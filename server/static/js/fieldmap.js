@@ -227,6 +227,14 @@ export class MapView {
       ctx.arc(X(o.x), Y(o.y), rad, 0, 2 * Math.PI);
       ctx.fill();
       ctx.stroke();
+      if (o.theta != null) { // an obstacle robot the tracker saw: its heading, as a robot's
+        ctx.strokeStyle = "#ffffff";
+        ctx.lineWidth = 1.5;
+        ctx.beginPath();
+        ctx.moveTo(X(o.x), Y(o.y));
+        ctx.lineTo(X(o.x) + rad * Math.cos(o.theta), Y(o.y) - rad * Math.sin(o.theta));
+        ctx.stroke();
+      }
     }
 
     // robots: filled disc at true size (at least 6 px), white heading line
