@@ -44,6 +44,22 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     assert con.execute("select version_num from alembic_version").fetchall() == [("0011",)]
 
 
+def _old_run(c, mode: str) -> None:  # type: ignore[no-untyped-def]
+    """A user, an experiment, its run 7 of ``mode`` and one pose of it (t 0.5 s at (0.3, 0.3)), in the columns
+    every revision since 0009 has."""
+    from sqlalchemy import text
+
+    c.execute(text("insert into users (id, name, is_admin, created_at) values (1, 'old', false, '2026-01-01')"))
+    c.execute(text(
+        "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner_params,"
+        " modes, repetitions, seed, field, robot_radius, planning_info, error, created_at) values (1, 1, 'completed',"
+        " 'room', '{}', '[0.3, 0.3]', '[1.5, 1.5]', '{}', :modes, 1, 0, 'sub', 0.045, '{}', '', '2026-01-01')"),
+        {"modes": f'["{mode}"]'})
+    c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
+                   " created_at) values (7, 1, :mode, 1, 'completed', 0, 1, '{}', '', '2026-01-01')"), {"mode": mode})
+    c.execute(text("insert into poses (run_id, t, x, y, theta) values (7, 0.5, 0.3, 0.3, 0.0)"))
+
+
 def test_multi_robot_migration_up_and_down_keeps_data(database_url):
     """0010 (an experiment's robots, a pose's fleet member) on both databases: old rows get NULL, fleet rows
     are written and read, and the downgrade keeps every other column's data."""
@@ -53,14 +69,7 @@ def test_multi_robot_migration_up_and_down_keeps_data(database_url):
     command.upgrade(cfg, "0009")
     engine = make_engine(database_url)
     with engine.begin() as c:
-        c.execute(text("insert into users (id, name, is_admin, created_at) values (1, 'old', false, '2026-01-01')"))
-        c.execute(text(
-            "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner_params,"
-            " modes, repetitions, seed, field, robot_radius, planning_info, error, created_at) values (1, 1, 'completed',"
-            " 'room', '{}', '[0.3, 0.3]', '[1.5, 1.5]', '{}', '[\"sim\"]', 1, 0, 'sub', 0.045, '{}', '', '2026-01-01')"))
-        c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
-                       " created_at) values (7, 1, 'sim', 1, 'completed', 0, 1, '{}', '', '2026-01-01')"))
-        c.execute(text("insert into poses (run_id, t, x, y, theta) values (7, 0.5, 0.3, 0.3, 0.0)"))
+        _old_run(c, "sim")
     command.upgrade(cfg, "0010")
     with engine.begin() as c:
         assert c.execute(text("select robots from experiments")).all() == [(None,)]
@@ -93,14 +102,7 @@ def test_obstacle_poses_migration_up_and_down(database_url):
     command.upgrade(cfg, "0010")
     engine = make_engine(database_url)
     with engine.begin() as c:
-        c.execute(text("insert into users (id, name, is_admin, created_at) values (1, 'old', false, '2026-01-01')"))
-        c.execute(text(
-            "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner_params,"
-            " modes, repetitions, seed, field, robot_radius, planning_info, error, created_at) values (1, 1, 'completed',"
-            " 'room', '{}', '[0.3, 0.3]', '[1.5, 1.5]', '{}', '[\"twb\"]', 1, 0, 'sub', 0.045, '{}', '', '2026-01-01')"))
-        c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
-                       " created_at) values (7, 1, 'twb', 1, 'completed', 0, 1, '{}', '', '2026-01-01')"))
-        c.execute(text("insert into poses (run_id, t, x, y, theta, robot) values (7, 0.5, 0.3, 0.3, 0.0, null)"))
+        _old_run(c, "twb")
     command.upgrade(cfg, "0011")
     with engine.begin() as c:
         assert c.execute(text("select t, x, obstacle from poses")).all() == [(0.5, 0.3, None)]
