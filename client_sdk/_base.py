@@ -37,6 +37,7 @@ from ._models import (
     ExperimentMetrics,
     ExperimentSummary,
     Message,
+    ObstacleTracks,
     Page,
     Program,
     Robot,
@@ -254,6 +255,9 @@ class BaseClient:
         if format == "array":
             return Call("GET", path, _poses_array, params={"format": "json", **which})
         raise ValueError(f"`format` must be 'array' or 'csv', got {format!r}")
+
+    def _get_obstacles(self, run_id: int) -> Call:
+        return Call("GET", f"{API_PREFIX}/runs/{int(run_id)}/obstacles", _one(ObstacleTracks.from_json))
 
     def _get_messages(self, run_id: int, offset: int, limit: int) -> Call:
         return Call("GET", f"{API_PREFIX}/runs/{int(run_id)}/messages", _page(Message.from_json),

@@ -24,6 +24,7 @@ from ._models import (
     ExperimentMetrics,
     ExperimentSummary,
     Message,
+    ObstacleTracks,
     Page,
     Program,
     Robot,
@@ -279,6 +280,12 @@ class Client(BaseClient):
         ``robot=k`` keeps robot k's."""
         return self._send(self._get_poses(run_id, format, robot))
 
+    def get_obstacles(self, run_id: int) -> ObstacleTracks:
+        """Where the run's moving obstacles were: a field run's obstacle robots as the tracker saw them
+        (``exact`` False), else their exact tracks over the run; per obstacle ``(T, 4)`` t, x, y, theta
+        (s, m, m, rad)."""
+        return self._send(self._get_obstacles(run_id))
+
     def get_messages(self, run_id: int, *, offset: int = 0, limit: int = 1000) -> Page[Message]:
         """Protocol lines exchanged with the robot during a run, with experiment time."""
         return self._send(self._get_messages(run_id, offset, limit))
@@ -447,6 +454,10 @@ class AsyncClient(BaseClient):
                         robot: Optional[int] = None) -> np.ndarray | str:
         """See :meth:`Client.get_poses`."""
         return await self._send(self._get_poses(run_id, format, robot))
+
+    async def get_obstacles(self, run_id: int) -> ObstacleTracks:
+        """See :meth:`Client.get_obstacles`."""
+        return await self._send(self._get_obstacles(run_id))
 
     async def get_messages(self, run_id: int, *, offset: int = 0, limit: int = 1000) -> Page[Message]:
         """See :meth:`Client.get_messages`."""

@@ -25,6 +25,7 @@ __all__ = [
     "ExperimentSummary",
     "Message",
     "ModeAggregate",
+    "ObstacleTracks",
     "Page",
     "Plan",
     "Program",
@@ -382,6 +383,29 @@ class Message(_FromJson):
     direction: str
     line: str
     t_estimated: bool = False
+
+
+@dataclass
+class ObstacleTracks:
+    """Where a run's moving obstacles were (``GET /api/v1/runs/{id}/obstacles``).
+
+    ``tracks[k]``: ``(T, 4)`` t, x, y, theta (s on the run's clock, m, m, rad) of the environment's
+    ``moving_obstacles[k]``, ``radii[k]`` its radius (m).  ``exact`` False: a field run's obstacle robots as
+    the tracker saw them (robots of the run's radius); True: the exact tracks, sampled over the run (a
+    simulation's, or a field run's without stored ones).
+    """
+
+    run_id: int
+    exact: bool
+    tracks: list[np.ndarray]
+    radii: list[float]
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "ObstacleTracks":
+        obstacles = data.get("obstacles") or []
+        return cls(int(data["run_id"]), bool(data["exact"]),
+                   [np.asarray(o["poses"], dtype=float).reshape(-1, 4) for o in obstacles],
+                   [float(o["radius"]) for o in obstacles])
 
 
 @dataclass

@@ -192,7 +192,9 @@ class Run(Base):
 
 class Pose(Base):
     """A logged pose of a run: tracker measurement (twb) or ground truth (sim); ``robot`` is the fleet member
-    of a multi-robot run (its index in the job's ``robots``), None for a single robot's."""
+    of a multi-robot run (its index in the job's ``robots``), None for a single robot's; ``obstacle``: not the
+    run's robot but one of a field run's obstacle robots (its index in the environment's
+    ``moving_obstacles``), None for the run's own robots."""
 
     __tablename__ = "poses"
     __table_args__ = (Index("ix_poses_run_t", "run_id", "t"),)
@@ -204,6 +206,7 @@ class Pose(Base):
     y: Mapped[float] = mapped_column(Float)
     theta: Mapped[float] = mapped_column(Float)
     robot: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
+    obstacle: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
 
 
 class Message(Base):

@@ -41,7 +41,23 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0010",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0011",)]
+
+
+def _old_run(c, mode: str) -> None:  # type: ignore[no-untyped-def]
+    """A user, an experiment, its run 7 of ``mode`` and one pose of it (t 0.5 s at (0.3, 0.3)), in the columns
+    every revision since 0009 has."""
+    from sqlalchemy import text
+
+    c.execute(text("insert into users (id, name, is_admin, created_at) values (1, 'old', false, '2026-01-01')"))
+    c.execute(text(
+        "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner_params,"
+        " modes, repetitions, seed, field, robot_radius, planning_info, error, created_at) values (1, 1, 'completed',"
+        " 'room', '{}', '[0.3, 0.3]', '[1.5, 1.5]', '{}', :modes, 1, 0, 'sub', 0.045, '{}', '', '2026-01-01')"),
+        {"modes": f'["{mode}"]'})
+    c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
+                   " created_at) values (7, 1, :mode, 1, 'completed', 0, 1, '{}', '', '2026-01-01')"), {"mode": mode})
+    c.execute(text("insert into poses (run_id, t, x, y, theta) values (7, 0.5, 0.3, 0.3, 0.0)"))
 
 
 def test_multi_robot_migration_up_and_down_keeps_data(database_url):
@@ -53,14 +69,7 @@ def test_multi_robot_migration_up_and_down_keeps_data(database_url):
     command.upgrade(cfg, "0009")
     engine = make_engine(database_url)
     with engine.begin() as c:
-        c.execute(text("insert into users (id, name, is_admin, created_at) values (1, 'old', false, '2026-01-01')"))
-        c.execute(text(
-            "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner_params,"
-            " modes, repetitions, seed, field, robot_radius, planning_info, error, created_at) values (1, 1, 'completed',"
-            " 'room', '{}', '[0.3, 0.3]', '[1.5, 1.5]', '{}', '[\"sim\"]', 1, 0, 'sub', 0.045, '{}', '', '2026-01-01')"))
-        c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
-                       " created_at) values (7, 1, 'sim', 1, 'completed', 0, 1, '{}', '', '2026-01-01')"))
-        c.execute(text("insert into poses (run_id, t, x, y, theta) values (7, 0.5, 0.3, 0.3, 0.0)"))
+        _old_run(c, "sim")
     command.upgrade(cfg, "0010")
     with engine.begin() as c:
         assert c.execute(text("select robots from experiments")).all() == [(None,)]
@@ -76,5 +85,35 @@ def test_multi_robot_migration_up_and_down_keeps_data(database_url):
     with engine.begin() as c:
         assert c.execute(text("select t, x from poses order by t")).all() == [(0.5, 0.3), (1.0, 0.4)]
         assert c.execute(text("select environment, start from experiments")).all()[0][0] == "room"
+    engine.dispose()
+    command.upgrade(cfg, "head")
+
+
+def test_obstacle_poses_migration_up_and_down(database_url):
+    """0011 (an obstacle robot's poses beside the run's) on both databases: old rows get NULL and stay the run's,
+    obstacle rows are written and kept apart, and the downgrade drops them (they would read as the robot's own)
+    and keeps every other row."""
+    from sqlalchemy import inspect, text
+
+    from server.core.db import make_session_factory
+    from server.store.poses import obstacle_poses, run_poses
+
+    cfg = config(database_url)
+    command.upgrade(cfg, "0010")
+    engine = make_engine(database_url)
+    with engine.begin() as c:
+        _old_run(c, "twb")
+    command.upgrade(cfg, "0011")
+    with engine.begin() as c:
+        assert c.execute(text("select t, x, obstacle from poses")).all() == [(0.5, 0.3, None)]
+        c.execute(text("insert into poses (run_id, t, x, y, theta, obstacle) values (7, 0.5, 1.2, 0.9, 0.0, 0)"))
+    with make_session_factory(engine)() as s:
+        assert run_poses(s, 7) == [[0.5, 0.3, 0.3, 0.0]] and obstacle_poses(s, 7) == {0: [[0.5, 1.2, 0.9, 0.0]]}
+    engine.dispose()
+    command.downgrade(cfg, "0010")
+    engine = make_engine(database_url)
+    assert "obstacle" not in {c["name"] for c in inspect(engine).get_columns("poses")}
+    with engine.begin() as c:
+        assert c.execute(text("select t, x from poses")).all() == [(0.5, 0.3)]
     engine.dispose()
     command.upgrade(cfg, "head")

@@ -45,6 +45,9 @@ def test_rows_and_lines_come_due_by_experiment_time():
     assert [d[1] for d in due] == ["a done"] and pb.ended(0) and not pb.ended(1) and not pb.done
     np.testing.assert_array_equal(pb.played(0), a)
     np.testing.assert_array_equal(pb.played(1), b[:2])
+    obstacle = track(0.0, 10.0, 11)  # a field run's obstacle robot on the same clock: cut where playing got to
+    np.testing.assert_array_equal(pb.until_played([obstacle])[0], obstacle[:4])
+    assert pb.until_played(None) is None
     rows, due = pb.advance(math.inf)
     assert [d[1] for d in due] == ["b done"] and pb.done
 

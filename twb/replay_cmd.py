@@ -23,7 +23,8 @@ def replay(
     token: TokenOpt = None,
 ) -> None:
     """Animated replay of a run over its environment: planned path, performed path, robot with heading, and the
-    environment's moving obstacles where they were."""
+    environment's moving obstacles where they were (a field run's obstacle robots as the tracker saw them;
+    else their exact tracks)."""
     if out.suffix.lower() != ".gif":
         fail(f"--out must be a .gif file (written with Pillow), got {out}")
     with sdk_client(url, token) as client:
@@ -36,6 +37,7 @@ def replay(
         if robot is not None and robot >= len(exp.robots):
             fail(f"run {run_id} has {len(exp.robots)} robots (0 to {len(exp.robots) - 1}); --robot {robot} is none")
         poses = client.get_poses(run_id) if robot is None else client.get_poses(run_id, robot=robot)
+        obstacles = client.get_obstacles(run_id) if env.moving_obstacles else None
     if len(poses) == 0:
         fail(f"run {run_id} ({run.status}) has no logged poses to replay")
     planned = exp.planned_path
@@ -48,13 +50,18 @@ def replay(
 
     title = (f"run {run.id}: {exp.environment} · {exp.planner or 'path'} · {run.mode} #{run.repetition} "
              f"({run.status})" + (f" · robot {robot}" if robot is not None else ""))
+    tracked = obstacles is not None and not obstacles.exact
     fig, anim, n = replay_animation(env.to_json(), poses, planned=planned,
                                     robot_radius=exp.robot_radius or 0.045, fps=fps, speed=speed,
                                     max_frames=max_frames, title=title, color=COLORS.get(run.mode, "#d62728"),
-                                    obstacle_t0=run.t_start)
+                                    obstacle_t0=0.0 if fleet else run.t_start,  # a fleet's obstacles: its clock
+                                    obstacles=obstacles.tracks if tracked else None,
+                                    obstacle_radii=obstacles.radii if tracked else None)
     out.parent.mkdir(parents=True, exist_ok=True)
     anim.save(out, writer=PillowWriter(fps=fps), dpi=dpi)
-    typer.echo(f"{out}: {n} frames, {n / fps:.1f} s")
+    shown = "" if obstacles is None else \
+        ("; moving obstacles: the obstacle robots as tracked" if tracked else "; moving obstacles: exact tracks")
+    typer.echo(f"{out}: {n} frames, {n / fps:.1f} s{shown}")
 
 
 def _fleet_tracks(exp: Any, poses: Any, robot: Optional[int]) -> tuple[Any, Any]:

@@ -17,9 +17,12 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
                      planned: Optional[np.ndarray | Sequence[Optional[np.ndarray]]] = None,
                      robot_radius: float = 0.045, fps: int = 15, speed: float = 4.0, max_frames: int = 300,
                      title: str = "", color: str = COLORS["twb"],
-                     obstacle_t0: Optional[float] = None):  # type: ignore[no-untyped-def]
+                     obstacle_t0: Optional[float] = None,
+                     obstacles: Optional[Sequence[np.ndarray]] = None,
+                     obstacle_radii: Optional[Sequence[float]] = None):  # type: ignore[no-untyped-def]
     """A matplotlib ``FuncAnimation`` of a run: planned paths, performed paths so far, every robot with its
-    heading, and the environment's moving obstacles where they were at each frame.
+    heading, and the environment's moving obstacles where they were at each frame: on their exact tracks, or
+    where the tracker saw a field run's obstacle robots (``obstacles``); the legend says which.
 
     Parameters
     ----------
@@ -36,7 +39,13 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
     color : the robot's colour (one robot; several get a colour each)
     obstacle_t0 : float, s, optional
         The pose time at which the moving obstacles' clock is 0 (a run's ``t_start``: obstacles move
-        from its path's start); default the first pose's time.
+        from its path's start); default the first pose's time.  Not used with ``obstacles``.
+    obstacles : sequence of (T, 4) float arrays, s, m, m, rad, optional
+        Where each moving obstacle was, on the poses' clock (a field run's obstacle robots as the tracker
+        saw them, :meth:`client_sdk.Client.get_obstacles`), interpolated at each frame; default the
+        environment's exact tracks.
+    obstacle_radii : sequence of float, m, optional
+        The radius each of ``obstacles`` is drawn with; default the environment's.
 
     Returns
     -------
@@ -63,7 +72,14 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
     times = t0 + dt * np.arange(n)
     times = np.append(times, [t1] * max(1, fps // 2))  # hold the last poses for half a second
     idx = [np.minimum(np.searchsorted(q[:, 0], times, side="right") - 1, len(q) - 1).clip(0) for q in tracks]
-    movers, centres = _obstacle_centres(env, times - (t0 if obstacle_t0 is None else obstacle_t0))
+    if obstacles is None:
+        movers, centres = _obstacle_centres(env, times - (t0 if obstacle_t0 is None else obstacle_t0))
+        radii, what = [ob.radius for ob in movers], "moving obstacle (exact track)"
+    else:
+        centres = _tracked_centres(obstacles, times)
+        radii = list(obstacle_radii) if obstacle_radii is not None else \
+            [float(o["radius"]) for o in env.get("moving_obstacles") or []]
+        what = "moving obstacle (tracked)"
 
     fig = Figure(figsize=(5, 5.3), layout="constrained")
     ax = fig.subplots()
@@ -83,8 +99,8 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
         ax.add_patch(robot)
         (heading,) = ax.plot([], [], "k-", lw=1.5)
         artists.append((trace, robot, heading))
-    discs = [Circle(tuple(centres[m, 0]), ob.radius, fc="#7f7f7f", ec="k", hatch="//", alpha=0.8,
-                    label="moving obstacle" if m == 0 else None) for m, ob in enumerate(movers)]
+    discs = [Circle(tuple(centres[m, 0]), r, fc="#7f7f7f", ec="k", hatch="//", alpha=0.8,
+                    label=what if m == 0 else None) for m, r in enumerate(radii)]
     for d in discs:
         ax.add_patch(d)
     clock = ax.text(0.06, 0.96, "", transform=ax.transAxes, va="top", fontsize=9,
@@ -111,6 +127,18 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
 
     anim = FuncAnimation(fig, update, frames=len(times), interval=1000 / fps, blit=False)
     return fig, anim, len(times)
+
+
+def _tracked_centres(tracks: Sequence[np.ndarray], t: np.ndarray) -> np.ndarray:
+    """Centres ``(M, T, 2)`` (m) of obstacles whose poses ``tracks[m]`` ``(N, 4)`` (t s, x m, y m, theta) were
+    logged, at times ``t`` (s, the same clock): interpolated, held before the first and after the last."""
+    out = np.full((len(tracks), len(t), 2), np.nan)
+    for m, tr in enumerate(tracks):  # a loop over the few obstacles; times are vectorised
+        tr = np.asarray(tr, dtype=float).reshape(-1, 4)
+        if len(tr):
+            out[m, :, 0] = np.interp(t, tr[:, 0], tr[:, 1])
+            out[m, :, 1] = np.interp(t, tr[:, 0], tr[:, 2])
+    return out
 
 
 def _obstacle_centres(env: dict[str, Any], t: np.ndarray) -> tuple[tuple[Any, ...], np.ndarray]:

@@ -12,7 +12,8 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "field_obstacle_tracks", "moving_tuples",
+__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "exact_obstacle_tracks", "field_obstacle_tracks",
+           "moving_tuples",
            "obstacle_robots_note", "compare_runs", "expected_duration_s", "explicit_path", "fleet_job", "jittered",
            "measure_run", "plan_job", "replan_metrics", "replanning", "simulate_job", "warm_up"]
 
@@ -184,6 +185,30 @@ def field_obstacle_tracks(env_data: dict[str, Any], seed: int, platform: str, t_
             for tr in mover_tracks(list(sent.obstacles), path_key(seed), params, t_end - t_start)]
 
 
+def exact_obstacle_tracks(env_data: dict[str, Any], t_from: float, t_to: float, t_zero: float,
+                          step_s: float = 0.05) -> list[np.ndarray]:
+    """The environment's moving obstacles on their exact tracks (docs/planners.md, "Moving obstacles") from
+    ``t_from`` to ``t_to`` (s, the run's clock; both included) every ``step_s`` (s), obstacle time 0 at
+    ``t_zero`` (s): per moving obstacle ``(T, 4)`` t s, x m, y m, theta rad (the direction it moves in, the
+    last one while it stands; its first way's before it sets off)."""
+    if not env_data.get("moving_obstacles"):
+        return []
+    from planners import parse_environment
+    from planners.moving import positions
+
+    obstacles = parse_environment(env_data).moving_obstacles
+    t = np.arange(t_from, t_to, step_s) if t_to > t_from else np.zeros(0)
+    t = np.append(t, t_to)
+    xy = positions(obstacles, t - t_zero)  # (M, T, 2)
+    step = np.diff(np.concatenate([xy, xy[:, -1:]], axis=1), axis=1)  # to the next sample; none after the last
+    moving = np.hypot(step[..., 0], step[..., 1]) > 1e-12
+    # where it stands, the heading of the last step it moved (of the first one before it ever moved)
+    last = np.maximum.accumulate(np.where(moving, np.arange(len(t)), -1), axis=1)
+    idx = np.where(last >= 0, last, np.argmax(moving, axis=1)[:, None])
+    theta = np.take_along_axis(np.arctan2(step[..., 1], step[..., 0]), idx, axis=1)
+    return [np.column_stack([t, xy[m], theta[m]]) for m in range(len(obstacles))]
+
+
 def _replans(events: list[Any]) -> list[tuple[int, float]]:
     """A simulated run's ``REPLAN`` events as :func:`replan_metrics` takes them (points, planning time s)."""
     return [(e.index or 0, e.seconds or 0.0) for e in events if e.kind == "REPLAN"]
@@ -288,7 +313,9 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     profile with the field parameters ``overrides``) following with ``controller`` for at most ``max_s``
     experiment seconds.  Returns ``{"robots": [per robot {"path", "depart", "poses" (N, 4) t s, x m, y m,
     theta rad, "lines", "t_start", "t_end", "outcome", "obstacle", "holds" [[waypoint, s held], ...],
-    "waited_for" [[robot, ...] per hold]}], "planning_time_s", "metrics"}``,
+    "waited_for" [[robot, ...] per hold]}], "planning_time_s", "metrics", "obstacles"}`` (``"obstacles"``: on
+    the field the tracker's poses of the obstacle robots, per moving obstacle ``(T, 4)`` on the fleet's clock;
+    else None),
     or ``{"planning_error": why}`` / ``{"placement_error": why}``."""
     import time
 
@@ -382,7 +409,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
                     "t_start": run.t_start, "t_end": run.t_end, "outcome": run.outcome, "obstacle": run.obstacle,
                     "holds": [[int(k), float(s)] for k, s in fleet.holds[i]],
                     "waited_for": [[int(h) for h in w] for w in fleet.waited_for[i]]})
-    return {"robots": out, "planning_time_s": planning_time_s, "metrics": _clean(metrics)}
+    return {"robots": out, "planning_time_s": planning_time_s, "metrics": _clean(metrics), "obstacles": fleet.obstacles}
 
 
 def _fleet_obstacle_distances(env: Any, fleet: Any, obstacle_radius: Optional[float], metrics: dict[str, Any]) -> None:

@@ -74,6 +74,9 @@ class RunContext:
         #: poses a compute engine's task returned (s, m, m, rad)
         self.end_fields: dict[str, Any] = {}
         self.end_poses: Optional[np.ndarray] = None
+        #: a field run's obstacle robots' tracker poses, per moving obstacle (T, 4) (s, m, m, rad; the run's
+        #: clock and frame), stored with the end too; None: none to store (a sim run's are exact)
+        self.end_obstacles: Optional[list[np.ndarray]] = None
         #: metrics a step measured itself (a controller program's compute time), added to the run's metrics
         self.end_metrics: dict[str, Any] = {}
         #: the robot's path noise was keyed by the run's seed (then its field obstacle robots can be replayed)

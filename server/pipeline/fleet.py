@@ -176,7 +176,7 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     for k, r in enumerate(robots):
         for (w, held), why in zip(r["holds"], r.get("waited_for") or [[] for _ in r["holds"]]):
             ctx.on_line("s", f"robot {k}: held at waypoint {w} for {held:.2f} s, {_held_for(why)}", None, False)
-    await _play(ctx, svc, job, robots)
+    await _play(ctx, svc, job, robots, out["obstacles"])
     failure = fleet_failure(robots, out["metrics"], timeout_s)
     t_start, t_end = _span(robots)
     metrics = dict(out["metrics"])
@@ -192,16 +192,19 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
         raise failure
 
 
-async def _play(ctx: RunContext, svc: RunServices, job: RunJob, robots: list[dict[str, Any]]) -> None:
+async def _play(ctx: RunContext, svc: RunServices, job: RunJob, robots: list[dict[str, Any]],
+                obstacles: Optional[list[np.ndarray]]) -> None:
     """Every robot's poses shown live and its lines logged (``robot k:``) as the run's experiment time passes
     at the time scale, on a robot's slot (at once on a compute engine's, as its single-robot runs are);
-    the poses stored with the run's end are the ones played, all of them unless the run is cancelled."""
+    the poses stored with the run's end are the ones played, all of them unless the run is cancelled, and
+    so are the field's ``obstacles`` robots' (None in simulation: exact discs)."""
     lines = [(d, f"robot {k}: {line}", t) for k, r in enumerate(robots) for d, line, t in r["lines"]]
     playback = Playback([np.asarray(r["poses"], dtype=float).reshape(-1, 4) for r in robots], lines)
     try:
         await play_run(ctx, svc, job.owner_id, playback, fleet=True)
     finally:  # stored with the run's end, in its one transaction
         ctx.end_poses = fleet_poses([{"poses": playback.played(k)} for k in range(len(robots))])
+        ctx.end_obstacles = playback.until_played(obstacles)
 
 
 async def _program_paths(ctx: RunContext, svc: RunServices, job: RunJob,

@@ -71,6 +71,17 @@ class Playback:
         """Whether track ``k`` is released to its last row."""
         return self._shown[k] == len(self.tracks[k])
 
+    def until_played(self, tracks: Optional[Sequence[np.ndarray]]) -> Optional[list[np.ndarray]]:
+        """Other tracks ``(T, 4)`` on the same clock (a field run's obstacle robots) cut where playing has
+        got to: their rows up to the experiment time released (None stays None)."""
+        if tracks is None:
+            return None
+        out = []
+        for tr in tracks:
+            tr = np.asarray(tr, dtype=float).reshape(-1, 4)
+            out.append(tr[:int(np.searchsorted(tr[:, 0], self.t, side="right"))])
+        return out
+
     @property
     def done(self) -> bool:
         return self.t >= self.t_last and self._logged == len(self._lines)

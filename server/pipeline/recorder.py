@@ -81,12 +81,14 @@ class RunRecorder:
     async def finish(self, run_id: int, status: RunStatus, error: str, *, failure: Optional[str] = None,
                      fields: Optional[dict[str, Any]] = None, poses: Optional[np.ndarray] = None,
                      messages: Sequence[dict[str, Any]] = (), retry: bool = False,
-                     resume: bool = False) -> Optional[tuple[Run, Experiment]]:
+                     resume: bool = False,
+                     obstacles: Optional[Sequence[np.ndarray]] = None) -> Optional[tuple[Run, Experiment]]:
         """Store a run's end in one transaction: the rest of its protocol log, then
 
         - ``resume``: the run is queued again, through nobody's fault (not counted as a retry);
         - ``retry`` (a testbed fault): the run is queued again once, its poses go;
-        - otherwise (or when the retry was had already): its ``poses`` ``(N, 4)`` (s, m, m, rad), ``fields``
+        - otherwise (or when the retry was had already): its ``poses`` ``(N, 4)`` (s, m, m, rad), its
+          ``obstacles`` (a field run's obstacle robots' poses, per moving obstacle ``(T, 4)``), ``fields``
           (``metrics``, ``t_start`` …), ``status``, ``finished_at``, ``error`` (kept when empty: a completed
           second attempt keeps the note about the first) and ``failure``.
 
@@ -103,6 +105,8 @@ class RunRecorder:
                     return (again, again.experiment), self._events([again], {again.experiment_id: resume})
                 if poses is not None:
                     pose_store.add_poses(s, run_id, poses)
+                if obstacles is not None:
+                    pose_store.add_obstacle_poses(s, run_id, obstacles)
                 end: dict[str, Any] = dict(fields or {}, status=status, finished_at=utcnow())
                 if error:
                     end["error"] = error

@@ -85,6 +85,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
         await play_run(ctx, svc, job.owner_id, playback, fleet=False)
     finally:  # stored with the run's end, in its one transaction: what was played
         ctx.end_poses = playback.played(0)
+        ctx.end_obstacles = playback.until_played(out["obstacles"])  # the field's obstacle robots (sim: None)
     outcome = out["outcome"]
     t_end = out["t_end"]
     failure: RunFailed | TestbedFault | None = None

@@ -64,8 +64,8 @@ class RunEnd:
     queued runs fail too, and ``failure`` why (``failed`` only); ``resume``:
     the run did not really begin (the database went away, or the robot could
     not be connected to), queue it again without counting a try.
-    ``fields``, ``poses`` and ``messages``: what the run produced that is
-    stored with its end (:meth:`RunRecorder.finish`).
+    ``fields``, ``poses``, ``messages`` and ``obstacles``: what the run
+    produced that is stored with its end (:meth:`RunRecorder.finish`).
     """
 
     status: RunStatus
@@ -74,10 +74,12 @@ class RunEnd:
     whole_experiment: bool = False
     failure: Optional[FailureKind] = None
     resume: bool = False
-    #: stored with the end, in one transaction: run fields, poses (N, 4) (s, m, m, rad), protocol-log rows
+    #: stored with the end, in one transaction: run fields, poses (N, 4) (s, m, m, rad), protocol-log rows,
+    #: a field run's obstacle robots' poses (per moving obstacle (T, 4), s, m, m, rad)
     fields: dict[str, Any] = field(default_factory=dict)
     poses: Optional[np.ndarray] = None
     messages: list[dict[str, Any]] = field(default_factory=list)
+    obstacles: Optional[list[np.ndarray]] = None
 
 
 async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Callable[[], bool]) -> RunEnd:
@@ -120,7 +122,8 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=_blame(ctx))
     finally:
         svc.tracker.close(robot)
-    return replace(end, fields=ctx.end_fields, poses=ctx.end_poses, messages=ctx.take_messages())
+    return replace(end, fields=ctx.end_fields, poses=ctx.end_poses, messages=ctx.take_messages(),
+                   obstacles=ctx.end_obstacles)
 
 
 async def store_end(recorder: RunRecorder, run_id: int, end: RunEnd) -> Optional[tuple[Run, Experiment]]:
@@ -128,7 +131,7 @@ async def store_end(recorder: RunRecorder, run_id: int, end: RunEnd) -> Optional
     once, a ``resume`` always; returns the run and experiment rows when queued again, else None."""
     return await recorder.finish(run_id, end.status, end.error, failure=failure_text(end), fields=end.fields,
                                  poses=end.poses, messages=end.messages, retry=end.status is RunStatus.ERROR,
-                                 resume=end.resume)
+                                 resume=end.resume, obstacles=end.obstacles)
 
 
 def failure_text(end: RunEnd) -> Optional[str]:

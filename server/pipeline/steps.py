@@ -245,6 +245,7 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
         if ctx.seeded:  # the obstacle robots' trajectories, replayed as the agent drove them
             obstacles = await svc.pool.run(compute.field_obstacle_tracks, job.environment_data, job.seed,
                                            ctx.robot.platform or "BeBot", t0, t1)
+            ctx.end_obstacles = obstacles  # stored with the run's end
         else:
             ctx.on_line("s", "the obstacle metrics measure against the moving obstacles' exact tracks: this robot's "
                              "agent keys its noise itself, so its obstacle robots cannot be replayed here", None,

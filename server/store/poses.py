@@ -2,12 +2,16 @@
 
 A multi-robot run's poses carry the fleet member they belong to (``robot``,
 its index in the job's ``robots``); a single robot's have none (NULL).
+A field run's obstacle robots' tracker poses are stored in the same table
+with the obstacle's index in the environment's ``moving_obstacles``
+(``obstacle``); the run's own poses have none, and :func:`run_poses` reads
+only those.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 import numpy as np
 from sqlalchemy import Engine, select
@@ -16,10 +20,9 @@ from sqlalchemy.orm import Session
 
 from ..models import Pose
 
-__all__ = ["add_poses", "insert_poses", "run_poses"]
+__all__ = ["add_obstacle_poses", "add_poses", "insert_poses", "obstacle_poses", "run_poses"]
 
 _COLUMNS = "run_id, t, x, y, theta"
-_FLEET_COLUMNS = "run_id, t, x, y, theta, robot"
 
 _EPS = 1e-9
 
@@ -35,7 +38,7 @@ def run_poses(session: Session, run_id: int, *, after_t: Optional[float] = None,
     ``[t, x, y, theta, robot]``, robot by robot, each oldest first.
     """
     cols = (Pose.t, Pose.x, Pose.y, Pose.theta) + ((Pose.robot,) if fleet else ())
-    q = select(*cols).where(Pose.run_id == run_id)
+    q = select(*cols).where(Pose.run_id == run_id, Pose.obstacle.is_(None))
     if after_t is not None:
         q = q.where(Pose.t > after_t)
     if between is not None and between[0] is not None and between[1] is not None:
@@ -44,6 +47,18 @@ def run_poses(session: Session, run_id: int, *, after_t: Optional[float] = None,
         q = q.where(Pose.robot == robot)
     order = (Pose.robot, Pose.t) if fleet else (Pose.t,)
     return [list(r) for r in session.execute(q.order_by(*order))]
+
+
+def obstacle_poses(session: Session, run_id: int) -> dict[int, list[list[float]]]:
+    """A field run's stored obstacle-robot poses: per obstacle index (the environment's
+    ``moving_obstacles[k]``) its ``[t, x, y, theta]`` rows (s, m, m, rad; the run's clock and frame), oldest
+    first; empty when none are stored."""
+    q = (select(Pose.obstacle, Pose.t, Pose.x, Pose.y, Pose.theta)
+         .where(Pose.run_id == run_id, Pose.obstacle.is_not(None)).order_by(Pose.obstacle, Pose.t))
+    out: dict[int, list[list[float]]] = {}
+    for k, *row in session.execute(q):
+        out.setdefault(k, []).append(row)
+    return out
 
 
 def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threading.Lock) -> None:
@@ -76,22 +91,40 @@ def add_poses(session: Session, run_id: int, rows: np.ndarray) -> None:
     """Store ``rows`` for ``run_id`` inside the session's transaction (a run's end written at once: its poses,
     log and status commit together), by the same bulk paths: ``(N, 4)`` (t, x, y, theta: s, m, m, rad) of one
     robot, or ``(N, 5)`` with the fleet member's index last (a multi-robot run)."""
+    _add(session, run_id, rows, "robot" if _has_index(rows) else None)
+
+
+def add_obstacle_poses(session: Session, run_id: int, tracks: Sequence[np.ndarray]) -> None:
+    """Store a field run's obstacle-robot poses inside the session's transaction, by the same bulk paths:
+    ``tracks[k]`` ``(T, 4)`` (t, x, y, theta: s, m, m, rad) of the environment's ``moving_obstacles[k]``."""
+    parts = [np.column_stack([np.asarray(tr, dtype=float).reshape(-1, 4), np.full(len(tr), k)])
+             for k, tr in enumerate(tracks)]
+    _add(session, run_id, np.concatenate(parts) if parts else np.zeros((0, 5)), "obstacle")
+
+
+def _add(session: Session, run_id: int, rows: np.ndarray, index: Optional[str]) -> None:
+    """Insert ``rows`` in the session's transaction; ``index``: the column of their fifth (``robot`` or
+    ``obstacle``), None for four columns."""
     if len(rows) == 0:
         return
     conn = session.connection()
     if conn.dialect.name == "postgresql":
-        _copy(conn.connection.driver_connection, run_id, rows)
+        _copy(conn.connection.driver_connection, run_id, rows, index)
     else:
-        conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle, _is_fleet(rows)), _tuples(run_id, rows))
+        conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle, index), _tuples(run_id, rows))
 
 
-def _is_fleet(rows: np.ndarray) -> bool:
-    """Rows with the fleet member's index as a fifth column."""
+def _has_index(rows: np.ndarray) -> bool:
+    """Rows with an index (a fleet member's, an obstacle's) as a fifth column."""
     return rows.ndim == 2 and rows.shape[1] == 5
 
 
-def _copy(pg: object, run_id: int, rows: np.ndarray) -> None:
-    columns = _FLEET_COLUMNS if _is_fleet(rows) else _COLUMNS
+def _columns(index: Optional[str]) -> str:
+    return _COLUMNS if index is None else f"{_COLUMNS}, {index}"
+
+
+def _copy(pg: object, run_id: int, rows: np.ndarray, index: Optional[str] = None) -> None:
+    columns = _columns(index)
     with pg.cursor() as cur:  # type: ignore[attr-defined]
         with cur.copy(f"COPY poses ({columns}) FROM STDIN") as copy:
             for row in _tuples(run_id, rows):
@@ -113,19 +146,20 @@ def _executemany(conn: object, sqlite: bool, paramstyle: str, run_id: int, rows:
 
 
 def _tuples(run_id: int, rows: np.ndarray) -> list[tuple[Any, ...]]:
-    """The INSERT's parameters: ``(run_id, t, x, y, theta)`` per row, ``(..., robot)`` for a multi-robot run's."""
-    if _is_fleet(rows):
+    """The INSERT's parameters: ``(run_id, t, x, y, theta)`` per row, ``(..., index)`` for rows with a fifth
+    column (a multi-robot run's robot, an obstacle robot's obstacle)."""
+    if _has_index(rows):
         return [(run_id, t, x, y, a, int(k)) for t, x, y, a, k in rows.tolist()]
     return [(run_id, t, x, y, a) for t, x, y, a in rows.tolist()]
 
 
-def _insert_sql(paramstyle: str, fleet: bool = False) -> str:
+def _insert_sql(paramstyle: str, index: Optional[str] = None) -> str:
     """The poses INSERT for the driver's parameter style (a raw executemany is ~5x faster than the ORM's);
-    ``fleet``: with the fleet member's column."""
-    n = 6 if fleet else 5
+    ``index``: with that column (``robot``, ``obstacle``) last."""
+    n = 5 if index is None else 6
     marks = {"qmark": "?", "format": "%s", "pyformat": "%s", "numeric": None, "named": None}.get(paramstyle, "?")
     if marks is None:
         params = ", ".join(f":{i}" if paramstyle == "numeric" else f":p{i}" for i in range(1, n + 1))
     else:
         params = ", ".join([marks] * n)
-    return f"INSERT INTO poses ({_FLEET_COLUMNS if fleet else _COLUMNS}) VALUES ({params})"
+    return f"INSERT INTO poses ({_columns(index)}) VALUES ({params})"

@@ -1,4 +1,4 @@
-"""Runs: one run, its logged poses (JSON or CSV) and protocol messages."""
+"""Runs: one run, its logged poses (JSON or CSV), its moving obstacles' tracks and protocol messages."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from sqlalchemy import func, select
 
 from ...access import owned
 from ...models import Message, Run
+from ...obstacles import run_obstacles
 from ...schemas import MAX_ROBOTS, RunPublic
 from ...store.poses import run_poses
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep
@@ -66,6 +67,23 @@ def get_poses(
         return PlainTextResponse(buf.getvalue(), media_type="text/csv",
                                  headers={"Content-Disposition": f'attachment; filename="run-{run_id}-poses.csv"'})
     return {"run_id": run_id, "count": len(rows), "columns": columns, "poses": rows}
+
+
+@router.get("/{run_id:int}/obstacles", responses=errors(404))
+def get_obstacles(run_id: IdPath, session: SessionDep, user: CurrentUser) -> dict:
+    """Where the run's moving obstacles were: a field run's obstacle robots as the tracker saw them, else exact.
+
+    One entry per moving obstacle of the environment (``index`` in its
+    ``moving_obstacles``, ``radius`` m, ``count``, ``poses`` ``[t, x, y,
+    theta]`` rows: experiment seconds on the run's clock, metres and radians
+    in the frame of the experiment's field, oldest first).  ``exact`` false:
+    the tracker's poses of the field's obstacle robots, stored with the run
+    (each a robot of the run's radius); true: the exact tracks over the run,
+    every 0.05 s (a simulation's; a field run whose obstacle robots could not
+    be replayed, or that ran before they were stored).
+    """
+    run = owned(session, user, Run, run_id, "Run")
+    return {"run_id": run_id, "columns": ["t", "x", "y", "theta"], **run_obstacles(session, run)}
 
 
 @router.get("/{run_id:int}/messages", responses=errors(404))

@@ -8,7 +8,7 @@ import { barChart, lineChart, speedProfile } from "./charts.js";
 import { $, TERMINAL, badge, debounce, duration, h, num, pose, report, toast, when } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
 import { byRobot, fleetLayers, robotColor, robotsTable } from "./fleet.js";
-import { obstacleLayers } from "./moving.js";
+import { obstacleLayers, trackedLayers } from "./moving.js";
 import { METRICS, allEqual, clipNote, intervalText, metricLabel, showIfClipped } from "./metrics.js";
 import { ProgramPanel } from "./programrun.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
@@ -164,6 +164,7 @@ export class ExperimentPage {
     if (this.id !== id) {
       this.id = id;
       this.poses = new Map(); // run id -> logged poses
+      this.obstacles = new Map(); // field run id -> its stored obstacle robots [{radius, poses}], or null (none)
       this.live = new Map(); // run id -> live points (experiment frame)
       this.hidden = new Set();
       this.data = null;
@@ -190,6 +191,7 @@ export class ExperimentPage {
       error: h("p", { class: "error", role: "alert" }),
       canvas: h("canvas", { id: "experiment-canvas", tabindex: 0, role: "img", "aria-label": "Planned and performed paths" }),
       legend: h("div", { class: "legend", role: "group", "aria-label": "Paths shown" }),
+      obstacleNote: h("p", { class: "muted small", id: "obstacle-note", hidden: true }),
       charts: h("div", { class: "charts", id: "experiment-charts" }),
       speed: h("div", { class: "wide-chart" }),
       runs: h("table", { class: "grid dense", id: "runs-table" }),
@@ -206,7 +208,7 @@ export class ExperimentPage {
       this.program.el,
       h("div", { class: "exp-grid" },
         h("div", { class: "panel" }, h("h2", {}, "Planned vs performed paths"),
-          h("div", { class: "canvas-box square" }, e.canvas), e.legend),
+          h("div", { class: "canvas-box square" }, e.canvas), e.legend, e.obstacleNote),
         h("div", { class: "panel" }, h("h2", {}, "Simulation vs field"),
           h("p", { class: "muted small" }, "Bars: mean per mode; whiskers: 95% confidence interval; dots: runs; dashed green: the planned path."),
           e.charts, e.speed)),
@@ -229,7 +231,11 @@ export class ExperimentPage {
     const [d, m] = await Promise.all([this.store.detail(id, { fresh: true }), api.get(`/api/v1/experiments/${id}/metrics`)]);
     if (id !== this.id) return;
     const want = d.runs.filter((r) => r.t_start != null && TERMINAL.has(r.status) && !this.poses.has(r.id)).slice(0, 40);
+    const moving = (await this.store.envAsync(d.environment))?.moving_tracks?.length;
+    const field = moving ? d.runs.filter((r) => r.mode === "twb" && r.t_start != null && TERMINAL.has(r.status)
+      && !this.obstacles.has(r.id)).slice(0, 40) : [];
     await Promise.all([...want.map((r) => api.get(`/api/v1/runs/${r.id}/poses`).then((p) => this.poses.set(r.id, p.poses))),
+      ...field.map((r) => api.get(`/api/v1/runs/${r.id}/obstacles`).then((o) => this.obstacles.set(r.id, o.exact ? null : o.obstacles))),
       this.program.load(d)]);
     if (id !== this.id) return;
     this.data = { d, m };
@@ -306,7 +312,7 @@ export class ExperimentPage {
     const runs = this.runs();
     if (d.robots) {
       const fleet = fleetLayers(d, runs, this.poses, this.hidden);
-      this.map.update({ blocks: env ? env.blocks : [], ...obstacleLayers(env?.moving_tracks, 0), ...fleet });
+      this.map.update({ blocks: env ? env.blocks : [], ...this.movingLayers(env, runs), ...fleet });
       return;
     }
     const paths = [];
@@ -328,11 +334,37 @@ export class ExperimentPage {
     paths.push(...crashes);
     this.map.update({
       blocks: env ? env.blocks : [],
-      ...obstacleLayers(env?.moving_tracks, 0), // where the moving obstacles stand when a path starts
+      ...this.movingLayers(env, runs),
       paths,
       markers: [{ x: d.start[0], y: d.start[1], theta: d.start[2], color: COLORS.start, label: "start" },
         { x: d.goal[0], y: d.goal[1], theta: d.goal[2], color: COLORS.goal, label: "goal" }],
     });
+  }
+
+  /**
+   * The moving obstacles' map layers: their exact tracks dotted, and where they stand when a path starts; each
+   * shown field run's stored obstacle robots as the tracker saw them, their tracks solid and each where it was
+   * when its run ended (then the exact discs only while a shown run has none stored).  The note under the
+   * legend says which is which.
+   */
+  movingLayers(env, runs) {
+    const exact = obstacleLayers(env?.moving_tracks, 0);
+    const note = this.els.obstacleNote;
+    note.hidden = !exact.obstacleTracks.length;
+    if (note.hidden) return exact;
+    const shown = runs.filter((r) => !this.hidden.has(`run-${r.id}`));
+    const tracked = shown.filter((r) => this.obstacles.get(r.id));
+    const discs = tracked.length < shown.length || !shown.length; // a shown run's obstacles are the exact ones
+    const layers = { obstacleTracks: [...exact.obstacleTracks], obstacles: discs ? exact.obstacles : [] };
+    for (const r of tracked) {
+      const o = trackedLayers(this.obstacles.get(r.id), r.t_end ?? Infinity);
+      layers.obstacleTracks.push(...o.obstacleTracks);
+      layers.obstacles.push(...o.obstacles);
+    }
+    const ids = tracked.map((r) => r.id).join(", ");
+    note.textContent = `Moving obstacles: dotted, their exact tracks${discs ? ", each disc where it stands when a path starts" : ""}`
+      + (ids ? `; solid, the obstacle robots of field run${tracked.length > 1 ? "s" : ""} ${ids} as the tracker saw them, each where it was when its run ended.` : ".");
+    return layers;
   }
 
   renderRuns(d, m) {

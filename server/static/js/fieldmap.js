@@ -206,12 +206,13 @@ export class MapView {
       }
     }
 
-    // moving obstacles: their tracks (dotted) and the discs, hatched grey, at true size
+    // moving obstacles: their tracks (dotted: exact; solid: where the tracker saw an obstacle robot) and the
+    // discs at true size
     ctx.strokeStyle = COLORS.obstacle;
     ctx.lineWidth = 1;
-    ctx.setLineDash([2, 3]);
     for (const tr of L.obstacleTracks || []) {
       if (tr.points.length < 2) continue;
+      ctx.setLineDash(tr.solid ? [] : [2, 3]);
       ctx.beginPath();
       tr.points.forEach(([x, y], i) => (i ? ctx.lineTo(X(x), Y(y)) : ctx.moveTo(X(x), Y(y))));
       ctx.stroke();
@@ -226,6 +227,14 @@ export class MapView {
       ctx.arc(X(o.x), Y(o.y), rad, 0, 2 * Math.PI);
       ctx.fill();
       ctx.stroke();
+      if (o.theta != null) { // an obstacle robot the tracker saw: its heading, as a robot's
+        ctx.strokeStyle = "#ffffff";
+        ctx.lineWidth = 1.5;
+        ctx.beginPath();
+        ctx.moveTo(X(o.x), Y(o.y));
+        ctx.lineTo(X(o.x) + rad * Math.cos(o.theta), Y(o.y) - rad * Math.sin(o.theta));
+        ctx.stroke();
+      }
     }
 
     // robots: filled disc at true size (at least 6 px), white heading line

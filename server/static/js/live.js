@@ -5,7 +5,7 @@ import { $, TERMINAL, badge, duration, h } from "./dom.js";
 import { plannerName } from "./experiments.js";
 import { COLORS, MapView } from "./fieldmap.js";
 import { robotColor } from "./fleet.js";
-import { obstacleLayers } from "./moving.js";
+import { obstacleLayers, trackedLayers } from "./moving.js";
 import { FIELD_SIZE } from "./store.js";
 
 export class FieldPage {
@@ -93,6 +93,8 @@ export class FieldPage {
     const fleet = []; // the robots of multi-robot runs
     const obstacles = [];
     const obstacleTracks = [];
+    const tracked = []; // runs whose obstacles are drawn as the tracker saw them, and as exact
+    const exact = [];
     const seenRuns = new Set();
     for (const sf of st.subfields) {
       const runId = st.subfieldRun.get(sf.id);
@@ -110,14 +112,22 @@ export class FieldPage {
       });
       const d = run && st.details.get(run.experiment_id);
       const env = d && st.env(d.environment);
-      if (env?.moving_tracks?.length && trace && trace.t1 != null) {
-        // the moving obstacles where they were at the last pose shown (their clock starts with the path)
+      if (trace?.obstacles && trace.t1 != null) {
+        // a stored field run's obstacle robots where the tracker saw them at its last pose shown
+        const o = trackedLayers(trace.obstacles, trace.t1);
+        obstacles.push(...o.obstacles);
+        obstacleTracks.push(...o.obstacleTracks);
+        tracked.push(runId);
+      } else if (env?.moving_tracks?.length && trace && trace.t1 != null) {
+        // the moving obstacles on their exact tracks where they were at the last pose shown (their clock
+        // starts with the path)
         const [ox, oy] = d.field === "full" ? [0, 0] : sf.origin;
         const t = trace.t1 - (trace.robots ? 0 : (run?.t_start ?? trace.t0 ?? trace.t1));
         const shifted = env.moving_tracks.map((tr) => ({ ...tr, waypoints: tr.waypoints.map(([x, y]) => [x + ox, y + oy]) }));
         const o = obstacleLayers(shifted, t);
         obstacles.push(...o.obstacles);
         obstacleTracks.push(...o.obstacleTracks);
+        exact.push(runId);
       }
       if (d && active && run.robot_id && d.robots) {
         const [ox, oy] = st.originOf(run.robot_id);
@@ -146,7 +156,21 @@ export class FieldPage {
     }
     robots.push(...fleet);
     this.describe(robots);
+    this.sayObstacles(tracked, exact);
     return { subfields, blocks, plannedBlocks, paths, markers, robots, obstacles, obstacleTracks };
+  }
+
+  /** The legend's line on moving obstacles: whose are drawn as the tracker saw them, whose on exact tracks. */
+  sayObstacles(tracked, exact) {
+    const item = $("#legend-obstacle");
+    const runs = (ids) => `run${ids.length > 1 ? "s" : ""} ${ids.join(", ")}`;
+    const parts = [];
+    if (tracked.length) parts.push(`as tracked (solid; ${runs(tracked)})`);
+    if (exact.length) parts.push(`on exact tracks (dotted; ${runs(exact)})`);
+    const text = `moving obstacle, ${parts.join("; ")}`;
+    item.hidden = parts.length === 0;
+    const label = item.querySelector(".text");
+    if (label.textContent !== text) label.textContent = text;
   }
 
   /** Whether the gripper is building another environment than the one the sub-field reports. */

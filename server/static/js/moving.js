@@ -37,3 +37,36 @@ export function obstacleLayers(tracks, t) {
     }),
   };
 }
+
+/** Where an obstacle robot was at time `t` (s, its poses' clock) and its heading, `[x, y, theta]` (m, m, rad):
+ * `poses` `[[t, x, y, theta], ...]`, oldest first (a field run's stored obstacle tracks, GET
+ * /api/v1/runs/{id}/obstacles), interpolated (the heading of the pose before); held before the first and after
+ * the last. */
+export function trackedAt(poses, t) {
+  const n = poses.length;
+  if (t <= poses[0][0]) return [poses[0][1], poses[0][2], poses[0][3]];
+  if (t >= poses[n - 1][0]) return [poses[n - 1][1], poses[n - 1][2], poses[n - 1][3]];
+  let lo = 0;
+  let hi = n - 1;
+  while (hi - lo > 1) {
+    const mid = (lo + hi) >> 1;
+    if (poses[mid][0] <= t) lo = mid;
+    else hi = mid;
+  }
+  const [a, b] = [poses[lo], poses[hi]];
+  const u = b[0] > a[0] ? (t - a[0]) / (b[0] - a[0]) : 0;
+  return [a[1] + u * (b[1] - a[1]), a[2] + u * (b[2] - a[2]), a[3]];
+}
+
+/** The map layers of a run's stored obstacle robots (`obstacles`: `[{radius, poses}]`) at time `t` (s, the run's
+ * clock): each one's track solid up to `t`, and the robot where it was then, with its heading. */
+export function trackedLayers(obstacles, t) {
+  const shown = (obstacles || []).filter((o) => o.poses.length);
+  return {
+    obstacleTracks: shown.map((o) => ({ points: o.poses.filter((p) => p[0] <= t).map((p) => [p[1], p[2]]), solid: true })),
+    obstacles: shown.map((o) => {
+      const [x, y, theta] = trackedAt(o.poses, t);
+      return { x, y, theta, radius: o.radius };
+    }),
+  };
+}

@@ -35,7 +35,8 @@ export class Store extends EventTarget {
     this.programs = new Map(); // program id -> ProgramPublic (names for the lists)
     this.poses = new Map(); // robot id -> {x, y, theta, t, run_id, source: live|log|home}
     // run id -> {robot_id, points: [[x, y]] field frame, exact, t0, t1 (s, first and last pose time seen);
-    // a multi-robot run's: robots, one {points, last: {x, y, theta}} per robot}
+    // a multi-robot run's: robots, one {points, last: {x, y, theta}} per robot; a stored field run's: obstacles,
+    // its obstacle robots' tracks [{radius, poses}] field frame, or null}
     this.traces = new Map();
     this.subfieldRun = new Map(); // sub-field id -> latest run id seen on it
     // when an event last told a run's or a sub-field's state (performance.now()): an API answer asked for
@@ -240,12 +241,16 @@ export class Store extends EventTarget {
     }
   }
 
-  /** Logged poses of a run as its trace (field frame); the robot's last pose from them. */
+  /** Logged poses of a run as its trace (field frame); the robot's last pose from them; a field run's stored
+   * obstacle robots as `obstacles` (`[{radius, poses}]`, field frame; null: none stored, the exact tracks hold). */
   async loadTrace(runId) {
     const run = await this.run(runId);
     if (!run.robot_id) return;
-    const res = await this.api.get(`/api/v1/runs/${runId}/poses`);
+    const [res, obs] = await Promise.all([this.api.get(`/api/v1/runs/${runId}/poses`),
+      run.mode === "twb" ? this.api.get(`/api/v1/runs/${runId}/obstacles`) : null]);
     const [ox, oy] = this.originOf(run.robot_id);
+    const obstacles = obs && !obs.exact
+      ? obs.obstacles.map((o) => ({ radius: o.radius, poses: o.poses.map(([t, x, y, a]) => [t, x + ox, y + oy, a]) })) : null;
     if (run.mode === "twb" && run.subfield != null && (this.subfieldRun.get(run.subfield) ?? -1) < runId) {
       this.subfieldRun.set(run.subfield, runId);
     }
@@ -256,14 +261,14 @@ export class Store extends EventTarget {
         points: (track || []).map(([, x, y]) => [x + ox, y + oy]),
         last: track?.length ? { x: track[track.length - 1][1] + ox, y: track[track.length - 1][2] + oy, theta: track[track.length - 1][3] } : null,
       }));
-      this.traces.set(runId, { robot_id: run.robot_id, points: [], robots, exact: true, ...times });
+      this.traces.set(runId, { robot_id: run.robot_id, points: [], robots, exact: true, obstacles, ...times });
       this.prune();
       this.emit("field");
       return;
     }
     const points = res.poses.map(([, x, y]) => [x + ox, y + oy]);
     const old = this.traces.get(runId);
-    if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true, ...times });
+    if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true, obstacles, ...times });
     this.prune();
     const last = res.poses[res.poses.length - 1];
     if (last && this.isFieldRobot(run.robot_id)) {
