@@ -45,8 +45,7 @@ class RunRecorder:
 
         def write() -> tuple[RunJob, list[dict[str, Any]]]:
             with self._sessions.begin() as s:
-                run_store.clear_try(s, run_id)
-                job = run_store.job_of(s.get(Run, run_id))
+                job = run_store.job_of(run_store.clear_try(s, run_id))
                 fields["status"] = status(job) if callable(status) else status
                 run, exp, changed = run_store.update_run(s, run_id, fields)
                 return job, self._events([run], {exp.id: changed})

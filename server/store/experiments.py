@@ -76,13 +76,20 @@ def lock_experiments(session: Session, *, experiment_ids: Sequence[int] = (),
                      run_ids: Sequence[int] = ()) -> None:
     """Lock the experiments (given, or of the given runs) until the transaction ends, before reading their
     runs: two runs of one experiment ending at once then roll it up one after the other, each seeing the
-    other's end (PostgreSQL's ``FOR UPDATE``; SQLite serialises writers anyway)."""
-    ids = set(experiment_ids)
-    if run_ids:
-        ids |= set(session.scalars(select(Run.experiment_id).where(Run.id.in_(list(run_ids)))))
-    if ids:
-        session.execute(select(Experiment.id).where(Experiment.id.in_(sorted(ids))).order_by(Experiment.id)
-                        .with_for_update())
+    other's end (PostgreSQL's ``FOR UPDATE``; SQLite serialises writers anyway).  One statement; nothing
+    when this transaction locked them already (a run's start locks its experiment once, not per step)."""
+    tx = session.get_transaction()
+    held = session.info.get("twb_locked")
+    if held is None or held[0] is not tx:
+        held = session.info["twb_locked"] = (tx, set(), set())
+    exps, runs = set(experiment_ids) - held[1], set(run_ids) - held[2]
+    if not exps and not runs:
+        return
+    which = Experiment.id.in_(sorted(exps))
+    if runs:
+        which = which | Experiment.id.in_(select(Run.experiment_id).where(Run.id.in_(sorted(runs))))
+    held[1].update(session.scalars(select(Experiment.id).where(which).order_by(Experiment.id).with_for_update()))
+    held[2].update(runs)
 
 
 def finish_if_done(exp: Experiment) -> bool:

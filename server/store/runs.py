@@ -68,13 +68,16 @@ def resume_run(session: Session, run_id: int, why: str) -> Run:
     return run
 
 
-def clear_try(session: Session, run_id: int) -> None:
-    """Forget what an earlier, interrupted try of a run left: its poses, metrics and end."""
+def clear_try(session: Session, run_id: int) -> Run:
+    """Forget what an earlier, interrupted try of a run left: its poses, metrics and end; returns the run, its
+    experiment loaded with it."""
     lock_experiments(session, run_ids=[run_id])
-    run = session.get(Run, run_id)
+    run = session.get(Run, run_id, options=[joinedload(Run.experiment)])
     run.t_start = run.t_end = None
     run.metrics, run.failure, run.stopped_at = {}, None, None
-    session.execute(delete(Pose).where(Pose.run_id == run_id))
+    if run.started_at is not None:  # a run that never started has no poses
+        session.execute(delete(Pose).where(Pose.run_id == run_id))
+    return run
 
 
 def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
