@@ -6,7 +6,7 @@ import hashlib
 from typing import Any, Optional, Sequence
 
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session, object_session
+from sqlalchemy.orm import Session, contains_eager, joinedload, object_session
 
 from ..core.security import Principal
 from ..models import Experiment, Run, utcnow
@@ -78,10 +78,7 @@ def lock_experiments(session: Session, *, experiment_ids: Sequence[int] = (),
     runs: two runs of one experiment ending at once then roll it up one after the other, each seeing the
     other's end (PostgreSQL's ``FOR UPDATE``; SQLite serialises writers anyway).  One statement; nothing
     when this transaction locked them already (a run's start locks its experiment once, not per step)."""
-    tx = session.get_transaction()
-    held = session.info.get("twb_locked")
-    if held is None or held[0] is not tx:
-        held = session.info["twb_locked"] = (tx, set(), set())
+    held = _held(session)
     exps, runs = set(experiment_ids) - held[1], set(run_ids) - held[2]
     if not exps and not runs:
         return
@@ -90,6 +87,31 @@ def lock_experiments(session: Session, *, experiment_ids: Sequence[int] = (),
         which = which | Experiment.id.in_(select(Run.experiment_id).where(Run.id.in_(sorted(runs))))
     held[1].update(session.scalars(select(Experiment.id).where(which).order_by(Experiment.id).with_for_update()))
     held[2].update(runs)
+
+
+def _held(session: Session) -> tuple[Any, set[int], set[int]]:
+    """What this transaction of ``session`` has locked: (the transaction, experiment ids, run ids)."""
+    tx = session.get_transaction()
+    held = session.info.get("twb_locked")
+    if held is None or held[0] is not tx:
+        held = session.info["twb_locked"] = (tx, set(), set())
+    return held
+
+
+def lock_run(session: Session, run_id: int) -> Run:
+    """The run with its experiment, in one statement that also locks the experiment as
+    :func:`lock_experiments` does (``FOR UPDATE OF experiments``); later locks of it in the transaction
+    are no-ops."""
+    held = _held(session)
+    if run_id in held[2]:
+        run = session.get(Run, run_id, options=[joinedload(Run.experiment, innerjoin=True)])
+        assert run is not None
+        return run
+    run = session.scalars(select(Run).join(Run.experiment).options(contains_eager(Run.experiment))
+                          .where(Run.id == run_id).with_for_update(of=Experiment)).one()
+    held[1].add(run.experiment_id)
+    held[2].add(run_id)
+    return run
 
 
 def finish_if_done(exp: Experiment) -> bool:
