@@ -163,7 +163,8 @@ class RayPool:
             self.stop()
             raise EngineUnavailable(f"cannot connect to the Ray cluster at {address}: {why}")
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        self.slots = self.slots or max(1, cpus)
+        # two runs per CPU: a worker's next run waits in Ray's queue while the server stores the one before
+        self.slots = self.slots or 2 * max(1, cpus)
         where = "a local Ray cluster" if self._head is not None else f"the Ray cluster at {address}"
         self.description = f"{where}, {cpus} CPUs, {self.slots} runs at once"
         self._warm_up(cpus, connect_timeout_s)
