@@ -4,7 +4,10 @@
    posted by 4 concurrent clients into a run in progress, against a same-run
    baseline: raw ``sqlite3`` ``executemany`` of the same rows into a table of
    the same schema (WAL, one transaction per batch, as the server does).
-   Targets: >= 50,000 poses/s and >= 0.3x the baseline.
+   Targets: >= 50,000 poses/s and >= 0.3x the baseline.  The same into
+   PostgreSQL (``twb up --database-url``, a server started from the machine's
+   binaries as the tests do) against psycopg's own ``COPY`` of the same rows
+   (target >= 0.3x).
 2. REST ``GET /api/v1/experiments/{id}`` latency with 32 concurrent clients while one
    experiment is submitted per second: p50 / p99 (target p99 <= 50 ms).
 3. Experiments per minute end to end (sim + twb run each) at maximum time scale.
@@ -92,6 +95,34 @@ class RawSqlite:
         return time.perf_counter() - t0
 
 
+class RawCopy:
+    """The PostgreSQL baseline: psycopg's own ``COPY ... FROM STDIN`` (``write_row`` per row, as its docs show)
+    of the same rows into a table of the poses schema, a transaction per batch."""
+
+    def __init__(self, url: str) -> None:
+        import psycopg
+
+        self.con = psycopg.connect(url.replace("postgresql+psycopg://", "postgresql://"))
+        with self.con.transaction():
+            self.con.execute("DROP TABLE IF EXISTS baseline_poses")
+            self.con.execute("CREATE TABLE baseline_poses (id BIGSERIAL PRIMARY KEY, run_id INTEGER, t DOUBLE "
+                             "PRECISION, x DOUBLE PRECISION, y DOUBLE PRECISION, theta DOUBLE PRECISION)")
+            self.con.execute("CREATE INDEX ix_baseline_poses_run_t ON baseline_poses (run_id, t)")
+
+    def insert(self, batches: list[list[list[float]]]) -> float:
+        """Seconds to store ``batches``."""
+        t0 = time.perf_counter()
+        for b in batches:
+            with self.con.transaction(), self.con.cursor() as cur:
+                with cur.copy("COPY baseline_poses (run_id, t, x, y, theta) FROM STDIN") as copy:
+                    for t, x, y, a in b:
+                        copy.write_row((1, t, x, y, a))
+        return time.perf_counter() - t0
+
+    def close(self) -> None:
+        self.con.close()
+
+
 async def post_batches(client: httpx.AsyncClient, robot: str, batches: list[list[list[float]]],
                        workers: int) -> float:
     """Seconds to post ``batches`` with ``workers`` concurrent requests; checks they were stored."""
@@ -117,10 +148,13 @@ async def post_batches(client: httpx.AsyncClient, robot: str, batches: list[list
     return dt
 
 
-def ingestion(tmp: Path, n_batches: int, rounds: int = 10) -> dict:
-    """Server and baseline timed in alternating rounds, so both see the same machine load."""
-    tb = Testbed(tmp / "ingest", "--time-scale", "0.2", "--sim-robots", "1")
-    base = RawSqlite(tmp / "baseline.db")
+def ingestion(tmp: Path, n_batches: int, rounds: int = 10, database_url: str = "") -> dict:
+    """Server and baseline timed in alternating rounds, so both see the same machine load; on
+    ``database_url`` (PostgreSQL, against a raw psycopg COPY), else on SQLite (against raw executemany)."""
+    extra = ["--database-url", database_url] if database_url else []
+    tb = Testbed(tmp / ("ingest-pg" if database_url else "ingest"), "--time-scale", "0.2", "--sim-robots", "1",
+                 *extra)
+    base: RawSqlite | RawCopy = RawCopy(database_url) if database_url else RawSqlite(tmp / "baseline.db")
     per_round = max(n_batches // rounds, 1)
     t_server = t_base = 0.0
     try:
@@ -146,9 +180,12 @@ def ingestion(tmp: Path, n_batches: int, rounds: int = 10) -> dict:
             c.post(f"/api/v1/experiments/{e['id']}/cancel")
     finally:
         tb.stop()
+        if isinstance(base, RawCopy):
+            base.close()
     n = rounds * per_round * 1000
+    baseline = "baseline_psycopg_copy_poses_per_s" if database_url else "baseline_sqlite_poses_per_s"
     return {"poses": n, "batch": 1000, "clients": 4, "server_poses_per_s": n / t_server,
-            "baseline_sqlite_poses_per_s": n / t_base, "ratio": t_base / t_server}
+            baseline: n / t_base, "ratio": t_base / t_server}
 
 
 async def latency(url: str, path: str, clients: int, per_client: int) -> list[float]:
@@ -273,13 +310,25 @@ def big_queue(tmp: Path, queued_runs: int, probes: int = 60) -> dict:
             "cancel_one_request": {"experiments": len(cancelled), "seconds": cancel_s}}
 
 
+def _postgres(tmp: Path):  # type: ignore[no-untyped-def]
+    """A PostgreSQL server of the machine's binaries, as the tests start one (tests/pg_support.py), or None."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from pg_support import PostgresServer, postgres_bin
+
+    if postgres_bin() is None:
+        return None
+    tmp.chmod(0o755)  # PostgreSQL runs as its own user when this runs as root
+    return PostgresServer(tmp / "pg")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--batches", type=int, default=200, help="tracker batches of 1000 poses")
     ap.add_argument("--requests", type=int, default=50, help="GET requests per client (32 clients)")
     ap.add_argument("--experiments", type=int, default=20)
     ap.add_argument("--queued-runs", type=int, default=5000)
-    ap.add_argument("--only", choices=["ingestion", "rest", "queue"], help="run one part only")
+    ap.add_argument("--only", choices=["ingestion", "ingestion-postgresql", "rest", "queue"],
+                    help="run one part only")
     args = ap.parse_args()
     parts: list[dict] = []
     targets: dict[str, bool] = {}
@@ -290,6 +339,17 @@ def main() -> None:
             parts.append({"tracker_ingestion": ing})
             targets["ingestion >= 50000 poses/s"] = ing["server_poses_per_s"] >= 50_000
             targets["ingestion >= 0.3x raw sqlite executemany"] = ing["ratio"] >= 0.3
+        if args.only in (None, "ingestion-postgresql"):
+            pg = _postgres(tmp)
+            if pg is None:
+                parts.append({"tracker_ingestion_postgresql": {"skipped": "PostgreSQL's binaries are not installed"}})
+            else:
+                try:
+                    ing = ingestion(tmp, args.batches, database_url=pg.database())
+                finally:
+                    pg.stop()
+                parts.append({"tracker_ingestion_postgresql": ing})
+                targets["PostgreSQL ingestion >= 0.3x a raw psycopg COPY"] = ing["ratio"] >= 0.3
         if args.only in (None, "rest"):
             rest, thr = rest_and_throughput(tmp, args.requests, args.experiments)
             parts += [{"rest_latency": rest}, {"throughput": thr}]
