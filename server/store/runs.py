@@ -133,7 +133,15 @@ def queued_runs(session: Session, *, experiment_ids: Optional[Iterable[int]] = N
 
 def add_messages(session: Session, batch: list[dict[str, Any]]) -> None:
     """Insert protocol-log rows ``{run_id, t, t_estimated, direction, line}``."""
-    if batch:  # Core's executemany: the ORM's bulk insert costs a third more CPU for nothing here
+    if not batch:
+        return
+    conn = session.connection()
+    if conn.dialect.name == "postgresql":  # COPY: half the CPU of an executemany for a run's few dozen lines
+        with conn.connection.driver_connection.cursor() as cur:
+            with cur.copy("COPY messages (run_id, t, t_estimated, direction, line) FROM STDIN") as copy:
+                for m in batch:
+                    copy.write_row((m["run_id"], m["t"], m.get("t_estimated", False), m["direction"], m["line"]))
+    else:  # Core's executemany: the ORM's bulk insert costs a third more CPU for nothing here
         session.execute(insert(Message.__table__), batch)
 
 
