@@ -66,3 +66,22 @@ def database_url(request, tmp_path):
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'store.db'}"
     return request.getfixturevalue("postgres").database()
+
+
+@pytest.fixture
+def run_store(database_url):
+    """A migrated store of each kind (:func:`database_url`) holding user 1, experiment 1 and its runs 1 and 2:
+    its session factory (the engine disposed after the test)."""
+    from server.core.db import make_engine, make_session_factory, migrate
+    from server.models import Experiment, Run, User
+
+    engine = make_engine(database_url)
+    migrate(engine)
+    sessions = make_session_factory(engine)
+    with sessions.begin() as s:
+        s.add(User(id=1, name="u"))
+        s.add(Experiment(id=1, owner_id=1, environment="e", environment_data={}, start=[0, 0], goal=[1, 1],
+                         modes=["sim", "twb"], robot_radius=0.045))
+        s.add_all([Run(id=k, experiment_id=1, mode="sim", repetition=k) for k in (1, 2)])
+    yield sessions
+    engine.dispose()

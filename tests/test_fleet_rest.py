@@ -287,21 +287,11 @@ def test_a_fleet_failure_names_each_robot_and_the_gravest_kind():
     assert fleet_failure(robots[:1], metrics, 100.0) is None
 
 
-def test_fleet_poses_go_in_by_each_databases_bulk_path(database_url):
+def test_fleet_poses_go_in_by_each_databases_bulk_path(run_store):
     """A run's end with the robot column: COPY on PostgreSQL, executemany on SQLite; read back robot by robot."""
-    from server.core.db import make_engine, make_session_factory, migrate
-    from server.models import Experiment, Run, User
     from server.store.poses import add_poses, run_poses
 
-    engine = make_engine(database_url)
-    migrate(engine)
-    sessions = make_session_factory(engine)
-    with sessions.begin() as s:
-        s.add(User(id=1, name="u"))
-        s.add(Experiment(id=1, owner_id=1, environment="swap", environment_data={}, start=[0, 0], goal=[1, 1],
-                         robots=TWO, modes=["sim"], robot_radius=0.045))
-        s.add_all([Run(id=1, experiment_id=1, mode="sim", repetition=1), Run(id=2, experiment_id=1, mode="sim",
-                                                                             repetition=2)])
+    sessions = run_store
     t = np.arange(5) * 0.02
     rows = np.concatenate([np.column_stack([t, t + k, t, t, np.full(5, k)]) for k in (1, 0)])  # robot 1 first
     with sessions.begin() as s:
@@ -312,7 +302,6 @@ def test_fleet_poses_go_in_by_each_databases_bulk_path(database_url):
         assert np.array_equal(got, np.concatenate([rows[5:], rows[:5]]))  # robot by robot, oldest first
         assert np.array_equal(np.array(run_poses(s, 1, robot=1)), rows[:5, :4])
         assert run_poses(s, 2, fleet=True) == [[*r, None] for r in rows[:5, :4].tolist()]
-    engine.dispose()
 
 
 def test_the_sdk_and_twb_submit_take_multi_robot_jobs(testbed, twb, tmp_path):

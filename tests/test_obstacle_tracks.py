@@ -132,22 +132,12 @@ async def test_a_field_run_stores_its_obstacle_robots_with_its_end_and_nothing_e
         assert n > 200 and np.allclose(a[:n], b[:n], rtol=0, atol=1e-9), k
 
 
-def test_obstacle_rows_go_in_by_each_databases_bulk_path_and_stay_apart(database_url):
+def test_obstacle_rows_go_in_by_each_databases_bulk_path_and_stay_apart(run_store):
     """A run's end with its obstacle robots: COPY on PostgreSQL, executemany on SQLite; read back per obstacle,
     never among the run's (or a fleet's robot's) poses."""
-    from server.core.db import make_engine, make_session_factory, migrate
-    from server.models import User
     from server.store.poses import add_obstacle_poses, add_poses
 
-    engine = make_engine(database_url)
-    migrate(engine)
-    sessions = make_session_factory(engine)
-    with sessions.begin() as s:
-        s.add(User(id=1, name="u"))
-        s.add(Experiment(id=1, owner_id=1, environment="e", environment_data={}, start=[0, 0], goal=[1, 1],
-                         modes=["twb"], robot_radius=0.045))
-        s.add_all([Run(id=1, experiment_id=1, mode="twb", repetition=1),
-                   Run(id=2, experiment_id=1, mode="twb", repetition=2)])
+    sessions = run_store
     t = np.arange(4) * 0.5
     own = np.column_stack([t, t, t, t])
     fleet = np.concatenate([np.column_stack([t, t + k, t, t, np.full(4, k)]) for k in (0, 1)])
@@ -165,7 +155,6 @@ def test_obstacle_rows_go_in_by_each_databases_bulk_path_and_stay_apart(database
         assert np.array_equal(run_poses(s, 1), own) and len(run_poses(s, 1, after_t=0.7)) == 2
         assert np.array_equal(run_poses(s, 2, fleet=True), fleet)
         assert np.array_equal(run_poses(s, 2, robot=1), fleet[4:, :4])
-    engine.dispose()
 
 
 def test_the_exact_tracks_are_the_formulas_with_the_heading_they_move_in():

@@ -146,23 +146,15 @@ def test_tracker_batches_from_many_clients_at_once(pg_server):
     assert codes == [200] * 16
 
 
-def test_a_runs_log_goes_in_by_each_databases_bulk_path_and_reads_back_as_written(database_url):
+def test_a_runs_log_goes_in_by_each_databases_bulk_path_and_reads_back_as_written(run_store):
     """COPY on PostgreSQL, executemany on SQLite: program output with tabs, newlines, backslashes, quotes and
     non-ASCII text, untimed lines and estimated times come back as they were, in order."""
     from sqlalchemy import select
 
-    from server.core.db import make_engine, make_session_factory, migrate
-    from server.models import Experiment, Message, Run, User
+    from server.models import Message
     from server.store.runs import add_messages
 
-    engine = make_engine(database_url)
-    migrate(engine)
-    sessions = make_session_factory(engine)
-    with sessions.begin() as s:
-        s.add(User(id=1, name="u"))
-        s.add(Experiment(id=1, owner_id=1, environment="room", environment_data={}, start=[0, 0], goal=[1, 1],
-                         modes=["sim"], robot_radius=0.045))
-        s.add(Run(id=1, experiment_id=1, mode="sim", repetition=1))
+    sessions = run_store
     lines = [(">", "T,T,P,0.3,0.3,0;1.5,1.5,0", 0.02, False), ("o", "a\ttab\\back\nnew 'q' \"dq\" \\N", None, False),
              ("e", "Fehler: Größe ≠ 0 — ✓", 1.5, True), ("<", "EV,DONE,12.34", 12.34, False)]
     with sessions.begin() as s:
@@ -171,4 +163,3 @@ def test_a_runs_log_goes_in_by_each_databases_bulk_path_and_reads_back_as_writte
     with sessions() as s:
         got = [(m.direction, m.line, m.t, m.t_estimated) for m in s.scalars(select(Message).order_by(Message.id))]
     assert got == lines
-    engine.dispose()

@@ -101,23 +101,19 @@ def _timed(lines: Sequence[Line]) -> tuple[list[Line], np.ndarray]:
 async def play(playback: Playback, time_scale: float, show: Callable[[int, np.ndarray, bool], None],
                log: Callable[[Line], None], flush: Optional[Callable[[], Awaitable[Any]]] = None) -> None:
     """Release ``playback`` as its experiment time passes at ``time_scale`` (experiment s per wall s; inf:
-    at once): new rows to ``show(k, rows, last)`` (``last``: they end track ``k``), due lines to ``log(line)``, then ``flush()`` (storing the log
-    so far) about once a second.  Cancelling it leaves ``playback`` at what was released."""
-    if math.isinf(time_scale):
-        rows, lines = playback.advance(math.inf)
-    else:
-        wall0, flushed = time.monotonic(), time.monotonic()
-        while True:
-            now = time.monotonic()
-            rows, lines = playback.advance(playback.t_first + (now - wall0) * time_scale)
-            _release(playback, rows, lines, show, log)
-            if playback.done:
-                return
-            if flush is not None and now - flushed >= 1.0:
-                await flush()
-                flushed = now
-            await asyncio.sleep(TICK_S)
-    _release(playback, rows, lines, show, log)
+    at once): new rows to ``show(k, rows, last)`` (``last``: they end track ``k``), due lines to
+    ``log(line)``, then ``flush()`` (storing the log so far) about once a second.  Cancelling it leaves ``playback`` at what was released."""
+    wall0 = flushed = time.monotonic()
+    while True:
+        now = time.monotonic()
+        t = math.inf if math.isinf(time_scale) else playback.t_first + (now - wall0) * time_scale
+        _release(playback, *playback.advance(t), show, log)
+        if playback.done:
+            return
+        if flush is not None and now - flushed >= 1.0:
+            await flush()
+            flushed = now
+        await asyncio.sleep(TICK_S)
 
 
 def _release(playback: Playback, rows: list[tuple[int, np.ndarray]], lines: list[Line],
