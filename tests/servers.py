@@ -48,6 +48,20 @@ def wait_for(client: httpx.Client, experiment_id: int, timeout: float = 60.0, te
     raise AssertionError(f"experiment {experiment_id} still {exp['status']} after {timeout} s: {exp}")
 
 
+def submit_watched(testbed, client: httpx.Client, job: dict, timeout: float = 120.0) -> tuple[dict, list[dict]]:  # type: ignore[no-untyped-def]
+    """Submit ``job`` with the event stream read from before it is queued, and wait for it to end: the
+    experiment and every event seen until its end (:class:`EventListener`)."""
+    submitted: dict = {}
+    listener = EventListener(testbed.url, testbed.token,
+                             until=lambda e: e["event"] == "experiment" and e["experiment"]["id"] == submitted.get("id")
+                             and e["experiment"]["status"] in ("completed", "failed", "error"))
+    submitted.update(client.post("/api/v1/experiments", json=job).json())
+    exp = wait_for(client, submitted["id"], timeout=timeout)
+    listener.join(10)
+    listener.stop()
+    return exp, listener.seen
+
+
 class EventListener:
     """``GET /api/v1/events`` read in a thread: every event in ``seen`` (``{"event": kind, **data}``) until
     ``until(event)`` says so or :meth:`stop` is called (it returns at the next event)."""

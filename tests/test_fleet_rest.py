@@ -19,7 +19,7 @@ from robot_agent.params import robot_params
 from server.core.settings import Settings
 from server.pipeline import compute
 from server.pipeline.fleet import fleet_failure, fleet_timeout_s
-from servers import EventListener, serve, wait_for
+from servers import serve, submit_watched, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 RADIUS = robot_params().collision_radius_m
@@ -192,14 +192,7 @@ def test_a_field_fleet_on_a_sub_field_is_the_emulated_field_robots_shown_live(te
     """`twb` mode: the field robots of the run's sub-field, computed as one task; every robot's last pose is
     published live as robot "<field robot>/<k>" in field coordinates."""
     job = {**JOBS["prioritized"], "modes": ["twb"], "field": "sub"}
-    submitted: dict = {}
-    listener = EventListener(testbed.url, testbed.token,
-                             until=lambda e: e["event"] == "experiment" and e["experiment"]["id"] == submitted.get("id")
-                             and e["experiment"]["status"] in ("completed", "failed", "error"))
-    submitted.update(client.post("/api/v1/experiments", json=job).json())
-    exp = wait_for(client, submitted["id"], timeout=120)
-    listener.join(10)
-    listener.stop()
+    exp, seen = submit_watched(testbed, client, job)
     run = exp["runs"][0]
     assert exp["status"] == "completed", exp
     assert run["robot_id"].startswith("field-") and run["subfield"] in (1, 2, 3, 4)
@@ -207,8 +200,8 @@ def test_a_field_fleet_on_a_sub_field_is_the_emulated_field_robots_shown_live(te
     log = lines(client, run["id"])
     assert log[0].startswith("a multi-robot run of 4 emulated field robots (BeBot) on the field of field-")
     origin = next(r["origin"] for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])
-    live = {e["robot_id"]: e for e in listener.seen if e["event"] == "pose" and e["run_id"] == run["id"]}
-    assert set(live) == {f"{run['robot_id']}/{k}" for k in range(4)}, listener.seen
+    live = {e["robot_id"]: e for e in seen if e["event"] == "pose" and e["run_id"] == run["id"]}
+    assert set(live) == {f"{run['robot_id']}/{k}" for k in range(4)}, seen
     for k in range(4):
         mine, e = poses(client, run["id"], robot=k), live[f"{run['robot_id']}/{k}"]
         assert e["robot"] == k and e["t"] == mine[-1, 0]

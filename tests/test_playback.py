@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from server.pipeline.playback import Playback, play
-from servers import EventListener, serve, wait_for
+from servers import EventListener, serve, submit_watched, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -105,17 +105,10 @@ def stored(client, run_id: int, robot: int) -> np.ndarray:
 
 
 def test_a_field_fleet_is_shown_live_as_it_drives(testbed, client):
-    submitted: dict = {}
-    listener = EventListener(testbed.url, testbed.token,
-                             until=lambda e: e["event"] == "experiment" and e["experiment"]["id"] == submitted.get("id")
-                             and e["experiment"]["status"] in ("completed", "failed", "error"))
-    submitted.update(client.post("/api/v1/experiments", json=TWO).json())
-    exp = wait_for(client, submitted["id"], timeout=120)
-    listener.join(10)
-    listener.stop()
+    exp, seen = submit_watched(testbed, client, TWO)
     run = exp["runs"][0]
     assert exp["status"] == "completed", exp
-    live = [e for e in listener.seen if e["event"] == "pose" and e["run_id"] == run["id"]]
+    live = [e for e in seen if e["event"] == "pose" and e["run_id"] == run["id"]]
     span = run["t_end"] - run["t_start"]
     assert span > 2.0, run  # several seconds of experiment time: at time scale 4, many ticks
     for k in range(2):
