@@ -163,3 +163,22 @@ def test_a_runs_log_goes_in_by_each_databases_bulk_path_and_reads_back_as_writte
     with sessions() as s:
         got = [(m.direction, m.line, m.t, m.t_estimated) for m in s.scalars(select(Message).order_by(Message.id))]
     assert got == lines
+
+
+def test_a_failed_bulk_write_is_sqlalchemys_error_on_each_database(run_store):
+    """The COPY paths use the driver directly; what the database refuses there (or a connection lost mid-COPY)
+    comes out as SQLAlchemy's DBAPIError, as from every other statement: the callers that make an unreachable
+    database a 503, a waiting run end or a queued-again run catch that, not psycopg's own errors."""
+    from sqlalchemy.exc import DBAPIError
+
+    from server.store.poses import add_obstacle_poses, add_poses
+    from server.store.runs import add_messages
+
+    writes = [lambda s: add_poses(s, 999, np.zeros((3, 4))),
+              lambda s: add_obstacle_poses(s, 999, [np.zeros((2, 4))]),
+              lambda s: add_messages(s, [{"run_id": 999, "t": 0.0, "t_estimated": False, "direction": ">",
+                                          "line": "T,T,Q"}])]
+    for write in writes:  # no run 999: the foreign key refuses the rows
+        with pytest.raises(DBAPIError):
+            with run_store.begin() as s:
+                write(s)

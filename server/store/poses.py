@@ -16,10 +16,10 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 from sqlalchemy import Engine, select
-from sqlalchemy.exc import DBAPIError
 from sqlalchemy.orm import Session
 
 from ..models import Pose
+from .driver import as_sqlalchemy_errors
 
 __all__ = ["add_obstacle_poses", "add_poses", "insert_poses", "obstacle_poses", "run_poses"]
 
@@ -69,8 +69,7 @@ def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threadi
     ``lock``: SQLite writes one at a time, queued on this mutex rather than on SQLite's sleeping busy
     handler; PostgreSQL takes concurrent writers.
     """
-    dbapi_error = engine.dialect.loaded_dbapi.Error
-    try:  # the driver's own errors, as SQLAlchemy's (callers handle those: an unreachable database is a 503)
+    with as_sqlalchemy_errors(engine.dialect, "INSERT INTO poses"):
         conn = engine.raw_connection()
         try:
             if engine.dialect.name == "postgresql":
@@ -84,8 +83,6 @@ def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threadi
             raise
         finally:
             conn.close()
-    except dbapi_error as exc:
-        raise DBAPIError.instance("INSERT INTO poses", None, exc, dbapi_error) from exc
 
 
 def add_poses(session: Session, run_id: int, rows: np.ndarray) -> None:
@@ -110,7 +107,8 @@ def _add(session: Session, run_id: int, rows: np.ndarray, index: Optional[str]) 
         return
     conn = session.connection()
     if conn.dialect.name == "postgresql":
-        _copy(conn.connection.driver_connection, run_id, rows, index)
+        with as_sqlalchemy_errors(conn.dialect, "COPY poses"):
+            _copy(conn.connection.driver_connection, run_id, rows, index)
     else:
         conn.exec_driver_sql(_insert_sql(conn.dialect.paramstyle, index), _tuples(run_id, rows))
 

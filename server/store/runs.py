@@ -11,6 +11,7 @@ from sqlalchemy.orm import Session
 
 from ..models import Experiment, Message, Pose, Run, utcnow
 from ..status import ACTIVE, RunStatus
+from .driver import as_sqlalchemy_errors
 from .experiments import finish_if_done, lock_experiments, lock_run
 
 __all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "resume_run", "interrupt_active", "job_of", "queued_runs", "requeue_interrupted",
@@ -137,7 +138,7 @@ def add_messages(session: Session, batch: list[dict[str, Any]]) -> None:
         return
     conn = session.connection()
     if conn.dialect.name == "postgresql":  # COPY: half the CPU of an executemany for a run's few dozen lines
-        with conn.connection.driver_connection.cursor() as cur:
+        with as_sqlalchemy_errors(conn.dialect, "COPY messages"), conn.connection.driver_connection.cursor() as cur:
             with cur.copy("COPY messages (run_id, t, t_estimated, direction, line) FROM STDIN") as copy:
                 for m in batch:
                     copy.write_row((m["run_id"], m["t"], m.get("t_estimated", False), m["direction"], m["line"]))
