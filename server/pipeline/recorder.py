@@ -45,10 +45,8 @@ class RunRecorder:
 
         def write() -> tuple[RunJob, list[dict[str, Any]]]:
             with self._sessions.begin() as s:
-                job = run_store.job_of(run_store.clear_try(s, run_id))
-                fields["status"] = status(job) if callable(status) else status
-                run, exp, changed = run_store.update_run(s, run_id, fields)
-                return job, self._events([run], {exp.id: changed})
+                job, written = run_store.start_try(s, run_id, status, fields)
+                return job, self._written(written)
 
         job, events = await asyncio.to_thread(write)
         self._publish(events)
@@ -59,8 +57,7 @@ class RunRecorder:
 
         def write() -> list[dict[str, Any]]:
             with self._sessions.begin() as s:
-                run, exp, changed = run_store.update_run(s, run_id, fields)
-                return self._events([run], {exp.id: changed})
+                return self._written(run_store.update_run(s, run_id, fields))
 
         self._publish(await asyncio.to_thread(write))
 
@@ -111,8 +108,7 @@ class RunRecorder:
                     end["error"] = error
                 if failure is not None:
                     end["failure"] = failure
-                run, exp, changed = run_store.update_run(s, run_id, end)
-                return None, self._events([run], {exp.id: changed})
+                return None, self._written(run_store.update_run(s, run_id, end))
 
         rows, events = await asyncio.to_thread(write)
         self._publish(events)
@@ -183,6 +179,18 @@ class RunRecorder:
 
     # ------------------------------------------------------------------ events
 
+    def _written(self, w: run_store.RunWrite) -> list[dict[str, Any]]:
+        """The live events of one run's write (built inside the transaction, published after it)."""
+        out = [{"type": "run", "owner_id": w.owner_id, "run": RunPublic.model_validate(w.run).model_dump(mode="json")}]
+        if w.experiment is not None:
+            out.append(self._experiment_event(w.experiment))
+        return out
+
+    @staticmethod
+    def _experiment_event(exp: Experiment) -> dict[str, Any]:
+        view = ExperimentPublic.model_validate(exp).model_dump(mode="json", exclude={"planned_path", "runs"})
+        return {"type": "experiment", "owner_id": exp.owner_id, "experiment": view}
+
     def _events(self, runs: list[Run], exp_changed: dict[int, bool]) -> list[dict[str, Any]]:
         """The live events for changed runs (built inside the transaction, published after it)."""
         out: list[dict[str, Any]] = []
@@ -193,8 +201,7 @@ class RunRecorder:
             exps[run.experiment_id] = run.experiment
         for exp_id, exp in exps.items():
             if exp_changed.get(exp_id) or exp.status in TERMINAL:
-                view = ExperimentPublic.model_validate(exp).model_dump(mode="json", exclude={"planned_path", "runs"})
-                out.append({"type": "experiment", "owner_id": exp.owner_id, "experiment": view})
+                out.append(self._experiment_event(exp))
         return out
 
     def _publish(self, events: list[dict[str, Any]]) -> None:

@@ -4,18 +4,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from dataclasses import field as dc_field
-from typing import Any, Iterable, Optional
+from typing import Any, Callable, Iterable, Optional
 
-from sqlalchemy import delete, insert, select
+from sqlalchemy import delete, insert, select, update
 from sqlalchemy.orm import Session
 
 from ..models import Experiment, Message, Pose, Run, utcnow
-from ..status import ACTIVE, RunStatus
+from ..status import ACTIVE, TERMINAL, RunStatus, roll_up
 from .driver import as_sqlalchemy_errors
-from .experiments import finish_if_done, lock_experiments, lock_run
+from .experiments import finish_if_done, lock_experiments, lock_run, lock_run_row
 
-__all__ = ["RunJob", "add_messages", "clear_try", "end_runs", "resume_run", "interrupt_active", "job_of", "queued_runs", "requeue_interrupted",
-           "requeue_run", "update_run"]
+__all__ = ["RunJob", "RunWrite", "add_messages", "end_runs", "interrupt_active", "queued_runs", "requeue_interrupted",
+           "requeue_run", "resume_run", "start_try", "update_run"]
 
 
 @dataclass(frozen=True)
@@ -51,13 +51,64 @@ class RunJob:
     program: Optional[int] = None
 
 
-def job_of(run: Run) -> RunJob:
-    """The :class:`RunJob` of a run row (its experiment loaded with it)."""
-    e = run.experiment
-    return RunJob(run.id, run.seed, run.mode, e.id, e.owner_id, e.environment, e.environment_data, list(e.start),
-                  list(e.goal), e.field, e.robot_radius, e.jitter, e.profile_overrides, e.controller or "schema",
-                  dict(e.controller_params or {}), e.controller_program_id, e.robots, e.planner,
-                  dict(e.planner_params or {}), e.seed, e.planning_margin or 0.0, e.program_id)
+def _job(run: dict[str, Any], e: dict[str, Any]) -> RunJob:
+    """The :class:`RunJob` of a run and its experiment (their columns by name)."""
+    return RunJob(run["id"], run["seed"], run["mode"], e["id"], e["owner_id"], e["environment"], e["environment_data"],
+                  list(e["start"]), list(e["goal"]), e["field"], e["robot_radius"], e["jitter"], e["profile_overrides"],
+                  e["controller"] or "schema", dict(e["controller_params"] or {}), e["controller_program_id"],
+                  e["robots"], e["planner"], dict(e["planner_params"] or {}), e["seed"], e["planning_margin"] or 0.0,
+                  e["program_id"])
+
+
+@dataclass(frozen=True)
+class RunWrite:
+    """A run as a write left it: its columns by name (what :class:`~server.schemas.RunPublic` reads), its
+    experiment's owner, and the experiment (an ORM row, for its live event) when the write changed the
+    experiment's status or the experiment has ended, else None."""
+
+    run: dict[str, Any]
+    owner_id: int
+    experiment: Optional[Experiment] = None
+    experiment_changed: bool = False
+
+
+#: what a run's write reads of its experiment: the owner, and what the roll-up compares and stamps
+_ROLL_UP = ("id", "owner_id", "status", "started_at", "finished_at")
+_RUNS = Run.__table__
+
+
+def start_try(session: Session, run_id: int, status: RunStatus | Callable[[RunJob], RunStatus],
+              fields: dict[str, Any]) -> tuple[RunJob, RunWrite]:
+    """A try of the run starts: what an interrupted earlier try left goes (poses, metrics, end), ``status`` (or
+    ``status(job)``, decided on the run's job) and ``fields`` are written and the experiment rolled up."""
+    run, exp = lock_run_row(session, run_id, [c.name for c in Experiment.__table__.c])
+    job = _job(run, exp)
+    if run["started_at"] is not None:  # a run that never started has no poses
+        session.execute(delete(Pose.__table__).where(Pose.__table__.c.run_id == run_id))
+    cleared = dict(t_start=None, t_end=None, metrics={}, failure=None, stopped_at=None)
+    values = {k: v for k, v in cleared.items() if run[k] != v}  # a first try has nothing to clear: a narrower update
+    values.update(fields, status=status(job) if callable(status) else status)
+    return job, _write(session, run, exp, values)
+
+
+def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> RunWrite:
+    """Write ``fields`` on the run and roll the experiment's status up."""
+    run, exp = lock_run_row(session, run_id, _ROLL_UP)
+    return _write(session, run, exp, fields)
+
+
+def _write(session: Session, run: dict[str, Any], exp: dict[str, Any], values: dict[str, Any]) -> RunWrite:
+    """Core statements, not the ORM's unit of work: the run's update, its siblings' statuses for the roll-up;
+    the experiment is loaded (and stamped, and given its error text) only when its status changes."""
+    session.execute(update(_RUNS).where(_RUNS.c.id == run["id"]).values(values))
+    run.update(values)
+    new = roll_up(session.scalars(select(_RUNS.c.status).where(_RUNS.c.experiment_id == exp["id"])).all())
+    if new == exp["status"] and new not in TERMINAL and (new not in ACTIVE or exp["started_at"] is not None):
+        return RunWrite(run, exp["owner_id"])
+    orm = session.get(Experiment, exp["id"])
+    assert orm is not None
+    changed = finish_if_done(orm)
+    return RunWrite(run, orm.owner_id, orm, changed)
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:
@@ -66,26 +117,6 @@ def resume_run(session: Session, run_id: int, why: str) -> Run:
     run.status, run.error, run.finished_at = RunStatus.QUEUED, f"resumed: {why}", None
     finish_if_done(run.experiment)
     return run
-
-
-def clear_try(session: Session, run_id: int) -> Run:
-    """Forget what an earlier, interrupted try of a run left: its poses, metrics and end; returns the run, its
-    experiment loaded with it."""
-    run = lock_run(session, run_id)
-    run.t_start = run.t_end = None
-    run.metrics, run.failure, run.stopped_at = {}, None, None
-    if run.started_at is not None:  # a run that never started has no poses
-        session.execute(delete(Pose).where(Pose.run_id == run_id))
-    return run
-
-
-def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> tuple[Run, Experiment, bool]:
-    """Write ``fields`` on the run and roll the experiment's status up; (run, experiment, status changed)."""
-    run = lock_run(session, run_id)  # one query, the experiment locked and loaded with it
-    for k, v in fields.items():
-        setattr(run, k, v)
-    exp = run.experiment
-    return run, exp, finish_if_done(exp)
 
 
 def requeue_run(session: Session, run_id: int, error: str) -> Optional[Run]:
