@@ -41,7 +41,7 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0011",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0012",)]
 
 
 def _old_run(c, mode: str) -> None:  # type: ignore[no-untyped-def]
@@ -115,5 +115,41 @@ def test_obstacle_poses_migration_up_and_down(database_url):
     assert "obstacle" not in {c["name"] for c in inspect(engine).get_columns("poses")}
     with engine.begin() as c:
         assert c.execute(text("select t, x from poses")).all() == [(0.5, 0.3)]
+    engine.dispose()
+    command.upgrade(cfg, "head")
+
+
+def test_poses_lose_their_row_check_and_keep_their_cascade(database_url):
+    """0012 on both databases: the poses' foreign key goes (its per-row check was most of what storing poses
+    cost PostgreSQL), a trigger still deletes a run's poses with it, directly or through its experiment; the
+    downgrade drops orphan poses and brings the key back, which refuses a pose of no run."""
+    import pytest
+    from sqlalchemy import inspect, text
+    from sqlalchemy.exc import IntegrityError
+
+    cfg = config(database_url)
+    command.upgrade(cfg, "0011")
+    engine = make_engine(database_url)
+    with engine.begin() as c:
+        _old_run(c, "sim")
+    command.upgrade(cfg, "0012")
+    assert inspect(engine).get_foreign_keys("poses") == []
+    with engine.begin() as c:
+        c.execute(text("insert into runs (id, experiment_id, mode, repetition, status, seed, attempt, metrics, error,"
+                       " created_at) values (8, 1, 'sim', 2, 'completed', 0, 1, '{}', '', '2026-01-01')"))
+        c.execute(text("insert into poses (run_id, t, x, y, theta) values (8, 0.5, 1.0, 1.0, 0.0), "
+                       "(8, 0.6, 1.1, 1.0, 0.0), (99, 0.5, 2.0, 2.0, 0.0)"))  # 99: a run that is not there
+        c.execute(text("delete from runs where id = 8"))
+        assert c.execute(text("select run_id, x from poses order by run_id")).all() == [(7, 0.3), (99, 2.0)]
+        c.execute(text("delete from experiments where id = 1"))  # cascades to run 7, and the trigger to its pose
+        assert c.execute(text("select run_id from poses")).all() == [(99,)]
+    engine.dispose()
+    command.downgrade(cfg, "0011")
+    engine = make_engine(database_url)
+    assert [fk["referred_table"] for fk in inspect(engine).get_foreign_keys("poses")] == ["runs"]
+    with engine.begin() as c:
+        assert c.execute(text("select count(*) from poses")).scalar() == 0
+    with pytest.raises(IntegrityError), engine.begin() as c:
+        c.execute(text("insert into poses (run_id, t, x, y, theta) values (99, 0.5, 2.0, 2.0, 0.0)"))
     engine.dispose()
     command.upgrade(cfg, "head")

@@ -169,6 +169,7 @@ def test_a_failed_bulk_write_is_sqlalchemys_error_on_each_database(run_store):
     """The COPY paths use the driver directly; what the database refuses there (or a connection lost mid-COPY)
     comes out as SQLAlchemy's DBAPIError, as from every other statement: the callers that make an unreachable
     database a 503, a waiting run end or a queued-again run catch that, not psycopg's own errors."""
+    from sqlalchemy import text
     from sqlalchemy.exc import DBAPIError
 
     from server.store.poses import add_obstacle_poses, add_poses
@@ -178,7 +179,13 @@ def test_a_failed_bulk_write_is_sqlalchemys_error_on_each_database(run_store):
               lambda s: add_obstacle_poses(s, 999, [np.zeros((2, 4))]),
               lambda s: add_messages(s, [{"run_id": 999, "t": 0.0, "t_estimated": False, "direction": ">",
                                           "line": "T,T,Q"}])]
-    for write in writes:  # no run 999: the foreign key refuses the rows
-        with pytest.raises(DBAPIError):
+    for write in writes:  # a read-only transaction: the database refuses the rows
+        with pytest.raises(DBAPIError, match="read-only|readonly"):
             with run_store.begin() as s:
-                write(s)
+                sqlite = s.connection().dialect.name == "sqlite"
+                s.execute(text("PRAGMA query_only = 1" if sqlite else "SET TRANSACTION READ ONLY"))
+                try:
+                    write(s)
+                finally:
+                    if sqlite:
+                        s.execute(text("PRAGMA query_only = 0"))
