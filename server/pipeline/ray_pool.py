@@ -111,6 +111,12 @@ class _LocalHead:
         self.proc = None
 
 
+#: every task of the pool: one CPU; no retry by Ray (the dispatcher retries a run once); no task events (their
+#: state transitions for Ray's dashboard and state API, which the testbed does not use: CPU in the server and
+#: the workers at every task)
+_TASK = {"num_cpus": 1, "max_retries": 0, "enable_task_events": False}
+
+
 class RayPool:
     """Ray tasks for the pipeline: a local cluster of ``cpus`` CPUs, or the cluster at ``address``."""
 
@@ -174,7 +180,7 @@ class RayPool:
         each worker pays its imports and the compiled core's loading (about 1.4 s of CPU) before the first
         run rather than during it.  Workers not ready in time warm up with their first run; nothing fails."""
         ray = self._ray
-        warm = ray.remote(num_cpus=1, max_retries=0)(compute.warm_up)
+        warm = ray.remote(**_TASK)(compute.warm_up)
         refs = [warm.remote() for _ in range(workers)]
         ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout_s)
         if len(ready) < len(refs):
@@ -188,7 +194,7 @@ class RayPool:
             raise RuntimeError("the Ray pool is not started")
         remote = self._remote.get(fn)
         if remote is None:
-            remote = self._remote[fn] = ray.remote(num_cpus=1, max_retries=0)(fn)
+            remote = self._remote[fn] = ray.remote(**_TASK)(fn)
         ref = remote.remote(*args)
         try:
             return await ref
