@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from dataclasses import field as dc_field
 from typing import Any, Callable, Iterable, Optional
 
-from sqlalchemy import delete, insert, select, update
+from sqlalchemy import bindparam, delete, insert, select, update
 from sqlalchemy.orm import Session
 
 from ..models import Experiment, Message, Pose, Run, utcnow
@@ -74,17 +74,24 @@ class RunWrite:
 
 #: what a run's write reads of its experiment: the owner, and what the roll-up compares and stamps
 _ROLL_UP = ("id", "owner_id", "status", "started_at", "finished_at")
+_ALL = tuple(c.name for c in Experiment.__table__.c)
 _RUNS = Run.__table__
+_POSES = Pose.__table__
+# built once (building a statement and its cache key costs about as much as running it); an update's SET
+# clause is the keys of its parameters
+_UPDATE_RUN = update(_RUNS).where(_RUNS.c.id == bindparam("where_run_id"))
+_STATUSES = select(_RUNS.c.status).where(_RUNS.c.experiment_id == bindparam("experiment_id"))
+_CLEAR_POSES = delete(_POSES).where(_POSES.c.run_id == bindparam("run_id"))
 
 
 def start_try(session: Session, run_id: int, status: RunStatus | Callable[[RunJob], RunStatus],
               fields: dict[str, Any]) -> tuple[RunJob, RunWrite]:
     """A try of the run starts: what an interrupted earlier try left goes (poses, metrics, end), ``status`` (or
     ``status(job)``, decided on the run's job) and ``fields`` are written and the experiment rolled up."""
-    run, exp = lock_run_row(session, run_id, [c.name for c in Experiment.__table__.c])
+    run, exp = lock_run_row(session, run_id, _ALL)
     job = _job(run, exp)
     if run["started_at"] is not None:  # a run that never started has no poses
-        session.execute(delete(Pose.__table__).where(Pose.__table__.c.run_id == run_id))
+        session.execute(_CLEAR_POSES, {"run_id": run_id})
     cleared = dict(t_start=None, t_end=None, metrics={}, failure=None, stopped_at=None)
     values = {k: v for k, v in cleared.items() if run[k] != v}  # a first try has nothing to clear: a narrower update
     values.update(fields, status=status(job) if callable(status) else status)
@@ -100,9 +107,9 @@ def update_run(session: Session, run_id: int, fields: dict[str, Any]) -> RunWrit
 def _write(session: Session, run: dict[str, Any], exp: dict[str, Any], values: dict[str, Any]) -> RunWrite:
     """Core statements, not the ORM's unit of work: the run's update, its siblings' statuses for the roll-up;
     the experiment is loaded (and stamped, and given its error text) only when its status changes."""
-    session.execute(update(_RUNS).where(_RUNS.c.id == run["id"]).values(values))
+    session.execute(_UPDATE_RUN, {**values, "where_run_id": run["id"]})
     run.update(values)
-    new = roll_up(session.scalars(select(_RUNS.c.status).where(_RUNS.c.experiment_id == exp["id"])).all())
+    new = roll_up(session.scalars(_STATUSES, {"experiment_id": exp["id"]}).all())
     if new == exp["status"] and new not in TERMINAL and (new not in ACTIVE or exp["started_at"] is not None):
         return RunWrite(run, exp["owner_id"])
     orm = session.get(Experiment, exp["id"])
