@@ -76,7 +76,7 @@ def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threadi
                 _copy(conn.driver_connection, run_id, rows)
             else:
                 with lock:
-                    _executemany(conn, engine.dialect.name == "sqlite", engine.dialect.paramstyle, run_id, rows)
+                    _executemany(conn, engine.dialect.paramstyle, run_id, rows)
             conn.commit()
         except Exception:
             conn.rollback()
@@ -154,16 +154,10 @@ def binary_copy(run_id: int, rows: np.ndarray) -> bytes:
     return _PGCOPY_HEAD + out.tobytes() + _PGCOPY_TAIL
 
 
-def _executemany(conn: object, sqlite: bool, paramstyle: str, run_id: int, rows: np.ndarray) -> None:
+def _executemany(conn: object, paramstyle: str, run_id: int, rows: np.ndarray) -> None:
     cur = conn.cursor()  # type: ignore[attr-defined]
     try:
-        if sqlite:  # the run id comes from the server's own window: skip the per-row key lookup
-            cur.execute("PRAGMA foreign_keys=OFF")
-        try:
-            cur.executemany(_insert_sql(paramstyle), _tuples(run_id, rows))
-        finally:
-            if sqlite:  # the pooled connection goes back as it came
-                cur.execute("PRAGMA foreign_keys=ON")
+        cur.executemany(_insert_sql(paramstyle), _tuples(run_id, rows))
     finally:
         cur.close()
 
