@@ -76,7 +76,7 @@ def test_a_run_on_ray_equals_the_same_run_on_a_local_agent(postgres, tmp_path):
                       "--database-url", postgres.database()], tmp_path / "ray", timeout=120)
     try:
         theirs = _run_all(on_ray)
-        assert "Simulation runs: Ray tasks on a local Ray cluster, 2 CPUs, 4 runs at once." in on_ray.output()
+        assert "Simulation runs: Ray tasks on a local Ray cluster, 2 CPUs, 6 runs at once." in on_ray.output()
     finally:
         assert on_ray.stop() == 0, on_ray.output()
     assert "Traceback" not in on_ray.output(), on_ray.output()

@@ -36,7 +36,9 @@ def make_engine(url: str) -> Engine:
             cur.close()
 
         return engine
-    return create_engine(url, pool_pre_ping=True)
+    # ten kept connections: the run pipeline's database threads, the dispatcher's and the API's can hold one
+    # each at once; the default five opened and closed the rest under load (a new backend per transaction)
+    return create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20)
 
 
 def private_sqlite_file(url: str) -> None:

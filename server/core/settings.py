@@ -47,7 +47,7 @@ class Settings(BaseSettings):
     ray_address: str = Field(default="", description="host:port of an existing Ray cluster's head (GCS); empty: "
                                                      "start a local Ray cluster with the testbed.")
     ray_cpus: int = Field(default=0, ge=0, description="CPUs of the local Ray cluster (0: this machine's).")
-    ray_slots: int = Field(default=0, ge=0, description="Simulation runs at once on Ray (0: twice the cluster's CPUs).")
+    ray_slots: int = Field(default=0, ge=0, description="Simulation runs at once on Ray (0: three times the cluster's CPUs).")
     robot_radius_m: float = Field(default=0.045, gt=0, description="Robot radius: validation, metrics (collided).")
     planning_margin_m: float = Field(
         default=0.02, ge=0,

@@ -169,8 +169,9 @@ class RayPool:
             self.stop()
             raise EngineUnavailable(f"cannot connect to the Ray cluster at {address}: {why}")
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        # two runs per CPU: a worker's next run waits in Ray's queue while the server stores the one before
-        self.slots = self.slots or 2 * max(1, cpus)
+        # three runs per CPU: a worker's next runs wait in Ray's queue while the server stores the one before
+        # (faster than two in 5 of 6 alternated pairs of bench/scale.py, docs/scale-out.md)
+        self.slots = self.slots or 3 * max(1, cpus)
         where = "a local Ray cluster" if self._head is not None else f"the Ray cluster at {address}"
         self.description = f"{where}, {cpus} CPUs, {self.slots} runs at once"
         self._warm_up(cpus, connect_timeout_s)
