@@ -69,11 +69,10 @@ class RunWrite:
     run: dict[str, Any]
     owner_id: int
     experiment: Optional[Experiment] = None
-    experiment_changed: bool = False
 
 
-#: what a run's write reads of its experiment: the owner, and what the roll-up compares and stamps
-_ROLL_UP = ("id", "owner_id", "status", "started_at", "finished_at")
+#: what a run's write reads of its experiment: the owner, and what tells whether the roll-up changes it
+_ROLL_UP = ("id", "owner_id", "status", "started_at")
 _ALL = tuple(c.name for c in Experiment.__table__.c)
 _RUNS = Run.__table__
 _POSES = Pose.__table__
@@ -114,8 +113,8 @@ def _write(session: Session, run: dict[str, Any], exp: dict[str, Any], values: d
         return RunWrite(run, exp["owner_id"])
     orm = session.get(Experiment, exp["id"])
     assert orm is not None
-    changed = finish_if_done(orm)
-    return RunWrite(run, orm.owner_id, orm, changed)
+    finish_if_done(orm)
+    return RunWrite(run, orm.owner_id, orm)
 
 
 def resume_run(session: Session, run_id: int, why: str) -> Run:
