@@ -1,4 +1,4 @@
-"""Helpers shared by the benchmarks: interleaved timing with medians, and the JSON report."""
+"""Helpers shared by the benchmarks: interleaved timing with medians, the JSON report, a PostgreSQL server."""
 
 from __future__ import annotations
 
@@ -7,7 +7,22 @@ import platform
 import statistics
 import sys
 import time
+from pathlib import Path
 from typing import Any, Callable
+
+
+def postgres(work: Path):  # type: ignore[no-untyped-def]
+    """A throw-away PostgreSQL server in ``work/pg`` from the machine's binaries, started as the tests start
+    one (tests/pg_support.py); None when they are not installed.  The caller stops it."""
+    tests = str(Path(__file__).resolve().parents[1] / "tests")
+    if tests not in sys.path:
+        sys.path.append(tests)
+    from pg_support import PostgresServer, postgres_bin
+
+    if postgres_bin() is None:
+        return None
+    work.chmod(0o755)  # PostgreSQL runs as its own user when this runs as root
+    return PostgresServer(work / "pg")
 
 
 def time_once(fn: Callable[[], Any]) -> float:

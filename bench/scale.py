@@ -33,9 +33,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 if __package__ in (None, ""):  # run as a script: bench/ must not shadow the project's packages
     sys.path[0] = str(ROOT)
-sys.path.append(str(ROOT / "tests"))  # pg_support: PostgreSQL from the machine's binaries, as the tests start it
-
-from bench._common import report  # noqa: E402
+from bench._common import postgres, report  # noqa: E402
 
 PLANNERS = ["fmm", "fm2", "astar", "prm"]
 REPETITIONS = 20
@@ -164,20 +162,16 @@ def main() -> None:
     limit = in_process(jobs)
     results = [limit]
     work = Path(tempfile.mkdtemp(prefix="twb-scale-"))
-    work.chmod(0o755)  # PostgreSQL runs as its own user when this runs as root
     pg = None
     wanted = args.only or ["local-sqlite", "local-postgresql", "ray-postgresql"]
     try:
         for name in wanted:
             extra: list[str] = []
             if name.endswith("postgresql"):
+                pg = pg or postgres(work)
                 if pg is None:
-                    from pg_support import PostgresServer, postgres_bin
-
-                    if postgres_bin() is None:
-                        results.append({"name": name, "skipped": "PostgreSQL's binaries are not installed"})
-                        continue
-                    pg = PostgresServer(work / "pg")
+                    results.append({"name": name, "skipped": "PostgreSQL's binaries are not installed"})
+                    continue
                 extra += ["--database-url", pg.database()]
             extra += ["--sim-engine", "ray"] if name.startswith("ray") else ["--sim-robots", str(args.sim_robots)]
             r = through_testbed(name, extra, jobs, work / name)

@@ -42,7 +42,7 @@ if __package__ in (None, ""):
 import httpx  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bench._common import report  # noqa: E402
+from bench._common import postgres, report  # noqa: E402
 from twb.launch import LocalTestbed  # noqa: E402
 
 TOKEN = "bench-token"
@@ -310,17 +310,6 @@ def big_queue(tmp: Path, queued_runs: int, probes: int = 60) -> dict:
             "cancel_one_request": {"experiments": len(cancelled), "seconds": cancel_s}}
 
 
-def _postgres(tmp: Path):  # type: ignore[no-untyped-def]
-    """A PostgreSQL server of the machine's binaries, as the tests start one (tests/pg_support.py), or None."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from pg_support import PostgresServer, postgres_bin
-
-    if postgres_bin() is None:
-        return None
-    tmp.chmod(0o755)  # PostgreSQL runs as its own user when this runs as root
-    return PostgresServer(tmp / "pg")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--batches", type=int, default=200, help="tracker batches of 1000 poses")
@@ -340,7 +329,7 @@ def main() -> None:
             targets["ingestion >= 50000 poses/s"] = ing["server_poses_per_s"] >= 50_000
             targets["ingestion >= 0.3x raw sqlite executemany"] = ing["ratio"] >= 0.3
         if args.only in (None, "ingestion-postgresql"):
-            pg = _postgres(tmp)
+            pg = postgres(tmp)
             if pg is None:
                 parts.append({"tracker_ingestion_postgresql": {"skipped": "PostgreSQL's binaries are not installed"}})
             else:
