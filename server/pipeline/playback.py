@@ -102,7 +102,8 @@ async def play(playback: Playback, time_scale: float, show: Callable[[int, np.nd
                log: Callable[[Line], None], flush: Optional[Callable[[], Awaitable[Any]]] = None) -> None:
     """Release ``playback`` as its experiment time passes at ``time_scale`` (experiment s per wall s; inf:
     at once): new rows to ``show(k, rows, last)`` (``last``: they end track ``k``), due lines to
-    ``log(line)``, then ``flush()`` (storing the log so far) about once a second.  Cancelling it leaves ``playback`` at what was released."""
+    ``log(line)``, then ``flush()`` (storing the log so far) about once a second.  Cancelling it leaves
+    ``playback`` at what was released."""
     wall0 = flushed = time.monotonic()
     while True:
         now = time.monotonic()

@@ -181,10 +181,15 @@ class RunRecorder:
 
     def _written(self, w: run_store.RunWrite) -> list[dict[str, Any]]:
         """The live events of one run's write (built inside the transaction, published after it)."""
-        out = [{"type": "run", "owner_id": w.owner_id, "run": RunPublic.model_validate(w.run).model_dump(mode="json")}]
+        out = [self._run_event(w.run, w.owner_id)]
         if w.experiment is not None:
             out.append(self._experiment_event(w.experiment))
         return out
+
+    @staticmethod
+    def _run_event(run: Run | dict[str, Any], owner_id: int) -> dict[str, Any]:
+        """A run's live event, from its ORM row or its columns by name."""
+        return {"type": "run", "owner_id": owner_id, "run": RunPublic.model_validate(run).model_dump(mode="json")}
 
     @staticmethod
     def _experiment_event(exp: Experiment) -> dict[str, Any]:
@@ -196,8 +201,7 @@ class RunRecorder:
         out: list[dict[str, Any]] = []
         exps: dict[int, Experiment] = {}
         for run in runs:
-            out.append({"type": "run", "owner_id": run.experiment.owner_id,
-                        "run": RunPublic.model_validate(run).model_dump(mode="json")})
+            out.append(self._run_event(run, run.experiment.owner_id))
             exps[run.experiment_id] = run.experiment
         for exp_id, exp in exps.items():
             if exp_changed.get(exp_id) or exp.status in TERMINAL:

@@ -41,9 +41,10 @@ def upgrade() -> None:
 
 
 def downgrade() -> None:
+    sqlite = op.get_bind().dialect.name == "sqlite"
     op.execute("DELETE FROM poses WHERE run_id NOT IN (SELECT id FROM runs)")  # the key would refuse them
-    op.execute("DROP TRIGGER runs_delete_poses" + ("" if op.get_bind().dialect.name == "sqlite" else " ON runs"))
-    if op.get_bind().dialect.name == "sqlite":
+    op.execute("DROP TRIGGER runs_delete_poses" + ("" if sqlite else " ON runs"))
+    if sqlite:
         with op.batch_alter_table('poses', naming_convention=_SQLITE_FK) as batch:
             batch.create_foreign_key('fk_poses_run_id_runs', 'runs', ['run_id'], ['id'], ondelete='CASCADE')
     else:
