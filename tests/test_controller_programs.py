@@ -166,3 +166,34 @@ def test_the_sdk_and_the_cli_name_a_controller_program(testbed, client):
     assert out.returncode == 0 and "completed (1/1 runs completed)" in out.stderr, out.stdout + out.stderr
     exp = client.get(f"/api/v1/experiments/{int(out.stdout)}").json()
     assert exp["status"] == "completed" and exp["controller_program"] == prog.id
+
+
+#: two obstacle robots away from the way from START to GOAL (neither meets the robot)
+MOVERS = {"name": "program-movers", "size": [1.8, 1.8], "blocks": [], "moving_obstacles": [
+    {"radius": 0.04, "waypoints": [[1.1, 1.1], [1.5, 1.1], [1.5, 1.5]], "speed": 0.1, "repeat": "pingpong"},
+    {"radius": 0.05, "waypoints": [[0.3, 1.5], [0.3, 1.1]], "speed": 0.08, "delay_s": 1.0}]}
+
+
+def test_a_programs_field_run_is_seeded_and_stores_its_obstacle_robots(client):
+    """The robot's velocity mode takes the job's noise seed as a path does, so the server replays the obstacle
+    robots the emulated field drove for the program's run: they are stored with the run (not the exact tracks),
+    equal to the replay of its seed bit for bit, and the log does not claim they could not be replayed."""
+    import numpy as np
+
+    from server.pipeline import compute
+
+    assert client.post("/api/v1/environments", json=MOVERS).status_code == 201
+    python = upload(client, "p_controller.py", (EXAMPLES / "p_controller.py").read_text())
+    r = client.post("/api/v1/experiments", json={"environment": MOVERS["name"], "start": START, "goal": GOAL,
+                                                 "controller_program": python, "modes": ["twb"], "seed": 7})
+    assert r.status_code == 202, r.text
+    exp = wait_for(client, r.json()["id"], timeout=240)
+    (run,) = runs(client, exp["id"])
+    assert run["status"] == "completed", (run, log(client, run["id"])[-3000:])
+    assert "cannot be replayed" not in log(client, run["id"])
+    got = client.get(f"/api/v1/runs/{run['id']}/obstacles").json()
+    assert got["exact"] is False and [o["index"] for o in got["obstacles"]] == [0, 1], got
+    replay = compute.field_obstacle_tracks(MOVERS, run["seed"], "BeBot", run["t_start"], run["t_end"])
+    for o, tr in zip(got["obstacles"], replay):
+        assert o["count"] > 50 and np.array_equal(np.array(o["poses"]), tr), o["index"]
+    assert run["metrics"]["obstacle_distance_min_m"] > 0.3

@@ -25,7 +25,7 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -49,11 +49,14 @@ class ControllerRelay:
 
     ``goal`` (m) in the robot's frame; ``tolerance_m``: how near the goal the
     robot must stop.  ``ended`` resolves with the robot's ending ``EV,FAIL``
-    fields (``STOPPED`` when the program or the server stopped it).
+    fields (``STOPPED`` when the program or the server stopped it).  ``seed``
+    gives the robot's velocity mode the job's noise seed (whether it could:
+    :meth:`RobotHooks.seed_next_path`), so that its obstacle robots replay.
     """
 
-    def __init__(self, link: AgentLink, ctx: RunContext, goal: tuple[float, float], tolerance_m: float) -> None:
-        self.link, self.ctx = link, ctx
+    def __init__(self, link: AgentLink, ctx: RunContext, goal: tuple[float, float], tolerance_m: float,
+                 seed: Callable[[], bool] = lambda: False) -> None:
+        self.link, self.ctx, self._seed = link, ctx, seed
         self.goal, self.tolerance_m = goal, tolerance_m
         self.pose: Optional[tuple[float, float]] = None  # the last PO position, m
         self.t_start: Optional[float] = None
@@ -86,6 +89,7 @@ class ControllerRelay:
         if self.armed or self.ended.done():
             return
         self.armed = True
+        self.ctx.seeded = self._seed()  # velocity mode draws the robot's noise as a path does
         await self.link.request("T,T,O,1", self.ctx.wall(0))
         await self.link.request("T,T,V,0,0", self.ctx.wall(0))
 
@@ -153,7 +157,8 @@ async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job:
         await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id, owner_id=job.owner_id)
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
     await rec.add_messages(ctx.take_messages())
-    relay = ControllerRelay(link, ctx, (job.goal[0], job.goal[1]), DEFAULT_GOAL_TOLERANCE)
+    relay = ControllerRelay(link, ctx, (job.goal[0], job.goal[1]), DEFAULT_GOAL_TOLERANCE,
+                            seed=lambda: svc.hooks.seed_next_path(robot_id, job.seed))
     s = svc.settings
     program = asyncio.create_task(svc.sandbox.run_controller(
         spec, relay, env_data=job.environment_data, start=start_pose(job), goal=list(job.goal), path=plan.path,
