@@ -29,13 +29,24 @@ from .environment import Environment, load_environment
 from .errors import NoPathFound, PlanningError
 from .st_astar import SpaceTimeAStar, TimedPath, movers_table, plan_timed
 
-__all__ = ["MultiPlan", "fleet_waypoints", "min_separation", "plan_prioritized", "timed_waypoints"]
+__all__ = ["DESCRIPTION", "MultiPlan", "fleet_defaults", "fleet_waypoints", "min_separation", "plan_prioritized",
+           "timed_waypoints"]
 
 #: the space-time defaults for fleets: waits allowed, a smaller time margin (robots that can be timed)
 FLEET_DEFAULTS = {"wait": True, "time_margin_s": 0.5, "clearance": 0.0}
 #: how the robots keep to a prioritized plan (a job's ``planner_params.execution``, not the planner's):
 #: ``dependencies`` (in the plan's order of passing each shared place) or ``timed`` (by the clock alone)
 EXECUTIONS = ("dependencies", "timed")
+#: what the testbed's planner list says of ``prioritized`` (a multi-robot job's planner, not a registry one)
+DESCRIPTION = ("plans the robots of a multi-robot job together, one after the other: timed paths in which a robot "
+               "waits for the ones planned before it (robot 0 first), and the testbed holds it there; any other "
+               "planner plans each robot alone (the uncoordinated baseline)")
+
+
+def fleet_defaults() -> dict[str, Any]:
+    """Every parameter a multi-robot job's ``planner_params`` may give ``prioritized``, with its default: the
+    space-time planner's, :data:`FLEET_DEFAULTS` over them, and ``execution``."""
+    return {**SpaceTimeAStar.defaults, **FLEET_DEFAULTS, "execution": EXECUTIONS[0]}
 
 
 @dataclass

@@ -53,6 +53,11 @@ def test_a_two_robot_job_from_the_form_is_stored_as_entered_and_completes(page, 
     open_fleet_form(page, testbed.url)
     page.select_option("#f-environment", "swap")
     expect(page.locator("#f-planner")).to_have_value("prioritized")  # the coordinated planner for fleets
+    expect(page.locator("#f-planner option").first).to_have_text("prioritized")
+    page.check("input[name=robots][value=one]")  # it plans fleets only: one robot is not offered it
+    expect(page.locator("#f-planner option[value=prioritized]")).to_have_count(0)
+    page.check("input[name=robots][value=fleet]")
+    expect(page.locator("#f-planner")).to_have_value("prioritized")
     page.wait_for_timeout(200)
     geo = canvas_geometry(page, "#submit-canvas")
     # robot 0 on the map: a click for its start, a drag for its goal's heading; then the form moves on to robot 1
@@ -148,11 +153,9 @@ def test_the_swap_shortcut_and_a_refused_robot_shown_under_it(page, testbed):  #
     for k, plan in enumerate(SWAP["plans"]):
         assert robot_pose(page, k, "start") == pytest.approx(plan["start"], abs=1e-3)
         assert robot_pose(page, k, "goal") == pytest.approx(plan["goal"], abs=1e-3)
-    # prioritized offers the space-time planner's parameters with the fleet's own defaults (planners/prioritized.py)
-    from planners.prioritized import FLEET_DEFAULTS
-
-    assert page.evaluate("async () => (await import('/static/js/fleetform.js')).FLEET_DEFAULTS") == FLEET_DEFAULTS
+    # prioritized offers the parameters the server lists for it: the space-time planner's with the fleet's defaults
     expect(page.locator("#f-param-time_margin_s")).to_have_attribute("placeholder", "0.5")
+    expect(page.locator("#f-param-execution")).to_have_attribute("placeholder", "dependencies")
     expect(page.locator("#f-param-wait option").first).to_have_text("default (true)")
     page.wait_for_timeout(200)
     for k, plan in enumerate(SWAP["plans"]):  # every robot's start in its colour (each corner is another's goal)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from client_sdk import Client
+from client_sdk.study import StudySpec, check_study
 from robot_agent.params import robot_params
 from server.core.settings import Settings
 from server.pipeline import compute
@@ -100,6 +101,25 @@ def test_the_same_seed_gives_the_same_poses_as_the_task_run_directly(client, pri
     for k, r in enumerate(out["robots"]):
         assert np.array_equal(poses(client, run["id"], robot=k)[:, :4], r["poses"]), k
     assert out["metrics"]["robot_distance_min_m"] == run["metrics"]["robot_distance_min_m"]
+
+
+def test_the_planner_list_offers_prioritized_with_the_parameters_a_fleet_job_takes(testbed, client, prioritized):
+    """`GET /api/v1/planners` lists `prioritized` as the planner of multi-robot jobs only, its defaults those a job
+    without `planner_params` is given; so a study may set any of them (`execution` too) and is not refused."""
+    exp, _ = prioritized
+    listed = {p["name"]: p for p in client.get("/api/v1/planners").json()["data"]}
+    assert listed["prioritized"]["fleet_only"] is True and listed["prioritized"]["description"]
+    assert not any(p["fleet_only"] for name, p in listed.items() if name != "prioritized")
+    assert listed["prioritized"]["defaults"] == exp["planner_params"]
+    spec = StudySpec.from_json({"name": "timed", "environments": ["swap"], "modes": ["sim"],
+                                "plans": [{"name": "circle-2", "circle": {"robots": 2, "radius_m": 0.6}}],
+                                "planners": [{"name": "prioritized", "params": {"execution": "timed", "wait": False}},
+                                             "fmm"]})
+    with Client(testbed.url, testbed.token) as c:
+        assert check_study(c, spec, limits={}) == []
+        spec.planners[0].params["speed_m_s"] = 0.1
+        assert check_study(c, spec, limits={}) == [
+            f"planner 'prioritized' has no parameter(s) speed_m_s (its parameters: {', '.join(sorted(exp['planner_params']))})"]
 
 
 def test_a_job_can_have_its_prioritized_plan_executed_by_the_clock(client, prioritized):

@@ -24,10 +24,7 @@ from .._base import API_PREFIX, Call
 from .._client import Client
 from .._exceptions import ApiError, NotFound
 from ._fleet import SEPARATION_M
-from ._spec import FLEET_PLANNER, StudySpec, StudySpecError
-
-#: the planner whose parameters prioritized planning takes (the server: SpaceTimeAStar's, with the fleet's defaults)
-_FLEET_BASE = "st_astar"
+from ._spec import StudySpec, StudySpecError
 
 __all__ = ["StudyRefused", "check_study", "refusal", "server_limits"]
 
@@ -72,12 +69,10 @@ def check_study(client: Client, spec: StudySpec, *, limits: Optional[dict[str, i
     for p in spec.planners:
         if p.waypoints is not None:
             continue
-        # prioritized planning is the space-time A* robot after robot: offered with it, with its parameters
-        name = _FLEET_BASE if p.name == FLEET_PLANNER else p.name
-        if name not in offered:
+        if p.name not in offered:
             reasons.append(f"planner {p.name!r} is not offered by this testbed (it offers {', '.join(sorted(offered))})")
             continue
-        defaults = offered[name]
+        defaults = offered[p.name]
         unknown = sorted(set(p.params) - set(defaults)) if defaults is not None else []
         if unknown:
             reasons.append(f"planner {p.name!r} has no parameter(s) {', '.join(unknown)} "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
+from ...schemas import FLEET_PLANNER
 from ..deps import CurrentUser
 from ..responses import AUTHENTICATED
 
@@ -12,8 +13,10 @@ router = APIRouter(prefix="/planners", tags=["planners"], responses=AUTHENTICATE
 
 @router.get("")
 def list_planners(_: CurrentUser) -> dict:
-    """Every selectable planner: name, description and parameter defaults (null: any parameters)."""
+    """Every selectable planner: name, description, parameter defaults (null: any parameters) and whether it
+    plans multi-robot jobs only (``fleet_only``: ``prioritized``; any other plans each robot alone)."""
     from planners import get_planner
+    from planners.prioritized import DESCRIPTION, fleet_defaults
     from planners.registry import available_planners
 
     out = []
@@ -23,5 +26,6 @@ def list_planners(_: CurrentUser) -> dict:
         except Exception:  # noqa: BLE001 - a broken plug-in is left out, not an error for everyone
             continue
         out.append({"name": name, "description": p.description,
-                    "defaults": dict(p.defaults) if p.defaults is not None else None})
+                    "defaults": dict(p.defaults) if p.defaults is not None else None, "fleet_only": False})
+    out.append({"name": FLEET_PLANNER, "description": DESCRIPTION, "defaults": fleet_defaults(), "fleet_only": True})
     return {"data": out, "count": len(out)}

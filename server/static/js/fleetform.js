@@ -8,23 +8,14 @@ import { robotColor, swatch } from "./fleet.js";
 
 /** The planner that plans a fleet together (server/schemas.py FLEET_PLANNER). */
 export const FLEET_PLANNER = "prioritized";
-/** What `prioritized` changes in the space-time planner's defaults (planners/prioritized.py FLEET_DEFAULTS;
- * tests/test_dashboard_fleet.py compares the two). */
-export const FLEET_DEFAULTS = { wait: true, time_margin_s: 0.5, clearance: 0.0 };
 /** The most robots of a job, on the whole field (robot_agent/frames.py MAX_ROBOTS). */
 export const MAX_ROBOTS = 64;
 
-/** The entry the planner select offers for fleets: `prioritized` with the space-time planner's parameters
- * (null defaults, a JSON box, when the server lists no `st_astar`). */
-export function fleetPlanner(planners) {
-  const st = planners.find((p) => p.name === "st_astar");
-  return {
-    name: FLEET_PLANNER,
-    description: "Plans the robots together, one after the other: timed paths in which a robot waits for the " +
-      "ones planned before it (robot 0 first), and the testbed holds it there. Any other planner plans each " +
-      "robot alone (the uncoordinated baseline).",
-    defaults: st?.defaults ? { ...st.defaults, ...FLEET_DEFAULTS } : null,
-  };
+/** The planners to offer, from the server's list (`GET /api/v1/planners`): for several robots the ones that plan
+ * fleets only (`prioritized`) first, then every other (each plans each robot alone); for one robot the others. */
+export function plannerChoices(planners, multi) {
+  const others = planners.filter((p) => !p.fleet_only);
+  return multi ? [...planners.filter((p) => p.fleet_only), ...others] : others;
 }
 
 /** Which robot a server message is about: `{index, part}` for `robots[i]` (`part` "start", "goal", "path" or

@@ -5,7 +5,7 @@
 
 import { $, $$, TERMINAL, checkRadio, deg, h, num, radioValue, report, retoast, toast } from "./dom.js";
 import { COLORS, MapView } from "./fieldmap.js";
-import { FLEET_PLANNER, MAX_ROBOTS, RobotList, fleetPlanner, robotOfLoc, robotOfMessage } from "./fleetform.js";
+import { FLEET_PLANNER, MAX_ROBOTS, RobotList, plannerChoices, robotOfLoc, robotOfMessage } from "./fleetform.js";
 import { obstacleLayers } from "./moving.js";
 import { programLabel } from "./programs.js";
 import { FIELD_SIZE, SUBFIELD_SIZE } from "./store.js";
@@ -129,7 +129,7 @@ export class SubmitPage {
 
   /** The planners to choose from: the server's, and for several robots `prioritized` first. */
   plannerChoices() {
-    return this.multi ? [fleetPlanner(this.planners), ...this.planners] : this.planners;
+    return plannerChoices(this.planners, this.multi);
   }
 
   /** The planner select for one robot or several; `prefer` is chosen if given, else the choice is kept when it is
