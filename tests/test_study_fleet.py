@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client_sdk import Environment
-from client_sdk.study import (DISCS, FLEET, StudySpec, StudySpecError, export_ompl, load_spec, load_study,
-                              make_figures, plan_jobs)
+from client_sdk import Client, Environment
+from client_sdk.study import (DISCS, FLEET, StudySpec, StudySpecError, export_ompl, figure_fleet_paths, load_spec,
+                              load_study, make_figures, plan_jobs, run_study)
 from client_sdk.study._fleet import SEPARATION_M, circle_robots
 from client_sdk.study._fleet_results import FLEET_KINDS, fleet_outcome, fleet_row
 from servers import serve
@@ -301,6 +301,71 @@ def test_a_fleet_study_exports_to_ompl_without_progress(fleet_dir, tmp_path):
     setup = json.loads(con.execute("SELECT setup FROM experiments WHERE name = 'swap-circle-4'").fetchone()[0])
     con.close()
     assert setup["robots"] == circle_robots(4, 0.6, (0.9, 0.9))
+
+
+#: one fleet of two in the empty sub-field and one among the moving discs, simulation and field, once each
+AMONG_DISCS = {"name": "fleet-discs", "environments": ["swap", DISCS],
+               "plans": [{"name": "circle-2", "circle": {"robots": 2, "radius_m": 0.6}}],
+               "planners": ["prioritized"], "repetitions": 1, "modes": ["sim", "twb"], "seed": 3}
+TRACKED, EXACT = "moving obstacle (tracked)", "moving obstacle (exact track)"
+
+
+def _panel(fig, title: str):  # type: ignore[no-untyped-def]
+    return next(ax for ax in fig.axes if ax.get_title() == title)
+
+
+def _obstacle_labels(ax) -> set[str]:  # type: ignore[no-untyped-def]
+    return {line.get_label() for line in ax.get_lines()} & {TRACKED, EXACT}
+
+
+def test_a_study_keeps_and_draws_a_field_runs_tracked_obstacle_robots(monkeypatch, testbed, tmp_path):
+    """The field run among moving discs: its obstacle robots as the server stored them go to obstacles/ (asked
+    for that run alone), are read back, and its panel of Fig. 8 draws them where the tracker saw them; the
+    simulation's panel draws the exact tracks, and so does a study directory without obstacles/ (an older one)."""
+    out = tmp_path / "out"
+    with Client(testbed.url, token=testbed.token) as client:
+        asked: list[int] = []
+        get = client.get_obstacles
+        monkeypatch.setattr(client, "get_obstacles", lambda run_id: asked.append(run_id) or get(run_id))
+        data = run_study(client, StudySpec.from_json(AMONG_DISCS), progress=False, out=out)
+        runs = {(r["environment"], r["mode"]): r["run_id"] for r in data.rows}
+        field = runs[("discs", "twb")]
+        assert asked == [field]  # not for the simulations, nor for the environment without moving obstacles
+        served = get(field)
+    assert not served.exact and len(served.tracks) == 2 and all(len(tr) > 10 for tr in served.tracks)
+    assert sorted(f.name for f in (out / "obstacles").iterdir()) == [f"run-{field}.csv"]
+    assert (out / "obstacles" / f"run-{field}.csv").read_text().startswith("obstacle,t,x,y,theta,radius\n")
+    kept = load_study(out).obstacles(field)
+    assert not kept.exact and kept.radii == served.radii
+    assert [tr.shape for tr in kept.tracks] == [tr.shape for tr in served.tracks]
+    for mine, theirs in zip(kept.tracks, served.tracks):
+        assert np.allclose(mine, theirs, rtol=0, atol=5e-6)  # the file keeps 10 µm, 10 µs
+    assert [load_study(out).obstacles(runs[k]) for k in runs if k != ("discs", "twb")] == [None] * 3
+
+    fig = figure_fleet_paths(load_study(out))
+    panel = _panel(fig, "discs circle-2 · prioritized · T")
+    assert _obstacle_labels(panel) == {TRACKED}
+    lines = [line.get_xydata() for line in panel.get_lines()]
+    discs = [(p.center, p.radius) for p in panel.patches if hasattr(p, "center")]
+    for tr, radius in zip(kept.tracks, kept.radii):  # each path where the tracker saw it, its disc at the first pose
+        assert any(xy.shape == tr[:, 1:3].shape and np.array_equal(xy, tr[:, 1:3]) for xy in lines)
+        assert any(np.array_equal(c, tr[0, 1:3]) and r == radius for c, r in discs)
+    assert _obstacle_labels(_panel(fig, "discs circle-2 · prioritized · S")) == {EXACT}
+    assert not _obstacle_labels(_panel(fig, "swap circle-2 · prioritized · T"))
+    assert {TRACKED, EXACT} <= {t.get_text() for t in fig.legends[0].get_texts()}
+
+    # saved elsewhere, the obstacle robots go along; a study directory without obstacles/ draws exact tracks
+    copy = tmp_path / "copy"
+    load_study(out).save(copy)
+    assert (copy / "obstacles" / f"run-{field}.csv").read_bytes() == (out / "obstacles" / f"run-{field}.csv").read_bytes()
+    for f in (copy / "obstacles").iterdir():
+        f.unlink()
+    (copy / "obstacles").rmdir()
+    older = load_study(copy)
+    assert older.obstacles(field) is None
+    fig = figure_fleet_paths(older)
+    assert _obstacle_labels(_panel(fig, "discs circle-2 · prioritized · T")) == {EXACT}
+    assert TRACKED not in {t.get_text() for t in fig.legends[0].get_texts()}
 
 
 def test_a_circle_that_does_not_fit_the_environment_is_refused_before_anything_runs(capsys, monkeypatch, testbed,

@@ -43,8 +43,8 @@ def study(
 ) -> None:
     """Run a study (environments x plans x planners x repetitions x modes) and write its report.
 
-    OUT gets runs.csv, outcomes.csv, comparisons.csv, direct.csv, study.json, poses/, summary.md (which planner
-    is better, in words), fig5-8 (PNG, SVG) and report.html.  Exit status: 0 every run was submitted and ended
+    OUT gets runs.csv, outcomes.csv, comparisons.csv, direct.csv, study.json, poses/, obstacles/ (field runs'
+    tracked obstacle robots), summary.md (which planner is better, in words), fig5-8 (PNG, SVG) and report.html.  Exit status: 0 every run was submitted and ended
     completed or failed (a failure is a result); 1 the study ran but jobs were refused, runs ended in a testbed
     error, or nothing ran; 2 the study was refused before it ran (with the reasons).  The paper's findings are checked on the
     study (findings.md, findings.json; also printed).

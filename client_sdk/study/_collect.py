@@ -171,7 +171,8 @@ def _duration(seconds: Optional[float]) -> str:
 
 def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = None, timeout: Optional[float] = None,
               interval: float = 0.5, out: Optional[str | Path] = None) -> StudyData:
-    """Submit every experiment of ``spec``, follow them and collect runs, metrics and poses into ``out``.
+    """Submit every experiment of ``spec``, follow them and collect runs, metrics and poses (and the field runs'
+    tracked obstacle robots) into ``out``.
 
     Before submitting, the study is checked against the testbed
     (:func:`~client_sdk.study._limits.check_study`: planners, environments,
@@ -212,7 +213,8 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
             for eid in pending[:_WINDOW]:
                 exp = client.get_experiment(eid)
                 if exp.finished:
-                    final[eid] = _collect_experiment(client, spec, submitted[eid], exp, sink)
+                    final[eid] = _collect_experiment(client, spec, submitted[eid], exp, sink,
+                                                     bool(envs[submitted[eid]["environment"]].moving_obstacles))
                     ended.update(r.status for r in exp.runs)
                 else:
                     states.update(r.status for r in exp.runs)
@@ -272,19 +274,26 @@ def _submit(client: Client, spec: StudySpec, jobs: list[StudyJob], waiting: list
     return waiting
 
 
-def _collect_experiment(client: Client, spec: StudySpec, job: StudyJob, exp: Experiment,
-                        sink: StudySink) -> dict[str, Any]:
-    """A finished experiment's rows and poses to the sink; its entry in study.json."""
+def _collect_experiment(client: Client, spec: StudySpec, job: StudyJob, exp: Experiment, sink: StudySink,
+                        moving: bool) -> dict[str, Any]:
+    """A finished experiment's rows, poses and (``moving``: its environment has moving obstacles) its field runs'
+    tracked obstacle robots to the sink; its entry in study.json."""
     rows, direct = _rows(spec, job, exp, client.get_metrics(exp.id))
-    poses = {}
+    poses, obstacles = {}, {}
     for run in exp.runs:
         # a failed run's driving is data too: Fig. 8 draws it up to where it stopped
-        if run.status in ("completed", "failed") and run.t_start is not None:
-            try:
-                poses[run.id] = client.get_poses(run.id)
-            except NotFound:
-                pass
-    sink.add(rows, direct, poses)
+        if run.status not in ("completed", "failed") or run.t_start is None:
+            continue
+        try:
+            poses[run.id] = client.get_poses(run.id)
+            # only a field run can have obstacle robots: a simulation's would be the exact tracks, not fetched
+            if moving and run.mode == "twb":
+                tracked = client.get_obstacles(run.id)
+                if not tracked.exact:
+                    obstacles[run.id] = tracked
+        except NotFound:
+            pass
+    sink.add(rows, direct, poses, obstacles)
     return _experiment_entry(job, exp)
 
 

@@ -12,7 +12,9 @@ The collector writes, in the output directory:
   repetition);
 - ``direct.csv``: one row per experiment and repetition with both modes;
 - ``poses/run-<id>.csv``: the logged poses ``t,x,y,theta`` of each run (a fleet's run:
-  ``t,x,y,theta,robot``, robot by robot).
+  ``t,x,y,theta,robot``, robot by robot);
+- ``obstacles/run-<id>.csv``: a field run's obstacle robots as the tracker saw them,
+  ``obstacle,t,x,y,theta,radius``, obstacle by obstacle (only runs the server stored them for).
 
 Everything else (summary, figures, report, OMPL database) is computed from
 these files, offline.
@@ -32,10 +34,11 @@ from typing import Any, Iterable, Optional
 
 import numpy as np
 
+from .._models import ObstacleTracks
 from ._spec import StudySpec
 
 __all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "run_outcome", "write_csv",
-           "write_csv_rows", "write_poses"]
+           "write_csv_rows", "write_obstacles", "write_poses"]
 
 #: leading columns of runs.csv (the metrics follow)
 ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "controller", "configuration", "mode",
@@ -60,6 +63,7 @@ class StudyData:
     meta: dict[str, Any] = _field(default_factory=dict)
     directory: Optional[Path] = None
     _poses: dict[int, np.ndarray] = _field(default_factory=dict, repr=False)
+    _obstacles: dict[int, ObstacleTracks] = _field(default_factory=dict, repr=False)
 
     def poses(self, run_id: int) -> np.ndarray:
         """``(N, 4)`` t, x, y, theta of a run (s, m, m, rad) -- ``(N, 5)`` with the robot's index last for a fleet's
@@ -69,12 +73,22 @@ class StudyData:
             return self._poses[run_id]
         if self.directory is None:
             raise KeyError(f"no poses for run {run_id}")
-        path = self.directory / "poses" / f"run-{run_id}.csv"
-        if not path.exists():
-            return np.empty((0, 4))
-        with open(path) as f:
-            columns = len(f.readline().split(","))
-        return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2).reshape(-1, columns)
+        table = _read_table(self.directory / "poses" / f"run-{run_id}.csv")
+        return table if table is not None else np.empty((0, 4))
+
+    def obstacles(self, run_id: int) -> Optional[ObstacleTracks]:
+        """A field run's obstacle robots as the tracker saw them (``tracks[k]`` ``(T, 4)`` t, x, y, theta; s, m, m,
+        rad; ``radii`` m), from memory or ``obstacles/run-<id>.csv``; None where none were stored (a simulation, a
+        field run without moving obstacles or whose obstacle robots the server could not replay, a study written
+        before they were kept): the study knows only their exact tracks."""
+        if run_id in self._obstacles:
+            return self._obstacles[run_id]
+        table = _read_table(self.directory / "obstacles" / f"run-{run_id}.csv") if self.directory else None
+        return _obstacle_tracks(run_id, table) if table is not None else None
+
+    def add_obstacles(self, run_id: int, obstacles: ObstacleTracks) -> None:
+        """Keep a field run's tracked obstacle robots in memory (``exact`` False: see :meth:`obstacles`)."""
+        self._obstacles[run_id] = obstacles
 
     def add_poses(self, run_id: int, poses: np.ndarray) -> None:
         """Keep a run's poses in memory: ``(N, 4)``, or ``(N, 5)`` with the robot's index (a fleet's run)."""
@@ -136,23 +150,50 @@ class StudyData:
         return list(dict.fromkeys((e["environment"], e["plan"]) for e in self.experiments))
 
     def save(self, directory: Path) -> None:
-        """Write study.json, runs.csv, direct.csv and poses/ into ``directory``."""
+        """Write study.json, runs.csv, direct.csv, poses/ and obstacles/ into ``directory``."""
         directory.mkdir(parents=True, exist_ok=True)
         doc = {"spec": self.spec.to_json(), **self.meta, "environments": self.environments,
                "experiments": self.experiments}
         (directory / "study.json").write_text(json.dumps(doc, indent=1) + "\n")
         write_csv_rows(directory / "runs.csv", self.rows, ID_COLUMNS)
         write_csv_rows(directory / "direct.csv", self.direct, DIRECT_COLUMNS)
-        pdir = directory / "poses"
-        pdir.mkdir(exist_ok=True)
+        (directory / "poses").mkdir(exist_ok=True)
         for run_id, arr in self._poses.items():
-            write_poses(pdir / f"run-{run_id}.csv", arr)
+            write_poses(directory / "poses" / f"run-{run_id}.csv", arr)
+        for run_id, obs in self._obstacles.items():
+            write_obstacles(directory / "obstacles" / f"run-{run_id}.csv", obs)
         if self.directory is not None and self.directory.resolve() != directory.resolve():
-            # poses still on disk where the study was written (a streamed study keeps none in memory)
-            for src in (self.directory / "poses").glob("run-*.csv"):
-                if not (pdir / src.name).exists():
-                    shutil.copyfile(src, pdir / src.name)
+            # files still on disk where the study was written (a streamed study keeps none in memory)
+            for sub in ("poses", "obstacles"):
+                _copy_missing(self.directory / sub, directory / sub)
         self.directory = directory
+
+
+def _copy_missing(src: Path, dst: Path) -> None:
+    """Copy the ``run-*.csv`` files of ``src`` that ``dst`` lacks (``src`` may not exist: an older study)."""
+    files = sorted(src.glob("run-*.csv"))
+    if files:
+        dst.mkdir(exist_ok=True)
+    for f in files:
+        if not (dst / f.name).exists():
+            shutil.copyfile(f, dst / f.name)
+
+
+def _read_table(path: Path) -> Optional[np.ndarray]:
+    """A numeric CSV with a header line as ``(N, columns)`` floats; None where there is no such file."""
+    if not path.exists():
+        return None
+    with open(path) as f:
+        columns = len(f.readline().split(","))
+    return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2).reshape(-1, columns)
+
+
+def _obstacle_tracks(run_id: int, table: np.ndarray) -> ObstacleTracks:
+    """An ``obstacles/run-<id>.csv`` table (``obstacle,t,x,y,theta,radius``) as the server's tracked obstacles."""
+    index = table[:, 0].astype(int)
+    rows = [table[index == k] for k in range(int(index.max()) + 1 if len(index) else 0)]
+    # an obstacle the tracker never saw has no row, so no radius either
+    return ObstacleTracks(run_id, False, [r[:, 1:5] for r in rows], [r[0, 5] if len(r) else math.nan for r in rows])
 
 
 def write_poses(path: Path, poses: np.ndarray) -> None:
@@ -163,6 +204,20 @@ def write_poses(path: Path, poses: np.ndarray) -> None:
     buf = io.StringIO()
     buf.write("t,x,y,theta,robot\n" if fleet else "t,x,y,theta\n")
     np.savetxt(buf, arr.reshape(-1, 5 if fleet else 4), delimiter=",", fmt=["%.5f"] * 4 + ["%d"] * fleet)
+    path.write_text(buf.getvalue())
+
+
+def write_obstacles(path: Path, obstacles: ObstacleTracks) -> None:
+    """A field run's tracked obstacle robots as a study's CSV (``path``'s folder created): header
+    ``obstacle,t,x,y,theta,radius``, obstacle by obstacle, each pose ``t,x,y,theta`` (s, m, m, rad) with the
+    obstacle's index and radius (m)."""
+    parts = [np.column_stack([np.full(len(tr), k), np.asarray(tr, dtype=float).reshape(-1, 4), np.full(len(tr), r)])
+             for k, (tr, r) in enumerate(zip(obstacles.tracks, obstacles.radii))]
+    buf = io.StringIO()
+    buf.write("obstacle,t,x,y,theta,radius\n")
+    np.savetxt(buf, np.concatenate(parts) if parts else np.empty((0, 6)), delimiter=",",
+               fmt=["%d"] + ["%.5f"] * 5)
+    path.parent.mkdir(exist_ok=True)
     path.write_text(buf.getvalue())
 
 

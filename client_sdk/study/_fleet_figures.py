@@ -14,10 +14,11 @@ from typing import Any, Optional
 
 import numpy as np
 
+from .._models import ObstacleTracks
 from ._data import StudyData
 from ._figures import COLORS, MAX_PATH_ROWS, SHORT, draw_environment, legend_and_title
 from ._fleet_results import FLEET_METRICS, FleetGroup, fleet_groups
-from ._replay import _obstacle_centres
+from ._replay import EXACT, TRACKED, obstacle_paths
 from ._verdict import display_name
 
 __all__ = ["FLEET_FIGURE_METRICS", "TOUCH_M", "figure_fleet_metrics", "figure_fleet_paths", "robot_colours"]
@@ -123,14 +124,27 @@ def _first_run(data: StudyData, exp: dict[str, Any], mode: str) -> Optional[dict
     return min(mine, key=lambda r: r["repetition"]) if mine else None
 
 
-def _draw_obstacles(ax, env: dict[str, Any], t_end: float) -> None:  # type: ignore[no-untyped-def]
-    """The environment's moving obstacles' tracks over the run (grey, dotted) and where each started."""
-    t = np.linspace(0.0, max(t_end, 1.0), 200)
-    movers, centres = _obstacle_centres(env, t)
-    for m, ob in enumerate(movers):
-        ax.plot(centres[m, :, 0], centres[m, :, 1], ls=":", color="0.45", lw=1.2,
-                label="moving obstacle (track)" if m == 0 else None)
-        ax.add_patch(_disc(centres[m, 0], ob.radius))
+#: how a panel draws its moving obstacles' paths, by what they are
+_OBSTACLE_STYLE = {TRACKED: {"ls": "-.", "color": "0.35", "lw": 1.0},
+                   EXACT: {"ls": ":", "color": "0.45", "lw": 1.2}}
+
+
+def _draw_obstacles(ax, env: dict[str, Any], t_end: float,  # type: ignore[no-untyped-def]
+                    tracked: Optional[ObstacleTracks]) -> Optional[str]:
+    """A run's moving obstacles: where the tracker saw them (``tracked``: a field run's obstacle robots) or else
+    their exact tracks from obstacle time 0 to ``t_end`` (s), each path and its disc where it started; what was
+    drawn (:data:`TRACKED`, :data:`EXACT`), None if the environment has none."""
+    if not env.get("moving_obstacles"):
+        return None
+    if tracked is None:
+        paths, radii, what = obstacle_paths(env, np.linspace(0.0, max(t_end, 1.0), 200))
+    else:
+        paths, radii, what = obstacle_paths(env, None, tracked.tracks, tracked.radii)
+    for m, (path, radius) in enumerate(zip(paths, radii)):
+        if len(path):
+            ax.plot(path[:, 0], path[:, 1], **_OBSTACLE_STYLE[what], label=what if m == 0 else None)
+            ax.add_patch(_disc(path[0], radius))
+    return what
 
 
 def _disc(centre: Any, radius: float):  # type: ignore[no-untyped-def]
@@ -169,8 +183,9 @@ def _draw_fleet_run(ax, data: StudyData, exp: dict[str, Any], row: dict[str, Any
 
 def figure_fleet_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # type: ignore[no-untyped-def]
     """Every robot of a fleet's run, each in its colour (planned dashed, driven solid, ✕ where one that did not
-    arrive stopped), with the moving obstacles' tracks; rows: problems (environment x plan, the first
-    ``max_rows``), columns: configuration x mode; each panel the run of lowest repetition."""
+    arrive stopped), with the moving obstacles: where the tracker saw a field run's obstacle robots
+    (:meth:`StudyData.obstacles`, dash-dot), else their exact tracks (dotted); rows: problems (environment x
+    plan, the first ``max_rows``), columns: configuration x mode; each panel the run of lowest repetition."""
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
@@ -180,6 +195,7 @@ def figure_fleet_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # ty
     fig = Figure(figsize=(2.9 * len(cols), 3.0 * len(problems) + 0.8), layout="constrained")
     axes = np.asarray(fig.subplots(len(problems), len(cols), squeeze=False))
     by_key = {(e["environment"], e["plan"], e["configuration"]): e for e in data.experiments}
+    kinds: set[Optional[str]] = set()  # the moving obstacles' kinds drawn, for the legend
     for i, (env_name, plan) in enumerate(problems):
         env = data.environments[env_name]
         for j, (config, mode) in enumerate(cols):
@@ -193,14 +209,14 @@ def figure_fleet_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # ty
                         transform=ax.transAxes, ha="center", color=COLORS["failed"], fontsize=8)
                 continue
             t_end = row.get("t_end") if isinstance(row.get("t_end"), (int, float)) else 0.0
-            _draw_obstacles(ax, env, float(t_end))
+            kinds.add(_draw_obstacles(ax, env, float(t_end), data.obstacles(row["run_id"])))
             _draw_fleet_run(ax, data, exp, row)
     handles = {"planned (dashed, the robot's colour)": Line2D([], [], ls="--", color="0.3", lw=0.8),
                "driven": Line2D([], [], color="0.3", lw=1.4),
                "start": Line2D([], [], ls="none", marker="o", color="0.5", mec="k"),
                "goal": Line2D([], [], ls="none", marker="*", color="0.5", mec="k", ms=9),
                "did not arrive (where it stopped)": Line2D([], [], ls="none", marker="x", color="k", mew=2),
-               "moving obstacle (track)": Line2D([], [], ls=":", color="0.45")}
+               **{what: Line2D([], [], **style) for what, style in _OBSTACLE_STYLE.items() if what in kinds}}
     more = f" (the first {len(problems)} of {len(data.problems)} problems)" if len(problems) < len(data.problems) \
         else ""
     legend_and_title(fig, handles, f"Study {data.spec.name}: every robot's path, each robot in its colour, of the "

@@ -72,14 +72,8 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
     times = t0 + dt * np.arange(n)
     times = np.append(times, [t1] * max(1, fps // 2))  # hold the last poses for half a second
     idx = [np.minimum(np.searchsorted(q[:, 0], times, side="right") - 1, len(q) - 1).clip(0) for q in tracks]
-    if obstacles is None:
-        movers, centres = _obstacle_centres(env, times - (t0 if obstacle_t0 is None else obstacle_t0))
-        radii, what = [ob.radius for ob in movers], "moving obstacle (exact track)"
-    else:
-        centres = _tracked_centres(obstacles, times)
-        radii = list(obstacle_radii) if obstacle_radii is not None else \
-            [float(o["radius"]) for o in env.get("moving_obstacles") or []]
-        what = "moving obstacle (tracked)"
+    at = times if obstacles is not None else times - (t0 if obstacle_t0 is None else obstacle_t0)
+    centres, radii, what = obstacle_paths(env, at, obstacles, obstacle_radii)
 
     fig = Figure(figsize=(5, 5.3), layout="constrained")
     ax = fig.subplots()
@@ -99,7 +93,7 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
         ax.add_patch(robot)
         (heading,) = ax.plot([], [], "k-", lw=1.5)
         artists.append((trace, robot, heading))
-    discs = [Circle(tuple(centres[m, 0]), r, fc="#7f7f7f", ec="k", hatch="//", alpha=0.8,
+    discs = [Circle(tuple(centres[m][0]), r, fc="#7f7f7f", ec="k", hatch="//", alpha=0.8,
                     label=what if m == 0 else None) for m, r in enumerate(radii)]
     for d in discs:
         ax.add_patch(d)
@@ -120,13 +114,33 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
             heading.set_data([x, x + robot_radius * 1.6 * math.cos(a)], [y, y + robot_radius * 1.6 * math.sin(a)])
             out += [trace, robot, heading]
         for m, d in enumerate(discs):
-            d.center = tuple(centres[m, k])
+            d.center = tuple(centres[m][k])
             out.append(d)
         clock.set_text(f"t = {times[k] - t0:5.1f} s")
         return out
 
     anim = FuncAnimation(fig, update, frames=len(times), interval=1000 / fps, blit=False)
     return fig, anim, len(times)
+
+
+#: the legend's names of moving obstacles: where the tracker saw a field run's obstacle robots, or their exact tracks
+TRACKED, EXACT = "moving obstacle (tracked)", "moving obstacle (exact track)"
+
+
+def obstacle_paths(env: dict[str, Any], t: Optional[np.ndarray], tracks: Optional[Sequence[np.ndarray]] = None,
+                   radii: Optional[Sequence[float]] = None) -> tuple[list[np.ndarray], list[float], str]:
+    """Each moving obstacle's centres ``(K, 2)`` (m), its radius (m) and the legend's label (:data:`TRACKED`,
+    :data:`EXACT`): with ``tracks`` (``(N, 4)`` t, x, y, theta per obstacle; s, m, m, rad) where the tracker saw
+    them, at times ``t`` (s, their clock; None: every pose as logged), ``radii`` default the environment's;
+    else on the environment's exact tracks at obstacle times ``t`` (s)."""
+    if tracks is None:
+        movers, centres = _obstacle_centres(env, np.asarray(t, dtype=float))
+        return list(centres), [ob.radius for ob in movers], EXACT
+    if radii is None:
+        radii = [float(o["radius"]) for o in env.get("moving_obstacles") or []]
+    paths = [np.asarray(tr, dtype=float).reshape(-1, 4)[:, 1:3] for tr in tracks] if t is None else \
+        list(_tracked_centres(tracks, t))
+    return paths, list(radii), TRACKED
 
 
 def _tracked_centres(tracks: Sequence[np.ndarray], t: np.ndarray) -> np.ndarray:

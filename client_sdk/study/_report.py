@@ -283,8 +283,9 @@ _CAPTIONS = {
                           "closest approach of two robots over every measured run (Student-t 95% intervals); a "
                           "line per configuration and mode (field solid, simulation dashed).",
     "fig8_fleet_paths": "Every robot of a fleet's run, each in its colour: planned (dashed) and driven (solid) paths, "
-                        "start ○, goal ☆, ✕ where a robot that did not arrive stopped, the moving obstacles' "
-                        "tracks dotted; the first run per configuration and mode.",
+                        "start ○, goal ☆, ✕ where a robot that did not arrive stopped, the moving obstacles "
+                        "where the tracker saw a field run's obstacle robots (dash-dot), else their exact tracks "
+                        "(dotted); the first run per configuration and mode.",
 }
 
 

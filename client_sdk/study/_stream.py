@@ -1,8 +1,9 @@
 """A study's results written to disk as its experiments finish, so a study of any size fits in memory.
 
-Each finished experiment's poses go to ``poses/run-<id>.csv`` at once and its
-rows to ``runs.jsonl`` / ``direct.jsonl`` (one JSON object per line); when the
-study ends :meth:`StudySink.close` turns those into ``runs.csv`` and
+Each finished experiment's poses go to ``poses/run-<id>.csv`` at once (its
+field runs' tracked obstacle robots to ``obstacles/run-<id>.csv``) and its
+rows to ``runs.jsonl`` / ``direct.jsonl`` (one JSON object per line); when
+the study ends :meth:`StudySink.close` turns those into ``runs.csv`` and
 ``direct.csv`` (one row at a time) and writes ``study.json``.  Nothing but
 the rows' column names is kept in memory while the study runs.
 """
@@ -11,11 +12,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Optional
 
 import numpy as np
 
-from ._data import DIRECT_COLUMNS, ID_COLUMNS, StudyData, load_study, write_csv, write_poses
+from .._models import ObstacleTracks
+from ._data import DIRECT_COLUMNS, ID_COLUMNS, StudyData, load_study, write_csv, write_obstacles, write_poses
 from ._spec import StudySpec
 
 __all__ = ["StudySink"]
@@ -59,10 +61,14 @@ class StudySink:
         """Run rows written so far."""
         return self._runs.count
 
-    def add(self, rows: list[dict[str, Any]], direct: list[dict[str, Any]], poses: dict[int, np.ndarray]) -> None:
-        """One finished experiment: its run rows, direct-comparison rows and each run's poses."""
+    def add(self, rows: list[dict[str, Any]], direct: list[dict[str, Any]], poses: dict[int, np.ndarray],
+            obstacles: Optional[dict[int, ObstacleTracks]] = None) -> None:
+        """One finished experiment: its run rows, direct-comparison rows, each run's poses and its field runs'
+        tracked obstacle robots."""
         for run_id, arr in poses.items():
             write_poses(self.directory / "poses" / f"run-{run_id}.csv", arr)
+        for run_id, obs in (obstacles or {}).items():
+            write_obstacles(self.directory / "obstacles" / f"run-{run_id}.csv", obs)
         self._runs.add(rows)
         self._direct.add(direct)
 
