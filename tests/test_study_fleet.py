@@ -19,6 +19,7 @@ from client_sdk import Client, Environment
 from client_sdk.study import (DISCS, FLEET, StudySpec, StudySpecError, export_ompl, figure_fleet_paths, load_spec,
                               load_study, make_figures, plan_jobs, run_study)
 from client_sdk.study._fleet import SEPARATION_M, circle_robots
+from client_sdk.study._report import report_html
 from client_sdk.study._fleet_results import FLEET_KINDS, fleet_outcome, fleet_row
 from servers import serve
 from sdk_helpers import invoke, study_process
@@ -353,6 +354,7 @@ def test_a_study_keeps_and_draws_a_field_runs_tracked_obstacle_robots(monkeypatc
     assert _obstacle_labels(_panel(fig, "discs circle-2 · prioritized · S")) == {EXACT}
     assert not _obstacle_labels(_panel(fig, "swap circle-2 · prioritized · T"))
     assert {TRACKED, EXACT} <= {t.get_text() for t in fig.legends[0].get_texts()}
+    assert "obstacle robots as the tracker saw them in <code>obstacles/</code>" in report_html(load_study(out), [])
 
     # saved elsewhere, the obstacle robots go along; a study directory without obstacles/ draws exact tracks
     copy = tmp_path / "copy"

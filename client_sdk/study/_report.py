@@ -302,6 +302,11 @@ def which_is_better_html(answers: list[Answer], what: str = "planner", method: s
     return "".join(parts)
 
 
+def _tracked_obstacles(data: StudyData) -> bool:
+    """Whether the study can have kept field runs' obstacle robots (``obstacles/``)."""
+    return "twb" in data.modes and any(e.get("moving_obstacles") for e in data.environments.values())
+
+
 def report_html(data: StudyData, figure_names: list[str], outcomes: Optional[list[OutcomeSummary]] = None,
                 comparisons: Optional[Comparisons] = None) -> str:
     """``report.html``: which planner is better, the figures (linked PNG, with the SVG beside) and the tables."""
@@ -320,7 +325,9 @@ def report_html(data: StudyData, figure_names: list[str], outcomes: Optional[lis
                  "<a href='direct.csv'>direct.csv</a>, " + (
                      "<a href='fleet_outcomes.csv'>fleet_outcomes.csv</a>, <a href='fleet.csv'>fleet.csv</a>, "
                      if spec.fleet else "") + "<a href='summary.md'>summary.md</a>, "
-                 "<a href='study.json'>study.json</a>, poses in <code>poses/</code>.</p>")
+                 "<a href='study.json'>study.json</a>, poses in <code>poses/</code>" + (
+                     ", the field runs' obstacle robots as the tracker saw them in <code>obstacles/</code>"
+                     if _tracked_obstacles(data) else "") + ".</p>")
     parts.append(which_is_better_html(which_is_better(data, comparisons, outcomes), _what(data), _method(data)))
     for name in figure_names:
         parts.append(f"<figure><a href='{name}.svg'><img src='{name}.png' alt='{name}'></a>"
