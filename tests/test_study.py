@@ -85,6 +85,35 @@ def orange_pixels(png, tol: int = 30) -> int:
     return int((np.abs(a - CRASH_RGB).max(axis=2) <= tol).sum())
 
 
+def test_fig8_draws_the_moving_obstacles_exact_tracks_over_each_panels_longest_run(study_dir):
+    """A study among moving obstacles: each Fig. 8 panel draws them on their exact tracks (obstacle time 0 to the
+    panel's longest run), labelled so, a disc where each starts; a study without them draws none."""
+    import copy
+
+    import numpy as np
+
+    from client_sdk.study._figures import figure_paths
+    from client_sdk.study._obstacle_paths import EXACT
+    from planners import parse_environment
+    from planners.moving import positions
+
+    data = load_study(study_dir)
+    assert not [line for ax in figure_paths(data).axes for line in ax.get_lines() if line.get_label() == EXACT]
+    env = copy.deepcopy(data.environments["room"])
+    env["moving_obstacles"] = [{"radius": 0.05, "waypoints": [[0.4, 1.2], [1.4, 1.2]], "speed": 0.1,
+                                "repeat": "pingpong"}]
+    data.environments["room"] = env
+    fig = figure_paths(data)
+    for ax, exp in zip(fig.axes, data.experiments):
+        (track,) = [line for line in ax.get_lines() if line.get_label() == EXACT]
+        runs = [r for r in data.rows if r["run_id"] in exp["runs"]]
+        longest = max(r["t_end"] - r["t_start"] for r in runs)
+        expected = positions(parse_environment(env).moving_obstacles, np.linspace(0.0, longest, 200))[0]
+        assert np.allclose(track.get_xydata(), expected), ax.get_title()
+        assert [(tuple(p.center), p.radius) for p in ax.patches if hasattr(p, "center")] == [((0.4, 1.2), 0.05)]
+    assert EXACT in {t.get_text() for t in fig.legends[0].get_texts()}
+
+
 def test_figures_are_real_images_with_the_expected_panels(study_dir):
     for name in ("fig5_outcomes", "fig6_metrics", "fig7_ratios", "fig8_paths"):
         with Image.open(study_dir / f"{name}.png") as im:

@@ -21,6 +21,7 @@ from typing import Any, Iterable, Optional
 import numpy as np
 
 from ._data import StudyData
+from ._obstacle_paths import draw_obstacles
 
 __all__ = ["FIG6_METRICS", "FIG7_RATIOS", "MAX_PATH_ROWS", "OUTCOME_COLORS", "figure_metrics", "figure_outcomes", "figure_paths",
            "figure_ratios", "make_figures", "mean_std", "save_figures"]
@@ -216,8 +217,9 @@ MAX_PATH_ROWS = 12
 
 
 def figure_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # type: ignore[no-untyped-def]
-    """Fig. 8: computed, simulated and field paths over each environment; rows: problems (the first
-    ``max_rows``), columns: configurations.  Each panel's runs are drawn as one collection per kind."""
+    """Fig. 8: computed, simulated and field paths over each environment, with its moving obstacles' exact tracks
+    over the panel's longest run; rows: problems (the first ``max_rows``), columns: configurations.  Each panel's
+    runs are drawn as one collection per kind."""
     from matplotlib.figure import Figure
 
     problems, planners = data.problems, data.configurations
@@ -234,8 +236,9 @@ def figure_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # type: ig
             ax.set_title(f"{env_name} {plan} · {planner}", fontsize=9)
             if exp is None:
                 continue
-            _draw_runs(ax, data, [runs[rid] for rid in exp["runs"] if rid in runs
-                                  and runs[rid].get("status") in ("completed", "failed")])
+            drawn = [runs[rid] for rid in exp["runs"] if rid in runs and runs[rid].get("status") in ("completed", "failed")]
+            draw_obstacles(ax, data.environments[env_name], _longest(drawn), None)
+            _draw_runs(ax, data, drawn)
             if exp.get("planned_path"):
                 pp = np.asarray(exp["planned_path"])
                 ax.plot(pp[:, 0], pp[:, 1], color="k", ls="--", lw=1.0, label=LABELS["computed"])
@@ -247,6 +250,13 @@ def figure_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # type: ig
         if len(shown) < len(problems) else ""
     legend_and_title(fig, handles, f"Study {data.spec.name}: computed (dashed), simulated and field paths{more}")
     return fig
+
+
+def _longest(rows: list[dict[str, Any]]) -> float:
+    """The longest of the runs' drives (s, ``t_end - t_start``; 0 without one)."""
+    spans = [r["t_end"] - r["t_start"] for r in rows
+             if isinstance(r.get("t_start"), (int, float)) and isinstance(r.get("t_end"), (int, float))]
+    return max(spans, default=0.0)
 
 
 def _draw_runs(ax, data: StudyData, rows: list[dict[str, Any]]) -> None:  # type: ignore[no-untyped-def]

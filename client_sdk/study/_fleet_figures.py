@@ -14,11 +14,10 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .._models import ObstacleTracks
 from ._data import StudyData
 from ._figures import COLORS, MAX_PATH_ROWS, SHORT, draw_environment, legend_and_title
 from ._fleet_results import FLEET_METRICS, FleetGroup, fleet_groups
-from ._replay import EXACT, TRACKED, obstacle_paths
+from ._obstacle_paths import OBSTACLE_STYLE, draw_obstacles
 from ._verdict import display_name
 
 __all__ = ["FLEET_FIGURE_METRICS", "TOUCH_M", "figure_fleet_metrics", "figure_fleet_paths", "robot_colours"]
@@ -124,35 +123,6 @@ def _first_run(data: StudyData, exp: dict[str, Any], mode: str) -> Optional[dict
     return min(mine, key=lambda r: r["repetition"]) if mine else None
 
 
-#: how a panel draws its moving obstacles' paths, by what they are
-_OBSTACLE_STYLE = {TRACKED: {"ls": "-.", "color": "0.35", "lw": 1.0},
-                   EXACT: {"ls": ":", "color": "0.45", "lw": 1.2}}
-
-
-def _draw_obstacles(ax, env: dict[str, Any], t_end: float,  # type: ignore[no-untyped-def]
-                    tracked: Optional[ObstacleTracks]) -> Optional[str]:
-    """A run's moving obstacles: where the tracker saw them (``tracked``: a field run's obstacle robots) or else
-    their exact tracks from obstacle time 0 to ``t_end`` (s), each path and its disc where it started; what was
-    drawn (:data:`TRACKED`, :data:`EXACT`), None if the environment has none."""
-    if not env.get("moving_obstacles"):
-        return None
-    if tracked is None:
-        paths, radii, what = obstacle_paths(env, np.linspace(0.0, max(t_end, 1.0), 200))
-    else:
-        paths, radii, what = obstacle_paths(env, None, tracked.tracks, tracked.radii)
-    for m, (path, radius) in enumerate(zip(paths, radii)):
-        if len(path):
-            ax.plot(path[:, 0], path[:, 1], **_OBSTACLE_STYLE[what], label=what if m == 0 else None)
-            ax.add_patch(_disc(path[0], radius))
-    return what
-
-
-def _disc(centre: Any, radius: float):  # type: ignore[no-untyped-def]
-    from matplotlib.patches import Circle
-
-    return Circle(tuple(centre), radius, fc="0.6", ec="k", lw=0.5, alpha=0.7)
-
-
 def _draw_fleet_run(ax, data: StudyData, exp: dict[str, Any], row: dict[str, Any]) -> None:  # type: ignore[no-untyped-def]
     """Every robot of one run in its colour: planned path dashed, driven path solid, start ○, goal ☆, and a ✕
     where a robot that did not arrive stopped."""
@@ -209,14 +179,14 @@ def figure_fleet_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # ty
                         transform=ax.transAxes, ha="center", color=COLORS["failed"], fontsize=8)
                 continue
             t_end = row.get("t_end") if isinstance(row.get("t_end"), (int, float)) else 0.0
-            kinds.add(_draw_obstacles(ax, env, float(t_end), data.obstacles(row["run_id"])))
+            kinds.add(draw_obstacles(ax, env, float(t_end), data.obstacles(row["run_id"])))
             _draw_fleet_run(ax, data, exp, row)
     handles = {"planned (dashed, the robot's colour)": Line2D([], [], ls="--", color="0.3", lw=0.8),
                "driven": Line2D([], [], color="0.3", lw=1.4),
                "start": Line2D([], [], ls="none", marker="o", color="0.5", mec="k"),
                "goal": Line2D([], [], ls="none", marker="*", color="0.5", mec="k", ms=9),
                "did not arrive (where it stopped)": Line2D([], [], ls="none", marker="x", color="k", mew=2),
-               **{what: Line2D([], [], **style) for what, style in _OBSTACLE_STYLE.items() if what in kinds}}
+               **{what: Line2D([], [], **style) for what, style in OBSTACLE_STYLE.items() if what in kinds}}
     more = f" (the first {len(problems)} of {len(data.problems)} problems)" if len(problems) < len(data.problems) \
         else ""
     legend_and_title(fig, handles, f"Study {data.spec.name}: every robot's path, each robot in its colour, of the "

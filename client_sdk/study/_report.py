@@ -277,7 +277,8 @@ _CAPTIONS = {
     "fig7_ratios": "Fig. 7 — performed / planned ratios of length, smoothness and clearance (1 = as planned), over "
                    "the completed runs.",
     "fig8_paths": "Fig. 8 — computed (dashed), simulated (blue) and field (red) paths over each environment; failed "
-                  "runs in orange up to where they stopped, ✕ marking the spot.",
+                  "runs in orange up to where they stopped, ✕ marking the spot; moving obstacles on their exact "
+                  "tracks (dotted) over the panel's longest run.",
     "fig6_fleet_metrics": "Fleet metrics against the number of robots, per environment: the share of runs in which "
                           "every robot arrived (Wilson 95% interval), the makespan over the completed runs and the "
                           "closest approach of two robots over every measured run (Student-t 95% intervals); a "
