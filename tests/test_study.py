@@ -282,6 +282,9 @@ def test_embedded_study(twb, tmp_path):
     assert (tmp_path / "out" / "fig8_paths.png").exists()
     log = (tmp_path / "out" / "testbed" / "stdout.log").read_text()
     assert "Teleworkbench is up" in log and "Traceback" not in log
+    # before the kernels load, twb up says what it is waiting for (nothing else shows until the banner)
+    assert 0 <= log.find("twb: starting the testbed (the first start after installing compiles the simulation "
+                         "kernels") < log.find("Teleworkbench is up")
 
 
 # ----------------------------------------------------------------------------- failures are results

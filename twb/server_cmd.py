@@ -179,6 +179,9 @@ def up(
     settings = _settings(data_dir, token, scale, **_uploads(enable_uploads), **_database(database_url),
                          **_engine(sim_engine, ray_address, ray_cpus))
     on_ray = settings.sim_engine == "ray"
+    # nothing else shows until the banner: the robots' kernels load first (numba compiles them once)
+    typer.echo("twb: starting the testbed (the first start after installing compiles the simulation kernels: "
+               "about 12 s, up to a minute on a busy machine)", err=True)
     testbed, admin = _open(settings, embedded=EmbeddedField(sim_robots=0 if on_ray else sim_robots, seed=seed,
                                                             time_scale=scale))
 
