@@ -208,7 +208,8 @@ def fleet_dir(testbed, tmp_path_factory):
     r, out = study_process(testbed, SMALL, tmp_path_factory.mktemp("fleet-study"), "--no-progress")
     assert r.returncode == 0, r.stderr  # failed runs (the uncoordinated fleets' crashes) are results
     assert "study fleet-small: 8/16 runs completed, 8 failed (collision 8)" in r.stdout, r.stdout
-    assert "paper's findings" not in r.stdout  # they concern one robot
+    assert "paper's findings" not in r.stdout  # they concern one robot: not checked, not written
+    assert not (out / "findings.md").exists() and not (out / "findings.json").exists()
     return out
 
 

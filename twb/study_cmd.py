@@ -47,7 +47,7 @@ def study(
     tracked obstacle robots), summary.md (which planner is better, in words), fig5-8 (PNG, SVG) and report.html.  Exit status: 0 every run was submitted and ended
     completed or failed (a failure is a result); 1 the study ran but jobs were refused, runs ended in a testbed
     error, or nothing ran; 2 the study was refused before it ran (with the reasons).  The paper's findings are checked on the
-    study (findings.md, findings.json; also printed).
+    study (findings.md, findings.json; also printed), except on fleets.
     """
     import dataclasses
 
@@ -126,7 +126,8 @@ def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # ty
     if progress:
         typer.echo("writing summary, figures and report...", err=True)
     write_report(data, out)
-    write_findings(data, out)
+    if not data.spec.fleet:  # the paper's findings concern one robot's paths
+        write_findings(data, out)
     if ompl is not None:
         counts = _export(data, ompl)
         if progress:
@@ -169,7 +170,8 @@ def export_ompl(
         from client_sdk.study import write_findings
 
         write_report(data, study_dir)
-        write_findings(data, study_dir)
+        if not data.spec.fleet:
+            write_findings(data, study_dir)
     path = out or study_dir / "study.db"
     counts = _export(data, path)
     typer.echo(f"{path}: {counts['experiments']} experiments, {counts['plannerConfigs']} planner configurations, "

@@ -19,7 +19,7 @@ robots per problem: ``robots`` or ``circle`` plans) gets fleet tables
 """
 
 from ._collect import StudyJob, flat_metrics, plan_jobs, run_study
-from ._compare import COMPARED_METRICS, Comparison, Comparisons, compare
+from ._compare import COMPARED_METRICS, CONTROLLER_METRICS, Comparison, Comparisons, compare
 from ._replay import replay_animation
 from ._data import StudyData, load_study
 from ._figures import figure_metrics, figure_outcomes, figure_paths, figure_ratios, make_figures, save_figures
@@ -49,6 +49,7 @@ __all__ = sorted(
         "fleet_groups",
         "fleet_spec",
         "COMPARED_METRICS",
+        "CONTROLLER_METRICS",
         "Comparison",
         "Comparisons",
         "OutcomeSummary",
