@@ -88,7 +88,9 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
             msg = f"body is not valid JSON: {(first.get('ctx') or {}).get('error', 'decode error')}{at}"
             return JSONResponse(status_code=422, content={"detail": msg, "errors": _jsonable(errs)})
         where = _where(first.get("loc", ()))
-        msg = f"{where}: {first.get('msg', 'invalid input')}" if where else first.get("msg", "invalid input")
+        # a validator's ValueError comes as "Value error, <its message>", and that message names the field itself
+        text = str(first.get("msg", "invalid input")).removeprefix("Value error, ")
+        msg = f"{where}: {text}" if where and not text.startswith(where) else text
         return JSONResponse(status_code=422, content={"detail": msg, "errors": _jsonable(errs)})
 
     app.include_router(health.router)

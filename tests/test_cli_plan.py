@@ -90,3 +90,17 @@ def test_demo_plans_every_builtin_case(twb):
     rows = [line for line in out.stdout.splitlines() if line.startswith("│")]
     assert len(rows) == 2 * 2 * 4
     assert all(p in out.stdout for p in ("fmm", "fm2", "prm", "astar"))
+
+
+def test_the_help_names_every_built_in_environment_and_planner(twb):
+    """`twb plan --help` offers what the package ships (it once named two of four environments)."""
+    from planners.environment import builtin_names
+    from planners.registry import available_planners
+
+    out = twb("plan", "--help", env={"COLUMNS": "400"})
+    assert out.returncode == 0, out.stderr
+    text = " ".join(out.stdout.split())
+    for name in builtin_names():
+        assert name in text.split("Built-in environment name")[1].split("or a JSON file")[0], name
+    for name in available_planners():
+        assert name in text.split("--planner")[1].split("or a plug-in name")[0], name

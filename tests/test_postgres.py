@@ -189,3 +189,41 @@ def test_a_failed_bulk_write_is_sqlalchemys_error_on_each_database(run_store):
                 finally:
                     if sqlite:
                         s.execute(text("PRAGMA query_only = 0"))
+
+
+def test_a_tracker_batch_cut_off_mid_copy_is_one_clear_error(postgres, monkeypatch, caplog):
+    """The database drops the connection of a tracker batch's COPY (as when it goes away mid-run): the caller
+    gets the database's own reason as SQLAlchemy's error, the pool drops that connection rather than reset it
+    (the reset's traceback in the server's output, seen in CI), and the next batch goes in."""
+    import logging
+
+    import psycopg
+    from sqlalchemy import text
+    from sqlalchemy.exc import OperationalError
+
+    from server.core.db import make_engine, migrate
+    from server.store import poses
+
+    url = postgres.database()
+    engine = make_engine(url)
+    migrate(engine)
+    copy = poses._copy
+
+    def cut_first(pg, *args):
+        with psycopg.connect(url.replace("+psycopg", ""), autocommit=True) as admin:
+            admin.execute("SELECT pg_terminate_backend(%s)", (pg.info.backend_pid,))
+        monkeypatch.setattr(poses, "_copy", copy)
+        return copy(pg, *args)
+
+    monkeypatch.setattr(poses, "_copy", cut_first)
+    lock = threading.Lock()
+    try:
+        with caplog.at_level(logging.DEBUG, logger="sqlalchemy.pool"):
+            with pytest.raises(OperationalError, match="terminating connection"):
+                poses.insert_poses(engine, 7, np.zeros((50, 4)), lock=lock)
+            poses.insert_poses(engine, 7, np.ones((3, 4)), lock=lock)
+        assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
+        with engine.connect() as conn:
+            assert conn.execute(text("SELECT count(*) FROM poses WHERE run_id = 7")).scalar() == 3
+    finally:
+        engine.dispose()

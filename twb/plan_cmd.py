@@ -41,13 +41,14 @@ def _params(items: list[str], flag: str = "--param") -> dict:
 
 
 def plan(
-    env: Annotated[str, typer.Option("--env", help="Built-in environment name (room, blocks) or a JSON file.")],
+    env: Annotated[str, typer.Option("--env", help="Built-in environment name (room, blocks, crossing, swap) or a "
+                                                   "JSON file.")],
     start: Annotated[Optional[str], typer.Option(help="Start X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
     goal: Annotated[Optional[str], typer.Option(help="Goal X,Y[,A]: metres; A in radians or e.g. 90deg.")] = None,
     plan_name: Annotated[
         Optional[str], typer.Option("--plan", help="Use the environment's named start/goal plan (e.g. A).")
     ] = None,
-    planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar or a plug-in name.")] = "fmm",
+    planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar, st_astar or a plug-in name (twb planners).")] = "fmm",
     seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM).", min=0)] = 0,
     robot_radius: RobotRadiusOpt = None,
     planning_margin: PlanningMarginOpt = None,

@@ -16,7 +16,7 @@ def replay(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output animated GIF.")] = Path("run.gif"),
     fps: Annotated[int, typer.Option(help="Frames per second.", min=1, max=60)] = 15,
     speed: Annotated[float, typer.Option(help="Experiment seconds per second of animation.", min=0.01)] = 4.0,
-    max_frames: Annotated[int, typer.Option(help="At most this many frames (speed rises to fit).", min=2)] = 300,
+    max_frames: Annotated[int, typer.Option(help="At most this many frames over the run (speed rises to fit), then half a second holding the end.", min=2)] = 300,
     dpi: Annotated[int, typer.Option(help="Resolution of the frames.", min=20, max=300)] = 80,
     robot: Annotated[Optional[int], typer.Option("--robot", help="A multi-robot run: only this robot (default: every robot).", min=0)] = None,
     url: UrlOpt = None,

@@ -36,7 +36,8 @@ def replay_animation(env: dict[str, Any], poses: np.ndarray | Sequence[np.ndarra
         Frames per second of the animation.
     speed : float
         Experiment seconds per animation second (raised when the run would
-        need more than ``max_frames`` frames).
+        need more than ``max_frames`` frames; the last poses are then held for
+        half a second more, ``fps // 2`` frames, at least one).
     color : the robot's colour (one robot; several get a colour each)
     obstacle_t0 : float, s, optional
         The pose time at which the moving obstacles' clock is 0 (a run's ``t_start``: obstacles move

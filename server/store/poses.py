@@ -15,7 +15,7 @@ import threading
 from typing import Any, Optional, Sequence
 
 import numpy as np
-from sqlalchemy import Engine, select
+from sqlalchemy import Engine, PoolProxiedConnection, select
 from sqlalchemy.orm import Session
 
 from ..models import Pose
@@ -78,11 +78,21 @@ def insert_poses(engine: Engine, run_id: int, rows: np.ndarray, *, lock: threadi
                 with lock:
                     _executemany(conn, engine.dialect.paramstyle, run_id, rows)
             conn.commit()
-        except Exception:
-            conn.rollback()
+        except Exception as exc:
+            _roll_back_or_drop(conn, exc)
             raise
         finally:
             conn.close()
+
+
+def _roll_back_or_drop(conn: PoolProxiedConnection, exc: BaseException) -> None:
+    """Roll back a raw pooled connection after ``exc``; one that ``exc`` cut (the database went away mid-COPY)
+    is dropped from the pool instead: rolling it back, or the pool's reset on its return, only fails again
+    (and the pool logs that reset's traceback)."""
+    try:
+        conn.rollback()
+    except Exception:
+        conn.invalidate(exc)
 
 
 def add_poses(session: Session, run_id: int, rows: np.ndarray) -> None:
