@@ -7,7 +7,7 @@ caught anything; what the key also did, deleting a run's poses with the run, is 
 
 Revision ID: 0012
 Revises: 0011
-Create Date: 2026-11-25 00:00:00
+Create Date: 2026-11-24 00:00:00
 """
 from __future__ import annotations
 
