@@ -114,6 +114,40 @@ def test_fig8_draws_the_moving_obstacles_exact_tracks_over_each_panels_longest_r
     assert EXACT in {t.get_text() for t in fig.legends[0].get_texts()}
 
 
+def test_an_obstacle_robot_the_tracker_never_saw_keeps_its_place_and_radius(study_dir, tmp_path):
+    """obstacles/run-<id>.csv of a field run whose first and last obstacle robots the tracker never saw: read
+    back, every obstacle keeps its index and radius (they were dropped, or their radius was NaN), and the figure
+    draws the one it saw, labelled as tracked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from client_sdk import ObstacleTracks
+    from client_sdk.study._obstacle_paths import TRACKED, draw_obstacles
+
+    data = load_study(study_dir)
+    run_id = data.rows[0]["run_id"]
+    seen = np.array([[1.0, 0.4, 1.2, 0.0], [1.1, 0.5, 1.2, 0.0], [1.2, 0.6, 1.2, 0.0]])
+    data.add_obstacles(run_id, ObstacleTracks(run_id, False, [np.empty((0, 4)), seen, np.empty((0, 4))],
+                                              [0.04, 0.05, 0.06]))
+    data.save(tmp_path / "copy")
+    back = load_study(tmp_path / "copy").obstacles(run_id)
+    assert not back.exact and back.radii == [0.04, 0.05, 0.06]
+    assert [tr.shape for tr in back.tracks] == [(0, 4), (3, 4), (0, 4)] and np.array_equal(back.tracks[1], seen)
+
+    env = {"size": [1.8, 1.8], "blocks": [], "moving_obstacles": [
+        {"radius": 0.04, "waypoints": [[0.3, 0.3], [0.6, 0.3]], "speed": 0.1}] * 3}
+    fig, ax = plt.subplots()
+    try:
+        assert draw_obstacles(ax, env, 5.0, back) == TRACKED
+        assert [line.get_label() for line in ax.get_lines()] == [TRACKED]
+        assert [(tuple(p.center), p.radius) for p in ax.patches] == [((0.4, 1.2), 0.05)]
+    finally:
+        plt.close(fig)
+
+
 def test_figures_are_real_images_with_the_expected_panels(study_dir):
     for name in ("fig5_outcomes", "fig6_metrics", "fig7_ratios", "fig8_paths"):
         with Image.open(study_dir / f"{name}.png") as im:

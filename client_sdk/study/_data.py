@@ -192,8 +192,10 @@ def _obstacle_tracks(run_id: int, table: np.ndarray) -> ObstacleTracks:
     """An ``obstacles/run-<id>.csv`` table (``obstacle,t,x,y,theta,radius``) as the server's tracked obstacles."""
     index = table[:, 0].astype(int)
     rows = [table[index == k] for k in range(int(index.max()) + 1 if len(index) else 0)]
-    # an obstacle the tracker never saw has no row, so no radius either
-    return ObstacleTracks(run_id, False, [r[:, 1:5] for r in rows], [r[0, 5] if len(r) else math.nan for r in rows])
+    # an obstacle the tracker never saw is one row without a pose (write_obstacles); directories written
+    # before that have no row for it, so no radius either
+    return ObstacleTracks(run_id, False, [r[~np.isnan(r[:, 1]), 1:5] for r in rows],
+                          [r[0, 5] if len(r) else math.nan for r in rows])
 
 
 def write_poses(path: Path, poses: np.ndarray) -> None:
@@ -210,9 +212,13 @@ def write_poses(path: Path, poses: np.ndarray) -> None:
 def write_obstacles(path: Path, obstacles: ObstacleTracks) -> None:
     """A field run's tracked obstacle robots as a study's CSV (``path``'s folder created): header
     ``obstacle,t,x,y,theta,radius``, obstacle by obstacle, each pose ``t,x,y,theta`` (s, m, m, rad) with the
-    obstacle's index and radius (m)."""
-    parts = [np.column_stack([np.full(len(tr), k), np.asarray(tr, dtype=float).reshape(-1, 4), np.full(len(tr), r)])
-             for k, (tr, r) in enumerate(zip(obstacles.tracks, obstacles.radii))]
+    obstacle's index and radius (m); an obstacle the tracker never saw is one row of its index and radius
+    with ``nan`` for t, x, y and theta, so every obstacle keeps its index and its radius."""
+    parts = []
+    for k, (track, r) in enumerate(zip(obstacles.tracks, obstacles.radii)):
+        tr = np.asarray(track, dtype=float).reshape(-1, 4)
+        tr = tr if len(tr) else np.full((1, 4), np.nan)
+        parts.append(np.column_stack([np.full(len(tr), k), tr, np.full(len(tr), r)]))
     buf = io.StringIO()
     buf.write("obstacle,t,x,y,theta,radius\n")
     np.savetxt(buf, np.concatenate(parts) if parts else np.empty((0, 6)), delimiter=",",

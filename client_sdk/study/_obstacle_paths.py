@@ -70,10 +70,12 @@ def draw_obstacles(ax, env: dict[str, Any], t_end: float,  # type: ignore[no-unt
         paths, radii, what = obstacle_paths(env, np.linspace(0.0, max(t_end, 1.0), 200))
     else:
         paths, radii, what = obstacle_paths(env, None, tracked.tracks, tracked.radii)
-    for m, (path, radius) in enumerate(zip(paths, radii)):
-        if len(path):
-            ax.plot(path[:, 0], path[:, 1], **OBSTACLE_STYLE[what], label=what if m == 0 else None)
+    labelled = False
+    for path, radius in zip(paths, radii):
+        if len(path):  # a tracked obstacle the tracker never saw has no path
+            ax.plot(path[:, 0], path[:, 1], **OBSTACLE_STYLE[what], label=None if labelled else what)
             ax.add_patch(_disc(path[0], radius))
+            labelled = True
     return what
 
 
