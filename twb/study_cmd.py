@@ -126,8 +126,7 @@ def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # ty
     if progress:
         typer.echo("writing summary, figures and report...", err=True)
     write_report(data, out)
-    if not data.spec.fleet:  # the paper's findings concern one robot's paths
-        write_findings(data, out)
+    write_findings(data, out)  # none for a fleet: the paper's findings concern one robot's paths
     if ompl is not None:
         counts = _export(data, ompl)
         if progress:
@@ -170,8 +169,7 @@ def export_ompl(
         from client_sdk.study import write_findings
 
         write_report(data, study_dir)
-        if not data.spec.fleet:
-            write_findings(data, study_dir)
+        write_findings(data, study_dir)
     path = out or study_dir / "study.db"
     counts = _export(data, path)
     typer.echo(f"{path}: {counts['experiments']} experiments, {counts['plannerConfigs']} planner configurations, "

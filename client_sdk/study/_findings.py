@@ -263,8 +263,11 @@ def findings_json(findings: list[Finding]) -> dict[str, Any]:
 
 def write_findings(data: StudyData, directory: Optional[Path] = None) -> list[Finding]:
     """Check the findings on ``data``; write ``findings.md`` and ``findings.json`` into ``directory``
-    (default: the study's).  Returns the findings."""
+    (default: the study's), except for a fleet study (nine rows of n/a: the findings concern one robot).
+    Returns the findings."""
     found = paper_findings(data)
+    if data.spec.fleet:
+        return found
     d = Path(directory or data.directory or ".")
     d.mkdir(parents=True, exist_ok=True)
     (d / "findings.md").write_text(findings_markdown(found))
