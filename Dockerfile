@@ -9,6 +9,7 @@ RUN apt-get update \
  && rm -rf /var/lib/apt/lists/*
 WORKDIR /src
 COPY pyproject.toml README.md ./
+COPY contract contract
 COPY planners planners
 COPY robot_agent robot_agent
 COPY server server
@@ -20,7 +21,7 @@ FROM python:3.11-slim
 COPY --from=build /wheels /wheels
 RUN pip install --no-cache-dir --no-index --find-links /wheels teleworkbench && rm -rf /wheels
 # compile the simulation kernels into the image (numba's cache), not at every container start
-RUN python -c "from robot_agent.sim import warm_up; warm_up()"
+RUN python -c "from robot_agent.engine.sim import warm_up; warm_up()"
 WORKDIR /data
 EXPOSE 8000 5555
 ENTRYPOINT ["twb"]

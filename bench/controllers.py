@@ -1,6 +1,6 @@
 """Controller benchmark: simulation speed of one robot with each path-tracking controller.
 
-For every built-in controller (:mod:`robot_agent.controller_specs`) and both
+For every built-in controller (:mod:`contract.controller_specs`) and both
 emulated backends, one robot follows the long loop through the ``room``
 environment of ``bench/sim.py`` (blocks, collisions checked, tracker poses
 logged) in :meth:`SimCore.advance`, the compiled loop.  The controllers are
@@ -26,9 +26,9 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 
 from bench._common import interleaved, report  # noqa: E402
 from bench.sim import busy_core  # noqa: E402
-from robot_agent.controller_specs import BUILTINS, Param, register_controller, select  # noqa: E402
-from robot_agent.noise import path_key  # noqa: E402
-from robot_agent.sim import SimCore, State  # noqa: E402
+from contract.controller_specs import BUILTINS, Param, register_controller, select  # noqa: E402
+from robot_agent.engine.noise import path_key  # noqa: E402
+from robot_agent.engine.sim import SimCore, State  # noqa: E402
 
 TARGET = 10_000.0  #: realtime factor of one ideal robot, every built-in controller
 

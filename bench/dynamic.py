@@ -21,8 +21,8 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pla
 
 from bench._common import interleaved, report  # noqa: E402
 from planners import DEFAULT_PLANNING_MARGIN, load_environment, plan_path  # noqa: E402
-from robot_agent.headless import simulate_run  # noqa: E402
-from server.pipeline.compute import block_tuples, moving_tuples  # noqa: E402
+from robot_agent.engine.headless import simulate_run  # noqa: E402
+from robot_agent.engine.run_data import block_tuples, moving_tuples  # noqa: E402
 
 
 def main() -> None:

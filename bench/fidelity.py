@@ -3,7 +3,7 @@
 A study is run in this process exactly as the testbed runs it (the same planning
 call with the robot radius plus the planning margin, the same path on the wire,
 the same per-run seeds, the same metrics), without a server: the simulation core
-(:class:`robot_agent.sim.SimCore`) drives one robot per run.  The result is a
+(:class:`robot_agent.engine.sim.SimCore`) drives one robot per run.  The result is a
 :class:`client_sdk.study.StudyData`, so :func:`client_sdk.study.paper_findings`
 checks it as it checks a study the testbed ran (and the numbers are the same:
 ``twb study paper --embedded --seed S`` gives the same runs.csv values).
@@ -13,9 +13,8 @@ checks it as it checks a study the testbed ran (and the numbers are the same:
     python bench/fidelity.py paper --set field.tracker_latency_s=0   # with a profile change
     python bench/fidelity.py paper --main                  # the field robot as it was on e2c6fc3
     python bench/fidelity.py ablate --seeds 0-9            # one change at a time, driven and logged paths
-    python bench/fidelity.py figures --out docs/img        # the figures of docs/fidelity.md (a few minutes)
 
-Output is JSON on stdout (figures: PNG files).  Profile changes are
+Output is JSON on stdout.  The figures of docs/fidelity.md: ``python bench/fidelity_figures.py --out docs/img``.  Profile changes are
 ``section.key=value`` (a top-level key without a section: ``max_accel_m_s2=1``).
 """
 
@@ -28,7 +27,6 @@ import math
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any, Iterable, Optional
 
 if __package__ in (None, ""):  # run as a script: bench/ must not shadow the project's packages
@@ -38,17 +36,18 @@ import numpy as np  # noqa: E402
 
 from client_sdk.study import PlanSpec, StudyData, StudySpec, paper_findings, paper_spec  # noqa: E402
 from client_sdk.study._collect import flat_metrics  # noqa: E402
+from contract.frames import field_layout  # noqa: E402
+from contract.params import robot_params  # noqa: E402
+from contract.protocol import decode_path, encode_path  # noqa: E402
+from contract.robot_profile import load_profile  # noqa: E402
 from planners import PlanningError, distance_to_obstacles, load_environment, parse_environment, plan_path  # noqa: E402
 from planners.metrics import path_length, smoothness, turning_angles  # noqa: E402
-from robot_agent.backends import make_backend  # noqa: E402
-from robot_agent.frames import field_layout  # noqa: E402
-from robot_agent.noise import path_key  # noqa: E402
-from robot_agent.params import robot_params  # noqa: E402
-from robot_agent.protocol import decode_path, encode_path  # noqa: E402
-from robot_agent.robot_profile import load_profile  # noqa: E402
-from robot_agent.sim import SimCore, State  # noqa: E402
-from robot_agent.world import World  # noqa: E402
-from server.pipeline.compute import compare_runs, measure_run  # noqa: E402
+from robot_agent.engine.backends import make_backend  # noqa: E402
+from robot_agent.engine.noise import path_key  # noqa: E402
+from robot_agent.engine.sim import SimCore, State  # noqa: E402
+from robot_agent.engine.world import World  # noqa: E402
+from robot_agent.engine.jobs import measure_run  # noqa: E402
+from robot_agent.engine.run_data import compare_runs  # noqa: E402
 from server.store.experiments import run_seed  # noqa: E402
 
 ROBOT_RADIUS, PLANNING_MARGIN = 0.045, 0.02  # the testbed's defaults (server/core/settings.py)
@@ -414,20 +413,13 @@ def _overrides(items: Iterable[str]) -> dict[str, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("what", choices=["paper", "varied", "ablate", "figures"])
+    ap.add_argument("what", choices=["paper", "varied", "ablate"])
     ap.add_argument("--seeds", default="0-19")
     ap.add_argument("--set", action="append", default=[], help="profile change section.key=value")
     ap.add_argument("--main", action="store_true", help="the field robot as on e2c6fc3 (before this work)")
     ap.add_argument("--truth", action="store_true", help="also the true (driven) paths' ratios (slower)")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--out", type=Path, default=Path("docs/img"))
     a = ap.parse_args()
-    if a.what == "figures":
-        from bench.fidelity_figures import figures
-
-        for p in figures(a.out, a.workers):
-            print(p)
-        return
     if a.what == "ablate":
         print(json.dumps(ablate(_seeds(a.seeds), a.workers), indent=1))
         return

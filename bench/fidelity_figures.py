@@ -1,4 +1,4 @@
-"""The figures of docs/fidelity.md, one function each (``python bench/fidelity.py figures --out docs/img``).
+"""The figures of docs/fidelity.md, one function each (``python bench/fidelity_figures.py --out docs/img``).
 
 Every figure is drawn from runs made as :mod:`bench.fidelity` makes them (the
 testbed's planning call, wire path, seeds and metrics); lengths in metres on
@@ -7,26 +7,32 @@ the axes unless labelled, ratios performed / computed.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
+import os
+import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.patches import Rectangle
+if __package__ in (None, ""):  # run as a script: bench/ must not shadow the project's packages
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
 
 from bench.fidelity import (MAIN, PLANNERS, PLANNING_MARGIN, ROBOT_RADIUS, ablate, drive, profile_with, run_many,
-                            summarize, varied)
-from planners import load_environment, plan_path
-from planners.metrics import path_length, smoothness
-from robot_agent.backends import make_backend
-from robot_agent.noise import path_key
-from robot_agent.params import robot_params
-from robot_agent.protocol import decode_path, encode_path
-from server.store.experiments import run_seed
+                            summarize, varied)  # noqa: E402
+from contract.params import robot_params  # noqa: E402
+from contract.protocol import decode_path, encode_path  # noqa: E402
+from planners import load_environment, plan_path  # noqa: E402
+from planners.metrics import path_length, smoothness  # noqa: E402
+from robot_agent.engine.backends import make_backend  # noqa: E402
+from robot_agent.engine.noise import path_key  # noqa: E402
+from server.store.experiments import run_seed  # noqa: E402
 
 __all__ = ["ablation", "corners", "figures", "findings", "tracker", "varied_paths", "weave", "zigzag"]
 
@@ -247,3 +253,16 @@ def figures(out: Path, workers: int) -> list[Path]:
     """Every figure of docs/fidelity.md, as PNG files in ``out`` (a few minutes)."""
     out.mkdir(parents=True, exist_ok=True)
     return [weave(out), ablation(out, workers), corners(out), tracker(out), varied_paths(out), findings(out, workers)]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, default=Path("docs/img"))
+    ap.add_argument("--workers", type=int, default=2)
+    a = ap.parse_args()
+    for p in figures(a.out, a.workers):
+        print(p)
+
+
+if __name__ == "__main__":
+    main()

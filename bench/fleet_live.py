@@ -36,11 +36,10 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
 from bench._agent_proc import AgentProcess  # noqa: E402
-from bench._clients import (  # noqa: E402
-    Counts, Phases, ask_all, close_all, connect_all, cpu_window, live_arguments)
+from bench._clients import Counts, Phases, ask_all, close_all, connect_all, cpu_window, live_arguments  # noqa: E402
 from bench._common import interleaved, report  # noqa: E402
-from robot_agent.params import robot_params  # noqa: E402
-from robot_agent.protocol import MAX_MOVING, encode_moving  # noqa: E402
+from contract.params import robot_params  # noqa: E402
+from contract.protocol import MAX_MOVING, encode_moving  # noqa: E402
 
 FIELD_M = 3.6  #: the whole field (m), every robot's world
 CENTRE_M = (1.8, 1.8)  #: where the gripper puts every robot (m)
@@ -72,12 +71,12 @@ def step_costs(robots: int, counts: tuple[int, ...], steps: int = 50, runs: int 
     """The simulation's cost per control step (s) of ``robots`` field robots driving the square, each with
     ``n`` moving obstacles for every ``n`` in ``counts`` (set in the world directly: the protocol stops at
     8), one step per call as at time scale 1, tracker poses logged; interleaved, ``counts[0]`` the baseline."""
-    from robot_agent.backends import make_backend
-    from robot_agent.frames import field_layout
-    from robot_agent.noise import path_key
-    from robot_agent.params import robot_params
-    from robot_agent.sim import SimCore
-    from robot_agent.world import World
+    from contract.frames import field_layout
+    from contract.params import robot_params
+    from robot_agent.engine.backends import make_backend
+    from robot_agent.engine.noise import path_key
+    from robot_agent.engine.sim import SimCore
+    from robot_agent.engine.world import World
 
     p = robot_params()
     path = np.array(square_path(laps=8 + steps * (runs + 1) * len(counts) // 300))
@@ -103,7 +102,7 @@ def step_costs(robots: int, counts: tuple[int, ...], steps: int = 50, runs: int 
 
 async def _measure(host: AgentProcess, n_obstacles: int, seconds: float, rounds: int) -> Phases:
     """``rounds`` rounds of the three phases (see the module docstring); per phase, each round's window."""
-    from robot_agent.protocol import encode_path
+    from contract.protocol import encode_path
 
     counts = Counts()
     clients = await connect_all(host.ports, counts, (CENTRE_M[0] * 1000, CENTRE_M[1] * 1000, 0.0))

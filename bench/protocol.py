@@ -5,7 +5,7 @@ The legitimate line is the largest path a client may send: ``T,T,P`` with
 Baseline, measured in the same run on the same payload: the bare numpy
 conversion ``np.array(payload.replace(";", ",").split(","), dtype=float)``
 with no checks at all (what the agent did after its regular expression
-matched).  ``parse`` is :func:`robot_agent.protocol.parse_command` as the
+matched).  ``parse`` is :func:`contract.protocol.parse_command` as the
 agent calls it (with the RANGE checks of its 1.8 m area).
 
 Hostile lines (each refused with an ``ERR`` reply; the reply is reported):
@@ -34,7 +34,7 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 import numpy as np  # noqa: E402
 
 from bench._common import interleaved, report  # noqa: E402
-from robot_agent.protocol import (  # noqa: E402
+from contract.protocol import (  # noqa: E402
     MAX_LINE_BYTES,
     MAX_NUMBER_CHARS,
     MAX_POINTS,

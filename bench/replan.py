@@ -29,8 +29,8 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 
 from bench._common import interleaved, report  # noqa: E402
 from planners import DEFAULT_PLANNING_MARGIN, load_environment, plan_path  # noqa: E402
-from robot_agent.headless import simulate_run  # noqa: E402
-from server.pipeline.compute import block_tuples, moving_tuples  # noqa: E402
+from robot_agent.engine.headless import simulate_run  # noqa: E402
+from robot_agent.engine.run_data import block_tuples, moving_tuples  # noqa: E402
 
 RPP = "regulated_pure_pursuit"
 
@@ -62,8 +62,8 @@ def replans(seeds: int) -> dict:
 
 def fleet(seeds: int) -> dict:
     """Replanning times in the uncoordinated four-robot swap, found and not found."""
-    from robot_agent.controller_specs import select
-    from server.pipeline.compute import fleet_job
+    from contract.controller_specs import select
+    from robot_agent.engine.jobs import fleet_job
 
     env = load_environment("swap")
     robots = [{"start": list(p.start), "goal": list(p.goal)} for p in env.plans]

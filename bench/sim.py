@@ -36,16 +36,16 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 import numpy as np  # noqa: E402
 
 from bench._common import interleaved, report  # noqa: E402
+from contract.frames import field_layout  # noqa: E402
+from contract.params import robot_params  # noqa: E402
+from contract.protocol import encode_path  # noqa: E402
 from planners import load_environment  # noqa: E402
-from robot_agent.backends import make_backend  # noqa: E402
+from robot_agent.engine.backends import make_backend  # noqa: E402
+from robot_agent.engine.noise import path_key  # noqa: E402
+from robot_agent.engine.sim import SimCore, State  # noqa: E402
+from robot_agent.engine.world import World  # noqa: E402
 from robot_agent.host import AgentHost  # noqa: E402
-from robot_agent.noise import path_key  # noqa: E402
-from robot_agent.params import robot_params  # noqa: E402
-from robot_agent.protocol import encode_path  # noqa: E402
-from robot_agent.sim import SimCore, State  # noqa: E402
-from robot_agent.sinks import CsvTrackerSink  # noqa: E402
-from robot_agent.frames import field_layout  # noqa: E402
-from robot_agent.world import World  # noqa: E402
+from robot_agent.host.sinks import CsvTrackerSink  # noqa: E402
 
 CONFIGS = [(1, "ideal"), (1, "field"), (64, "field"), (1000, "ideal")]
 TARGETS = {"1 robot realtime_factor >= 5000": (1, "ideal", 5000.0), "1000 robots realtime_factor >= 20": (1000, "ideal", 20.0)}

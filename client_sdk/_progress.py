@@ -36,7 +36,7 @@ def format_seconds(seconds: float) -> str:
 def gripper_seconds_per_block(profile: str) -> Optional[float]:
     """Experiment seconds the gripper of robot profile ``profile`` takes per block, or None if unknown here."""
     try:
-        from robot_agent.robot_profile import load_profile
+        from contract.robot_profile import load_profile
 
         return float(load_profile(profile)["gripper"]["seconds_per_block"])
     except Exception:  # noqa: BLE001 - an unknown or unreadable profile means no estimate, nothing worse

@@ -4,7 +4,7 @@ This is the testbed's raw way, open to planners in any language: connect, read
 the ``HELLO`` greeting, authenticate with ``T,T,A,<secret>`` if the robot
 needs it, send the path in millimetres and degrees, read the ``OK``/``ERR``
 reply and, optionally, the events until ``EV,DONE`` or ``EV,FAIL``.  The wire
-codec is :mod:`robot_agent.protocol`, the one the agent itself uses.
+codec is :mod:`contract.protocol`, the one the agent itself uses.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from robot_agent.protocol import ProtocolError, check_secret, encode_path, parse_reply
+from contract.protocol import ProtocolError, check_secret, encode_path, parse_reply
 
 from ._exceptions import RobotError, TransportError
 

@@ -16,7 +16,7 @@ expanded once into waypoints (the same seed gives the same walk everywhere).
 
 :func:`positions` is the pure, vectorised position function: arrays of
 times in, centres out.  The agent's compiled collision check
-(:mod:`robot_agent.contact`) computes the same function per step.
+(:mod:`robot_agent.engine.contact`) computes the same function per step.
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .errors import InvalidEnvironment
-from .fields import check_keys, number as _num
+from .fields import check_keys
+from .fields import number as _num
 
 __all__ = ["MAX_MOVING_OBSTACLES", "MAX_OBSTACLE_RADIUS_M", "MAX_OBSTACLE_SPEED_M_S", "REPEAT_MODES",
            "MovingObstacle", "obstacle_at", "parse_moving_obstacles", "positions", "track_arrays"]

@@ -165,7 +165,7 @@ def fleet_waypoints(timed: TimedPath, goal_heading: float | None = None,
     the time it leaves the point, NaN elsewhere.
 
     Straight runs of lattice moves become one segment; a wait (a repeated point) becomes one waypoint the
-    robot holds at (:func:`robot_agent.fleet.simulate_fleet`)."""
+    robot holds at (:func:`robot_agent.engine.fleet.simulate_fleet`)."""
     wps, arrive, leave = timed_waypoints(timed, goal_heading, dense)
     depart = np.where(leave > arrive + 1e-9, leave, np.nan)
     depart[-1] = np.nan

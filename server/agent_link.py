@@ -16,7 +16,7 @@ import math
 import time
 from typing import Callable, Optional
 
-from robot_agent.protocol import MAX_LINE_BYTES, ProtocolError, Reply, parse_reply
+from contract.protocol import MAX_LINE_BYTES, ProtocolError, Reply, parse_reply
 
 from .errors import AgentRefused, AgentUnavailable, AgentUnreachable
 

@@ -25,9 +25,10 @@ from typing import Any, Iterable, Optional
 
 from sqlalchemy.exc import DBAPIError
 
+from robot_agent.engine import run_data
+
 from .field import FieldState
 from .models import Experiment, Run
-from .pipeline import compute
 from .pipeline.context import RunServices
 from .pipeline.runner import RunEnd, execute_run, failure_text, store_end
 from .scheduler import Assignment, Pending, Scheduler
@@ -45,7 +46,7 @@ def pending_of(run: Run, exp: Experiment, exclude: frozenset[str] = frozenset())
     if exp.planned_path:
         length = sum(math.dist(a[:2], b[:2]) for a, b in zip(exp.planned_path[:-1], exp.planned_path[1:]))
     return Pending(run.id, exp.id, run.mode, exp.field, exp.environment,
-                   compute.expected_duration_s(length, n_blocks), exclude)
+                   run_data.expected_duration_s(length, n_blocks), exclude)
 
 
 CANCELLED = "cancelled by its owner"

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 from sqlalchemy.exc import DBAPIError
 
-from robot_agent.frames import FIELD_SIZE, SUBFIELD_ORIGINS, SUBFIELD_SIZE
+from contract.frames import FIELD_SIZE, SUBFIELD_ORIGINS, SUBFIELD_SIZE
 
 from .field import FieldState
 from .schemas import RobotRegister

@@ -18,8 +18,8 @@ from typing import Any, Callable, Optional
 from sqlalchemy.exc import DBAPIError
 from sqlalchemy.orm import Session, sessionmaker
 
-from robot_agent.auth import control_key as derive_key
-from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
+from contract.auth import control_key as derive_key
+from contract.frames import FIELD_SIZE, SUBFIELD_SIZE
 
 from .broker import EventBroker
 from .core.security import Principal
@@ -104,7 +104,7 @@ class FieldState:
         process, with ``control_key``).  A robot registered before may be
         registered again only by the same token or an admin
         (:class:`~server.errors.Forbidden`); its control key derives from the
-        registering token (:mod:`robot_agent.auth`).
+        registering token (:mod:`contract.auth`).
         """
         rid = body.robot_id
         if by is not None and not by.is_admin and rid in self._tokens and self._tokens[rid] != by.token_id:

@@ -243,7 +243,7 @@ class Robot(Base):
     area: Mapped[list[Any]] = mapped_column(JSON)
     subfield: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
     #: the token that registered the robot: only it (or an admin) may register it again or post its poses;
-    #: the robot's control key derives from it (robot_agent.auth); none for robots in the server's process
+    #: the robot's control key derives from it (contract.auth); none for robots in the server's process
     token_id: Mapped[Optional[int]] = mapped_column(ForeignKey("tokens.id", ondelete="SET NULL", name="fk_robots_token_id"),
                                                     nullable=True)
     status: Mapped[str] = mapped_column(String(16), default=RobotStatus.IDLE)

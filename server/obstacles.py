@@ -8,8 +8,9 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session
 
+from robot_agent.engine.run_data import exact_obstacle_tracks
+
 from .models import Run
-from .pipeline.compute import exact_obstacle_tracks
 from .store.poses import obstacle_poses
 
 __all__ = ["EXACT_STEP_S", "run_obstacles"]

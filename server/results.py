@@ -7,9 +7,9 @@ from typing import Any, Sequence
 from sqlalchemy.orm import Session
 
 from planners.stats import aggregate, proportion
+from robot_agent.engine.run_data import compare_runs
 
 from .models import Experiment, Run
-from .pipeline.compute import compare_runs
 from .status import TERMINAL, RunStatus
 from .store.poses import run_poses
 

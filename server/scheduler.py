@@ -46,8 +46,8 @@ from itertools import count, islice, repeat
 from operator import attrgetter, itemgetter
 from typing import Callable, Optional, Union, overload
 
-from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
-from robot_agent.frames import SUBFIELD_ORIGINS as _ORIGINS
+from contract.frames import FIELD_SIZE, SUBFIELD_SIZE
+from contract.frames import SUBFIELD_ORIGINS as _ORIGINS
 
 from .status import SubfieldState
 

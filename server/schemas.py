@@ -14,7 +14,7 @@ from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
 
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from robot_agent.frames import MAX_ROBOTS  # robots a multi-robot job may have (issue 17)
+from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (issue 17)
 
 from .status import RunStatus
 
@@ -239,13 +239,13 @@ class ExperimentCreate(Strict):
         "real field (the ideal simulation is otherwise deterministic)."))
     profile_overrides: Optional[dict[str, Any]] = Field(default=None, description=(
         "Field parameters of the robot profile for this job's field runs, e.g. {\"tracker_noise_xy_m\": 0.003} "
-        "(SI units; names and physical ranges: robot_agent/overrides.py, docs/fidelity.md \"Noise studies\"): "
+        "(SI units; names and physical ranges: contract/overrides.py, docs/fidelity.md \"Noise studies\"): "
         "its field runs are the emulated field robot with these values."))
 
     @field_validator("profile_overrides")
     @classmethod
     def _overrides(cls, v: Optional[dict[str, Any]]) -> Optional[dict[str, float]]:
-        from robot_agent.overrides import check_overrides
+        from contract.overrides import check_overrides
 
         return check_overrides(v) or None if v is not None else None
 

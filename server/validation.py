@@ -15,11 +15,11 @@ from typing import Any, Optional
 
 import numpy as np
 
+from contract.controller_specs import ControllerError
+from contract.controller_specs import select as select_controller
+from contract.frames import FIELD_SIZE, MAX_ROBOTS_SUBFIELD, SUBFIELD_SIZE
 from planners import Environment, PlanningError, check_query, get_planner, parse_environment
 from planners.moving import obstacle_at
-from robot_agent.controller_specs import ControllerError
-from robot_agent.controller_specs import select as select_controller
-from robot_agent.frames import FIELD_SIZE, MAX_ROBOTS_SUBFIELD, SUBFIELD_SIZE
 
 from .errors import PreflightError
 from .schemas import FLEET_PLANNER, MAX_ROBOTS, ExperimentCreate

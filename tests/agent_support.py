@@ -14,8 +14,8 @@ from typing import AsyncIterator
 import numpy as np
 
 from robot_agent.host import AgentHost
-from robot_agent.protocol import format_hello, format_ok
-from robot_agent.sinks import MemoryTrackerSink
+from contract.protocol import format_hello, format_ok
+from robot_agent.host.sinks import MemoryTrackerSink
 
 READY_TIMEOUT_S = 5.0
 REPLY_TIMEOUT_S = 10.0

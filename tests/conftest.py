@@ -23,7 +23,7 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-    from robot_agent.sim import warm_up
+    from robot_agent.engine.sim import warm_up
 
     warm_up()
 

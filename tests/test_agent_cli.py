@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from robot_agent.protocol import encode_path, encode_place
+from contract.protocol import encode_path, encode_place
 
 TWB = Path(sys.executable).with_name("twb")
 START_TIMEOUT_S = 20.0

@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 
 import robot_agent
-from robot_agent import follower as fl
-from robot_agent.backends import Backend, make_backend
-from robot_agent.kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
-from robot_agent.noise import normals, path_key, uniforms
-from robot_agent.params import robot_params
-from robot_agent.robot_profile import load_profile, profile_names
-from robot_agent.sim import SimCore, State
-from robot_agent.frames import SUBFIELD_ORIGINS, field_layout
-from robot_agent.world import World
+from robot_agent.engine import follower as fl
+from robot_agent.engine.backends import Backend, make_backend
+from robot_agent.engine.kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
+from robot_agent.engine.noise import normals, path_key, uniforms
+from contract.params import robot_params
+from contract.robot_profile import load_profile, profile_names
+from robot_agent.engine.sim import SimCore, State
+from contract.frames import SUBFIELD_ORIGINS, field_layout
+from robot_agent.engine.world import World
 
 P = robot_params("bebot")
 C = P.controller
@@ -297,14 +297,14 @@ def test_kernel_cache_follows_every_kernel_source(tmp_path):
     shutil.copytree(Path(robot_agent.__file__).parent, pkg, ignore=shutil.ignore_patterns("__pycache__"))
 
     def where() -> str:
-        code = "from robot_agent.compiled import cache_dir; print(cache_dir())"
+        code = "from robot_agent.engine.compiled import cache_dir; print(cache_dir())"
         env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
         return subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True,
                               text=True, check=True).stdout.strip()
 
     first = where()
-    assert first.startswith(str(pkg / "__pycache__" / "kernels")) and where() == first
-    with open(pkg / "follower.py", "a") as f:
+    assert first.startswith(str(pkg / "engine" / "__pycache__" / "kernels")) and where() == first
+    with open(pkg / "engine" / "follower.py", "a") as f:
         f.write("\n# changed\n")
     second = where()
     assert second != first and Path(second).parent == Path(first).parent

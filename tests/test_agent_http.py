@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from agent_support import LineClient, running_agents
 
-from robot_agent.protocol import encode_path, encode_place
-from robot_agent.server_link import ServerLink
+from contract.protocol import encode_path, encode_place
+from robot_agent.host.server_link import ServerLink
 
 TOKEN = "s3cret-token"
 
@@ -82,7 +82,7 @@ async def test_registration_and_tracker_batches_reach_the_server():
 
 
 async def test_server_errors_are_retried_and_refusals_dropped(caplog):
-    caplog.set_level(logging.WARNING, "robot_agent.server_link")
+    caplog.set_level(logging.WARNING, "robot_agent.host.server_link")
     with Recorder(statuses=[503, 500, 202, 401]) as server:
         link = ServerLink(server.url, TOKEN, retry_initial_s=0.01)
         link.register({"robot_id": "r"})
@@ -96,7 +96,7 @@ async def test_server_errors_are_retried_and_refusals_dropped(caplog):
 
 
 async def test_unreachable_server_never_crashes_the_agent(caplog):
-    caplog.set_level(logging.WARNING, "robot_agent.server_link")
+    caplog.set_level(logging.WARNING, "robot_agent.host.server_link")
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         dead = f"http://127.0.0.1:{s.getsockname()[1]}"

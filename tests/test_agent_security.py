@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from agent_support import OK_I, OK_S, LineClient, running_agents
 
-from robot_agent.auth import control_key, token_hash
+from contract.auth import control_key, token_hash
 from robot_agent.host import AgentHost
-from robot_agent.protocol import ErrorCode, encode_path, encode_place, format_error, format_ok, parse_reply
+from contract.protocol import ErrorCode, encode_path, encode_place, format_error, format_ok, parse_reply
 
 LIVENESS_S = 5.0  # generous: these tests check that answers come, never how fast
 KEY = "control-key-0123456789"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from agent_support import OK_I, OK_S, LineClient, running_agents
 
-from robot_agent.protocol import MAX_LINE_BYTES, MAX_POINTS, ErrorCode, encode_build, encode_path, encode_place, format_ok, parse_reply
+from contract.protocol import MAX_LINE_BYTES, MAX_POINTS, ErrorCode, encode_build, encode_path, encode_place, format_ok, parse_reply
 
 SQUARE = np.array([[0.3, 0.3, 0.0], [0.8, 0.3, 0.0], [0.8, 0.8, math.pi / 2]])
 

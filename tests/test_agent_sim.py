@@ -10,9 +10,9 @@ from agent_support import CORNERS, OK_I, LineClient, densify, running_agents
 
 from planners.metrics import deviation, path_length
 from robot_agent.host import AgentHost
-from robot_agent.protocol import ErrorCode, encode_build, encode_path, encode_place, format_ok, parse_reply
-from robot_agent.robot_profile import load_profile
-from robot_agent.sinks import MemoryTrackerSink
+from contract.protocol import ErrorCode, encode_build, encode_path, encode_place, format_ok, parse_reply
+from contract.robot_profile import load_profile
+from robot_agent.host.sinks import MemoryTrackerSink
 
 SEEDS = list(range(6))
 PATH = densify(CORNERS)

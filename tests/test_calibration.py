@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from robot_agent.calibration import FITTED, RecordedRun, calibrate
-from robot_agent.headless import simulate_run
-from robot_agent.overrides import apply_overrides
-from robot_agent.params import robot_params
-from robot_agent.robot_profile import load_profile
+from robot_agent.engine.calibration import FITTED, RecordedRun, calibrate
+from robot_agent.engine.headless import simulate_run
+from contract.overrides import apply_overrides
+from contract.params import robot_params
+from contract.robot_profile import load_profile
 from sdk_helpers import invoke
 
 #: the profile the runs are emulated with: every fitted value away from the shipped one (the fit's start)

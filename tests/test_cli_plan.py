@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from robot_agent.protocol import decode_path
+from contract.protocol import decode_path
 
 
 def test_json_output_matches_the_contract(twb):

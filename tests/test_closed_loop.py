@@ -8,7 +8,7 @@ import math
 import pytest
 from agent_support import OK_I, LineClient, running_agents
 
-from robot_agent.protocol import ProtocolError, VelocityCommand, encode_path, encode_place, parse_command
+from contract.protocol import ProtocolError, VelocityCommand, encode_path, encode_place, parse_command
 
 GOAL = (0.9, 0.6)  # m, the robot's frame
 

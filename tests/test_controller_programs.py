@@ -180,7 +180,7 @@ def test_a_programs_field_run_is_seeded_and_stores_its_obstacle_robots(client):
     equal to the replay of its seed bit for bit, and the log does not claim they could not be replayed."""
     import numpy as np
 
-    from server.pipeline import compute
+    from robot_agent.engine import jobs
 
     assert client.post("/api/v1/environments", json=MOVERS).status_code == 201
     python = upload(client, "p_controller.py", (EXAMPLES / "p_controller.py").read_text())
@@ -193,7 +193,7 @@ def test_a_programs_field_run_is_seeded_and_stores_its_obstacle_robots(client):
     assert "cannot be replayed" not in log(client, run["id"])
     got = client.get(f"/api/v1/runs/{run['id']}/obstacles").json()
     assert got["exact"] is False and [o["index"] for o in got["obstacles"]] == [0, 1], got
-    replay = compute.field_obstacle_tracks(MOVERS, run["seed"], "BeBot", run["t_start"], run["t_end"])
+    replay = jobs.field_obstacle_tracks(MOVERS, run["seed"], "BeBot", run["t_start"], run["t_end"])
     for o, tr in zip(got["obstacles"], replay):
         assert o["count"] > 50 and np.array_equal(np.array(o["poses"]), tr), o["index"]
     assert run["metrics"]["obstacle_distance_min_m"] > 0.3

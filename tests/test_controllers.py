@@ -11,12 +11,12 @@ import pytest
 from agent_support import LineClient, densify, running_agents
 
 from planners import load_environment, plan_path
-from robot_agent.controller_specs import BUILTINS, ControllerError, Param, register_controller, select
-from robot_agent.frames import FIELD_SIZE
-from robot_agent.headless import simulate_run
-from robot_agent.protocol import ControllerCommand, ErrorCode, ProtocolError, encode_controller, encode_path, \
+from contract.controller_specs import BUILTINS, ControllerError, Param, register_controller, select
+from contract.frames import FIELD_SIZE
+from robot_agent.engine.headless import simulate_run
+from contract.protocol import ControllerCommand, ErrorCode, ProtocolError, encode_controller, encode_path, \
     encode_place, parse_command
-from server.pipeline.compute import block_tuples
+from robot_agent.engine.run_data import block_tuples
 
 CONTROLLERS = list(BUILTINS)
 #: the schema's runs before controllers existed (commit c19afc0): FMM path, seed 5; poses' sha256, count, end
@@ -129,7 +129,7 @@ def test_regulated_pure_pursuit_slows_near_moving_obstacles_and_other_robots():
     assert near.outcome == blind.outcome == "DONE"
     assert slowest_beside(near) < 0.7 * slowest_beside(blind) and near.t_end > blind.t_end
 
-    from robot_agent.fleet import simulate_fleet
+    from robot_agent.engine.fleet import simulate_fleet
 
     bystander = np.array([[0.9, 1.0, 0.0], [0.9, 1.0, 0.0]])  # stands 0.1 m off the path (2 cm between edges)
     runs = [simulate_fleet([path, bystander], [(0.3, 0.9, 0.0), (0.9, 1.0, 0.0)], seed=1, area=(1.8, 1.8),

@@ -1,5 +1,5 @@
 """Moving obstacles end to end: the built-in `crossing` scenario, the space-time planner and exact replay
-(issue 17).  Runs are the agent's simulation core stepped headless (robot_agent.headless), which the
+(issue 17).  Runs are the agent's simulation core stepped headless (robot_agent.engine.headless), which the
 pipeline tests show equal to the same run over TCP."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import pytest
 from planners import DEFAULT_PLANNING_MARGIN, load_environment, parse_environment, plan_path
 from planners.metrics import obstacle_gaps
 from planners.moving import positions
-from robot_agent.headless import simulate_run
-from server.pipeline.compute import block_tuples, moving_tuples
+from robot_agent.engine.headless import simulate_run
+from robot_agent.engine.run_data import block_tuples, moving_tuples
 
 CROSSING = load_environment("crossing")
 

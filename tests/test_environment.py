@@ -88,7 +88,7 @@ def test_environment_files_and_robots_agree_on_which_blocks_fit():
     """A block the environment model accepts is one the robots build, and the other way round."""
     import random
 
-    from robot_agent.protocol import ProtocolError, encode_build, parse_command
+    from contract.protocol import ProtocolError, encode_build, parse_command
     from planners import InvalidEnvironment, parse_environment
 
     rng = random.Random(5)

@@ -16,15 +16,15 @@ from agent_support import CORNERS, densify
 
 from client_sdk.study import FINDINGS, StudyData, StudySpec, findings_markdown, paper_findings, write_findings
 from planners.metrics import path_length, smoothness
-from robot_agent.backends import FieldBackend, make_backend
-from robot_agent.frames import field_layout
-from robot_agent.kinematics import tracks_to_body, unicycle_step
-from robot_agent.noise import path_key
-from robot_agent.params import robot_params
-from robot_agent.physics import tracker_bias
-from robot_agent.robot_profile import load_profile
-from robot_agent.sim import SimCore, State
-from robot_agent.world import World
+from robot_agent.engine.backends import FieldBackend, make_backend
+from contract.frames import field_layout
+from robot_agent.engine.kinematics import tracks_to_body, unicycle_step
+from robot_agent.engine.noise import path_key
+from contract.params import robot_params
+from robot_agent.engine.physics import tracker_bias
+from contract.robot_profile import load_profile
+from robot_agent.engine.sim import SimCore, State
+from robot_agent.engine.world import World
 
 P = robot_params()
 ROOT = Path(__file__).resolve().parent.parent

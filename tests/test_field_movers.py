@@ -12,10 +12,10 @@ import pytest
 from sqlalchemy import select
 
 from planners.moving import MovingObstacle, positions
-from robot_agent.fleet import simulate_fleet
-from robot_agent.headless import simulate_run
-from robot_agent.movers import mover_tracks
-from robot_agent.params import robot_params
+from robot_agent.engine.fleet import simulate_fleet
+from robot_agent.engine.headless import simulate_run
+from robot_agent.engine.movers import mover_tracks
+from contract.params import robot_params
 from server.models import Experiment, Message, Run
 from server.schemas import ExperimentCreate
 from server.validation import PreflightError, preflight

@@ -1,4 +1,4 @@
-"""Several robots in one world on one clock (robot_agent.fleet): they collide with each other, and prioritized
+"""Several robots in one world on one clock (robot_agent.engine.fleet): they collide with each other, and prioritized
 plans with their holds keep them apart."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import pytest
 
 from planners import parse_environment
 from planners.prioritized import fleet_waypoints, plan_prioritized
-from robot_agent.fleet import MAX_FLEET, simulate_fleet
-from robot_agent.headless import PlacementRefused
-from robot_agent.params import robot_params
+from robot_agent.engine.fleet import MAX_FLEET, simulate_fleet
+from robot_agent.engine.headless import PlacementRefused
+from contract.params import robot_params
 
 RADIUS = robot_params().collision_radius_m
 SUB = (1.8, 1.8)
@@ -169,7 +169,7 @@ from pathlib import Path  # noqa: E402
 
 from planners import load_environment  # noqa: E402
 from server.errors import PreflightError  # noqa: E402
-from server.pipeline import compute  # noqa: E402
+from robot_agent.engine import jobs  # noqa: E402
 from server.validation import preflight_fleet  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "fleet"
@@ -180,7 +180,7 @@ def test_the_swap_job_as_one_task_uncoordinated_collides_prioritized_completes()
     out = {}
     for name in ("uncoordinated", "prioritized"):
         job = json.loads((EXAMPLES / f"swap-{name}.json").read_text())
-        out[name] = compute.fleet_job(env, job["robots"], job["planner"], {}, job["seed"], 120.0, 0.045)
+        out[name] = jobs.fleet_job(env, job["robots"], job["planner"], {}, job["seed"], 120.0, 0.045)
     bad, good = out["uncoordinated"], out["prioritized"]
     assert [r["outcome"] for r in bad["robots"]] == ["COLLISION"] * 4 and bad["metrics"]["collisions_robot"] == 4
     assert [r["outcome"] for r in good["robots"]] == ["DONE"] * 4
@@ -194,7 +194,7 @@ def test_the_swap_job_as_one_task_uncoordinated_collides_prioritized_completes()
 def test_fleet_task_planning_errors_name_the_robot():
     env = json.loads((Path(__file__).resolve().parents[1] / "planners" / "data" / "room.json").read_text())
     robots = [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 0.3], "goal": [0.9, 0.9]}]
-    assert compute.fleet_job(env, robots, "fmm", {}, 1, 60.0, 0.045)["planning_error"].startswith("robot 1:")
+    assert jobs.fleet_job(env, robots, "fmm", {}, 1, 60.0, 0.045)["planning_error"].startswith("robot 1:")
 
 
 def test_fleet_preflight_names_the_field():
@@ -218,14 +218,14 @@ def test_an_uncoordinated_fleet_that_replans_swaps_some_corners_and_counts_the_r
     """Replanning robots (regulated pure pursuit, ``replan`` = 1) of the uncoordinated swap avoid each other
     where they stand: without it all four collide in the middle, with it some arrive; the replans are
     counted per robot and in all, and the same seed replays them."""
-    from robot_agent.controller_specs import select
+    from contract.controller_specs import select
 
     env = json.loads((Path(__file__).resolve().parents[1] / "planners" / "data" / "swap.json").read_text())
     job = json.loads((EXAMPLES / "swap-uncoordinated.json").read_text())
     runs = {}
     for on in (0, 1, 1):
         params = select("regulated_pure_pursuit", {"replan": on}).params
-        runs.setdefault(on, []).append(compute.fleet_job(env, job["robots"], job["planner"], {}, job["seed"], 120.0,
+        runs.setdefault(on, []).append(jobs.fleet_job(env, job["robots"], job["planner"], {}, job["seed"], 120.0,
                                                          0.045, controller="regulated_pure_pursuit",
                                                          controller_params=params))
     off, on, again = runs[0][0], runs[1][0], runs[1][1]

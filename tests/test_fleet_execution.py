@@ -1,4 +1,4 @@
-"""Executing a prioritized plan by its order of passage (planners.dependencies, robot_agent.fleet): the
+"""Executing a prioritized plan by its order of passage (planners.dependencies, robot_agent.engine.fleet): the
 precedences of a hand-made crossing, and fleets that collide when driven by the clock but not by dependencies."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from client_sdk.study._fleet import circle_robots
 from planners import parse_environment
 from planners.dependencies import NONE, fleet_dependencies
 from planners.prioritized import plan_prioritized, timed_waypoints
-from robot_agent.fleet import simulate_fleet
-from server.pipeline.compute import fleet_job
+from robot_agent.engine.fleet import simulate_fleet
+from robot_agent.engine.jobs import fleet_job
 
 SWAP = {"name": "swap", "size": [1.8, 1.8]}
 DOOR = {"name": "door", "size": [1.8, 1.0], "blocks": [

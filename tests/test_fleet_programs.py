@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from client_sdk import Client
-from robot_agent.params import robot_params
+from contract.params import robot_params
 from server.sandbox.outcome import explain_fleet, robots_phrase
 from servers import serve, wait_for
 

@@ -16,9 +16,9 @@ import pytest
 
 from client_sdk import Client
 from client_sdk.study import StudySpec, check_study
-from robot_agent.params import robot_params
+from contract.params import robot_params
 from server.core.settings import Settings
-from server.pipeline import compute
+from robot_agent.engine import jobs
 from server.pipeline.fleet import fleet_failure, fleet_timeout_s
 from servers import serve, submit_watched, wait_for
 
@@ -83,18 +83,18 @@ def test_the_prioritized_swap_completes_with_the_robots_apart_and_poses_per_robo
 
 
 def direct(client, exp: dict, run: dict) -> dict:
-    """compute.fleet_job called here with the run's arguments."""
+    """jobs.fleet_job called here with the run's arguments."""
     env = client.get("/api/v1/environments/swap").json()
     platform = next(r["platform"] for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])
     timeout_s = fleet_timeout_s(SimpleNamespace(settings=Settings()), exp["robots"])
-    return compute.fleet_job({k: env[k] for k in ("name", "size", "blocks", "plans", "description")}, exp["robots"],
+    return jobs.fleet_job({k: env[k] for k in ("name", "size", "blocks", "plans", "description")}, exp["robots"],
                              exp["planner"], exp["planner_params"], run["seed"], timeout_s,
                              exp["robot_radius"] + exp["planning_margin"], "ideal", exp["controller"],
                              exp["controller_params"], platform or "BeBot", None, exp["seed"])
 
 
 def test_the_same_seed_gives_the_same_poses_as_the_task_run_directly(client, prioritized):
-    """compute.fleet_job called here with the run's arguments: the server's stored poses, bit for bit."""
+    """jobs.fleet_job called here with the run's arguments: the server's stored poses, bit for bit."""
     exp, run = prioritized
     assert exp["planner_params"]["execution"] == "dependencies"  # the default, shown
     out = direct(client, exp, run)

@@ -1,4 +1,4 @@
-"""A run as a function call (robot_agent.headless) equals the same run sent to an agent over TCP."""
+"""A run as a function call (robot_agent.engine.headless) equals the same run sent to an agent over TCP."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from agent_support import LineClient, densify, CORNERS, running_agents
 
-from robot_agent.frames import FIELD_SIZE
-from robot_agent.headless import PlacementRefused, simulate_run
-from robot_agent.protocol import encode_build, encode_moving, encode_path, encode_place, format_event
+from contract.frames import FIELD_SIZE
+from robot_agent.engine.headless import PlacementRefused, simulate_run
+from contract.protocol import encode_build, encode_moving, encode_path, encode_place, format_event
 
 BLOCKS = [(0.9, 0.55, 0.3, 0.1, 0.2)]
 #: a disc crossing the first leg of CORNERS (0.3, 0.3) -> (1.5, 0.3) when the robot gets there: it is hit
@@ -71,9 +71,9 @@ def test_a_moving_obstacle_is_hit_where_it_is_at_that_time_and_named():
 
 def test_the_compiled_obstacle_track_is_the_planners_position_function():
     from planners.moving import MovingObstacle
-    from robot_agent.frames import field_layout
-    from robot_agent.world import World
-    from robot_agent.contact import obstacle_position
+    from contract.frames import field_layout
+    from robot_agent.engine.world import World
+    from robot_agent.engine.contact import obstacle_position
 
     obs = [MovingObstacle(0.03, ((0.2, 0.2), (0.6, 0.2), (0.6, 0.7)), 0.07, mode, 0.5)
            for mode in ("once", "loop", "pingpong")]

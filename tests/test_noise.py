@@ -9,8 +9,8 @@ import json
 import pytest
 
 from client_sdk.study import StudySpecError, load_spec, noise_spec
-from robot_agent.overrides import OverrideError, apply_overrides, check_overrides
-from robot_agent.robot_profile import load_profile
+from contract.overrides import OverrideError, apply_overrides, check_overrides
+from contract.robot_profile import load_profile
 from servers import Process, wait_for
 from sdk_helpers import invoke
 

@@ -20,12 +20,12 @@ from client_sdk import Client, NotFound
 from client_sdk.study import replay_animation
 from planners import parse_environment
 from planners.moving import positions
-from robot_agent.movers import mover_tracks
-from robot_agent.params import robot_params
-from robot_agent.protocol import MovingCommand, encode_moving, parse_command
+from robot_agent.engine.movers import mover_tracks
+from contract.params import robot_params
+from contract.protocol import MovingCommand, encode_moving, parse_command
 from server.core.settings import Settings
 from server.models import Experiment, Pose, Run
-from server.pipeline import compute
+from robot_agent.engine import jobs, run_data
 from server.pipeline.fleet import fleet_timeout_s
 from server.scheduler import Assignment
 from server.status import RunStatus
@@ -106,7 +106,7 @@ async def test_a_field_run_stores_its_obstacle_robots_with_its_end_and_nothing_e
                 found[kind] = SimpleNamespace(run=run, tracks=obstacle_poses(s, run_id), own=run_poses(s, run_id),
                                               rows=rows)
     agent, task = found["agent"], found["task"]
-    replay = compute.field_obstacle_tracks(SIDE, agent.run.seed, "BeBot", agent.run.t_start, agent.run.t_end)
+    replay = jobs.field_obstacle_tracks(SIDE, agent.run.seed, "BeBot", agent.run.t_start, agent.run.t_end)
     assert sorted(agent.tracks) == [0, 1]
     for k, tr in enumerate(replay):
         assert np.array_equal(np.array(agent.tracks[k]), tr), k  # what the metrics measured against
@@ -118,7 +118,7 @@ async def test_a_field_run_stores_its_obstacle_robots_with_its_end_and_nothing_e
         assert len(got.own) == got.rows - sum(len(tr) for tr in got.tracks.values()) > 100
         assert not {tuple(p) for p in got.own} & {tuple(p) for tr in got.tracks.values() for p in tr}
         # what is stored gives the run's obstacle metrics again
-        again = compute.measure_run(SIDE, STRAIGHT, got.own, got.run.t_start, got.run.t_end, [1.5, 0.3, 0.0], 0.045,
+        again = jobs.measure_run(SIDE, STRAIGHT, got.own, got.run.t_start, got.run.t_end, [1.5, 0.3, 0.0], 0.045,
                                     None, [got.tracks[k] for k in (0, 1)])
         for k in ("obstacle_distance_min_m", "obstacle_time_within_s", "length_m"):
             assert again[k] == got.run.metrics[k], k
@@ -158,7 +158,7 @@ def test_obstacle_rows_go_in_by_each_databases_bulk_path_and_stay_apart(run_stor
 
 
 def test_the_exact_tracks_are_the_formulas_with_the_heading_they_move_in():
-    tracks = compute.exact_obstacle_tracks(SIDE, 5.0, 25.0, 5.0, 0.05)
+    tracks = run_data.exact_obstacle_tracks(SIDE, 5.0, 25.0, 5.0, 0.05)
     want = positions(parse_environment(SIDE).moving_obstacles, tracks[0][:, 0] - 5.0)
     assert len(tracks) == 2 and tracks[0][0, 0] == 5.0 and tracks[0][-1, 0] == 25.0
     for k, tr in enumerate(tracks):
@@ -167,7 +167,7 @@ def test_the_exact_tracks_are_the_formulas_with_the_heading_they_move_in():
     assert np.allclose(a[tracks[0][:, 0] < 8.9], 0.0) and np.allclose(a[(tracks[0][:, 0] > 9.1) & (tracks[0][:, 0] < 14)], math.pi / 2)
     b = tracks[1][:, 3]
     assert np.allclose(b, -math.pi / 2)  # standing until its delay ends: already facing its way
-    assert compute.exact_obstacle_tracks({**SIDE, "moving_obstacles": []}, 0.0, 1.0, 0.0) == []
+    assert run_data.exact_obstacle_tracks({**SIDE, "moving_obstacles": []}, 0.0, 1.0, 0.0) == []
 
 
 # --------------------------------------------------------------------------- a real `twb up`
@@ -221,7 +221,7 @@ def test_the_rest_api_serves_the_stored_obstacle_robots_and_the_exact_tracks(tes
     csv = client.get(f"/api/v1/runs/{field['id']}/poses", params={"format": "csv"}).text
     assert len(csv.splitlines()) == own + 1
     # the direct comparison is of the two robots' own poses
-    from server.pipeline.compute import compare_runs
+    from robot_agent.engine.run_data import compare_runs
 
     direct = client.get(f"/api/v1/experiments/{single['id']}/metrics").json()["direct"][0]
     sim_poses = client.get(f"/api/v1/runs/{sim['id']}/poses").json()["poses"]
@@ -275,7 +275,7 @@ def test_a_field_fleet_stores_the_obstacle_robots_it_drove(testbed, client):
     assert 0.005 < off.mean() < 0.03 and off.max() < 0.05
     env = client.get("/api/v1/environments/side-movers").json()
     platform = next(r["platform"] for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == field["robot_id"])
-    out = compute.fleet_job({k: env[k] for k in ("name", "size", "blocks", "moving_obstacles")}, exp["robots"],
+    out = jobs.fleet_job({k: env[k] for k in ("name", "size", "blocks", "moving_obstacles")}, exp["robots"],
                             exp["planner"], exp["planner_params"], field["seed"],
                             fleet_timeout_s(SimpleNamespace(settings=Settings()), exp["robots"]),
                             exp["robot_radius"] + exp["planning_margin"], "field", exp["controller"],

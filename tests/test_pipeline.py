@@ -26,7 +26,7 @@ from server.testbed import Testbed
 from server.validation import Preflight
 
 from planners import parse_environment
-from robot_agent.controller_specs import select as select_controller
+from contract.controller_specs import select as select_controller
 
 ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
 
@@ -176,9 +176,9 @@ async def test_the_run_timeout_counts_the_robots_time_not_the_testbeds(tmp_path)
 
 
 async def test_a_robot_whose_own_time_runs_out_is_stopped_and_the_run_fails(tmp_path, monkeypatch):
-    from server.pipeline import compute
+    from robot_agent.engine import run_data
 
-    monkeypatch.setattr(compute, "expected_duration_s", lambda *a, **k: 0.5)  # the run's budget: 1 s of its time
+    monkeypatch.setattr(run_data, "expected_duration_s", lambda *a, **k: 0.5)  # the run's budget: 1 s of its time
     async with running(tmp_path, time_scale=5.0, run_slack_s=0.3, run_timeout_min_s=1.0) as tb:
         _, run_id = add_experiment(tb, mode="sim")
         end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
@@ -189,7 +189,7 @@ async def test_a_robot_whose_own_time_runs_out_is_stopped_and_the_run_fails(tmp_
 
 
 async def test_start_pose_jitter_is_seeded_and_small(tmp_path):
-    from server.pipeline.compute import jittered
+    from robot_agent.engine.run_data import jittered
     from server.store.poses import run_poses
 
     jitter = {"xy_m": 0.01, "theta_rad": 0.05}

@@ -184,14 +184,14 @@ def test_goal_heading_is_optional():
 
 
 def test_default_radius_matches_the_bebot_profile():
-    from robot_agent.robot_profile import load_profile
+    from contract.robot_profile import load_profile
 
     assert load_profile("bebot")["radius_m"] == DEFAULT_ROBOT_RADIUS
 
 
 def test_an_environment_takes_as_many_moving_obstacles_as_a_robot_does():
     from planners.moving import MAX_MOVING_OBSTACLES
-    from robot_agent.protocol import MAX_MOVING
+    from contract.protocol import MAX_MOVING
 
     assert MAX_MOVING_OBSTACLES == MAX_MOVING  # planners import nothing from robot_agent: the value is repeated
 

@@ -11,7 +11,7 @@ import pytest
 
 from planners import PlanningError, UnknownPlanner, available_planners, get_planner, plan_path, register_planner
 from planners import registry
-from robot_agent import controller_specs
+from contract import controller_specs
 
 PLUGIN = textwrap.dedent(
     '''
@@ -43,7 +43,7 @@ PLUGIN = textwrap.dedent(
         description = "creeps along"
 
         def __init__(self):
-            from robot_agent.controller_specs import Param
+            from contract.controller_specs import Param
 
             self.params = (Param("speed_m_s", "m/s", 0.08, 0.01, 0.2),)
 
@@ -81,7 +81,7 @@ def plugin_dist(tmp_path, monkeypatch):
 
 
 def test_entry_point_controller_runs_in_python_like_a_builtin(plugin_dist):
-    from robot_agent.headless import simulate_run
+    from robot_agent.engine.headless import simulate_run
 
     assert "creep" in controller_specs.available_controllers()
     spec = controller_specs.select("creep").spec

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from planners.environment import builtin_names, load_environment
-from robot_agent.protocol import (
+from contract.protocol import (
     MAX_LINE_BYTES,
     MAX_NUMBER_CHARS,
     MAX_POINTS,
@@ -255,7 +255,7 @@ def _outcome(text: str, width: int) -> tuple[str, object]:
 def test_short_items_parse_field_by_field_as_the_vectorised_pass_does(monkeypatch):
     """A single short item (T,T,V, T,T,I, a one-point path) is parsed without the vectorised pass: the same
     values and the same refusal, word for word, on the seeded corpus of valid and mutated items."""
-    import robot_agent.protocol as protocol
+    import contract.protocol as protocol
 
     rng = random.Random(20261124)
     items = []
@@ -382,7 +382,7 @@ def test_builtin_environments_fit_their_area(name):
 
 
 def test_moving_obstacles_line():
-    from robot_agent.protocol import MovingCommand, encode_moving
+    from contract.protocol import MovingCommand, encode_moving
 
     line = encode_moving([((0.04, 0.05, 2, 1.5), [(0.2, 1.2), (0.8, 1.2)]), ((0.03, 0.1, 0, 0), [(0.5, 0.5)])])
     assert line == "T,T,M,40,50,2,1.5,200,1200,800,1200;30,100,0,0,500,500"

@@ -12,11 +12,12 @@ from agent_support import LineClient, running_agents
 from planners import DEFAULT_PLANNING_MARGIN, load_environment, plan_path
 from planners.metrics import obstacle_gaps
 from planners.moving import MovingObstacle
-from robot_agent.controller_specs import ControllerError, select
-from robot_agent.headless import simulate_run
-from robot_agent.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
-from robot_agent.replan import blocked, path_ahead
-from server.pipeline.compute import block_tuples, moving_tuples, simulate_job
+from contract.controller_specs import ControllerError, select
+from robot_agent.engine.headless import simulate_run
+from contract.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
+from robot_agent.engine.replan import blocked, path_ahead
+from robot_agent.engine.jobs import simulate_job
+from robot_agent.engine.run_data import block_tuples, moving_tuples
 
 CROSSING = load_environment("crossing")
 DATA = CROSSING.to_dict()

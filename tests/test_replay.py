@@ -12,8 +12,8 @@ from PIL import Image
 from client_sdk.study import replay_animation
 from planners import load_environment
 from planners.moving import positions
-from robot_agent.fleet import simulate_fleet
-from server.pipeline.compute import block_tuples, moving_tuples
+from robot_agent.engine.fleet import simulate_fleet
+from robot_agent.engine.run_data import block_tuples, moving_tuples
 
 DPI = 60
 CORNERS = [[0.3, 0.3, 0.0], [1.5, 0.3, np.pi / 2], [1.5, 1.5, np.pi], [0.3, 1.5, -np.pi / 2]]

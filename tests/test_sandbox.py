@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pytest
 
-from robot_agent.protocol import MAX_LINE_BYTES, RobotState, format_hello, format_ok, format_status
+from contract.protocol import MAX_LINE_BYTES, RobotState, format_hello, format_ok, format_status
 from server.sandbox import cgroups, explain, launcher_env, robot_port, service
 from server.sandbox.robot_port import RobotPort
 

@@ -61,9 +61,9 @@ def agent(
     """Run emulated robots speaking the T,T,P line protocol until Ctrl-C (logs on stderr)."""
     import asyncio
 
+    from contract.robot_profile import profile_names
     from robot_agent.host import AgentHost
-    from robot_agent.robot_profile import profile_names
-    from robot_agent.sinks import CsvTrackerSink
+    from robot_agent.host.sinks import CsvTrackerSink
 
     if profile not in profile_names():
         fail(f"unknown --profile {profile!r} (profiles: {', '.join(profile_names())})")
@@ -81,7 +81,7 @@ def agent(
     if subfield is not None:
         if robots != 1:
             fail("--subfield places a single robot; use it with --robots 1")
-        from robot_agent.frames import SUBFIELD_ORIGINS
+        from contract.frames import SUBFIELD_ORIGINS
 
         origins, world = [SUBFIELD_ORIGINS[subfield - 1]], WorldMode.shared
     agents = AgentHost(

@@ -16,15 +16,15 @@ __all__ = ["calibrate", "calibration_figure", "recorded_runs"]
 
 def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
     """The completed field runs of a study (:class:`client_sdk.study.StudyData`) as
-    :class:`robot_agent.calibration.RecordedRun`: the experiment's planned path, the start where the gripper
+    :class:`robot_agent.engine.calibration.RecordedRun`: the experiment's planned path, the start where the gripper
     put the robot (facing the goal without a heading; moved by the study's seeded jitter), the tracked poses
     from the path's start to its end, the environment's blocks, grouped by seed (runs with one seed drew the
     same random numbers); only the profile ``variant`` if given."""
     import numpy as np
 
-    from robot_agent.calibration import RecordedRun
-    from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
-    from server.pipeline.compute import block_tuples, jittered
+    from contract.frames import FIELD_SIZE, SUBFIELD_SIZE
+    from robot_agent.engine.calibration import RecordedRun
+    from robot_agent.engine.run_data import block_tuples, jittered
 
     variants = sorted({r.get("profile") or "" for r in data.rows if r.get("mode") == "twb"})
     if variant is None and len(variants) > 1:
@@ -109,9 +109,9 @@ def calibrate(
     tracker latency and noise) to the completed field runs of a study; writes the fitted profile with each
     value's standard error and a figure of tracked against re-simulated paths (docs/fidelity.md, "Calibration")."""
     from client_sdk.study import load_study
-    from robot_agent.calibration import FITTED
-    from robot_agent.calibration import calibrate as fit
-    from robot_agent.robot_profile import profile_names
+    from contract.robot_profile import profile_names
+    from robot_agent.engine.calibration import FITTED
+    from robot_agent.engine.calibration import calibrate as fit
 
     if profile not in profile_names():
         fail(f"unknown robot profile {profile!r} (profiles: {', '.join(profile_names())})")
@@ -130,7 +130,7 @@ def calibrate(
         "rms_residual_m": round(cal.rms_m, 6),
         "values": {k: round(cal.values[k], 6) for k in FITTED},
         "std_error": {k: round(cal.std[k], 6) for k in FITTED},
-        "method": "robot_agent/calibration.py; docs/fidelity.md#calibration",
+        "method": "robot_agent/engine/calibration.py; docs/fidelity.md#calibration",
     }
     out = out or runs / "calibrated-profile.json"
     out.write_text(json.dumps(result, indent=1) + "\n")

@@ -119,10 +119,10 @@ def metrics(
 ) -> None:
     """Print the metrics of an executed path against the planned one as JSON (docs/design.md, "Metrics"); with
     times and headings of the executed path, the controller's too (docs/metrics.md, "Controller metrics")."""
+    from contract.robot_profile import load_profile
     from planners import load_environment
     from planners.control_metrics import ControlSettings, control_metrics
     from planners.metrics import MetricSettings, run_metrics
-    from robot_agent.robot_profile import load_profile
 
     if not planned or not executed:
         fail("--planned FILE and --executed FILE are both required (CSV with header t,x,y,theta)")

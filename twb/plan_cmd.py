@@ -13,7 +13,6 @@ import typer
 from .errors import fail
 from .poses import parse_cli_pose
 
-
 #: the configuration space's options of ``twb plan`` and ``twb demo``: as the testbed plans unless told
 RobotRadiusOpt = Annotated[Optional[float], typer.Option(
     help="Robot radius in metres (default: the BeBot profile's, 0.045).")]
@@ -65,8 +64,8 @@ def plan(
     margin.  JSON carries both (robot_radius_m, planning_margin_m); with ttp and csv a comment
     line on stderr says them.
     """
+    from contract.protocol import encode_path
     from planners import load_environment, plan_path
-    from robot_agent.protocol import encode_path
 
     environment = load_environment(env)
     if plan_name is not None:
@@ -106,8 +105,8 @@ def plan(
 def clearance(robot_radius: Optional[float], planning_margin: Optional[float]) -> tuple[float, float]:
     """The robot radius and planning margin (m) to plan with: the options, else the testbed's defaults
     (the BeBot profile's radius, :data:`planners.DEFAULT_PLANNING_MARGIN`)."""
+    from contract.robot_profile import load_profile
     from planners import DEFAULT_PLANNING_MARGIN
-    from robot_agent.robot_profile import load_profile
 
     radius = load_profile()["radius_m"] if robot_radius is None else robot_radius
     margin = DEFAULT_PLANNING_MARGIN if planning_margin is None else planning_margin

@@ -31,9 +31,8 @@ def where() -> str:
 @plugins_app.command("list")
 def list_plugins() -> None:
     """The installed planner plug-ins, loaded now: which work and why the others fail."""
+    from contract.controller_specs import controller_report
     from planners.registry import plugin_report
-
-    from robot_agent.controller_specs import controller_report
 
     report = plugin_report()
     typer.echo(f"Planner plug-ins in {where()}:")

@@ -22,7 +22,8 @@ from ._collect import StudyJob, flat_metrics, plan_jobs, run_study
 from ._compare import COMPARED_METRICS, CONTROLLER_METRICS, Comparison, Comparisons, compare
 from ._replay import replay_animation
 from ._data import StudyData, load_study
-from ._figures import figure_metrics, figure_outcomes, figure_paths, figure_ratios, make_figures, save_figures
+from ._figure_set import make_figures
+from ._figures import figure_metrics, figure_outcomes, figure_paths, figure_ratios, save_figures
 from ._limits import StudyRefused, check_study
 from ._findings import FINDINGS, Finding, findings_json, findings_markdown, paper_findings, write_findings
 from ._ompl import export_ompl

@@ -29,9 +29,9 @@ from typing import Any, Iterable, Optional
 
 import numpy as np
 
-from ._data import StudyData
 from ._fleet_results import FLEET_COMPARED, FLEET_METRICS, measured
 from ._outcomes import counted, distinct_runs, identical_repetitions
+from ._records import StudyRecords
 
 __all__ = ["COMPARISON_COLUMNS", "COMPARED_METRICS", "CONTROLLER_METRICS", "Comparison", "Comparisons", "DIRECTION", "compare",
            "compared_over"]
@@ -218,7 +218,7 @@ def _rate_comparison(mode: str, ra: list[dict[str, Any]], rb: list[dict[str, Any
 
 
 def compare(
-    data: StudyData,
+    data: StudyRecords,
     metrics: Optional[Iterable[str]] = None,
     *,
     modes: Optional[Iterable[str]] = None,
@@ -233,7 +233,7 @@ def compare(
 
     Parameters
     ----------
-    data : StudyData
+    data : StudyRecords
     metrics : iterable of str, optional
         Metrics (runs.csv columns) to compare after ``success_rate``; default
         :data:`COMPARED_METRICS`, and :data:`CONTROLLER_METRICS` when the

@@ -35,6 +35,8 @@ from typing import Any, Iterable, Optional
 import numpy as np
 
 from .._models import ObstacleTracks
+from ._compare import compare
+from ._outcomes import outcome_table
 from ._spec import StudySpec
 
 __all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "run_outcome", "write_csv",
@@ -130,8 +132,6 @@ class StudyData:
     def outcomes(self) -> list[Any]:
         """How the runs of each configuration x mode ended, with the success rate's Wilson interval
         (:class:`~client_sdk.study.OutcomeSummary`)."""
-        from ._outcomes import outcome_table
-
         return outcome_table(self)
 
     def compare(self, metrics: Optional[Iterable[str]] = None, *, modes: Optional[Iterable[str]] = None,
@@ -139,8 +139,6 @@ class StudyData:
                 seed: int = 0) -> Any:
         """Every pair of configurations, per mode and metric (and the success rate): the difference with its
         bootstrap interval, the test, Holm's correction and an effect size (:func:`~client_sdk.study.compare`)."""
-        from ._compare import compare
-
         return compare(self, metrics, modes=modes, confidence=confidence, family=family, test=test,
                        n_resamples=n_resamples, seed=seed)
 

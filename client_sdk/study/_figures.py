@@ -22,9 +22,10 @@ import numpy as np
 
 from ._data import StudyData
 from ._obstacle_paths import draw_obstacles
+from ._verdict import MODE_WORDS, display_name
 
 __all__ = ["FIG6_METRICS", "FIG7_RATIOS", "MAX_PATH_ROWS", "OUTCOME_COLORS", "figure_metrics", "figure_outcomes", "figure_paths",
-           "figure_ratios", "make_figures", "mean_std", "save_figures"]
+           "figure_ratios", "mean_std", "save_figures"]
 
 #: Fig. 6 panels: (metric, label); the planned path's value is shown where it has one
 FIG6_METRICS = (
@@ -89,8 +90,6 @@ def _completed(data: StudyData) -> list[dict[str, Any]]:
 def _tick_label(data: StudyData, config: str, modes: Iterable[str]) -> str:
     """``FM²`` (a field-robot variant on a line of its own: ``FMM\ntracker 3 mm``) and, per mode, completed of
     runs: ``S 2/2 · T 0/2``."""
-    from ._verdict import display_name
-
     counts = []
     for m in modes:
         mine = [r for r in data.rows if r["configuration"] == config and r["mode"] == m]
@@ -313,8 +312,6 @@ def figure_outcomes(data: StudyData, outcomes: Optional[list[Any]] = None):  # t
     success rate's Wilson 95% interval as a whisker."""
     from matplotlib.figure import Figure
 
-    from ._verdict import MODE_WORDS, display_name
-
     outcomes = outcomes if outcomes is not None else data.outcomes()
     fig = Figure(figsize=(9, 0.55 * len(outcomes) + 1.6), layout="constrained")
     ax = fig.subplots()
@@ -348,21 +345,6 @@ def figure_outcomes(data: StudyData, outcomes: Optional[list[Any]] = None):  # t
     ax.set_axisbelow(True)
     legend_and_title(fig, handles, f"Study {data.spec.name}: outcomes per configuration and mode", fontsize=8)
     return fig
-
-
-def make_figures(data: StudyData) -> dict[str, Any]:
-    """``{"fig5_outcomes": Figure, "fig6_metrics": Figure, "fig7_ratios": Figure, "fig8_paths": Figure}``; a
-    fleet study's: ``{"fig5_outcomes", "fig6_fleet_metrics" (fleet metrics against the robot count),
-    "fig8_fleet_paths" (every robot's path)}`` (:mod:`._fleet_figures`)."""
-    if data.spec.fleet:
-        from ._fleet_figures import figure_fleet_metrics, figure_fleet_paths
-        from ._fleet_results import fleet_outcomes
-
-        return {"fig5_outcomes": figure_outcomes(data, fleet_outcomes(data)),
-                "fig6_fleet_metrics": figure_fleet_metrics(data),
-                "fig8_fleet_paths": figure_fleet_paths(data)}
-    return {"fig5_outcomes": figure_outcomes(data), "fig6_metrics": figure_metrics(data),
-            "fig7_ratios": figure_ratios(data), "fig8_paths": figure_paths(data)}
 
 
 def save_figures(figures: dict[str, Any], directory: Path, dpi: int = 110) -> list[Path]:

@@ -18,8 +18,8 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from robot_agent.frames import MAX_ROBOTS
-from robot_agent.frames import MAX_ROBOTS_SUBFIELD as MAX_ROBOTS_SUB
+from contract.frames import MAX_ROBOTS
+from contract.frames import MAX_ROBOTS_SUBFIELD as MAX_ROBOTS_SUB
 
 __all__ = ["MAX_ROBOTS", "MAX_ROBOTS_SUB", "MIN_ROBOTS", "SEPARATION_M", "Circle", "circle_robots", "finite", "is_pose", "parse_circle",
            "parse_robots"]

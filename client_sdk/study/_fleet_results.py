@@ -24,8 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, NamedTuple, Optional
 
-from ._data import StudyData
 from ._outcomes import OutcomeSummary, distinct_runs, outcome_table
+from ._records import StudyRecords
 
 __all__ = ["FLEET_COMPARED", "FLEET_KINDS", "FLEET_METRICS", "FleetGroup", "FleetMetric", "FleetOutcomes",
            "fleet_groups", "fleet_outcome", "fleet_outcomes", "fleet_row", "measured"]
@@ -115,7 +115,7 @@ class FleetOutcomes(OutcomeSummary):
     NAMED: ClassVar[tuple[str, ...]] = FLEET_KINDS
 
 
-def fleet_outcomes(data: StudyData) -> list[OutcomeSummary]:
+def fleet_outcomes(data: StudyRecords) -> list[OutcomeSummary]:
     """One :class:`FleetOutcomes` per configuration x mode, pooled over the problems (the outcomes figure)."""
     return outcome_table(data, summary=FleetOutcomes, key="fleet_outcome")
 
@@ -154,7 +154,7 @@ class FleetGroup(FleetOutcomes):
                 "metrics": {m: {**s, "over": FLEET_METRICS[m].over} for m, s in self.metrics.items()}}
 
 
-def fleet_groups(data: StudyData) -> list[FleetGroup]:
+def fleet_groups(data: StudyRecords) -> list[FleetGroup]:
     """One :class:`FleetGroup` per configuration x environment x plan x mode, in study order (a refused job's
     group too, with its runs ``not_submitted``)."""
     from planners.stats import proportion, summarize

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar, Iterable, Optional
 
-from ._data import StudyData
+from ._records import StudyRecords
 
 __all__ = ["COUNTED", "IDENTITY_METRICS", "NOT_COUNTED", "OutcomeSummary", "distinct_runs", "outcome_table"]
 
@@ -164,7 +164,7 @@ class OutcomeSummary:
                 "distinct_runs": s.get("n")}
 
 
-def outcome_table(data: StudyData, modes: Optional[Iterable[str]] = None, *,
+def outcome_table(data: StudyRecords, modes: Optional[Iterable[str]] = None, *,
                   summary: type[OutcomeSummary] = OutcomeSummary, key: str = "outcome") -> list[OutcomeSummary]:
     """One :class:`OutcomeSummary` per configuration x mode, in study order; a configuration whose jobs were all
     refused still appears (every run ``not_submitted``).  ``summary`` and ``key``: the class and the runs.csv

@@ -9,7 +9,8 @@ from typing import Any, Optional
 
 from ._compare import COMPARISON_COLUMNS, Comparisons
 from ._data import StudyData, write_csv_rows
-from ._figures import make_figures, mean_std, save_figures
+from ._figure_set import make_figures
+from ._figures import mean_std, save_figures
 from ._fleet_tables import fleet_tables, write_fleet_csvs
 from ._outcomes import OutcomeSummary
 from ._verdict import METRIC_WORDS, Answer, which_is_better

@@ -29,7 +29,7 @@ docs/controllers.md) are the robots' path-tracking controllers, a dimension besi
 name or ``{"name", "params", "label"}``; with them the configuration is the planner's and the
 controller's, ``fmm/pure_pursuit``; without, the planner's alone (and every robot runs the default
 controller).  ``profiles`` lists variants of the field robot: field parameters of the robot profile
-(:data:`robot_agent.overrides.OVERRIDE_LIMITS`, SI units) with an optional
+(:data:`contract.overrides.OVERRIDE_LIMITS`, SI units) with an optional
 ``"label"`` (default: the overrides, ``tracker_noise_xy_m=0.003``; ``shipped``
 for none); each configuration is then compared per variant, as
 ``fmm · noiseless``.  Every combination environment x plan x planner (x controller x profile
@@ -43,7 +43,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
-from robot_agent.overrides import OverrideError, check_overrides, overrides_label
+from contract.overrides import OverrideError, check_overrides, overrides_label
 
 from ._fleet import MAX_ROBOTS, MAX_ROBOTS_SUB, Circle, is_pose, parse_circle, parse_robots
 from ._fleet import finite as _finite

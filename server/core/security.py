@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-from robot_agent.auth import token_hash
+from contract.auth import token_hash
 
 __all__ = ["AuthCache", "FailedTokens", "Principal", "hash_token", "new_token"]
 

@@ -1,7 +1,7 @@
 """A multi-robot run as one task (issue 17): every robot planned, driven in one world on one clock, measured.
 
 The robots of a multi-robot job (``robots`` on the experiment) run together
-in :func:`server.pipeline.compute.fleet_job`, one task in the compute pool
+in :func:`robot_agent.engine.jobs.fleet_job`, one task in the compute pool
 (the worker processes, or Ray): planning (``prioritized`` together, any
 other planner robot by robot; an uploaded program's paths, one per robot
 port, had once per experiment before the task, are driven as sent), the simulation of all robots in one world
@@ -30,10 +30,11 @@ from typing import Any, Optional
 
 import numpy as np
 
+from robot_agent.engine import tasks
+
 from ..errors import FailureKind, RunFailed, TestbedFault
 from ..status import RunStatus, SubfieldState
 from ..store.runs import RunJob
-from . import compute
 from .context import RunContext, RunServices
 from .paths import Plan, placed
 from .playback import Playback, play_run
@@ -109,7 +110,7 @@ def fleet_failure(robots: list[dict[str, Any]], metrics: dict[str, Any], timeout
     """The run's failure when a robot did not reach its goal (None when every one did): its kind is the
     gravest of the robots' (a collision before a timeout ...), its message names every robot that failed and
     what it hit, e.g. ``collision: robot 0 hit robot 2; robot 2 hit robot 0``, and says so when the fleet was
-    deadlocked.  ``robots``: :func:`~server.pipeline.compute.fleet_job`'s; ``metrics`` its fleet metrics."""
+    deadlocked.  ``robots``: :func:`~robot_agent.engine.jobs.fleet_job`'s; ``metrics`` its fleet metrics."""
     ends = [_end_text(k, r, metrics["robots"][k], robots, timeout_s)
             for k, r in enumerate(robots) if r["outcome"] != "DONE"]
     if not ends:
@@ -164,7 +165,7 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
                      "below are the ones each robot would have exchanged, prefixed `robot k:`", None, False)
     timeout_s = fleet_timeout_s(svc, robots)
     out: dict[str, Any] = await svc.pool.run(
-        compute.fleet_job, job.environment_data, robots, job.planner, job.planner_params, job.seed, timeout_s,
+        tasks.FLEET, job.environment_data, robots, job.planner, job.planner_params, job.seed, timeout_s,
         job.robot_radius + job.planning_margin, "field" if on_field else "ideal", job.controller,
         job.controller_params, platform, job.profile_overrides if on_field else None, job.experiment_seed)
     if "planning_error" in out:

@@ -29,6 +29,7 @@ from typing import Any, Callable, Optional
 from sqlalchemy.orm import Session, sessionmaker
 
 from planners import PlanningError
+from robot_agent.engine import run_data, tasks
 
 from ..core.settings import Settings
 from ..errors import FailureKind, ProgramFailed, RunFailed
@@ -36,7 +37,6 @@ from ..models import Experiment, Program
 from ..sandbox import ProgramSpec, Sandbox
 from ..sandbox.outcome import robots_phrase
 from ..validation import FIELD_SIZE, SUBFIELD_SIZE, check_program_paths
-from . import compute
 from .pool import ComputePool
 from .recorder import RunRecorder
 
@@ -134,12 +134,12 @@ class PathService:
             await self._recorder.store_plan(experiment_id, paths[0], seconds, info)
             return Plan(paths[0], seconds, paths)
         if exp.explicit_path is not None:
-            path, seconds, info = compute.explicit_path(exp.explicit_path, exp.goal), None, {"explicit": True}
+            path, seconds, info = run_data.explicit_path(exp.explicit_path, exp.goal), None, {"explicit": True}
         elif exp.program_id is not None or exp.planner is None:
             path, seconds, info = await self._from_program(exp, run_id, robot_id, platform, on_line)
         else:
             try:
-                r = await self._pool.run(compute.plan_job, exp.environment_data, exp.start, exp.goal, exp.planner,
+                r = await self._pool.run(tasks.PLAN, exp.environment_data, exp.start, exp.goal, exp.planner,
                                          exp.planner_params or {}, exp.seed, exp.robot_radius + exp.planning_margin)
             except PlanningError as exc:
                 raise RunFailed(f"planning failed: {exc}", FailureKind.PLANNING, whole_experiment=True) from None

@@ -15,8 +15,9 @@ import signal
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Callable, Optional, Protocol
 
+from robot_agent.engine import tasks
+
 from ..core.lifeline import exit_with_parent
-from . import compute
 
 __all__ = ["ComputePool", "WorkerPool"]
 
@@ -34,7 +35,7 @@ def _worker_init(server_pid: int) -> None:
 
 
 class WorkerPool:
-    """``workers`` processes running the pure functions of :mod:`server.pipeline.compute` (and the like)."""
+    """``workers`` processes running the pure functions of :mod:`robot_agent.engine.jobs` (and the like)."""
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
@@ -46,7 +47,7 @@ class WorkerPool:
                                              mp_context=multiprocessing.get_context("spawn"),
                                              initializer=_worker_init, initargs=(os.getpid(),))
         for _ in range(self.workers):
-            self._executor.submit(compute.warm_up)
+            self._executor.submit(tasks.WARM_UP)
 
     async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)`` in a worker process (``fn`` and the arguments must pickle)."""

@@ -2,7 +2,7 @@
 
 A drop-in for :class:`server.pipeline.pool.WorkerPool` (``run(fn, *args)``):
 planning, metrics and whole simulation-mode runs
-(:func:`server.pipeline.compute.simulate_job`) run as Ray tasks, on a local
+(:func:`robot_agent.engine.jobs.simulate_job`) run as Ray tasks, on a local
 cluster started and stopped with the testbed (:mod:`server.pipeline.ray_head`)
 or on an existing one (``--ray-address host:port``).  Ray retries nothing
 itself (``max_retries=0``): a task lost with its worker or node is an
@@ -29,8 +29,9 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional
 
+from robot_agent.engine import tasks
+
 from ..errors import EngineFault
-from . import compute
 
 __all__ = ["EngineUnavailable", "RayPool", "INSTALL_HINT"]
 
@@ -126,7 +127,8 @@ class RayPool:
         self.address = address
         self.slots = slots
         self._head = None if address else _LocalHead(cpus, log_dir / "ray-head.log")
-        self._remote: dict[Callable[..., Any], Any] = {}
+        self._runner: Any = None  # tasks.run_task as a Ray remote function, made once (_remote_run)
+        self._runners: dict[str, Any] = {}  # ... with the name of each job it ran
         self._ray: Any = None
         self.description = ""
 
@@ -177,26 +179,35 @@ class RayPool:
         self._warm_up(cpus, connect_timeout_s)
 
     def _warm_up(self, workers: int, timeout_s: float) -> None:
-        """One :func:`~server.pipeline.compute.warm_up` task per CPU, waited for (blocking, at most ``timeout_s``):
+        """One :func:`~robot_agent.engine.jobs.warm_up` task per CPU, waited for (blocking, at most ``timeout_s``):
         each worker pays its imports and the compiled core's loading (about 1.4 s of CPU) before the first
         run rather than during it.  Workers not ready in time warm up with their first run; nothing fails."""
         ray = self._ray
-        warm = ray.remote(**_TASK)(compute.warm_up)
-        refs = [warm.remote() for _ in range(workers)]
+        refs = [self._remote_run(tasks.WARM_UP).remote(tasks.WARM_UP) for _ in range(workers)]
         ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout_s)
         if len(ready) < len(refs):
             log.warning("%d of %d Ray workers were not warmed up within %.0f s", len(refs) - len(ready), len(refs),
                         timeout_s)
+
+    def _remote_run(self, fn: Callable[..., Any]) -> Any:
+        """:func:`robot_agent.engine.tasks.run_task` as a Ray remote function named for ``fn`` (made once per
+        name): every task is ``run_task(fn, *args)``, so an engine task (a
+        :class:`~robot_agent.engine.tasks.Task`, which Ray cannot wrap itself) and a plain function both run,
+        and Ray's dashboard and the worker's process title name the job (``ray::simulate_job``)."""
+        name = getattr(fn, "name", None) or getattr(fn, "__name__", "task")
+        remote = self._runners.get(name)
+        if remote is None:
+            if self._runner is None:
+                self._runner = self._ray.remote(**_TASK)(tasks.run_task)
+            remote = self._runners[name] = self._runner.options(name=name)
+        return remote
 
     async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)`` as a Ray task (one CPU); a task Ray lost raises :class:`EngineFault`."""
         ray = self._ray
         if ray is None:
             raise RuntimeError("the Ray pool is not started")
-        remote = self._remote.get(fn)
-        if remote is None:
-            remote = self._remote[fn] = ray.remote(**_TASK)(fn)
-        ref = remote.remote(*args)
+        ref = self._remote_run(fn).remote(fn, *args)
         try:
             return await ref
         except asyncio.CancelledError:

@@ -13,7 +13,6 @@ import asyncio
 from typing import Any, Callable, Iterable, Optional, Sequence
 
 import numpy as np
-
 from sqlalchemy.orm import Session, sessionmaker
 
 from ..broker import EventBroker

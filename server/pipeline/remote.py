@@ -1,12 +1,12 @@
 """A simulation-mode run as one compute-engine task (Ray): no agent, no socket, the same numbers.
 
 A field run whose job has profile overrides runs the same way, as the emulated field robot with those
-parameters (:func:`server.pipeline.compute.simulate_job` with the field backend), while it holds the robot
+parameters (:func:`robot_agent.engine.jobs.simulate_job` with the field backend), while it holds the robot
 and sub-field the scheduler gave it; it is then played out at the time scale, as the robot would have
 driven it (:mod:`server.pipeline.playback`).
 
 The steps of :mod:`server.pipeline.runner` collapse into one task
-(:func:`server.pipeline.compute.simulate_job`): the gripper's build and
+(:func:`robot_agent.engine.jobs.simulate_job`): the gripper's build and
 placement (the jittered start when it is free, else the start), the path
 through the wire codec, the ideal robot's simulation core stepped to the
 end, the metrics.  The path itself is the experiment's, had once
@@ -23,12 +23,13 @@ from typing import Any
 
 import numpy as np
 
-from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
+from contract.frames import FIELD_SIZE, SUBFIELD_SIZE
+from robot_agent.engine import run_data, tasks
 
 from ..errors import FailureKind, RunFailed, TestbedFault
 from ..status import RunStatus
 from ..store.runs import RunJob
-from . import compute, steps
+from . import steps
 from .context import RunContext, RunServices
 from .playback import Playback, play_run
 
@@ -58,7 +59,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
                                         platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
         await rec.update(ctx.run_id, status=RunStatus.RUNNING)
     start = steps.start_pose(job)
-    jittered = compute.jittered(start, job.jitter, job.seed)
+    jittered = run_data.jittered(start, job.jitter, job.seed)
     starts = [jittered, start] if jittered != start else [start]
     platform = ctx.robot.platform or "BeBot"
     if on_field:
@@ -70,7 +71,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
                          "the ones an agent's robot would have exchanged", None, False)
     timeout_s = steps.run_timeout_s(svc, plan.path)
     area = None if not on_field else (FIELD_SIZE if job.field == "full" else SUBFIELD_SIZE)
-    out: dict[str, Any] = await svc.pool.run(compute.simulate_job, job.environment_data, plan.path, starts,
+    out: dict[str, Any] = await svc.pool.run(tasks.SIMULATE, job.environment_data, plan.path, starts,
                                              job.seed, timeout_s, job.goal,
                                              job.robot_radius, plan.planning_time_s,
                                              "field" if job.mode == "twb" else "ideal", platform,
@@ -102,7 +103,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     if out["metrics"] is not None:
         metrics = dict(out["metrics"])
         metrics["collided"] = failure is not None and failure.kind is FailureKind.COLLISION
-        metrics.update(compute.collision_counts(metrics["collided"], out.get("obstacle")))
+        metrics.update(run_data.collision_counts(metrics["collided"], out.get("obstacle")))
         fields["metrics"] = metrics
         if failure is not None and len(poses):
             fields["stopped_at"] = [round(float(poses[-1, 1]), 4), round(float(poses[-1, 2]), 4)]

@@ -36,10 +36,18 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Optional
 
 import numpy as np
-
 from sqlalchemy.exc import DBAPIError
 
-from ..errors import AgentRefused, AgentUnavailable, AgentUnreachable, EngineFault, FailureKind, RunEnded, RunFailed, TestbedFault
+from ..errors import (
+    AgentRefused,
+    AgentUnavailable,
+    AgentUnreachable,
+    EngineFault,
+    FailureKind,
+    RunEnded,
+    RunFailed,
+    TestbedFault,
+)
 from ..models import Experiment, Run, utcnow
 from ..scheduler import Assignment
 from ..status import RunStatus

@@ -6,14 +6,14 @@ import asyncio
 import math
 from typing import Optional
 
-from robot_agent.controller_specs import DEFAULT_CONTROLLER
-from robot_agent.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
+from contract.controller_specs import DEFAULT_CONTROLLER
+from contract.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
+from robot_agent.engine import run_data, tasks
 
 from ..agent_link import AgentLink
 from ..errors import AgentRefused, AgentUnavailable, AgentUnreachable, FailureKind, RunFailed, TestbedFault
 from ..status import SubfieldState
 from ..store.runs import RunJob
-from . import compute
 from .context import RunContext, RunServices
 from .paths import Plan
 
@@ -62,7 +62,7 @@ def timeout_for_length_s(svc: RunServices, length_m: float) -> float:
     """Experiment seconds a run driving ``length_m`` (m) may take before it is stopped: the testbed's factor
     times the expected duration, at least its minimum."""
     settings = svc.settings
-    return max(settings.run_timeout_min_s, settings.run_timeout_factor * compute.expected_duration_s(length_m, 0))
+    return max(settings.run_timeout_min_s, settings.run_timeout_factor * run_data.expected_duration_s(length_m, 0))
 
 
 def start_pose(job: RunJob) -> list[float]:
@@ -97,7 +97,7 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
     field = svc.field
     key = job.environment + (":full" if job.field == "full" else "")
     if job.mode == "twb" and job.environment_data.get("moving_obstacles"):
-        ctx.on_line("s", await svc.pool.run(compute.obstacle_robots_note, job.environment_data,
+        ctx.on_line("s", await svc.pool.run(tasks.OBSTACLE_NOTE, job.environment_data,
                                             ctx.robot.platform or "BeBot"), None, False)
     if len(ctx.subfields) == 4:
         for k in (2, 3, 4):
@@ -106,13 +106,13 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
                 await _park(ctx, svc, other.robot_id, k)
     if field.built.get(ctx.robot.robot_id) == key:
         return
-    blocks = compute.block_tuples(job.environment_data)
+    blocks = run_data.block_tuples(job.environment_data)
     for k in ctx.subfields:
         await field.set_subfield(k, state=SubfieldState.BUILDING)
     await link.request(encode_build(blocks), ctx.wall(60 * (len(blocks) + 10)))
     rid = ctx.robot.robot_id
     if job.environment_data.get("moving_obstacles") or rid in field.moving:  # set them, or clear the last ones
-        moving = await svc.pool.run(compute.moving_tuples, job.environment_data)
+        moving = await svc.pool.run(tasks.MOVING, job.environment_data)
         await link.request(encode_moving(moving), ctx.wall(0))
         if moving:
             field.moving.add(rid)
@@ -147,7 +147,7 @@ async def place(ctx: RunContext, link: AgentLink, job: RunJob) -> None:
     """The gripper puts the robot at the start (facing the goal when the start has no heading), moved by the
     job's seeded jitter if it has one (where the jittered pose is not free, at the start itself)."""
     start = start_pose(job)
-    pose = compute.jittered(start, job.jitter, job.seed)
+    pose = run_data.jittered(start, job.jitter, job.seed)
     try:
         await link.request(encode_place(pose), ctx.wall(30))
         return
@@ -181,8 +181,8 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
     await rec.add_messages(ctx.take_messages())  # the log up to the path, kept even if the server dies now
     t_start: Optional[float] = None
     replans: list[tuple[int, float]] = []  # (points, planning s) of each EV,REPLAN,<points>,<ms>,<t>
-    if compute.replanning(job.controller_params):
-        ctx.end_metrics.update(compute.replan_metrics(replans))
+    if run_data.replanning(job.controller_params):
+        ctx.end_metrics.update(run_data.replan_metrics(replans))
     loop = asyncio.get_running_loop()
     deadline = loop.time() + ctx.wall(timeout_exp)
     while True:
@@ -207,7 +207,7 @@ async def drive(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob,
             await rec.update(ctx.run_id, t_start=t_start)
         elif kind == "REPLAN" and len(ev.fields) == 4:
             replans.append((int(float(ev.fields[1])), float(ev.fields[2]) / 1000.0))
-            ctx.end_metrics.update(compute.replan_metrics(replans))
+            ctx.end_metrics.update(run_data.replan_metrics(replans))
         elif kind in ("DONE", "FAIL"):
             await rec.update(ctx.run_id, t_start=t_start, t_end=ev.time)
             await collect_poses(svc, robot_id, ev.time or 0.0)
@@ -243,7 +243,7 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
     obstacles = None
     if job.mode == "twb" and job.environment_data.get("moving_obstacles") and t0 is not None and t1 is not None:
         if ctx.seeded:  # the obstacle robots' trajectories, replayed as the agent drove them
-            obstacles = await svc.pool.run(compute.field_obstacle_tracks, job.environment_data, job.seed,
+            obstacles = await svc.pool.run(tasks.FIELD_OBSTACLE_TRACKS, job.environment_data, job.seed,
                                            ctx.robot.platform or "BeBot", t0, t1)
             ctx.end_obstacles = obstacles  # stored with the run's end
         else:
@@ -251,12 +251,12 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
                              "agent keys its noise itself, so its obstacle robots cannot be replayed here", None,
                         False)
     try:
-        metrics = await svc.pool.run(compute.measure_run, job.environment_data, plan.path, poses, t0, t1, job.goal,
+        metrics = await svc.pool.run(tasks.MEASURE, job.environment_data, plan.path, poses, t0, t1, job.goal,
                                      job.robot_radius, plan.planning_time_s, obstacles)
-    except compute.TooFewPoses as exc:
+    except run_data.TooFewPoses as exc:
         raise TestbedFault(f"cannot compute metrics: {exc}") from None
     metrics["collided"] = collided
-    metrics.update(compute.collision_counts(collided, obstacle))
+    metrics.update(run_data.collision_counts(collided, obstacle))
     metrics.update(ctx.end_metrics)
     ctx.end_fields["metrics"] = metrics  # stored with the run's end
     if failed and poses:

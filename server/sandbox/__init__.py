@@ -16,7 +16,7 @@ In the launcher (``python -m server.sandbox.launch``, one process tree per progr
 - :mod:`.confine` — the program's process between fork and exec: cgroup, uid, rlimits, seccomp;
 - :mod:`.workdir` — its working directory, environment and command line;
 - :mod:`.supervise` — spawn, pump (output and robot port), reap, report;
-- :mod:`.robot_port` — the robot port, on :mod:`robot_agent.protocol`;
+- :mod:`.robot_port` — the robot port, on :mod:`contract.protocol`;
 - :mod:`.processes` — counting and killing the sandbox's processes.
 """
 

@@ -33,7 +33,7 @@ import signal
 import sys
 from typing import Any, Optional
 
-import robot_agent.protocol  # noqa: F401 - see _check_single_threaded
+import contract.protocol  # noqa: F401 - see _check_single_threaded
 
 from . import cgroups
 from .isolation import CAP_SETGID, CAP_SETUID, PR_SET_PDEATHSIG, enter_namespaces, has_cap, prctl
@@ -83,10 +83,10 @@ def _warm_codec() -> None:
                  b"T,T,A,0123456789abcdef", b"T,T,L", b"T,T,P,1x,2,3", b"T,T,P," + b"1" * 40 + b",1,1", b"T,T,X",
                  b"\x01", "T,T,Q,\u00e9".encode()):
         try:
-            robot_agent.protocol.parse_command(line, field_size=(1.8, 1.8))
-        except robot_agent.protocol.ProtocolError as exc:
+            contract.protocol.parse_command(line, field_size=(1.8, 1.8))
+        except contract.protocol.ProtocolError as exc:
             exc.line()
-    robot_agent.protocol.format_status("IDLE", (0.3, 0.3, 0.0), 0.0)
+    contract.protocol.format_status("IDLE", (0.3, 0.3, 0.0), 0.0)
 
 
 def _run(job: dict[str, Any], cgroup: Optional[cgroups.ProgramCgroup], memory: dict[str, Any],

@@ -2,7 +2,7 @@
 
 :class:`RobotPort` holds no socket (the supervision loop frames the bytes
 in and sends the replies out); every line it sends comes from
-:mod:`robot_agent.protocol`, the one codec of agent, server and SDK.
+:mod:`contract.protocol`, the one codec of agent, server and SDK.
 """
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ from __future__ import annotations
 import socket
 from typing import Any, Callable, Optional
 
-from robot_agent.protocol import (MAX_LINE_BYTES, AuthCommand, Command, ErrorCode, LeaseCommand,
-                                  LocalisationCommand, PathCommand, ProtocolError, QueryCommand, RobotState,
-                                  StopCommand, VelocityCommand, format_hello, format_ok, format_status, parse_command)
+from contract.protocol import (MAX_LINE_BYTES, AuthCommand, Command, ErrorCode, LeaseCommand, LocalisationCommand,
+                               PathCommand, ProtocolError, QueryCommand, RobotState, StopCommand, VelocityCommand, format_hello, format_ok,
+                               format_status, parse_command)
 
 __all__ = ["MAX_LINE_BYTES", "RobotPort", "send"]
 

@@ -14,7 +14,7 @@ router = APIRouter(prefix="/controllers", tags=["controllers"], responses=AUTHEN
 def list_controllers(_: CurrentUser) -> dict:
     """Every selectable controller: name, description, source, whether it runs compiled, and its parameters
     (name, unit, default, range [low, high], description; SI units)."""
-    from robot_agent.controller_specs import ControllerError, available_controllers, controller_spec
+    from contract.controller_specs import ControllerError, available_controllers, controller_spec
 
     out = []
     for name in available_controllers():

@@ -5,8 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Query
 from sqlalchemy import func, or_, select
 
-from robot_agent.frames import FIELD_SIZE, SUBFIELD_SIZE
-
+from contract.frames import FIELD_SIZE, SUBFIELD_SIZE
 from planners import InvalidEnvironment, parse_environment
 
 from ...access import environment_named, visible_environments

@@ -8,7 +8,7 @@ import { robotColor, swatch } from "./fleet.js";
 
 /** The planner that plans a fleet together (server/schemas.py FLEET_PLANNER). */
 export const FLEET_PLANNER = "prioritized";
-/** The most robots of a job, on the whole field (robot_agent/frames.py MAX_ROBOTS). */
+/** The most robots of a job, on the whole field (contract/frames.py MAX_ROBOTS). */
 export const MAX_ROBOTS = 64;
 
 /** The planners to offer, from the server's list (`GET /api/v1/planners`): for several robots the ones that plan

@@ -1,6 +1,6 @@
 """Several robots' run as one function call: one shared world, one clock, no socket (issue 17).
 
-The multi-robot sibling of :func:`robot_agent.headless.simulate_run`.  ``N``
+The multi-robot sibling of :func:`robot_agent.engine.headless.simulate_run`.  ``N``
 robots stand in ONE world of the environment's size (frame origin (0, 0) for
 all of them), so they collide with the walls, the blocks, their moving
 obstacles and each other (centres closer than two collision radii).  They
@@ -21,7 +21,7 @@ re-sent with their clock shifted to the fleet's.  Events are reported per
 robot as one path: one START, WP indices of the whole path, one DONE or FAIL.
 
 **On the field** (backend ``field``) the moving obstacles are emulated robots
-the testbed drives (:mod:`robot_agent.movers`), one per obstacle, shared by
+the testbed drives (:mod:`robot_agent.engine.movers`), one per obstacle, shared by
 every robot of the fleet and driven on the fleet's clock from time 0; a robot
 that hits one stops it for everyone.  What the tracker logged of them is in
 :attr:`FleetRun.obstacles`.
@@ -35,16 +35,26 @@ from typing import Sequence
 
 import numpy as np
 
+from contract.controller_specs import select
+from contract.frames import FIELD_SIZE, MAX_ROBOTS
+from contract.params import robot_params
+from contract.protocol import (
+    BuildCommand,
+    MovingCommand,
+    PathCommand,
+    PlaceCommand,
+    encode_build,
+    encode_moving,
+    encode_path,
+    encode_place,
+    parse_command,
+)
+from contract.robot_profile import DEFAULT_PROFILE
+
 from .backends import make_backend
-from .controller_specs import select
-from .frames import FIELD_SIZE, MAX_ROBOTS
 from .headless import HeadlessRun, PlacementRefused
 from .movers import mover_tracks
 from .noise import path_key
-from .params import robot_params
-from .protocol import (BuildCommand, MovingCommand, PathCommand, PlaceCommand, encode_build, encode_moving, encode_path,
-                       encode_place, parse_command)
-from .robot_profile import DEFAULT_PROFILE
 from .sim import SimCore, SimEvent
 from .world import World
 
@@ -57,7 +67,7 @@ _CHUNK = 4096  # control steps per compiled call when no robot waits for a leg
 
 @dataclass
 class FleetRun:
-    """What a fleet run gave: one :class:`~robot_agent.headless.HeadlessRun` per robot (its tracker poses
+    """What a fleet run gave: one :class:`~robot_agent.engine.headless.HeadlessRun` per robot (its tracker poses
     ``(N, 4)`` t s, x m, y m, theta rad on the fleet's clock, its events, start and end times), the
     ``holds`` each robot made (waypoint index, s held), ``dt`` (s, the control step) and, per hold, the
     robots it ``waited_for`` (executed by dependencies; empty: it waited for the plan's clock); on the field
@@ -101,7 +111,7 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
                    depends: Sequence[np.ndarray] | None = None) -> FleetRun:
     """Run robot ``i`` along ``paths[i]`` ``(N_i, 3)`` (m, m, rad) from ``starts[i]`` (x, y, theta) in one world
     of ``area`` (m) with ``blocks`` (cx, cy, w, h, angle: m, rad) and, for every robot, the ``moving``
-    obstacles (params, waypoints, as :func:`~robot_agent.protocol.encode_moving`; their time is the fleet's
+    obstacles (params, waypoints, as :func:`~contract.protocol.encode_moving`; their time is the fleet's
     clock), all robots starting at time 0, until every robot ended its path or ``max_s`` (s) passed.
 
     ``depart[i]`` ``(N_i,)`` (optional): the time (s) robot ``i`` may leave waypoint ``k`` at the earliest
@@ -110,8 +120,8 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
     robot ``h`` reached its waypoint ``depends[i][h, k]``
     (:func:`planners.dependencies.fleet_dependencies`; the departure times stay lower bounds).  The seed gives every robot's noise.
     A replanning controller (``replan`` = 1) replans each robot around the moving obstacles and the other
-    robots where they stand (:mod:`robot_agent.replan`), in uncoordinated fleets only (no ``depart`` or
-    ``depends``).  Raises :class:`~robot_agent.headless.PlacementRefused` naming the robot whose start is not
+    robots where they stand (:mod:`robot_agent.engine.replan`), in uncoordinated fleets only (no ``depart`` or
+    ``depends``).  Raises :class:`~robot_agent.engine.headless.PlacementRefused` naming the robot whose start is not
     free and ``ValueError`` for mismatched or too many robots or a coordinated fleet that would replan."""
     n = len(paths)
     if not 1 <= n <= MAX_FLEET:
@@ -191,7 +201,7 @@ def simulate_fleet(paths: Sequence[Sequence[Sequence[float]] | np.ndarray], star
 
 
 def _obstacle_key(seed: int) -> int:
-    """The noise key a fleet's obstacle robots' keys derive from (:func:`robot_agent.movers.mover_key`)."""
+    """The noise key a fleet's obstacle robots' keys derive from (:func:`robot_agent.engine.movers.mover_key`)."""
     return path_key(seed, "obstacles")
 
 

@@ -1,8 +1,8 @@
 """Which path-tracking controllers a robot can run, their parameters, and plug-ins.
 
 The built-ins run inside the compiled simulation core
-(:mod:`robot_agent.controllers`, dispatched by :attr:`ControllerSpec.cid`
-with a row of :data:`~robot_agent.controllers.PARAM_SLOTS` parameters).  A
+(:mod:`robot_agent.engine.controllers`, dispatched by :attr:`ControllerSpec.cid`
+with a row of :data:`~robot_agent.engine.controllers.PARAM_SLOTS` parameters).  A
 plug-in distribution adds controllers that run in Python, declared in its
 ``pyproject.toml`` as planners are (:mod:`planners.registry`)::
 
@@ -21,7 +21,7 @@ Python (no numba): the server and the sandbox import it cheaply.
 
 Parameters with ``compiled=False`` (regulated pure pursuit's ``replan*``) are
 not in the compiled row: the agent reads them in Python
-(:mod:`robot_agent.replan`), so the kernels and their numbers stay as they were.
+(:mod:`robot_agent.engine.replan`), so the kernels and their numbers stay as they were.
 """
 
 from __future__ import annotations
@@ -40,8 +40,8 @@ __all__ = ["BUILTINS", "DEFAULT_CONTROLLER", "ENTRY_POINT_GROUP", "REPLAN_PARAMS
 
 ENTRY_POINT_GROUP = "teleworkbench.controllers"
 DEFAULT_CONTROLLER = "schema"
-_SLOTS = 8  # robot_agent.controllers.PARAM_SLOTS (not imported: that module compiles)
-_PLUGIN_ID = 100  # robot_agent.controllers.PLUGIN
+_SLOTS = 8  # robot_agent.engine.controllers.PARAM_SLOTS (not imported: that module compiles)
+_PLUGIN_ID = 100  # robot_agent.engine.controllers.PLUGIN
 
 
 class ControllerError(ValueError):
@@ -77,7 +77,7 @@ class Param:
         return out
 
 
-#: replanning (robot_agent.replan): off by default, so every run without it stays as it was
+#: replanning (robot_agent.engine.replan): off by default, so every run without it stays as it was
 REPLAN_PARAMS = (
     Param("replan", "0|1", 0, 0, 1, "1: check the path ahead 5 times a second and, when a moving obstacle "
           "(where it will be) or another robot (where it is) blocks it, replan to the goal with st_astar "

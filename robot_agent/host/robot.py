@@ -30,53 +30,54 @@ from __future__ import annotations
 import asyncio
 import hmac
 import logging
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Awaitable, Callable
 
+from contract.controller_specs import ControllerError, select
+from contract.params import RobotParams
+from contract.protocol import (AuthCommand, BuildCommand, Command, ControllerCommand, ErrorCode, LeaseCommand,
+                               LocalisationCommand, MovingCommand, PathCommand, PlaceCommand, ProtocolError, QueryCommand, RobotState, StopCommand,
+                               VelocityCommand, format_event, format_hello, format_ok, format_status, parse_arguments, split_command)
+from robot_agent.engine.noise import path_key
+from robot_agent.engine.sim import SimCore, SimEvent, State
+from robot_agent.engine.world import World
+
 from .connection import MAX_AUTH_FAILURES
-from .controller_specs import ControllerError, select
-from .noise import path_key
-from .protocol import (
-    AuthCommand,
-    BuildCommand,
-    Command,
-    ControllerCommand,
-    ErrorCode,
-    LocalisationCommand,
-    VelocityCommand,
-    LeaseCommand,
-    MovingCommand,
-    PathCommand,
-    PlaceCommand,
-    ProtocolError,
-    QueryCommand,
-    RobotState,
-    StopCommand,
-    format_event,
-    format_hello,
-    format_ok,
-    format_status,
-    parse_arguments,
-    split_command,
-)
-from .sim import SimEvent, State
 
 if TYPE_CHECKING:
     from .connection import Connection
-    from .host import AgentHost
 
-__all__ = ["GUARDED_VERBS", "Robot"]
+__all__ = ["GUARDED_VERBS", "Robot", "RobotServices"]
 
-log = logging.getLogger("robot_agent.robot")
+log = logging.getLogger("robot_agent.host.robot")
 
 GUARDED_VERBS = frozenset("PSIBMV")  #: verbs that need an authenticated connection when there is a control key
 WATCHDOG_S = 0.5  #: experiment seconds a robot in velocity mode drives on without a new T,T,V
 
 
-class Robot:
-    """Robot ``index`` of ``host``, called ``robot_id``."""
+@dataclass(frozen=True)
+class RobotServices:
+    """What a robot uses of the host that runs it, handed in: the robot never sees the host itself."""
 
-    def __init__(self, host: "AgentHost", index: int, robot_id: str, *, control_key: str | None = None) -> None:
-        self.host, self.index, self.robot_id = host, index, robot_id
+    core: SimCore  #: the simulation core all robots of the host share
+    world: World
+    params: RobotParams
+    seed: int  #: the host's seed, from which each path's noise key derives
+    backend_name: str  #: ``ideal`` or ``field``
+    advertise_host: str  #: the address clients reach the robot's port at
+    sync_clock: Callable[[], None]  #: bring experiment time up to date before a command applies
+    wake: Callable[[], None]  #: something changed: the simulation loop plans its next step now
+    sleep: Callable[[float], Awaitable[None]]  #: wait this many seconds of experiment time
+    event_hook: Callable[["Robot", str], None]  #: an ``EV`` line of this robot, for the host's listeners
+    localisation_changed: Callable[[], None]  #: a connection subscribed to ``PO`` lines or left
+
+
+class Robot:
+    """Robot ``index`` of a host, called ``robot_id``; ``services`` are what it uses of that host."""
+
+    def __init__(self, services: RobotServices, index: int, robot_id: str, *,
+                 control_key: str | None = None) -> None:
+        self.services, self.index, self.robot_id = services, index, robot_id
         self.control_key = control_key
         self.lease: str | None = None  # the second secret, granted by a key holder
         self.lease_grant = 0  # number of the current (or last) grant
@@ -94,22 +95,22 @@ class Robot:
     @property
     def origin(self) -> tuple[float, float]:
         """The robot frame's origin in its world (m)."""
-        o = self.host.world.origin[self.index]
+        o = self.services.world.origin[self.index]
         return float(o[0]), float(o[1])
 
     @property
     def area(self) -> tuple[float, float]:
         """The working area (w, h) in m: protocol points must lie in [0, w] x [0, h]."""
-        a = self.host.world.area[self.index]
+        a = self.services.world.area[self.index]
         return float(a[0]), float(a[1])
 
     def hello(self) -> str:
         """The greeting line."""
-        return format_hello(self.robot_id, self.host.params.platform)
+        return format_hello(self.robot_id, self.services.params.platform)
 
     def state(self) -> RobotState:
         """The path state (ST names)."""
-        return RobotState(State(int(self.host.core.state[self.index])).name)
+        return RobotState(State(int(self.services.core.state[self.index])).name)
 
     # ------------------------------------------------------------------ dispatch
 
@@ -145,7 +146,7 @@ class Robot:
     def cmd_localisation(self, conn: "Connection", cmd: LocalisationCommand) -> list[str]:
         """``T,T,O``: send (or stop sending) this connection ``PO`` lines."""
         conn.localisation = cmd.on
-        self.host.localisation_changed()
+        self.services.localisation_changed()
         return [format_ok("O")]
 
     # ------------------------------------------------------------------ authentication
@@ -210,19 +211,19 @@ class Robot:
             self.last_seed = seed
             return path_key(seed)
         self.last_seed = None
-        return path_key(self.host.seed, self.robot_id, self.path_count)
+        return path_key(self.services.seed, self.robot_id, self.path_count)
 
     def cmd_path(self, conn: "Connection", cmd: PathCommand) -> list[str]:
         """``T,T,P``: follow a path from the next control step."""
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
-        self.host.sync_clock()
-        replaced = self.host.core.set_path(self.index, cmd.points, self._noise_key(), conn.controller)
+        self.services.sync_clock()
+        replaced = self.services.core.set_path(self.index, cmd.points, self._noise_key(), conn.controller)
         self.path_count += 1
         if replaced is not None:
             self._deliver(replaced)
         self.owner = conn
-        self.host.wake()
+        self.services.wake()
         log.info("%s: path of %d points from %s", self.robot_id, len(cmd.points), conn.peer)
         return [format_ok("P", len(cmd.points))]
 
@@ -238,12 +239,12 @@ class Robot:
 
     def cmd_velocity(self, conn: "Connection", cmd: VelocityCommand) -> list[str]:
         """``T,T,V``: drive with body velocities until the next one, ``T,T,S`` or the watchdog (no path)."""
-        core = self.host.core
+        core = self.services.core
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
         started = not core.driving(self.index)
         if started:  # (a robot in velocity mode keeps the clock running: nothing to bring up to date)
-            self.host.sync_clock()
+            self.services.sync_clock()
         if started and core.moving(self.index):
             raise ProtocolError(ErrorCode.STATE, "a path is in progress: T,T,V drives a robot without one (T,T,S first)")
         if not started and self.owner is not conn:
@@ -252,48 +253,48 @@ class Robot:
         if started:
             self.path_count += 1
             self.owner = conn
-            self.host.wake()
+            self.services.wake()
             log.info("%s: velocity mode from %s", self.robot_id, conn.peer)
         return [format_ok("V")]
 
     def cmd_stop(self, conn: "Connection", cmd: StopCommand) -> list[str]:
         """``T,T,S``: stop now."""
-        self.host.sync_clock()
-        ev = self.host.core.stop(self.index)
+        self.services.sync_clock()
+        ev = self.services.core.stop(self.index)
         if ev is not None:
             self._deliver(ev)
         return [format_ok("S")]
 
     def cmd_query(self, conn: "Connection", cmd: QueryCommand) -> list[str]:
         """``T,T,Q``: state, believed pose (robot frame) and experiment time."""
-        self.host.sync_clock()
-        return [format_status(self.state(), self.host.core.belief(self.index), self.host.core.t)]
+        self.services.sync_clock()
+        return [format_status(self.state(), self.services.core.belief(self.index), self.services.core.t)]
 
     def _check_gripper(self) -> None:
-        if self.host.core.moving(self.index):
+        if self.services.core.moving(self.index):
             raise ProtocolError(ErrorCode.STATE, "the robot is following a path (send T,T,S first)")
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
 
     def gripper_seconds(self, *, blocks: int = 0, placements: int = 0) -> float:
         """Experiment seconds the gripper takes; none in the ``ideal`` simulator, where worlds appear at once."""
-        if self.host.backend_name == "ideal":
+        if self.services.backend_name == "ideal":
             return 0.0
-        g = self.host.params.gripper
+        g = self.services.params.gripper
         return blocks * g.seconds_per_block + placements * g.seconds_per_placement
 
     async def cmd_place(self, conn: "Connection", cmd: PlaceCommand) -> list[str]:
         """``T,T,I``: the gripper places the robot (takes ``seconds_per_placement``)."""
         self._check_gripper()
-        why = self.host.world.place_conflict(self.index, cmd.pose, self.host.core.backend.pose)
+        why = self.services.world.place_conflict(self.index, cmd.pose, self.services.core.backend.pose)
         if why:
             raise ProtocolError(ErrorCode.RANGE, f"cannot place the robot: {why}")
         self.gripper_busy = True
         try:
-            await self.host.sleep(self.gripper_seconds(placements=1))
-            if self.host.core.moving(self.index):  # a path arrived meanwhile: impossible, but safe
+            await self.services.sleep(self.gripper_seconds(placements=1))
+            if self.services.core.moving(self.index):  # a path arrived meanwhile: impossible, but safe
                 raise ProtocolError(ErrorCode.STATE, "the robot started moving")
-            self.host.core.place(self.index, cmd.pose)
+            self.services.core.place(self.index, cmd.pose)
         finally:
             self.gripper_busy = False
         return [format_ok("I")]
@@ -301,11 +302,11 @@ class Robot:
     async def cmd_build(self, conn: "Connection", cmd: BuildCommand) -> list[str]:
         """``T,T,B``: the gripper replaces this robot's blocks (time per block removed and placed)."""
         self._check_gripper()
-        removed = len(self.host.world.blocks_local(self.index))
+        removed = len(self.services.world.blocks_local(self.index))
         self.gripper_busy = True
         try:
-            await self.host.sleep(self.gripper_seconds(blocks=removed + len(cmd.blocks)))
-            self.host.world.set_blocks(self.index, cmd.blocks)
+            await self.services.sleep(self.gripper_seconds(blocks=removed + len(cmd.blocks)))
+            self.services.world.set_blocks(self.index, cmd.blocks)
         finally:
             self.gripper_busy = False
         return [format_ok("B", len(cmd.blocks))]
@@ -313,7 +314,7 @@ class Robot:
     def cmd_moving(self, conn: "Connection", cmd: MovingCommand) -> list[str]:
         """``T,T,M``: replace this robot's moving obstacles (their time starts with its next path)."""
         self._check_gripper()
-        self.host.world.set_moving(self.index, list(cmd.obstacles))
+        self.services.world.set_moving(self.index, list(cmd.obstacles))
         return [format_ok("M", len(cmd.obstacles))]
 
     # ------------------------------------------------------------------ events
@@ -328,7 +329,7 @@ class Robot:
             self.owner = None
         if owner is not None:
             owner.send(line)
-        self.host.event_hook(self, line)
+        self.services.event_hook(self, line)
 
     def on_event(self, ev: SimEvent) -> None:
         """An event of this robot from the simulation core."""
@@ -343,25 +344,25 @@ class Robot:
         self.connections.discard(conn)
         if conn.localisation:
             conn.localisation = False
-            self.host.localisation_changed()
+            self.services.localisation_changed()
         if self.lease_holder is conn:
             self.revoke_lease()
         if self.owner is conn:
             self.owner = None
-            ev = self.host.core.stop(self.index)
+            ev = self.services.core.stop(self.index)
             if ev is not None:
                 log.warning("%s: client %s left mid-path; robot stopped (FAIL,STOPPED)", self.robot_id, conn.peer)
-                self.host.event_hook(self, format_event("FAIL", ev.t, reason="STOPPED"))
+                self.services.event_hook(self, format_event("FAIL", ev.t, reason="STOPPED"))
 
     def info(self) -> dict[str, object]:
         """The registration record of this robot (see ``docs/protocol.md``)."""
         return {
             "robot_id": self.robot_id,
-            "host": self.host.advertise_host,
+            "host": self.services.advertise_host,
             "port": self.port,
-            "platform": self.host.params.platform,
-            "backend": self.host.backend_name,
-            "profile": self.host.params.name,
+            "platform": self.services.params.platform,
+            "backend": self.services.backend_name,
+            "profile": self.services.params.name,
             "origin": list(self.origin),
             "area": list(self.area),
         }

@@ -1,7 +1,7 @@
 """Replanning while driving: when the path ahead is blocked, a new path to the goal around what moves.
 
 A controller that supports it (regulated pure pursuit, ``replan`` = 1;
-:data:`robot_agent.controller_specs.REPLAN_PARAMS`) replans as nav2's
+:data:`contract.controller_specs.REPLAN_PARAMS`) replans as nav2's
 behaviour tree does with its "replan when the path is invalid" pattern, but
 with the moving obstacles' trajectories known exactly (the robot's world
 holds them, :mod:`planners.moving`):
@@ -42,14 +42,13 @@ from typing import Sequence
 
 import numpy as np
 
+from contract.controller_specs import Selection
 from planners.environment import Block, Environment
 from planners.errors import PlanningError
 from planners.grid import config_space
 from planners.moving import REPEAT_MODES, MovingObstacle, positions
 from planners.postprocess import postprocess
 from planners.st_astar import SpaceTimeAStar, TimedPath, plan_timed, without_waits
-
-from .controller_specs import Selection
 
 __all__ = ["CHECK_PERIOD_S", "MARGIN_M", "Request", "Result", "Settings", "blocked", "path_ahead", "solve"]
 
@@ -183,7 +182,7 @@ def interval_steps(seconds: float, dt: float) -> int:
 
 
 class Replanner:
-    """The replanning state of a :class:`~robot_agent.sim.SimCore`'s robots: each replanning robot's
+    """The replanning state of a :class:`~robot_agent.engine.sim.SimCore`'s robots: each replanning robot's
     :class:`Settings`, the step of its next check and of its last replan, and its path's generation (a
     replan computed for an older path is dropped)."""
 

@@ -1,4 +1,4 @@
-"""Robot profiles: physical and controller parameters as data (``robot_agent/profiles/*.json``).
+"""Robot profiles: physical and controller parameters as data (``contract/profiles/*.json``).
 
 Every value is in SI units and carries a documented reason in the file's
 ``notes``.  Load one with :func:`load_profile`; list them with
@@ -24,14 +24,14 @@ def profile_names() -> list[str]:
 
 @lru_cache(maxsize=None)
 def _shipped() -> tuple[str, ...]:
-    files = resources.files("robot_agent").joinpath("profiles")
+    files = resources.files("contract").joinpath("profiles")
     return tuple(sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".json")))
 
 
 @lru_cache(maxsize=None)
 def _text(name: str) -> str:
     # package data, read once per process: every simulated run loads its robot's profile
-    return resources.files("robot_agent").joinpath("profiles", f"{name}.json").read_text("utf-8")
+    return resources.files("contract").joinpath("profiles", f"{name}.json").read_text("utf-8")
 
 
 def load_profile(name: str = DEFAULT_PROFILE) -> dict[str, Any]:

@@ -22,11 +22,11 @@ from the host's ``seed``, or ``path_key(s)`` when :meth:`set_path_seed` gave
 the next path a seed ``s`` (the same ``s`` replays the same run on any robot).
 
 Robot ports: registered with a testbed server, each robot has the control
-key the server derives from the token (:mod:`robot_agent.auth`); with an
+key the server derives from the token (:mod:`contract.auth`); with an
 explicit ``control_key`` all robots have that one.  Then only authenticated
 connections move robots or change the world; a standalone agent (no server,
 no key) lets every connection, as in the paper.  Connections are bounded in number,
-per peer address and in idle time (:class:`robot_agent.connection.Limits`).
+per peer address and in idle time (:class:`robot_agent.host.connection.Limits`).
 """
 
 from __future__ import annotations
@@ -43,18 +43,19 @@ from typing import Callable
 
 import numpy as np
 
-from . import auth
-from .backends import make_backend
+from contract import auth
+from contract.frames import field_layout
+from contract.params import RobotParams, robot_params
+from contract.protocol import MAX_LINE_BYTES, ErrorCode, check_secret, format_error, format_localisations
+from contract.robot_profile import DEFAULT_PROFILE
+from robot_agent.engine.backends import make_backend
+from robot_agent.engine.sim import SimCore, SimEvent, kernels_ready, warm_up
+from robot_agent.engine.world import World
+
 from .connection import TOO_MANY, Connection, Limits
-from .params import RobotParams, robot_params
-from .protocol import MAX_LINE_BYTES, ErrorCode, check_secret, format_error, format_localisations
-from .robot import Robot
-from .robot_profile import DEFAULT_PROFILE
+from .robot import Robot, RobotServices
 from .server_link import ServerLink
-from .sim import SimCore, SimEvent, kernels_ready, warm_up
 from .sinks import TrackerSink
-from .frames import field_layout
-from .world import World
 
 __all__ = ["AgentHost", "EventListener", "start_agents"]
 
@@ -76,7 +77,7 @@ class AgentHost:
     wall second (``math.inf`` = as fast as possible); ``seed`` the agent seed;
     ``robot_id`` a base name (``robot`` gives ``robot-1`` ...) or
     ``robot_ids`` one per robot; ``world``, ``area`` (one or per robot), ``origins`` the layout
-    (:func:`robot_agent.frames.field_layout`); ``tracker_sink`` where logged
+    (:func:`contract.frames.field_layout`); ``tracker_sink`` where logged
     poses go; ``server_url`` + ``token`` register the robots with the testbed
     server and, without another sink, post the poses there.
     """
@@ -156,8 +157,10 @@ class AgentHost:
         if len(robot_ids) != robots or len(set(robot_ids)) != robots:
             raise ValueError(f"`robot_ids` must be {robots} distinct names")
         token_hash = auth.token_hash(token) if derive_control_key and token else None
+        services = RobotServices(self.core, self.world, self.params, self.seed, self.backend_name, self.advertise_host,
+                                 self.sync_clock, self.wake, self.sleep, self.event_hook, self.localisation_changed)
         self.robots = [
-            Robot(self, i, rid, control_key=control_key if control_key is not None or token_hash is None
+            Robot(services, i, rid, control_key=control_key if control_key is not None or token_hash is None
                   else auth.control_key(token_hash, rid))
             for i, rid in enumerate(robot_ids)
         ]
@@ -397,10 +400,10 @@ class AgentHost:
                 await self._wait((core.step_count + 1 - self._due()) / steps_per_s)
 
     async def _replan(self) -> None:
-        """The replanning checks due now (:mod:`robot_agent.replan`): the blocked robots' new paths are planned
+        """The replanning checks due now (:mod:`robot_agent.engine.replan`): the blocked robots' new paths are planned
         in a worker thread while the simulation waits (so a run replans the same at every time scale); the
         event loop serves the connections meanwhile, and a path that changed meanwhile drops its replan."""
-        from .replan import solve
+        from robot_agent.engine.replan import solve
 
         for req in self.core.replan_requests():
             res = await asyncio.to_thread(solve, req)

@@ -1,33 +1,54 @@
-"""CPU work of a run — planning and metrics — as pure functions for the worker processes.
+"""A run's CPU work as jobs: plan, simulate, measure — the engine's function-call API for worker pools.
 
-Functions here take and return plain JSON-ready data so they pickle cheaply
-to the worker pool (:mod:`server.pipeline.pool`); they never touch the
-database or the network.  Units: metres, radians, seconds.
+Jobs take and return plain JSON-ready data so they pickle cheaply to a
+worker process or a Ray task; they never touch a database or the network.
+The server names them through :mod:`.tasks` (so that it never loads the
+compiled core itself); benchmarks and tests call them directly.  Units:
+metres, radians, seconds.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import time
 from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["TooFewPoses", "block_tuples", "collision_counts", "exact_obstacle_tracks", "field_obstacle_tracks",
-           "moving_tuples",
-           "obstacle_robots_note", "compare_runs", "expected_duration_s", "explicit_path", "fleet_job", "jittered",
-           "measure_run", "plan_job", "replan_metrics", "replanning", "simulate_job", "warm_up"]
+from contract.overrides import apply_overrides
+from contract.params import robot_params
+from contract.protocol import (
+    MovingCommand,
+    encode_build,
+    encode_controller,
+    encode_moving,
+    encode_path,
+    encode_place,
+    parse_command,
+)
+from contract.robot_profile import load_profile, profile_for_platform
+from planners import PlanningError, parse_environment, plan_path
+from planners.control_metrics import ControlSettings, control_metrics
+from planners.dependencies import fleet_dependencies
+from planners.fleet_metrics import FleetSettings, fleet_metrics
+from planners.geometry import distance_to_obstacles
+from planners.metrics import MetricSettings, obstacle_gaps, run_metrics
+from planners.prioritized import EXECUTIONS, plan_prioritized, timed_waypoints
 
+from .fleet import simulate_fleet
+from .headless import PlacementRefused, simulate_run
+from .movers import mover_tracks
+from .noise import path_key
+from .run_data import TooFewPoses, block_tuples, explicit_path, json_safe, moving_tuples, replan_metrics, replanning
 
-class TooFewPoses(Exception):
-    """Fewer than two poses were logged for a run: the tracker did not deliver (the testbed's fault)."""
+__all__ = ["field_obstacle_tracks", "fleet_job", "measure_run",
+           "obstacle_robots_note", "plan_job", "simulate_job", "warm_up"]
 
 
 def warm_up() -> bool:
     """Ready a fresh worker: import the numerical stack and load the compiled simulation core with one short
     run (about 1.4 s of CPU on this machine's cores), so its first real run starts at once."""
-    import planners  # noqa: F401
-    import planners.metrics  # noqa: F401
-
     simulate_job({"name": "warm-up", "size": [1.0, 1.0], "blocks": []}, [[0.3, 0.3, 0.0], [0.6, 0.3, 0.0]],
                  [[0.3, 0.3, 0.0]], 0, 60.0, [0.6, 0.3, 0.0], 0.045, 0.0)
     return True
@@ -39,39 +60,10 @@ def plan_job(env_data: dict[str, Any], start: list[float], goal: list[float], pl
 
     Raises :class:`planners.PlanningError` (no path, bad plug-in output, ...).
     """
-    from planners import parse_environment, plan_path
-
     env = parse_environment(env_data)
     r = plan_path(env, start, goal, planner, robot_radius=robot_radius, params=params, seed=seed)
     return {"path": np.round(r.path, 6).tolist(), "length_m": r.length_m,
             "planning_time_s": r.planning_time_s, "info": r.info}
-
-
-def explicit_path(path: list[list[float]], goal: list[float]) -> list[list[float]]:
-    """Headings for a user's explicit path (points face the next one; the last takes the goal's)."""
-    from planners.postprocess import headings
-
-    p = np.asarray([q[:2] for q in path], dtype=float)
-    final = goal[2] if len(goal) > 2 else None
-    return np.round(headings(p, final), 6).tolist()
-
-
-def jittered(pose: list[float], jitter: Optional[dict[str, float]], seed: int) -> list[float]:
-    """``pose`` (x, y, theta) moved by seeded Gaussian noise of std ``jitter["xy_m"]`` per axis (m) and
-    ``jitter["theta_rad"]`` (rad), each clipped at 3 std; the same seed gives the same pose."""
-    if not jitter:
-        return list(pose)
-    rng = np.random.default_rng([int(seed), 0x6A177E8])
-    dx, dy, da = np.clip(rng.standard_normal(3), -3, 3) * [jitter.get("xy_m", 0.0), jitter.get("xy_m", 0.0),
-                                                            jitter.get("theta_rad", 0.0)]
-    x, y, a = pose
-    return [float(x + dx), float(y + dy), float(math.remainder(a + da, 2 * math.pi))]
-
-
-def expected_duration_s(path_length_m: float, n_blocks: int, *, speed_m_s: float = 0.2,
-                        seconds_per_block: float = 4.0) -> float:
-    """Rough experiment seconds a run takes (gripper + driving), for estimates and timeouts."""
-    return n_blocks * seconds_per_block + 5.0 + path_length_m / speed_m_s * 1.5
 
 
 def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: list[list[float]],
@@ -84,11 +76,6 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
 
     Raises :class:`TooFewPoses` when fewer than two poses lie in the run.
     """
-    from planners import parse_environment
-    from planners.control_metrics import ControlSettings, control_metrics
-    from planners.metrics import MetricSettings, run_metrics
-    from robot_agent.params import robot_params
-
     env = parse_environment(env_data)
     pr = np.asarray(poses, dtype=float).reshape(-1, 4)
     if t_start is not None and t_done is not None:
@@ -113,46 +100,12 @@ def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: lis
                                execution_time_s=out["execution_time_s"], settings=control))
     out["poses"] = int(len(pr))
     out["settings"] = {**settings.to_dict(), **control.to_dict()}
-    return _clean(out)
-
-
-def block_tuples(env_data: dict[str, Any]) -> list[tuple[float, float, float, float, float]]:
-    """The environment's blocks as the gripper's ``T,T,B`` takes them: (cx, cy, w, h, angle) in m, rad."""
-    return [(b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)) for b in env_data.get("blocks", [])]
-
-
-def moving_tuples(env_data: dict[str, Any]) -> list[tuple[list[float], list[list[float]]]]:
-    """The environment's moving obstacles as ``T,T,M`` takes them: per obstacle (radius m, speed m/s, repeat
-    code, delay s) and its waypoints (m; a random walk expanded with its seed)."""
-    if not env_data.get("moving_obstacles"):
-        return []
-    from planners import parse_environment
-    from planners.moving import REPEAT_MODES
-
-    env = parse_environment(env_data)
-    return [([o.radius, o.speed, float(REPEAT_MODES[o.repeat]), o.delay_s], [list(p) for p in o.waypoints])
-            for o in env.moving_obstacles]
-
-
-def replanning(controller_params: Optional[dict[str, float]]) -> bool:
-    """Whether a job's controller replans (``replan`` = 1, docs/controllers.md)."""
-    return bool(controller_params) and controller_params.get("replan") == 1
-
-
-def replan_metrics(replans: list[tuple[int, float]]) -> dict[str, Any]:
-    """A replanning run's metrics (docs/metrics.md) from its ``REPLAN`` events, each (points of the new path,
-    0 when none was found; planning time s): ``replans`` (new paths followed), ``replan_failures`` and
-    ``replan_time_s`` (planning time of them all, s)."""
-    return {"replans": sum(1 for n, _ in replans if n > 0), "replan_failures": sum(1 for n, _ in replans if n == 0),
-            "replan_time_s": float(sum(s for _, s in replans))}
+    return json_safe(out)
 
 
 def obstacle_robots_note(env_data: dict[str, Any], platform: str) -> str:
     """The run log's line on a field run's moving obstacles: emulated robots of ``platform`` the testbed
     drives, and, when the environment gives them another radius, that on the field they have the robot's."""
-    from robot_agent.params import robot_params
-    from robot_agent.robot_profile import profile_for_platform
-
     radius = robot_params(profile_for_platform(platform)).collision_radius_m
     obstacles = env_data.get("moving_obstacles") or []
     other = sorted({float(o["radius"]) for o in obstacles if float(o["radius"]) != radius})
@@ -170,14 +123,8 @@ def field_obstacle_tracks(env_data: dict[str, Any], seed: int, platform: str, t_
                           t_end: float) -> list[np.ndarray]:
     """The tracker's poses of a field run's obstacle robots from its path start ``t_start`` to its end
     ``t_end`` (s, the run's clock), replayed as the agent drove them for a path of noise seed ``seed``
-    (:func:`robot_agent.movers.mover_tracks`; the robot ``platform``'s profile): per moving obstacle
+    (:func:`robot_agent.engine.movers.mover_tracks`; the robot ``platform``'s profile): per moving obstacle
     ``(T, 4)`` t s, x m, y m, theta rad."""
-    from robot_agent.movers import mover_tracks
-    from robot_agent.noise import path_key
-    from robot_agent.params import robot_params
-    from robot_agent.protocol import MovingCommand, encode_moving, parse_command
-    from robot_agent.robot_profile import load_profile, profile_for_platform
-
     sent = parse_command(encode_moving(moving_tuples(env_data)))  # what the agent got: the wire's rounding
     assert isinstance(sent, MovingCommand)
     params = robot_params(load_profile(profile_for_platform(platform)))
@@ -185,40 +132,9 @@ def field_obstacle_tracks(env_data: dict[str, Any], seed: int, platform: str, t_
             for tr in mover_tracks(list(sent.obstacles), path_key(seed), params, t_end - t_start)]
 
 
-def exact_obstacle_tracks(env_data: dict[str, Any], t_from: float, t_to: float, t_zero: float,
-                          step_s: float = 0.05) -> list[np.ndarray]:
-    """The environment's moving obstacles on their exact tracks (docs/planners.md, "Moving obstacles") from
-    ``t_from`` to ``t_to`` (s, the run's clock; both included) every ``step_s`` (s), obstacle time 0 at
-    ``t_zero`` (s): per moving obstacle ``(T, 4)`` t s, x m, y m, theta rad (the direction it moves in, the
-    last one while it stands; its first way's before it sets off)."""
-    if not env_data.get("moving_obstacles"):
-        return []
-    from planners import parse_environment
-    from planners.moving import positions
-
-    obstacles = parse_environment(env_data).moving_obstacles
-    t = np.arange(t_from, t_to, step_s) if t_to > t_from else np.zeros(0)
-    t = np.append(t, t_to)
-    xy = positions(obstacles, t - t_zero)  # (M, T, 2)
-    step = np.diff(np.concatenate([xy, xy[:, -1:]], axis=1), axis=1)  # to the next sample; none after the last
-    moving = np.hypot(step[..., 0], step[..., 1]) > 1e-12
-    # where it stands, the heading of the last step it moved (of the first one before it ever moved)
-    last = np.maximum.accumulate(np.where(moving, np.arange(len(t)), -1), axis=1)
-    idx = np.where(last >= 0, last, np.argmax(moving, axis=1)[:, None])
-    theta = np.take_along_axis(np.arctan2(step[..., 1], step[..., 0]), idx, axis=1)
-    return [np.column_stack([t, xy[m], theta[m]]) for m in range(len(obstacles))]
-
-
 def _replans(events: list[Any]) -> list[tuple[int, float]]:
     """A simulated run's ``REPLAN`` events as :func:`replan_metrics` takes them (points, planning time s)."""
     return [(e.index or 0, e.seconds or 0.0) for e in events if e.kind == "REPLAN"]
-
-
-def collision_counts(collided: bool, obstacle: Optional[int]) -> dict[str, int]:
-    """A run's collisions by kind (docs/metrics.md): ``collisions_obstacle`` (a moving obstacle) and
-    ``collisions_block`` (a block, the wall or another robot); a collision ends a run, so each is 0 or 1."""
-    hit_obstacle = collided and obstacle is not None
-    return {"collisions_obstacle": int(hit_obstacle), "collisions_block": int(collided and not hit_obstacle)}
 
 
 def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list[list[float]], seed: int,
@@ -231,7 +147,7 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     follows ``path`` with ``controller`` and its ``controller_params`` from the first free pose of
     ``starts`` (x, y, theta; m, rad: the jittered start, then the start itself) among the environment's
     blocks and moving obstacles in a world of ``area`` (m; default the whole field) for at most ``max_s``
-    experiment seconds, as an agent's robot would (:func:`robot_agent.headless.simulate_run`), then is
+    experiment seconds, as an agent's robot would (:func:`robot_agent.engine.headless.simulate_run`), then is
     measured.
 
     Returns ``{"poses"`` ``(N, 4)`` t s, x m, y m, theta rad (field frame), ``"lines"`` the protocol
@@ -242,13 +158,6 @@ def simulate_job(env_data: dict[str, Any], path: list[list[float]], starts: list
     ``"metrics_error"`` when too few poses were logged)``}``; or ``{"placement_error": why, "lines"}`` when no
     pose of ``starts`` is free.
     """
-    import os
-    import time
-
-    from robot_agent.headless import PlacementRefused, simulate_run
-    from robot_agent.overrides import apply_overrides
-    from robot_agent.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
-    from robot_agent.robot_profile import load_profile, profile_for_platform
 
     pause = float(os.environ.get("TWB_FAULT_SIM_PAUSE_S", "0") or 0)  # fault injection (tests): a run in progress
     if pause > 0:
@@ -299,7 +208,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
               platform: str = "BeBot", overrides: Optional[dict[str, float]] = None,
               plan_seed: Optional[int] = None, execution: str = "dependencies") -> dict[str, Any]:
     """A multi-robot run as one task (issue 17): plan every robot, run them all in one world on one clock
-    (:func:`robot_agent.fleet.simulate_fleet`), measure them (:func:`planners.fleet_metrics.fleet_metrics`).
+    (:func:`robot_agent.engine.fleet.simulate_fleet`), measure them (:func:`planners.fleet_metrics.fleet_metrics`).
 
     ``robots``: per robot ``{"start", "goal", "path"?}`` (m, rad).  ``planner`` ``prioritized`` plans them
     together (timed paths) and ``execution`` says how the robots keep to it: ``dependencies`` (a robot
@@ -317,19 +226,6 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     the field the tracker's poses of the obstacle robots, per moving obstacle ``(T, 4)`` on the fleet's clock;
     else None),
     or ``{"planning_error": why}`` / ``{"placement_error": why}``."""
-    import time
-
-    from planners import PlanningError, parse_environment, plan_path
-    from planners.fleet_metrics import FleetSettings, fleet_metrics
-    from planners.geometry import distance_to_obstacles
-    from planners.dependencies import fleet_dependencies
-    from planners.prioritized import EXECUTIONS, plan_prioritized, timed_waypoints
-    from robot_agent.fleet import simulate_fleet
-    from robot_agent.headless import PlacementRefused
-    from robot_agent.overrides import apply_overrides
-    from robot_agent.params import robot_params
-    from robot_agent.protocol import encode_path
-    from robot_agent.robot_profile import load_profile, profile_for_platform
 
     env = parse_environment(env_data)
     t0 = time.perf_counter()
@@ -409,7 +305,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
                     "t_start": run.t_start, "t_end": run.t_end, "outcome": run.outcome, "obstacle": run.obstacle,
                     "holds": [[int(k), float(s)] for k, s in fleet.holds[i]],
                     "waited_for": [[int(h) for h in w] for w in fleet.waited_for[i]]})
-    return {"robots": out, "planning_time_s": planning_time_s, "metrics": _clean(metrics), "obstacles": fleet.obstacles}
+    return {"robots": out, "planning_time_s": planning_time_s, "metrics": json_safe(metrics), "obstacles": fleet.obstacles}
 
 
 def _fleet_obstacle_distances(env: Any, fleet: Any, obstacle_radius: Optional[float], metrics: dict[str, Any]) -> None:
@@ -417,8 +313,6 @@ def _fleet_obstacle_distances(env: Any, fleet: Any, obstacle_radius: Optional[fl
     the fleet's smallest: robot discs of the fleet settings' radius to the moving obstacles where they were
     (on the field the obstacle robots' tracker poses, each a robot of ``obstacle_radius``; else the exact
     tracks), on the fleet's clock."""
-    from planners.metrics import obstacle_gaps
-
     radius = metrics["settings"]["robot_radius"]
     smallest = None
     for run, row in zip(fleet.runs, metrics["robots"]):
@@ -431,27 +325,3 @@ def _fleet_obstacle_distances(env: Any, fleet: Any, obstacle_radius: Optional[fl
             smallest = gap if smallest is None else min(smallest, gap)
         row["obstacle_distance_min_m"] = gap
     metrics["obstacle_distance_min_m"] = smallest
-
-
-def compare_runs(sim_poses: list[list[float]], twb_poses: list[list[float]]) -> dict[str, Any]:
-    """The paper's direct sim-vs-twb comparison ("ST") of two performed paths."""
-    from planners.metrics import direct_comparison
-
-    a = np.asarray(sim_poses, dtype=float).reshape(-1, 4)[:, 1:3]
-    b = np.asarray(twb_poses, dtype=float).reshape(-1, 4)[:, 1:3]
-    return _clean(direct_comparison(a, b))
-
-
-def _clean(d: Any) -> Any:
-    """JSON-safe: NaN/inf become None, numpy scalars become Python numbers."""
-    if isinstance(d, dict):
-        return {k: _clean(v) for k, v in d.items()}
-    if isinstance(d, (list, tuple)):
-        return [_clean(v) for v in d]
-    if isinstance(d, (np.floating, float)):
-        return float(d) if math.isfinite(d) else None
-    if isinstance(d, np.integer):
-        return int(d)
-    if isinstance(d, np.bool_):
-        return bool(d)
-    return d

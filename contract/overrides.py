@@ -1,7 +1,7 @@
 """Profile overrides: a field robot with other sensor noise or control inaccuracies, checked against physics.
 
 An override is ``{"tracker_noise_xy_m": 0.003, "motor_time_constant_s": 0.3}``: keys of a profile's
-``field`` section (see ``robot_agent/profiles/*.json`` for what each means), values in SI units.  A study
+``field`` section (see ``contract/profiles/*.json`` for what each means), values in SI units.  A study
 varies them (docs/fidelity.md, "Noise studies"); a job carries them (``profile_overrides``) and its field
 runs are the emulated field robot with them.  Every value must lie in :data:`OVERRIDE_LIMITS`.
 """

@@ -12,7 +12,6 @@ import math
 
 from .compiled import kernel
 
-
 __all__ = ["body_to_tracks", "tracks_to_body", "unicycle_step", "wrap_angle"]
 
 

@@ -1,13 +1,13 @@
 """The simulation loop in compiled code: many control steps of a whole fleet per call.
 
-:func:`run` advances every robot of an :class:`~robot_agent.backends.Emulated`
+:func:`run` advances every robot of an :class:`~robot_agent.engine.backends.Emulated`
 backend up to ``max_steps`` control steps without returning to Python.  A
-step is: sense (:mod:`robot_agent.physics`), :func:`control_fleet` (the
+step is: sense (:mod:`robot_agent.engine.physics`), :func:`control_fleet` (the
 follower), actuate, collisions once all robots moved
-(:func:`robot_agent.contact.collide`), :func:`settle_fleet` (path states and
+(:func:`robot_agent.engine.contact.collide`), :func:`settle_fleet` (path states and
 event rows).  It stops early when nothing moves any more or when its output
 buffers could not hold another step.  Events and logged poses go to those
-buffers as rows; :class:`robot_agent.sim.SimCore` turns them into records.
+buffers as rows; :class:`robot_agent.engine.sim.SimCore` turns them into records.
 Backends that are stepped through Python run the same two fleet kernels
 around their own methods.
 
@@ -16,7 +16,7 @@ Array groups (each passed as a tuple, modified in place):
 - ``ctrl`` = ``(state, aligning, wp, k, timeout, cmd, anchor, anchor_k,
   points, offset, count, cid, cpar, cmem, want)``: the path follower's state
   and each robot's controller (id, parameters, memory, a plug-in's
-  commands; see ``SimCore`` and :mod:`robot_agent.controllers`);
+  commands; see ``SimCore`` and :mod:`robot_agent.engine.controllers`);
 - ``phys`` = :attr:`Emulated.arrays`; ``world`` = :attr:`World.arrays`;
 - ``out`` = ``(events (E, 5) int64: step, robot, old wp, new wp, flags;
   pose_rows (P, 2) int64: step, robot; pose_xyt (P, 3); and per-robot
@@ -35,13 +35,12 @@ from .contact import block_distance, collide, obstacle_xy, wall_distance
 from .controllers import RPP
 from .follower import DONE, STALLED, TIMED_OUT, Gains, control
 from .movers import MoverGains, drive_movers
-from .physics import FieldGains, field_actuate, field_sense, ideal_actuate
+from .physics import FIELD, IDEAL, FieldGains, field_actuate, field_sense, ideal_actuate
 
 __all__ = ["COLLIDED", "ENDED", "FIELD", "IDEAL", "State", "clearance", "control_fleet", "run", "settle_fleet"]
 
 COLLIDED = 32  #: flag bit: the robot touched a wall, a block, a robot or a moving obstacle this step
 ENDED = DONE | STALLED | TIMED_OUT
-IDEAL, FIELD = 0, 1  #: the physics :func:`run` applies (``Emulated.kind``)
 
 
 class State(IntEnum):
@@ -136,7 +135,7 @@ def run(kind: int, max_steps: int, step0: int, log_poses: bool, ctrl: tuple, phy
         radius: float, step_travel: float, out: tuple, g: Gains, fg: FieldGains, movers: tuple,
         mg: MoverGains) -> tuple[int, int, int]:
     """Advance the fleet up to ``max_steps`` steps from simulation step ``step0``; on the field the obstacle
-    robots (``movers`` = ``(tables, phys)`` of :mod:`robot_agent.movers`) step after the robots moved.
+    robots (``movers`` = ``(tables, phys)`` of :mod:`robot_agent.engine.movers`) step after the robots moved.
 
     Returns ``(steps done, event rows, pose rows)``.
     """

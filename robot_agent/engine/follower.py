@@ -19,7 +19,7 @@ step (all quantities SI: m, rad, s):
 5. :func:`rate_limit` applies the acceleration limits to the commands.
 
 :func:`control` chains 1-5 with stall and timeout detection for one robot
-of a fleet; the simulation's kernels (:mod:`robot_agent.stepper`) call it
+of a fleet; the simulation's kernels (:mod:`robot_agent.engine.stepper`) call it
 for every moving robot.  The functions are compiled with numba (the issue's
 single-robot target of 5000x real time leaves 4 microseconds per step) and
 can be called from Python with floats.  :class:`Gains` carries the
@@ -33,10 +33,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from contract.params import RobotParams
+
 from .compiled import kernel
 from .controllers import DIRECT, SCHEMA, project, steer
 from .kinematics import wrap_angle
-from .params import RobotParams
 
 __all__ = [
     "ARRIVED", "DONE", "STALLED", "STARTED", "TIMED_OUT",
@@ -170,7 +171,7 @@ def control(i: int, bx: float, by: float, bth: float, points: np.ndarray, offset
     anchor (``anchor`` ``(N, 3)``, ``anchor_k``).  ``points``, ``offset`` and
     ``count`` hold every robot's path back to back; ``k`` counts control
     steps since the path began, ``timeout`` is its limit.  ``cid[i]`` is the
-    robot's controller (:mod:`robot_agent.controllers`; the schema's steps
+    robot's controller (:mod:`robot_agent.engine.controllers`; the schema's steps
     are 1-5 above), ``cpar[i]`` its parameters, ``cmem[i]`` its memory,
     ``want[i]`` a plug-in's commands and ``clearance`` (m) the believed
     distance from the robot's edge to the nearest obstacle (regulated pure

@@ -1,15 +1,15 @@
 """The simulation core: steps all robots of a host at once, no I/O.
 
 :class:`SimCore` holds the fleet's path-follower state (paths, current
-waypoints, commands, stall anchors, timeouts), a :class:`~robot_agent.backends.Backend`
-for the physical side and a :class:`~robot_agent.world.World` for frames and
+waypoints, commands, stall anchors, timeouts), a :class:`~robot_agent.engine.backends.Backend`
+for the physical side and a :class:`~robot_agent.engine.world.World` for frames and
 collisions.  :meth:`SimCore.advance` moves experiment time on by up to a
 given number of control steps (``1 / control_rate_hz`` each) and returns the
 events of those steps; :meth:`SimCore.step` does one.  The host
 (:mod:`robot_agent.host`) calls them from an asyncio task.
 
 With an emulated backend (ideal or field) the steps run inside compiled code
-(:func:`robot_agent.stepper.run`), many per call; any other backend (a real
+(:func:`robot_agent.engine.stepper.run`), many per call; any other backend (a real
 robot) is stepped through its Python methods, with the same compiled
 follower.  Both orders of work are the same: sense, follow, actuate, then
 collisions once every robot moved.
@@ -20,7 +20,7 @@ the step's start (when the controller sensed), COLLISION at its end.  Logged
 tracker poses are collected in :attr:`SimCore.poses` (a :class:`PoseLog`).
 
 Replay: a run's trajectory depends only on the pose it starts from (at
-rest), its path, its noise key (see :mod:`robot_agent.noise`) and, in a
+rest), its path, its noise key (see :mod:`robot_agent.engine.noise`) and, in a
 shared world, on the other robots; all noise is indexed by the control step
 since the path began.
 """
@@ -32,13 +32,14 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from contract.controller_specs import Selection
+from contract.params import RobotParams
+from contract.protocol import format_event
+
 from .backends import Backend, Emulated
-from .controller_specs import Selection
 from .controllers import DIRECT, MEMORY, PARAM_SLOTS, SCHEMA, project
 from .follower import ARRIVED, DONE, STALLED, STARTED, TIMED_OUT, gains, timeout_steps
 from .movers import drive_movers, drive_shared, mover_gains
-from .params import RobotParams
-from .protocol import format_event
 from .stepper import COLLIDED, ENDED, FIELD, State, control_fleet, run, settle_fleet
 from .world import World
 
@@ -135,7 +136,7 @@ class SimCore:
         self.anchor = np.zeros((n, 3))
         self.anchor_k = np.zeros(n, dtype=np.int64)
         self.keys = np.zeros(n, dtype=np.uint64)
-        self.cid = np.full(n, SCHEMA, dtype=np.int64)  # each robot's controller (robot_agent.controllers)
+        self.cid = np.full(n, SCHEMA, dtype=np.int64)  # each robot's controller (robot_agent.engine.controllers)
         self.cpar = np.zeros((n, PARAM_SLOTS))
         self.cmem = np.zeros((n, MEMORY))
         self.want = np.zeros((n, 2))  # a plug-in controller's commands of this step
@@ -149,10 +150,10 @@ class SimCore:
                          np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(3))
         self._dirty = True
         self._rebuild_paths()
-        #: replanning robots' state (robot_agent.replan), made with the first path that replans
+        #: replanning robots' state (robot_agent.engine.replan), made with the first path that replans
         self.replanner: "Replanner | None" = None
         #: True: :meth:`advance` replans itself when a check is due; False: it stops there and the caller
-        #: runs :meth:`replan_requests` / :func:`robot_agent.replan.solve` / :meth:`apply_replan` (an agent,
+        #: runs :meth:`replan_requests` / :func:`robot_agent.engine.replan.solve` / :meth:`apply_replan` (an agent,
         #: which plans in a worker thread)
         self.inline_replan = True
         self._maps: dict[int, "Environment"] = {}  # replanning robots' static maps of their current path
@@ -184,7 +185,7 @@ class SimCore:
 
     def set_path(self, i: int, points: np.ndarray, key: int, controller: Selection | None = None) -> SimEvent | None:
         """Robot ``i`` follows ``points`` ``(P, 3)`` (its frame, m/rad) from the next step with ``controller``
-        (:func:`robot_agent.controller_specs.select`; None: the motor schema).
+        (:func:`contract.controller_specs.select`; None: the motor schema).
 
         Returns the ``FAIL,STOPPED`` event of a path it replaces, if any.
         """
@@ -216,7 +217,7 @@ class SimCore:
         return replaced
 
     def _begin_replanning(self, i: int, controller: Selection | None) -> None:
-        """Robot ``i``'s new path replans when its controller says so (:mod:`robot_agent.replan`)."""
+        """Robot ``i``'s new path replans when its controller says so (:mod:`robot_agent.engine.replan`)."""
         self._maps.pop(i, None)
         if self.replanner is None and (controller is None or not controller.replans):
             return
@@ -339,7 +340,7 @@ class SimCore:
 
     def replan_requests(self) -> list["Request"]:
         """Check the path ahead of every robot whose check is due now; the replans of those it finds
-        blocked (cheap: numpy over the samples ahead; :mod:`robot_agent.replan`)."""
+        blocked (cheap: numpy over the samples ahead; :mod:`robot_agent.engine.replan`)."""
         from .replan import Request, blocked, path_ahead, standing, static_map
 
         rp, world = self.replanner, self.world
@@ -481,10 +482,11 @@ def warm_up() -> None:
     global _warm
     if _warm:
         return
+    from contract.frames import field_layout
+    from contract.params import robot_params
+
     from . import replan  # noqa: F401 - the planners it uses load here, not on the loop when a robot first replans
     from .backends import make_backend
-    from .frames import field_layout
-    from .params import robot_params
 
     p = robot_params()
     for name in ("ideal", "field"):

@@ -5,7 +5,7 @@ A sink receives batches of one robot's logged poses as ``(M, 4)`` arrays of
 radians).  :class:`TrackerSink` is the interface; :class:`CsvTrackerSink`
 writes standalone files, :class:`MemoryTrackerSink` keeps them (tests, and a
 server embedding agents in its own process), and
-:class:`robot_agent.server_link.ServerLink` posts them to the testbed server.
+:class:`robot_agent.host.server_link.ServerLink` posts them to the testbed server.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Backends: the physical side of a fleet of robots, behind one interface.
 
-The simulation core (:mod:`robot_agent.sim`) runs the path follower for all
+The simulation core (:mod:`robot_agent.engine.sim`) runs the path follower for all
 robots of a host and talks to the robots only through a :class:`Backend`:
 
 - :meth:`Backend.begin_path` — a path starts for some robots (per-run draws);
@@ -18,17 +18,17 @@ All arrays are over the host's robots, in each robot's own frame (metres,
 radians).  Two emulated backends ship: :class:`IdealBackend` (Player/Stage
 like: perfect actuation, exact pose at the control rate) and
 :class:`FieldBackend` (the emulated physical robot on the Teleworkbench field).
-Their per-robot physics is compiled (:mod:`robot_agent.physics`); they are
+Their per-robot physics is compiled (:mod:`robot_agent.engine.physics`); they are
 also :class:`Emulated`: the simulation core runs them many steps at a time
-inside compiled code (:mod:`robot_agent.stepper`), which only works for
+inside compiled code (:mod:`robot_agent.engine.stepper`), which only works for
 backends whose whole physics is such code.  Any other backend is stepped
 through the methods below, one step at a time.
 
 **A real robot plugs in here**: subclass :class:`Backend`, send the commands
 of :meth:`actuate` to the robots (radio/Bluetooth), fill the beliefs and
 logged poses of :meth:`sense` from the real overhead tracker (the field
-backend's latency compensation, :func:`robot_agent.physics.localise` with
-:func:`robot_agent.physics.odometry`, works on late fixes from any tracker),
+backend's latency compensation, :func:`robot_agent.engine.physics.localise` with
+:func:`robot_agent.engine.physics.odometry`, works on late fixes from any tracker),
 report :attr:`pose` from the tracker too, and refuse :meth:`place` (no emulated
 gripper) by raising ``NotImplementedError``.  No such driver ships.
 """
@@ -39,10 +39,20 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from contract.params import RobotParams
+
 from .compiled import kernel
-from .physics import BIAS_FEATURES, FieldGains, field_actuate, field_begin, field_gains, field_sense, ideal_actuate
-from .params import RobotParams
-from .stepper import FIELD, IDEAL
+from .physics import (
+    BIAS_FEATURES,
+    FIELD,
+    IDEAL,
+    FieldGains,
+    field_actuate,
+    field_begin,
+    field_gains,
+    field_sense,
+    ideal_actuate,
+)
 
 __all__ = ["BACKENDS", "Backend", "Emulated", "FieldBackend", "IdealBackend", "make_backend"]
 
@@ -99,8 +109,8 @@ class Backend(ABC):
 class Emulated(Backend):
     """A backend the compiled simulation loop can run: its state is plain arrays.
 
-    ``kind`` selects the physics in :func:`robot_agent.stepper.run`
-    (``stepper.IDEAL`` or ``stepper.FIELD``); :attr:`arrays` hands over the
+    ``kind`` selects the physics in :func:`robot_agent.engine.stepper.run`
+    (``physics.IDEAL`` or ``physics.FIELD``); :attr:`arrays` hands over the
     state, in place.
     """
 
@@ -184,7 +194,7 @@ def _field_actuate_all(cmd: np.ndarray, pose: np.ndarray, tracks: np.ndarray, ga
 
 
 class FieldBackend(Emulated):
-    """The emulated physical robot on the field (see :mod:`robot_agent.physics`).
+    """The emulated physical robot on the field (see :mod:`robot_agent.engine.physics`).
 
     Tracker: each robot is measured at ``camera_rate_hz`` (frames timed from
     the path start, on the control grid) with a smooth position error over

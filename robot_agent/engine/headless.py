@@ -1,11 +1,11 @@
 """One robot's run as a function call: build, place, follow a path to its end, with no socket and no clock.
 
-The agent's own simulation core (:class:`~robot_agent.sim.SimCore`) stepped as fast as it goes, in a
+The agent's own simulation core (:class:`~robot_agent.engine.sim.SimCore`) stepped as fast as it goes, in a
 world of its own, exactly as an agent's simulation-pool robot would run it: the path, the placement and
 the blocks go through the wire codec's rounding (0.01 mm, 0.01 deg) as they would over TCP, the noise
 key comes from the run's seed, and the tracker log is the core's.  So a run here gives the same poses
 and events as the same run sent to an agent (times counted from the path's start).  The testbed's
-simulation pool on Ray runs this (:mod:`server.pipeline.compute`).
+simulation pool on Ray runs this (:mod:`robot_agent.engine.jobs`).
 """
 
 from __future__ import annotations
@@ -16,15 +16,25 @@ from typing import Sequence
 
 import numpy as np
 
+from contract.controller_specs import select
+from contract.frames import FIELD_SIZE, field_layout
+from contract.params import robot_params
+from contract.protocol import (
+    BuildCommand,
+    MovingCommand,
+    PathCommand,
+    PlaceCommand,
+    encode_build,
+    encode_moving,
+    encode_path,
+    encode_place,
+    parse_command,
+)
+from contract.robot_profile import DEFAULT_PROFILE
+
 from .backends import make_backend
-from .controller_specs import select
-from .frames import FIELD_SIZE, field_layout
 from .movers import mover_tracks
 from .noise import path_key
-from .params import robot_params
-from .protocol import (BuildCommand, MovingCommand, PathCommand, PlaceCommand, encode_build, encode_moving, encode_path,
-                       encode_place, parse_command)
-from .robot_profile import DEFAULT_PROFILE
 from .sim import SimCore, SimEvent
 from .world import World
 
@@ -43,7 +53,7 @@ class HeadlessRun:
     """What one run gave: tracker ``poses`` ``(N, 4)`` (t s, x m, y m, theta rad; the robot's frame),
     its ``events`` in order, the experiment times (s) of its start and end (None if none) and, on the
     field, the tracker's poses of its obstacle robots (``obstacles``: per moving obstacle ``(T, 4)`` on the
-    run's clock, as ``poses``; None: exact discs, :mod:`robot_agent.movers`)."""
+    run's clock, as ``poses``; None: exact discs, :mod:`robot_agent.engine.movers`)."""
 
     poses: np.ndarray
     events: list[SimEvent] = field(default_factory=list)
@@ -74,14 +84,14 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
                  max_s: float = 3600.0, track_gains: tuple[float, float] | None = None, controller: str | None = None,
                  controller_params: dict[str, float] | None = None) -> HeadlessRun:
     """Run ``path`` ``(N, 3)`` (m, m, rad) from ``start`` (x, y, theta) among ``blocks`` (cx, cy, w, h,
-    angle: m, rad) and ``moving`` obstacles (params, waypoints: as :func:`~robot_agent.protocol.encode_moving`
+    angle: m, rad) and ``moving`` obstacles (params, waypoints: as :func:`~contract.protocol.encode_moving`
     takes them) in a world of ``area`` (m), with the run's ``seed``, until the robot ends the path or
     ``max_s`` of experiment time passed (on the ``field`` backend the moving obstacles are robots the
-    testbed drives, :mod:`robot_agent.movers`), with ``controller`` (a name of
-    :mod:`robot_agent.controller_specs`, default the motor schema) and its ``controller_params`` (SI
+    testbed drives, :mod:`robot_agent.engine.movers`), with ``controller`` (a name of
+    :mod:`contract.controller_specs`, default the motor schema) and its ``controller_params`` (SI
     units; defaults filled in).  ``track_gains`` (left, right; field backend) replaces the run's drawn
     track gains (calibration re-simulates runs with fitted ones).  Raises :class:`PlacementRefused`
-    when the start is not free and :class:`~robot_agent.controller_specs.ControllerError` for a bad
+    when the start is not free and :class:`~contract.controller_specs.ControllerError` for a bad
     controller choice."""
     chosen = select(controller, controller_params)
     params = robot_params(profile)

@@ -5,7 +5,7 @@ caches machine code per source file and only notices changes to *that*
 file, not to the functions it calls from other files; so the cache lives in
 a directory named after a hash of all kernel sources, and changing any of
 them compiles everything afresh.  The directory is under
-``$NUMBA_CACHE_DIR`` when set, else ``robot_agent/__pycache__/kernels``, else
+``$NUMBA_CACHE_DIR`` when set, else ``robot_agent/engine/__pycache__/kernels``, else
 (read-only install) the user's cache directory.
 """
 

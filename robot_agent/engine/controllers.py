@@ -1,7 +1,7 @@
 """The path-tracking controllers besides the motor schema (compiled scalar functions).
 
-:func:`robot_agent.follower.control` runs one of these for a robot whose
-controller id (:mod:`robot_agent.controller_specs`) is not the schema's.  Each
+:func:`robot_agent.engine.follower.control` runs one of these for a robot whose
+controller id (:mod:`contract.controller_specs`) is not the schema's.  Each
 returns the desired body velocities ``(v m/s, w rad/s)`` of one control
 step; the follower then applies the same arrival, final alignment, stall,
 timeout and acceleration limits as for the schema.  All three share the

@@ -27,7 +27,7 @@ import numpy as np
 
 __all__ = ["ServerLink"]
 
-log = logging.getLogger("robot_agent.server_link")
+log = logging.getLogger("robot_agent.host.server_link")
 
 _RETRY_STATUS = {408, 429}
 

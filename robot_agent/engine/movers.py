@@ -3,7 +3,7 @@
 In a simulation (ideal backend) a moving obstacle is a disc that moves
 exactly as :mod:`planners.moving` says.  On the emulated field (field
 backend) it is an emulated field robot of the run's profile, the same
-physics as the run's robots (:mod:`robot_agent.physics`: the tracker with its
+physics as the run's robots (:mod:`robot_agent.engine.physics`: the tracker with its
 latency, noise and dropouts, motor lag, acceleration limit, per-run track
 gains and speed noise), driven by the testbed with :func:`pursue`: pure
 pursuit of the exact track's point ``lookahead_s`` ahead in the obstacle's
@@ -20,10 +20,10 @@ until one hits it; so its trajectory is replayed off line
 (:func:`mover_tracks`) exactly as it was driven live, which is how the
 server measures a run against where the obstacle robots really were.
 
-State: a :class:`~robot_agent.backends.FieldBackend`'s arrays, one row per
+State: a :class:`~robot_agent.engine.backends.FieldBackend`'s arrays, one row per
 obstacle (its ``arrays`` tuple is ``phys`` below); poses are in the owner
 robot's frame (m, rad); ``pts`` ``(M, K, 2)`` / ``cum`` ``(M, K)`` /
-``count`` ``(M,)`` the tracks in that frame (:mod:`robot_agent.contact`'s
+``count`` ``(M,)`` the tracks in that frame (:mod:`robot_agent.engine.contact`'s
 layout), ``par`` ``(M, 4)`` radius, speed, repeat code, delay.
 """
 
@@ -34,12 +34,14 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from contract.params import RobotParams
+
+from .backends import FieldBackend
 from .compiled import kernel
-from .contact import obstacle_position
+from .contact import LOOP, obstacle_position
 from .kinematics import wrap_angle
 from .noise import mix64
-from .physics import FieldGains, field_actuate, field_begin, field_sense
-from .params import RobotParams
+from .physics import FieldGains, field_actuate, field_begin, field_gains, field_sense
 
 __all__ = ["MoverGains", "drive_movers", "drive_shared", "mover_gains", "mover_key", "mover_step", "mover_tracks", "pursue",
            "reset_mover", "start_pose"]
@@ -130,7 +132,7 @@ def mover_step(m: int, c: int, par: np.ndarray, pts: np.ndarray, cum: np.ndarray
 @kernel
 def drive_movers(k: np.ndarray, world: tuple, tables: tuple, phys: tuple, meas: np.ndarray, fg: FieldGains,
                  mg: MoverGains, only_shared: bool) -> None:
-    """One control step of every driven obstacle robot of a world (:attr:`robot_agent.world.World.arrays`)
+    """One control step of every driven obstacle robot of a world (:attr:`robot_agent.engine.world.World.arrays`)
     that was not hit: a robot's own at its time ``k[i]`` (steps since its path began), the shared ones
     (a fleet's) at their own clock, which this advances; ``only_shared``: those alone (the robots stand)."""
     mo_first, mo_par, mo_n, mv_on, mv_halt, mv_clock = world[9], world[10], world[13], world[15], world[17], \
@@ -182,12 +184,9 @@ def mover_tracks(obstacles: Sequence[tuple[Sequence[float], Sequence[Sequence[fl
                  params: RobotParams, duration_s: float, halt: Sequence[int] | None = None) -> list[np.ndarray]:
     """What the tracker logged of obstacle robots driven for ``duration_s`` (s) from their track's start in a
     run of noise ``key``: per obstacle ``(T, 4)`` t s (since the track began), x m, y m, theta rad, in the
-    frame of their waypoints.  ``obstacles`` as the agent got them (:class:`~robot_agent.protocol.MovingCommand`,
+    frame of their waypoints.  ``obstacles`` as the agent got them (:class:`~contract.protocol.MovingCommand`,
     after the wire's rounding); ``halt[j]`` the step obstacle ``j`` was hit in (it stands after it; -1:
     never).  The same numbers as the live obstacle robots' (:func:`drive_movers`)."""
-    from .backends import FieldBackend
-    from .physics import field_gains
-
     m = len(obstacles)
     if m == 0:
         return []
@@ -208,9 +207,7 @@ def mover_tracks(obstacles: Sequence[tuple[Sequence[float], Sequence[Sequence[fl
 def track_tables(obstacles: Sequence[tuple[Sequence[float], Sequence[Sequence[float]]]]) -> tuple[
         np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(par (M, 4), pts (M, K, 2), cum (M, K), count (M,))`` of obstacles given as (params, waypoints), a
-    ``loop`` closed (:mod:`robot_agent.contact`'s layout)."""
-    from .contact import LOOP
-
+    ``loop`` closed (:mod:`robot_agent.engine.contact`'s layout)."""
     tracks = []
     for p, w in obstacles:
         w = np.asarray(w, dtype=float).reshape(-1, 2)

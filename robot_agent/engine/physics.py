@@ -1,9 +1,9 @@
 """The emulated robots' physics, one robot at a time (compiled scalar functions).
 
-What the two emulated backends (:mod:`robot_agent.backends`) do to robot
+What the two emulated backends (:mod:`robot_agent.engine.backends`) do to robot
 ``i`` of a fleet in one control step, written once and called both by the
 backends' array methods and by the fused simulation loop
-(:mod:`robot_agent.stepper`):
+(:mod:`robot_agent.engine.stepper`):
 
 - ideal (Player/Stage-like): the commands move the robot exactly
   (:func:`ideal_actuate`); it knows its pose.
@@ -18,7 +18,7 @@ backends' array methods and by the fused simulation loop
   first-order lag, acceleration limit) and the odometry model of them
   (:func:`odometry`); :func:`field_begin` the per-run draws.
 
-All noise comes from :mod:`robot_agent.noise`, keyed per run, so runs replay
+All noise comes from :mod:`robot_agent.engine.noise`, keyed per run, so runs replay
 exactly.  Units: m, rad, s.
 """
 
@@ -29,12 +29,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from contract.params import RobotParams
+
 from .compiled import kernel
 from .kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
 from .noise import box_muller, uniform
-from .params import RobotParams
 
-__all__ = ["BIAS_FEATURES", "FieldGains", "RUN_COUNTER", "field_actuate", "field_begin", "field_gains", "field_sense",
+__all__ = ["BIAS_FEATURES", "FIELD", "IDEAL", "FieldGains", "RUN_COUNTER", "field_actuate", "field_begin", "field_gains", "field_sense",
            "ideal_actuate", "localise", "odometry", "tracker_bias"]
 
 #: noise counter reserved for per-run draws (a path never runs 2**40 steps); the tracker's bias
@@ -79,6 +80,9 @@ def field_gains(p: RobotParams) -> FieldGains:
                       f.wheel_noise_rel, f.wheel_noise_abs_m_s, f.wheel_gain_mean, f.wheel_bias_sigma,
                       f.dead_band_m_s, p.max_accel_m_s2 * p.dt, alpha, p.dt, f.tracker_bias_xy_m, k,
                       int(round(f.latency_compensation_s / p.dt)), f.control_lead_s)
+
+
+IDEAL, FIELD = 0, 1  #: which physics the compiled loop applies to a fleet (``Emulated.kind``)
 
 
 @kernel

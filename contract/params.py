@@ -1,4 +1,4 @@
-"""Typed robot parameters built from a profile (``robot_agent/profiles/*.json``).
+"""Typed robot parameters built from a profile (``contract/profiles/*.json``).
 
 A profile is data; this module turns it into frozen dataclasses that the
 pure controller and the simulation core take, checking that every value is

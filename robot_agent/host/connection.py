@@ -2,8 +2,8 @@
 
 After aiosmtpd's connection handler: this class only frames lines
 (``readuntil(b"\\n")`` with a 1 MiB limit and recovery from an over-long line),
-hands each line to its robot (:class:`robot_agent.robot.Robot`) and writes
-what comes back.  Pure parsing lives in :mod:`robot_agent.protocol`.
+hands each line to its robot (:class:`robot_agent.host.robot.Robot`) and writes
+what comes back.  Pure parsing lives in :mod:`contract.protocol`.
 
 Writing never blocks anybody else: a line goes straight to the transport
 while the client keeps up, else into this connection's bounded queue, which
@@ -29,17 +29,38 @@ import asyncio
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Optional, Protocol
 
-from .protocol import MAX_LINE_BYTES, ErrorCode, RobotState, format_error
+from contract.protocol import MAX_LINE_BYTES, ErrorCode, RobotState, format_error
 
 if TYPE_CHECKING:
-    from .controller_specs import Selection
-    from .robot import Robot
+    from contract.controller_specs import Selection
 
-__all__ = ["MAX_AUTH_FAILURES", "TOOLONG", "TOO_MANY", "Connection", "Limits"]
+__all__ = ["MAX_AUTH_FAILURES", "TOOLONG", "TOO_MANY", "Connection", "Limits", "LineHandler"]
 
-log = logging.getLogger("robot_agent.connection")
+log = logging.getLogger("robot_agent.host.connection")
+
+class LineHandler(Protocol):
+    """What a connection hands its lines to: its robot (:class:`robot_agent.host.robot.Robot`)."""
+
+    robot_id: str
+    owner: Optional["Connection"]  #: the connection whose path is in progress
+
+    def hello(self) -> str:
+        """The greeting line."""
+
+    def state(self) -> RobotState:
+        """Where the robot stands."""
+
+    def authorized(self, conn: "Connection") -> bool:
+        """Whether ``conn`` holds a valid secret."""
+
+    async def handle(self, conn: "Connection", line: bytes, *, in_thread: bool = False) -> list[str]:
+        """The replies to one line ``conn`` sent."""
+
+    def disconnected(self, conn: "Connection") -> None:
+        """``conn`` closed."""
+
 
 TOOLONG = object()  #: marker returned by :func:`read_line` for a discarded over-long line
 TOO_MANY = "too many connections"
@@ -114,7 +135,7 @@ class Connection:
     ``auth_failures`` counts wrong secrets.
     """
 
-    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, robot: "Robot",
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, robot: LineHandler,
                  *, limits: Limits | None = None, probation: bool = False, max_queue: int = 50_000) -> None:
         self.reader, self.writer, self.robot = reader, writer, robot
         self.peer = writer.get_extra_info("peername")

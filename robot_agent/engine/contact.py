@@ -1,7 +1,7 @@
 """Collision geometry of one robot against walls, blocks, other robots and moving obstacles (compiled).
 
-Kernels for :class:`robot_agent.world.World` and the fused simulation loop
-(:mod:`robot_agent.stepper`).  Positions are world coordinates (m).  Blocks
+Kernels for :class:`robot_agent.engine.world.World` and the fused simulation loop
+(:mod:`robot_agent.engine.stepper`).  Positions are world coordinates (m).  Blocks
 are stored per world, packed at the front of ``(W, Bmax, 2)`` tables of
 centres, half sizes and (cos, sin) of their angles; ``nblocks`` ``(W,)``
 says how many each world has.
@@ -13,7 +13,7 @@ speed m/s, repeat code, delay s), ``mo_pts`` ``(M, K, 2)`` their tracks
 (world frame, a ``loop`` closed) with ``mo_cum`` ``(M, K)`` the arc length
 at each point and ``mo_n`` ``(M,)`` the points used; rows ``mo_first[N]`` to
 ``mo_first[N + 1]`` are shared by every robot of world 0 (a fleet's).  On the
-field an obstacle is an emulated robot (``mv_on``, :mod:`robot_agent.movers`)
+field an obstacle is an emulated robot (``mv_on``, :mod:`robot_agent.engine.movers`)
 standing at ``mv_pose`` in its owner's frame instead of on its exact track;
 ``mv_halt`` records the step it was hit in, after which it stands.
 """

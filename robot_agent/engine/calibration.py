@@ -3,7 +3,7 @@
 The field robot's effects (docs/fidelity.md, "The emulated field robot") are fitted in three stages, each by
 :func:`scipy.optimize.least_squares` or a statistic of the residuals, never a hand-written optimiser:
 
-1. **Tracks and lag.**  Every run is re-simulated without noise (:func:`robot_agent.headless.simulate_run`,
+1. **Tracks and lag.**  Every run is re-simulated without noise (:func:`robot_agent.engine.headless.simulate_run`,
    field backend, tracker jitter, bias, dropouts and wheel noise off) with the motor time constant and a
    left/right track gain per run as unknowns; ``least_squares`` fits them to the tracked positions (at the
    logged times, counted from the path's start).  ``wheel_gain_mean`` and ``wheel_bias_sigma`` are the mean
@@ -36,10 +36,11 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
-from .frames import SUBFIELD_SIZE
+from contract.frames import SUBFIELD_SIZE
+from contract.overrides import OVERRIDE_LIMITS, apply_overrides
+from contract.robot_profile import DEFAULT_PROFILE, load_profile
+
 from .headless import simulate_run
-from .overrides import OVERRIDE_LIMITS, apply_overrides
-from .robot_profile import DEFAULT_PROFILE, load_profile
 
 __all__ = ["FITTED", "Calibration", "RecordedRun", "calibrate", "resimulate"]
 

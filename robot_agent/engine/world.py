@@ -2,7 +2,7 @@
 
 A host's robots share one world (the 3.6 m x 3.6 m field, each robot on its
 sub-field) or each has a world of its own (the simulation pool); see
-:func:`robot_agent.frames.field_layout`.  Every robot has an *origin* (x0,
+:func:`contract.frames.field_layout`.  Every robot has an *origin* (x0,
 y0) in its world and a working *area* (w, h): protocol coordinates are
 relative to the origin, and path points and placements must lie in
 ``[0, w] x [0, h]``.
@@ -12,14 +12,14 @@ coordinates, tagged with their builder; they are obstacles for every robot of
 that world.  The world's boundary is a wall.  A robot collides when a block,
 a wall or another robot of its world comes closer than the collision radius
 to its centre (robots: twice that radius between centres).  The geometry is
-compiled (:mod:`robot_agent.contact`).
+compiled (:mod:`robot_agent.engine.contact`).
 
 Moving obstacles (``T,T,M``, :mod:`planners.moving`) belong to the robot
 that was sent them: their time is that robot's time since its path began,
 so they collide with that robot only.  In a simulation they move exactly as
 the environment says.  On the emulated field (:meth:`World.drive`) each is
 an emulated robot the testbed drives along its track
-(:mod:`robot_agent.movers`): it starts again from its first waypoint with
+(:mod:`robot_agent.engine.movers`): it starts again from its first waypoint with
 every path of its robot, touches that robot as a robot does (two collision
 radii between centres) and stops where it was hit.  A fleet's obstacles
 are shared by all its robots (:meth:`World.set_shared_moving`), on the
@@ -30,9 +30,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from contract.params import RobotParams
+
+from .backends import FieldBackend
 from .contact import block_distance, collide, obstacle_contact, wall_distance
 from .movers import mover_key, reset_mover, track_tables
-from .params import RobotParams
 
 __all__ = ["World"]
 
@@ -138,7 +140,7 @@ class World:
         return [(par.copy(), pts.copy()) for par, pts in self._moving.get(owner, [])]
 
     def drive(self, params: RobotParams) -> None:
-        """From now on moving obstacles are emulated field robots of ``params`` (:mod:`robot_agent.movers`)."""
+        """From now on moving obstacles are emulated field robots of ``params`` (:mod:`robot_agent.engine.movers`)."""
         self.driven = params
         self._rebuild_moving()
 
@@ -175,10 +177,8 @@ class World:
 
     def _rebuild_moving(self, changed: int = -1) -> None:
         """Tables of every robot's obstacle tracks, robot by robot, then the shared ones (see
-        :mod:`robot_agent.contact`): in the world's frame for exact discs, in the owner's for obstacle robots;
+        :mod:`robot_agent.engine.contact`): in the world's frame for exact discs, in the owner's for obstacle robots;
         the obstacle robots of owners other than ``changed`` keep their state."""
-        from .backends import FieldBackend
-
         world: list[tuple[np.ndarray, np.ndarray]] = []
         local: list[tuple[np.ndarray, np.ndarray]] = []
         first = np.zeros(self.n + 2, dtype=np.int64)
@@ -221,8 +221,8 @@ class World:
     @property
     def arrays(self) -> tuple:
         """``(origin, world_of, sizes, centre, half, cs, nblocks, shared, safe_until, mo_first, mo_par, mo_pts,
-        mo_cum, mo_n, what, mv_on, mv_pose, mv_halt, mv_clock)`` for :func:`robot_agent.contact.collide`, the
-        arrays themselves; ``mv_*`` the obstacle robots' (:mod:`robot_agent.movers`): driven or not, poses in
+        mo_cum, mo_n, what, mv_on, mv_pose, mv_halt, mv_clock)`` for :func:`robot_agent.engine.contact.collide`, the
+        arrays themselves; ``mv_*`` the obstacle robots' (:mod:`robot_agent.engine.movers`): driven or not, poses in
         their owner's frame, the step each was hit in (-1: not), the shared ones' clocks."""
         pose = self.movers.pose if self.movers is not None else _NO_POSE
         return (self.origin, self.world_of, self.sizes, self.centre, self.half, self.cs, self.nblocks,
