@@ -34,6 +34,7 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 import httpx  # noqa: E402
 
 from bench._common import report  # noqa: E402
+from contract.vocabulary import TERMINAL  # noqa: E402
 
 
 def lanes(robots: int) -> list[dict[str, Any]]:
@@ -97,7 +98,7 @@ def playing_window(c: httpx.Client, listener: Listener, pid: int, robots: int, s
     run = c.get(url).json()["runs"][0]
     if run["status"] not in ("running",):
         raise RuntimeError(f"the window outlasted the playback ({run['status']}): lower --seconds")
-    while c.get(url).json()["status"] not in ("completed", "failed", "error"):
+    while c.get(url).json()["status"] not in TERMINAL:
         time.sleep(0.2)
     return {"share": got, "events_per_s": events}
 

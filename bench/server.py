@@ -43,6 +43,7 @@ import httpx  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench._common import postgres, report  # noqa: E402
+from contract.vocabulary import TERMINAL  # noqa: E402
 from twb.launch import LocalTestbed  # noqa: E402
 
 TOKEN = "bench-token"
@@ -258,7 +259,7 @@ def rest_and_throughput(tmp: Path, requests: int, experiments: int) -> tuple[dic
             t0 = time.perf_counter()
             ids = [c.post("/api/v1/experiments", json={**job, "repetitions": 1, "seed": i}).json()["id"]
                    for i in range(experiments)]
-            done = [wait_status(c, i, {"completed", "failed", "error"}, timeout=600) for i in ids]
+            done = [wait_status(c, i, TERMINAL, timeout=600) for i in ids]
             wall = time.perf_counter() - t0
             ok = sum(d["status"] == "completed" for d in done)
             thr = {"experiments": experiments, "completed": ok, "runs_each": 2, "wall_s": wall,

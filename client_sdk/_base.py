@@ -27,6 +27,8 @@ from urllib.parse import quote
 import httpx
 import numpy as np
 
+from contract.vocabulary import Mode
+
 from ._config import missing_token_hint, resolve_token, resolve_url
 from ._exceptions import STATUS_ERRORS, ApiError, Conflict, NotFound, TransportError, TwbError, WaitTimeout
 from ._progress import BuildEstimate, LineReporter, ProgressBar, gripper_seconds_per_block
@@ -391,7 +393,7 @@ class Waiter:
         """Field runs the gripper builds for, whose build time is not estimated yet (none without progress)."""
         if self._reporter is None:
             return []
-        return [r for r in exp.runs if r.status == "building" and r.mode == "twb" and r.id not in self.builds]
+        return [r for r in exp.runs if r.status == "building" and r.mode == Mode.TWB and r.id not in self.builds]
 
     def block_count(self, client: BaseClient, name: str) -> Flow[Optional[int]]:
         """Blocks of environment ``name`` (None if it cannot be read), asked once per name."""

@@ -16,6 +16,8 @@ from typing import Any, Callable, ClassVar, Generic, Iterator, Optional, TypeVar
 
 import numpy as np
 
+from contract.vocabulary import TERMINAL, run_outcome
+
 __all__ = [
     "TERMINAL_STATES",
     "DirectComparison",
@@ -37,7 +39,7 @@ __all__ = [
 ]
 
 #: experiment and run states after which nothing changes any more
-TERMINAL_STATES = frozenset({"completed", "failed", "error", "cancelled", "interrupted"})
+TERMINAL_STATES = TERMINAL  #: the statuses a run ends in (contract.vocabulary.TERMINAL)
 
 T = TypeVar("T")
 
@@ -206,11 +208,7 @@ class Run(_FromJson):
     def outcome(self) -> str:
         """``success``, why it failed (``collision``, ``timeout``, ...), or its status (``error``,
         ``cancelled``, ``interrupted``; ``pending`` while it runs)."""
-        if self.status == "completed":
-            return "success"
-        if self.status == "failed":
-            return self.failure or "failed"
-        return self.status if self.finished else "pending"
+        return run_outcome(self.status, self.failure)
 
 
 @dataclass

@@ -15,6 +15,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Optional, TextIO
 
+from contract.vocabulary import Mode
+
 from ._models import Experiment, Run
 
 __all__ = ["REPORT_EVERY_S", "BuildEstimate", "LineReporter", "ProgressBar", "format_seconds", "gripper_seconds_per_block"]
@@ -82,7 +84,7 @@ class BuildEstimate:
 
 
 def _building(exp: Experiment) -> list[Run]:
-    return [r for r in exp.runs if r.status == "building" and r.mode == "twb"]
+    return [r for r in exp.runs if r.status == "building" and r.mode == Mode.TWB]
 
 
 def status_text(exp: Experiment, builds: dict[int, BuildEstimate]) -> str:

@@ -25,6 +25,7 @@ from typing import Any, Iterable, Optional
 
 from sqlalchemy.exc import DBAPIError
 
+from contract.vocabulary import Mode
 from robot_agent.engine import run_data
 
 from .field import FieldState
@@ -274,7 +275,7 @@ class Dispatcher:
             "queued_runs": len(self.scheduler.queue),
             "running_runs": len(self._tasks),
             "field_robots": sum(1 for r in robots if r.pool == "field"),
-            "sim_robots": sum(1 for r in robots if r.pool == "sim"),
+            "sim_robots": sum(1 for r in robots if r.pool == Mode.SIM),
             "time_scale": None if math.isinf(scale) else scale,
         }
 

@@ -23,8 +23,9 @@ run's status and error text (``server.pipeline.runner``).
 
 from __future__ import annotations
 
-from enum import StrEnum
 from typing import Any, Optional
+
+from contract.vocabulary import FailureKind
 
 from .status import RunStatus
 
@@ -98,18 +99,6 @@ class QuotaExceeded(RequestRefused):
 
 
 # --------------------------------------------------------------------------- run outcomes
-
-
-class FailureKind(StrEnum):
-    """Why a run ``failed`` (the job's own fault)."""
-
-    PLANNING = "planning"  # the planner found no path (or gave an unusable one)
-    PROGRAM = "program"  # the uploaded program gave no usable path
-    COLLISION = "collision"  # the robot hit an obstacle (its own verdict: EV,FAIL,COLLISION)
-    TIMEOUT = "timeout"  # the run took longer than the testbed's run timeout
-    CONTROLLER_TIMEOUT = "controller_timeout"  # the robot's controller gave up (EV,FAIL,TIMEOUT)
-    STALLED = "stalled"  # the robot made no progress (EV,FAIL,STALLED)
-    OTHER = "other"  # a failure reason this server does not know
 
 
 class RunEnded(TestbedError):

@@ -6,11 +6,12 @@ from typing import Any, Sequence
 
 from sqlalchemy.orm import Session
 
+from contract.vocabulary import JOB_OUTCOMES, Mode, run_outcome
 from planners.stats import aggregate, proportion
 from robot_agent.engine.run_data import compare_runs
 
 from .models import Experiment, Run
-from .status import TERMINAL, RunStatus
+from .status import RunStatus
 from .store.poses import run_poses
 
 __all__ = ["experiment_metrics", "outcome_of", "outcomes"]
@@ -41,8 +42,8 @@ def experiment_metrics(session: Session, exp: Experiment) -> dict[str, Any]:
         by_rep.setdefault(r.repetition, {})[r.mode] = r
     direct = []
     for rep, modes in sorted(by_rep.items()):
-        if "sim" in modes and "twb" in modes and exp.robots is None:
-            sim, twb = modes["sim"], modes["twb"]
+        if Mode.SIM in modes and Mode.TWB in modes and exp.robots is None:
+            sim, twb = modes[Mode.SIM], modes[Mode.TWB]
             direct.append({"repetition": rep, "sim_run_id": sim.id, "twb_run_id": twb.id,
                            **compare_runs(_driven(session, sim), _driven(session, twb))})
     planned = next((r.metrics.get("planned") for r in done if r.metrics.get("planned")), None)
@@ -50,19 +51,9 @@ def experiment_metrics(session: Session, exp: Experiment) -> dict[str, Any]:
             "outcomes": outcomes(runs), "aggregates": aggregates, "direct": direct}
 
 
-#: the outcomes that are the job's own: the success rate is over runs that ended in one of these
-JOB_OUTCOMES = ("success", "planning", "program", "collision", "timeout", "controller_timeout", "stalled", "other",
-                "failed")
-
-
 def outcome_of(run: Run) -> str:
-    """How a run ended: ``success``, why it failed (``collision``, ``timeout`` ...), or its status
-    (``error``, ``cancelled``, ``interrupted``; ``pending`` while it has not ended)."""
-    if run.status == RunStatus.COMPLETED:
-        return "success"
-    if run.status == RunStatus.FAILED:
-        return run.failure or "failed"
-    return str(run.status) if run.status in TERMINAL else "pending"
+    """How a run ended (:func:`contract.vocabulary.run_outcome`)."""
+    return run_outcome(run.status, run.failure)
 
 
 def outcomes(runs: Sequence[Run]) -> dict[str, Any]:

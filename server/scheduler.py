@@ -48,6 +48,7 @@ from typing import Callable, Optional, Union, overload
 
 from contract.frames import FIELD_SIZE, SUBFIELD_SIZE
 from contract.frames import SUBFIELD_ORIGINS as _ORIGINS
+from contract.vocabulary import Mode
 
 from .status import SubfieldState
 
@@ -80,7 +81,7 @@ class RobotSlot:
     @property
     def pool(self) -> str:
         """``sim`` for ideal robots, ``field`` for emulated physical ones."""
-        return "sim" if self.backend == "ideal" else "field"
+        return Mode.SIM if self.backend == "ideal" else "field"
 
     @property
     def subfield(self) -> Optional[int]:
@@ -140,7 +141,7 @@ _BLOCKED = object()  # no later run of this kind may start in this pass
 
 
 def _class_of(p: Pending) -> _Class:
-    return ("sim" if p.mode == "sim" else "twb", "full" if p.field == "full" else "sub", frozenset(p.exclude))
+    return (Mode.SIM if p.mode == Mode.SIM else Mode.TWB, "full" if p.field == "full" else "sub", frozenset(p.exclude))
 
 
 def _need(field_kind: str) -> tuple[float, float]:
@@ -429,12 +430,12 @@ class Scheduler:
         for r in self.robots.values():
             if r.run_id == run_id:
                 r.run_id = None
-                kinds.add("sim" if r.pool == "sim" else "twb")
+                kinds.add(Mode.SIM if r.pool == Mode.SIM else Mode.TWB)
         for s in self.subfields.values():
             if s.run_id == run_id:
                 s.run_id = None
                 s.state = SubfieldState.IDLE
-                kinds.add("twb")
+                kinds.add(Mode.TWB)
         return kinds
 
     def field_robot(self, subfield: int) -> Optional[RobotSlot]:
@@ -460,12 +461,12 @@ class Scheduler:
 
         The assignments come in queue order.
         """
-        return self._assign(("sim", "twb"))
+        return self._assign((Mode.SIM, Mode.TWB))
 
     def _assign(self, kinds: Iterable[str]) -> list[Assignment]:
         started: list[tuple[int, Assignment]] = []
         for kind in kinds:
-            choose = self._sim_chooser() if kind == "sim" else self._twb_chooser()
+            choose = self._sim_chooser() if kind == Mode.SIM else self._twb_chooser()
             if choose is not None:
                 started += self._start_in_order(kind, choose)
         started.sort(key=itemgetter(0))
@@ -503,7 +504,7 @@ class Scheduler:
 
     def _sim_chooser(self) -> Optional[Callable[[Pending], _Choice]]:
         """For sim runs: the lowest-id idle pool robot big enough and not excluded; None if none is idle."""
-        idle = [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == "sim" and r.idle]
+        idle = [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == Mode.SIM and r.idle]
         if not idle:
             return None
 
@@ -562,9 +563,9 @@ class Scheduler:
 
     def can_ever_run(self, mode: str, field_kind: str) -> bool:
         """Whether some registered robot could serve this kind of run at all."""
-        if mode == "sim":
+        if mode == Mode.SIM:
             need = _need(field_kind)
-            return any(r.pool == "sim" and _fits(r, need) for r in self.robots.values())
+            return any(r.pool == Mode.SIM and _fits(r, need) for r in self.robots.values())
         if field_kind == "full":
             return any(r.full_field for r in self.robots.values())
         return any(r.subfield is not None for r in self.robots.values())
@@ -584,7 +585,7 @@ class Scheduler:
             return self._estimate_events(finish)
         pool, field_ = self._pool_units(finish), self._field_units(finish)
         for key, runs in self._classes.items():
-            units = pool if key[0] == "sim" else field_
+            units = pool if key[0] == Mode.SIM else field_
             units.enqueue(runs, units.mask(key))
         out: dict[int, float] = {}
         pool.starts(out)
@@ -608,7 +609,7 @@ class Scheduler:
 
     def _pool_units(self, finish: dict[int, float]) -> _Pool:
         """The healthy simulation robots, bit i for the i-th by robot id (the order :meth:`_sim_chooser` tries)."""
-        robots = [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == "sim" and r.healthy]
+        robots = [r for r in sorted(self.robots.values(), key=_robot_id) if r.pool == Mode.SIM and r.healthy]
         units = _Pool(robots)
         for i, r in enumerate(robots):
             if r.run_id is None:
@@ -642,7 +643,7 @@ class Scheduler:
         durations = {p.run_id: p.expected_s for p in twin.queue}
         events = [(t, rid) for rid, t in finish.items()]
         heapq.heapify(events)
-        now, out, kinds = 0.0, {}, {"sim", "twb"}
+        now, out, kinds = 0.0, {}, {Mode.SIM, Mode.TWB}
         while True:
             for a in twin._assign(sorted(kinds)):
                 out[a.run_id] = now

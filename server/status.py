@@ -1,10 +1,11 @@
-"""The testbed's state vocabulary: run and experiment statuses, sub-field and robot states.
+"""The testbed's state vocabulary: how an experiment's status rolls up, sub-field and robot states.
 
 A run moves ``queued → building → placing → planning → running → analyzing``
-and ends in one of the terminal statuses; an experiment's status rolls up
-from its runs (:func:`roll_up`).  What each terminal status means — whose
-fault it is — is in docs/design.md ("Run states").  These are ``StrEnum``\\s:
-they compare equal to, store as and serialise as their plain string values.
+and ends in one of the terminal statuses (:mod:`contract.vocabulary`, re-exported
+here); an experiment's status rolls up from its runs (:func:`roll_up`).  What
+each terminal status means — whose fault it is — is in docs/design.md ("Run
+states").  These are ``StrEnum``\\s: they compare equal to, store as and
+serialise as their plain string values.
 """
 
 from __future__ import annotations
@@ -12,31 +13,11 @@ from __future__ import annotations
 from enum import StrEnum
 from typing import Iterable
 
+from contract.vocabulary import ACTIVE, TERMINAL, RunStatus
+
 __all__ = ["ACTIVE", "TERMINAL", "RobotStatus", "RunStatus", "SubfieldState", "roll_up"]
 
 
-class RunStatus(StrEnum):
-    """Where a run (or, rolled up, an experiment) stands."""
-
-    QUEUED = "queued"
-    BUILDING = "building"
-    PLACING = "placing"
-    PLANNING = "planning"
-    RUNNING = "running"
-    ANALYZING = "analyzing"
-    COMPLETED = "completed"
-    FAILED = "failed"  # the job's own fault: no path, collision, stall, timeout
-    ERROR = "error"  # the testbed's fault: robot unreachable, died, refused; retried once
-    CANCELLED = "cancelled"  # the owner's wish
-    INTERRUPTED = "interrupted"  # the testbed stopped during the run
-
-
-#: the states of a run under way, in the order a run passes them
-ACTIVE: tuple[RunStatus, ...] = (RunStatus.BUILDING, RunStatus.PLACING, RunStatus.PLANNING, RunStatus.RUNNING,
-                                 RunStatus.ANALYZING)
-#: the states a run ends in
-TERMINAL: frozenset[RunStatus] = frozenset({RunStatus.COMPLETED, RunStatus.FAILED, RunStatus.ERROR,
-                                            RunStatus.CANCELLED, RunStatus.INTERRUPTED})
 #: which terminal status an experiment takes when its runs ended differently (the first one any run has)
 _ROLL_UP_ORDER = (RunStatus.CANCELLED, RunStatus.ERROR, RunStatus.FAILED, RunStatus.INTERRUPTED)
 

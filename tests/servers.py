@@ -10,6 +10,7 @@ from pathlib import Path
 
 import httpx
 
+from contract.vocabulary import TERMINAL
 from twb.launch import LocalTestbed
 
 TWB = Path(sys.executable).with_name("twb")
@@ -38,7 +39,7 @@ def serve(args: list[str], data_dir: Path, **kw):  # type: ignore[no-untyped-def
 
 def wait_for(client: httpx.Client, experiment_id: int, timeout: float = 60.0, terminal=None) -> dict:
     """Poll an experiment until it reaches a terminal state."""
-    terminal = terminal or {"completed", "failed", "error", "cancelled", "interrupted"}
+    terminal = terminal or TERMINAL
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         exp = client.get(f"/api/v1/experiments/{experiment_id}").json()
@@ -54,7 +55,7 @@ def submit_watched(testbed, client: httpx.Client, job: dict, timeout: float = 12
     submitted: dict = {}
     listener = EventListener(testbed.url, testbed.token,
                              until=lambda e: e["event"] == "experiment" and e["experiment"]["id"] == submitted.get("id")
-                             and e["experiment"]["status"] in ("completed", "failed", "error"))
+                             and e["experiment"]["status"] in TERMINAL)
     submitted.update(client.post("/api/v1/experiments", json=job).json())
     exp = wait_for(client, submitted["id"], timeout=timeout)
     listener.join(10)

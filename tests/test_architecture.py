@@ -163,3 +163,34 @@ def test_the_sdk_imports_neither_the_server_nor_the_agent():
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'server', 'robot_agent', 'twb', 'numba'}))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "[]"
+
+
+def _string_sets(text: str, suffix: str) -> list[set[str]]:
+    """The collections of string literals written in ``text`` (Python: tuples, lists, sets; JavaScript: arrays)."""
+    import re
+
+    if suffix == ".py":
+        found = []
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+                found.append({e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)})
+        return found
+    return [set(re.findall(r"""["']([a-z_]+)["']""", m)) for m in re.findall(r"\[([^\[\]]*)\]", text)]
+
+
+def test_the_run_vocabulary_is_written_once():
+    """No module but contract/vocabulary.py spells out the terminal statuses or the modes as a collection: the
+    server, the SDK, the study tooling, the tests and the dashboard (from GET /api/v1/meta) take them from it."""
+    from contract.vocabulary import TERMINAL
+
+    terminal = {str(s) for s in TERMINAL}
+    copies = []
+    files = [p for pkg in (*PACKAGES, "tests") for p in (ROOT / pkg).rglob("*.py")]
+    files += list((ROOT / "server" / "static" / "js").glob("*.js"))
+    for path in files:
+        if path == ROOT / "contract" / "vocabulary.py" or "migrations" in path.parts:
+            continue
+        for strings in _string_sets(path.read_text(), path.suffix):
+            if len(strings & terminal) >= 3:
+                copies.append(f"{path.relative_to(ROOT)}: {sorted(strings)}")
+    assert copies == []

@@ -47,6 +47,19 @@ def test_health_is_open_and_the_token_file_is_written(server):
         assert con.execute(text("select count(*) from users")).scalar() >= 1
 
 
+def test_meta_serves_the_one_run_vocabulary_without_a_token(server):
+    """The dashboard's statuses and outcomes come from here: the contract's own lists, in its order."""
+    from contract.vocabulary import JOB_OUTCOMES, NOT_COUNTED, TERMINAL, FailureKind, Mode, RunStatus
+
+    with server.client(token=None) as c:
+        v = c.get("/api/v1/meta").json()["vocabulary"]
+    assert v["modes"] == ["sim", "twb"] == [m.value for m in Mode]
+    assert v["statuses"] == [s.value for s in RunStatus] and v["statuses"][0] == "queued"
+    assert set(v["terminal"]) == set(TERMINAL) and v["judged"] == ["completed", "failed"]
+    assert v["failure_kinds"] == [k.value for k in FailureKind]
+    assert v["job_outcomes"] == list(JOB_OUTCOMES) and v["not_counted"] == list(NOT_COUNTED)
+
+
 def test_auth_errors(server):
     with server.client(token=None) as c:
         r = c.get("/api/v1/experiments")

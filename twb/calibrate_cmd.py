@@ -9,6 +9,8 @@ from typing import Annotated, Any, Optional
 
 import typer
 
+from contract.vocabulary import Mode
+
 from .errors import fail
 
 __all__ = ["calibrate", "calibration_figure", "recorded_runs"]
@@ -26,7 +28,7 @@ def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
     from robot_agent.engine.calibration import RecordedRun
     from robot_agent.engine.run_data import block_tuples, jittered
 
-    variants = sorted({r.get("profile") or "" for r in data.rows if r.get("mode") == "twb"})
+    variants = sorted({r.get("profile") or "" for r in data.rows if r.get("mode") == Mode.TWB})
     if variant is None and len(variants) > 1:
         fail(f"the study's field runs have {len(variants)} robot variants ({', '.join(variants)}): "
              "choose one with --variant")
@@ -34,7 +36,7 @@ def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
     area = FIELD_SIZE if data.spec.field == "full" else SUBFIELD_SIZE
     runs = []
     for row in data.rows:
-        if row.get("mode") != "twb" or row.get("status") != "completed" or row.get("t_start") is None:
+        if row.get("mode") != Mode.TWB or row.get("status") != "completed" or row.get("t_start") is None:
             continue
         if variant is not None and (row.get("profile") or "") != variant:
             continue

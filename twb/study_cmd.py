@@ -9,6 +9,8 @@ from typing import Annotated, Iterator, Optional
 
 import typer
 
+from contract.vocabulary import JUDGED
+
 from .errors import fail
 from .sdk_support import TokenOpt, UrlOpt, sdk_client
 
@@ -82,7 +84,7 @@ def _outcome_line(data, spec, wall: float, out: Path) -> int:  # type: ignore[no
     for r in rows:
         if r.get("status") == "failed":
             failed[r.get("outcome") or "failed"] = failed.get(r.get("outcome") or "failed", 0) + 1
-    lost = sum(r.get("status") not in ("completed", "failed") for r in rows)
+    lost = sum(r.get("status") not in JUDGED for r in rows)
     refused = [e for e in data.experiments if e["status"] == "rejected"]
     for e in refused:
         typer.echo(f"twb: refused: {e['environment']} {e['plan']} {e['configuration']}: {e['error']}", err=True)
@@ -95,7 +97,7 @@ def _outcome_line(data, spec, wall: float, out: Path) -> int:  # type: ignore[no
     if refused:
         parts.append(f"{len(refused)} job(s) refused ({len(refused) * spec.runs_per_experiment} runs not submitted)")
     typer.echo(f"study {spec.name}: {', '.join(parts)} in {wall:.1f} s; report {out / 'report.html'}")
-    ran = sum(r.get("status") in ("completed", "failed") for r in rows)
+    ran = sum(r.get("status") in JUDGED for r in rows)
     if not ran:
         typer.echo("twb: error: nothing ran: no run completed or failed", err=True)
     return 1 if refused or lost or not ran else 0

@@ -10,6 +10,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Optional
 
+from contract.vocabulary import JUDGED, Mode, TERMINAL
+
 from .._client import Client
 from .._exceptions import Conflict, NotFound, RateLimited, TwbError, ValidationError
 from .._models import Environment, Experiment, ExperimentMetrics
@@ -109,7 +111,6 @@ def configuration(name: str, profile: Optional[ProfileSpec]) -> str:
 
 #: how many of the oldest unfinished experiments are looked at per poll (the queue runs them about in order)
 _WINDOW = 16
-_TERMINAL = ("completed", "failed", "error", "cancelled", "interrupted")
 
 
 class _StudyProgress:
@@ -222,7 +223,7 @@ def run_study(client: Client, spec: StudySpec, *, progress: Optional[bool] = Non
             states.update(ended)
             states["queued"] += sum(_runs(submitted[eid]) for eid in pending[_WINDOW:]) + \
                 sum(_runs(job) for _, job in waiting)
-            done = sum(n for st, n in states.items() if st in _TERMINAL)
+            done = sum(n for st, n in states.items() if st in TERMINAL)
             bar.update(done, " ".join(f"{st} {n}" for st, n in sorted(states.items()) if n))
             if not (waiting or pending):
                 break
@@ -282,12 +283,12 @@ def _collect_experiment(client: Client, spec: StudySpec, job: StudyJob, exp: Exp
     poses, obstacles = {}, {}
     for run in exp.runs:
         # a failed run's driving is data too: Fig. 8 draws it up to where it stopped
-        if run.status not in ("completed", "failed") or run.t_start is None:
+        if run.status not in JUDGED or run.t_start is None:
             continue
         try:
             poses[run.id] = client.get_poses(run.id)
             # only a field run can have obstacle robots: a simulation's would be the exact tracks, not fetched
-            if moving and run.mode == "twb":
+            if moving and run.mode == Mode.TWB:
                 tracked = client.get_obstacles(run.id)
                 if not tracked.exact:
                     obstacles[run.id] = tracked

@@ -29,6 +29,8 @@ from typing import Any, Iterable, Optional
 
 import numpy as np
 
+from contract.vocabulary import Mode
+
 from ._fleet_results import FLEET_COMPARED, FLEET_METRICS, measured
 from ._outcomes import counted, distinct_runs, identical_repetitions
 from ._records import StudyRecords
@@ -163,7 +165,7 @@ def _mean_comparison(metric: str, mode: str, ra: list[dict[str, Any]], rb: list[
             if len(group) >= 2 and identical_repetitions([x for x, _ in group]) \
                     and identical_repetitions([y for _, y in group]):
                 kept.append(group[0])
-                note = IDENTICAL if mode == "sim" else "identical repetitions"
+                note = IDENTICAL if mode == Mode.SIM else "identical repetitions"
             else:
                 kept.extend(group)
         res = compare_means([x.get(metric) for x, _ in kept], [y.get(metric) for _, y in kept], paired=True, **kw)
@@ -172,7 +174,7 @@ def _mean_comparison(metric: str, mode: str, ra: list[dict[str, Any]], rb: list[
         da, ma = distinct_runs(done_a)
         db, mb = distinct_runs(done_b)
         if ma or mb:
-            note = IDENTICAL if mode == "sim" else "identical repetitions"
+            note = IDENTICAL if mode == Mode.SIM else "identical repetitions"
         res = compare_means([r.get(metric) for r in da], [r.get(metric) for r in db], paired=False, **kw)
         runs_a, runs_b = len(done_a), len(done_b)
     if not done_a or not done_b:
@@ -211,7 +213,7 @@ def _rate_comparison(mode: str, ra: list[dict[str, Any]], rb: list[dict[str, Any
                         sum(r["outcome"] == "success" for r in db), len(db), confidence=confidence)
     note = ""
     if ma or mb:
-        note = (IDENTICAL if mode == "sim" else "identical repetitions") + ": counted once per problem"
+        note = (IDENTICAL if mode == Mode.SIM else "identical repetitions") + ": counted once per problem"
     if res.note:
         note = f"{note}; {res.note}" if note else res.note
     return res, sum(counted(r) for r in ra), sum(counted(r) for r in rb), note

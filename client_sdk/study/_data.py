@@ -34,6 +34,8 @@ from typing import Any, Iterable, Optional
 
 import numpy as np
 
+from contract.vocabulary import run_outcome
+
 from .._models import ObstacleTracks
 from ._compare import compare
 from ._outcomes import outcome_table
@@ -223,15 +225,6 @@ def write_obstacles(path: Path, obstacles: ObstacleTracks) -> None:
                fmt=["%d"] + ["%.5f"] * 5)
     path.parent.mkdir(exist_ok=True)
     path.write_text(buf.getvalue())
-
-
-def run_outcome(status: Optional[str], failure: Optional[str] = None) -> str:
-    """``success`` for a completed run, why a failed one failed (``collision``, ...), else its status."""
-    if status == "completed":
-        return "success"
-    if status == "failed":
-        return failure or "failed"
-    return status or "pending"
 
 
 def load_study(directory: str | Path) -> StudyData:

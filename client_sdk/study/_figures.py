@@ -20,6 +20,8 @@ from typing import Any, Iterable, Optional
 
 import numpy as np
 
+from contract.vocabulary import JUDGED, Mode
+
 from ._data import StudyData
 from ._obstacle_paths import draw_obstacles
 from ._verdict import MODE_WORDS, display_name
@@ -149,7 +151,7 @@ def figure_metrics(data: StudyData):  # type: ignore[no-untyped-def]
             mine = [r for r in rows if r["configuration"] == p]
             planned = {(r["experiment_id"]): r.get(f"planned_{key}") for r in mine}
             series["computed"].append(mean_std(planned.values())[:2] if f"planned_{key}" in _keys(mine) else (None, None))
-            for mode in ("sim", "twb"):
+            for mode in (Mode.SIM, Mode.TWB):
                 series[mode].append(mean_std(r.get(key) for r in mine if r["mode"] == mode)[:2])
             series["direct"].append(mean_std(d.get(key) for d in data.direct if d["configuration"] == p)[:2]
                                     if key == "deviation_mean_m" else (None, None))
@@ -176,7 +178,7 @@ def figure_ratios(data: StudyData):  # type: ignore[no-untyped-def]
     axes = fig.subplots(1, len(FIG7_RATIOS))
     for ax, (key, label) in zip(axes, FIG7_RATIOS):
         series = {mode: [mean_std(r.get(key) for r in rows if r["configuration"] == p and r["mode"] == mode)[:2]
-                         for p in planners] for mode in ("sim", "twb")}
+                         for p in planners] for mode in (Mode.SIM, Mode.TWB)}
         _grouped_bars(ax, labels, series, missing)
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
         ax.set_title(f"{label} (performed / planned)")
@@ -235,7 +237,7 @@ def figure_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # type: ig
             ax.set_title(f"{env_name} {plan} · {planner}", fontsize=9)
             if exp is None:
                 continue
-            drawn = [runs[rid] for rid in exp["runs"] if rid in runs and runs[rid].get("status") in ("completed", "failed")]
+            drawn = [runs[rid] for rid in exp["runs"] if rid in runs and runs[rid].get("status") in JUDGED]
             draw_obstacles(ax, data.environments[env_name], _longest(drawn), None)
             _draw_runs(ax, data, drawn)
             if exp.get("planned_path"):

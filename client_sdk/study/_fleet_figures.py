@@ -14,6 +14,8 @@ from typing import Any, Optional
 
 import numpy as np
 
+from contract.vocabulary import JUDGED, Mode
+
 from ._data import StudyData
 from ._figures import COLORS, MAX_PATH_ROWS, SHORT, draw_environment, legend_and_title
 from ._fleet_results import FLEET_METRICS, FleetGroup, fleet_groups
@@ -59,7 +61,7 @@ def figure_fleet_metrics(data: StudyData, groups: Optional[list[FleetGroup]] = N
     groups = groups if groups is not None else fleet_groups(data)
     envs = list(dict.fromkeys(g.environment for g in groups))
     configs = data.configurations
-    modes = sorted(data.modes, key=lambda m: m != "twb")
+    modes = sorted(data.modes, key=lambda m: m != Mode.TWB)
     lines = [(c, m) for c in configs for m in modes]
     fig = Figure(figsize=(4.2 * len(envs) + 1, 3.0 * len(FLEET_FIGURE_METRICS) + 1.2), layout="constrained")
     axes = np.asarray(fig.subplots(len(FLEET_FIGURE_METRICS), len(envs), squeeze=False, sharex=True))
@@ -118,8 +120,7 @@ def figure_fleet_metrics(data: StudyData, groups: Optional[list[FleetGroup]] = N
 def _first_run(data: StudyData, exp: dict[str, Any], mode: str) -> Optional[dict[str, Any]]:
     """The experiment's driven run of lowest repetition in ``mode`` (completed or failed), or None."""
     ids = set(exp.get("runs") or [])
-    mine = [r for r in data.rows if r["run_id"] in ids and r["mode"] == mode and r.get("status") in
-            ("completed", "failed")]
+    mine = [r for r in data.rows if r["run_id"] in ids and r["mode"] == mode and r.get("status") in JUDGED]
     return min(mine, key=lambda r: r["repetition"]) if mine else None
 
 
@@ -160,7 +161,7 @@ def figure_fleet_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # ty
     from matplotlib.lines import Line2D
 
     problems, configs = data.problems[:max_rows], data.configurations
-    modes = sorted(data.modes, key=lambda m: m != "twb")
+    modes = sorted(data.modes, key=lambda m: m != Mode.TWB)
     cols = [(c, m) for c in configs for m in modes]
     fig = Figure(figsize=(2.9 * len(cols), 3.0 * len(problems) + 0.8), layout="constrained")
     axes = np.asarray(fig.subplots(len(problems), len(cols), squeeze=False))

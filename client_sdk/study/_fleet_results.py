@@ -24,6 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, NamedTuple, Optional
 
+from contract.vocabulary import JUDGED
+
 from ._outcomes import OutcomeSummary, distinct_runs, outcome_table
 from ._records import StudyRecords
 
@@ -100,7 +102,7 @@ def fleet_row(robots: int, outcome: Optional[str], metrics: Mapping[str, Any]) -
 
 def measured(row: Mapping[str, Any]) -> bool:
     """A fleet's run that was driven and measured (completed, or failed after its robots set off)."""
-    return row.get("status") in ("completed", "failed") and row.get("robots_arrived") is not None
+    return row.get("status") in JUDGED and row.get("robots_arrived") is not None
 
 
 def _runs_over(rows: list[dict[str, Any]], over: str) -> list[dict[str, Any]]:

@@ -29,11 +29,13 @@ from typing import Any
 
 import numpy as np
 
+from contract.vocabulary import TERMINAL, RunStatus
+
 from ._data import ID_COLUMNS, StudyData
 
 __all__ = ["STATUS_ENUM", "export_ompl"]
 
-STATUS_ENUM = ("completed", "failed", "error", "cancelled", "interrupted")
+STATUS_ENUM = tuple(s.value for s in RunStatus if s in TERMINAL)  #: the status enum's codes, in order
 VERSION = "Teleworkbench 0.1.0"
 
 _SCHEMA = """

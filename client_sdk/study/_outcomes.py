@@ -19,12 +19,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar, Iterable, Optional
 
+from contract.vocabulary import NOT_COUNTED
+
 from ._records import StudyRecords
 
 __all__ = ["COUNTED", "IDENTITY_METRICS", "NOT_COUNTED", "OutcomeSummary", "distinct_runs", "outcome_table"]
 
-#: outcomes that are not the job's own (not counted in the success rate)
-NOT_COUNTED = ("error", "cancelled", "interrupted", "pending")
 #: the outcome columns of the tables: success, the two common failures, everything else
 COUNTED = ("success", "collision", "timeout", "other")
 #: metrics compared to decide that repetitions are identical (a single robot's, then a fleet's: a row has one set)

@@ -7,6 +7,8 @@ import math
 from pathlib import Path
 from typing import Any, Optional
 
+from contract.vocabulary import JUDGED
+
 from ._compare import COMPARISON_COLUMNS, Comparisons
 from ._data import StudyData, write_csv_rows
 from ._figure_set import make_figures
@@ -239,7 +241,7 @@ def summary_markdown(data: StudyData, outcomes: Optional[list[OutcomeSummary]] =
               f"{spec.field}; {jitter}",
               f"- {len(data.experiments)} experiments, {n_runs} runs: {done} completed, "
               f"{sum(r.get('status') == 'failed' for r in data.rows)} failed, "
-              f"{sum(r.get('status') not in ('completed', 'failed') for r in data.rows)} not counted"
+              f"{sum(r.get('status') not in JUDGED for r in data.rows)} not counted"
               + (f"; {sum(e['status'] == 'rejected' for e in data.experiments)} job(s) refused"
                  if any(e["status"] == "rejected" for e in data.experiments) else "")
               + (f"; wall time {data.meta['wall_s']:.1f} s" if data.meta.get("wall_s") is not None else ""),

@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any, Mapping, Optional
 
 from contract.overrides import OverrideError, check_overrides, overrides_label
+from contract.vocabulary import Mode
 
 from ._fleet import MAX_ROBOTS, MAX_ROBOTS_SUB, Circle, is_pose, parse_circle, parse_robots
 from ._fleet import finite as _finite
@@ -178,7 +179,7 @@ class StudySpec:
     planners: list[PlannerSpec]
     plans: Optional[list[PlanSpec]] = None
     repetitions: int = 1
-    modes: list[str] = field(default_factory=lambda: ["sim", "twb"])
+    modes: list[str] = field(default_factory=lambda: [Mode.SIM.value, Mode.TWB.value])
     seed: int = 0
     field: str = "sub"
     description: str = ""
@@ -253,8 +254,8 @@ class StudySpec:
         reps = data.get("repetitions", 1)
         if not isinstance(reps, int) or isinstance(reps, bool) or reps < 1:
             raise bad(f"`repetitions` must be an integer >= 1, got {reps!r}")
-        modes = data.get("modes", ["sim", "twb"])
-        if not isinstance(modes, list) or not modes or any(m not in ("sim", "twb") for m in modes) \
+        modes = data.get("modes", [Mode.SIM.value, Mode.TWB.value])
+        if not isinstance(modes, list) or not modes or any(m not in tuple(Mode) for m in modes) \
                 or len(set(modes)) != len(modes):
             raise bad(f"`modes` must be a list of distinct \"sim\" and/or \"twb\", got {modes!r}")
         seed = data.get("seed", 0)

@@ -19,6 +19,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Optional
 
+from contract.vocabulary import Mode
+
 from ._compare import DIRECTION, Comparison, Comparisons, compared_over
 from ._data import StudyData
 from ._fleet_results import FLEET_METRICS
@@ -208,7 +210,7 @@ def which_is_better(data: StudyData, comparisons: Optional[Comparisons] = None,
     """One :class:`Answer` per mode, the field first: verdicts per pair, then the facts behind them."""
     comps = comparisons if comparisons is not None else data.compare()
     outs = outcomes if outcomes is not None else data.outcomes()
-    modes = sorted(data.modes, key=lambda m: (m != "twb", m))
+    modes = sorted(data.modes, key=lambda m: (m != Mode.TWB, m))
     reach = REACH[data.spec.fleet]
     answers = []
     for mode in modes:

@@ -30,6 +30,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from contract.vocabulary import Mode
 from robot_agent.engine import tasks
 
 from ..errors import FailureKind, RunFailed, TestbedFault
@@ -146,7 +147,7 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     (:class:`RunFailed` when a robot did not arrive, planning included; :class:`TestbedFault` when the
     robots could not be placed)."""
     assert job.robots is not None
-    on_field = job.mode == "twb"
+    on_field = job.mode == Mode.TWB
     platform = ctx.robot.platform or "BeBot"
     if on_field:
         svc.field.claim(ctx.subfields, job.owner_id)

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from contract.frames import FIELD_SIZE, SUBFIELD_SIZE
+from contract.vocabulary import Mode
 from robot_agent.engine import run_data, tasks
 
 from ..errors import FailureKind, RunFailed, TestbedFault
@@ -74,7 +75,7 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     out: dict[str, Any] = await svc.pool.run(tasks.SIMULATE, job.environment_data, plan.path, starts,
                                              job.seed, timeout_s, job.goal,
                                              job.robot_radius, plan.planning_time_s,
-                                             "field" if job.mode == "twb" else "ideal", platform,
+                                             "field" if job.mode == Mode.TWB else "ideal", platform,
                                              job.profile_overrides, area, job.controller, job.controller_params)
     if "placement_error" in out:
         for direction, line, t in out["lines"]:

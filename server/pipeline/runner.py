@@ -38,6 +38,8 @@ from typing import Any, Callable, Optional
 import numpy as np
 from sqlalchemy.exc import DBAPIError
 
+from contract.vocabulary import Mode
+
 from ..errors import (
     AgentRefused,
     AgentUnavailable,
@@ -181,7 +183,7 @@ def _first_status(ctx: RunContext, svc: RunServices, job: RunJob) -> RunStatus:
 
 def _as_task(job: RunJob) -> bool:
     """A field run with profile overrides runs as a task (the robot's physics cannot change for one run)."""
-    return job.mode == "twb" and bool(job.profile_overrides)
+    return job.mode == Mode.TWB and bool(job.profile_overrides)
 
 
 async def _steps(ctx: RunContext, svc: RunServices, job: RunJob) -> None:

@@ -8,6 +8,7 @@ from typing import Optional
 
 from contract.controller_specs import DEFAULT_CONTROLLER
 from contract.protocol import encode_build, encode_controller, encode_moving, encode_path, encode_place
+from contract.vocabulary import Mode
 from robot_agent.engine import run_data, tasks
 
 from ..agent_link import AgentLink
@@ -96,7 +97,7 @@ async def build(ctx: RunContext, svc: RunServices, link: AgentLink, job: RunJob)
     """
     field = svc.field
     key = job.environment + (":full" if job.field == "full" else "")
-    if job.mode == "twb" and job.environment_data.get("moving_obstacles"):
+    if job.mode == Mode.TWB and job.environment_data.get("moving_obstacles"):
         ctx.on_line("s", await svc.pool.run(tasks.OBSTACLE_NOTE, job.environment_data,
                                             ctx.robot.platform or "BeBot"), None, False)
     if len(ctx.subfields) == 4:
@@ -241,7 +242,7 @@ async def analyze(ctx: RunContext, svc: RunServices, job: RunJob, plan: Plan, *,
     rec = svc.recorder
     poses, t0, t1 = await rec.driven(ctx.run_id)
     obstacles = None
-    if job.mode == "twb" and job.environment_data.get("moving_obstacles") and t0 is not None and t1 is not None:
+    if job.mode == Mode.TWB and job.environment_data.get("moving_obstacles") and t0 is not None and t1 is not None:
         if ctx.seeded:  # the obstacle robots' trajectories, replayed as the agent drove them
             obstacles = await svc.pool.run(tasks.FIELD_OBSTACLE_TRACKS, job.environment_data, job.seed,
                                            ctx.robot.platform or "BeBot", t0, t1)

@@ -4,7 +4,7 @@
 
 import { Api, ApiError } from "./api.js";
 import { ComparePage } from "./compare.js";
-import { $, $$, report } from "./dom.js";
+import { $, $$, loadVocabulary, report } from "./dom.js";
 import { ExperimentPage, ExperimentsPage } from "./experiments.js";
 import { FieldPage } from "./live.js";
 import { ProgramsPage } from "./programs.js";
@@ -178,6 +178,7 @@ function route() {
 }
 
 async function boot() {
+  await loadVocabulary();
   $("#login-form").addEventListener("submit", (ev) => login(ev).catch((err) => report(err, "Login")));
   $("#logout").addEventListener("click", () => {
     forgetToken();

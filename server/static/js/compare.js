@@ -5,14 +5,14 @@
 // repetition when both ran the same problem with the same seed). A study's tests with Holm's correction
 // are in `twb study` (summary.md, comparisons.csv) and StudyData.compare(); docs/study.md explains both.
 
-import { $, badge, h, num, pose, report } from "./dom.js";
+import { $, VOCABULARY, badge, h, num, pose, report } from "./dom.js";
 import { plannerName } from "./experiments.js";
 import { METRICS, allEqual, clipNote, intervalText, showIfClipped } from "./metrics.js";
 
 /** The compared metrics: [key, name, unit]. */
 export const COMPARE_METRICS = ["length_m", "execution_time_s", "average_speed_m_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m"]
   .map((key) => [key, ...METRICS[key].slice(0, 2)]);
-const NOT_COUNTED = new Set(["error", "cancelled", "interrupted", "pending"]);
+const NOT_COUNTED = VOCABULARY.notCounted;
 const MIN_BOOTSTRAP = 5; // as planners.stats: fewer values a side get no interval
 const IDENTICAL = "identical repetitions (deterministic simulation)";
 
@@ -130,7 +130,7 @@ function modeRuns(d, m, mode) {
   const outcome = new Map((m.runs || []).map((r) => [r.run_id, r.outcome]));
   return d.runs.filter((r) => r.mode === mode).map((r) => ({
     ...r,
-    outcome: outcome.get(r.id) || (r.status === "completed" ? "success" : r.status === "failed" ? (r.failure || "failed") : r.status),
+    outcome: outcome.get(r.id) ?? "pending", // the server's outcome rule (contract/vocabulary.py run_outcome)
   }));
 }
 

@@ -48,7 +48,23 @@ export function checkRadio(root, name, value) {
   root.querySelector(`input[name="${name}"][value="${value}"]`).checked = true;
 }
 
-export const TERMINAL = new Set(["completed", "failed", "error", "cancelled", "interrupted"]);
+/** The run vocabulary (contract/vocabulary.py), from GET /api/v1/meta before any page draws (loadVocabulary). */
+export const VOCABULARY = { terminal: new Set(), notCounted: new Set(), jobOutcomes: [], modes: [] };
+/** The statuses a run ends in. */
+export const TERMINAL = VOCABULARY.terminal;
+
+/** Fill VOCABULARY from the server (its one definition; the dashboard keeps no copy). */
+export async function loadVocabulary() {
+  const res = await fetch("/api/v1/meta");
+  if (!res.ok) throw new Error(`GET /api/v1/meta: ${res.status}`);
+  const v = (await res.json()).vocabulary;
+  for (const [set, values] of [[VOCABULARY.terminal, v.terminal], [VOCABULARY.notCounted, v.not_counted]]) {
+    set.clear();
+    values.forEach((s) => set.add(s));
+  }
+  VOCABULARY.jobOutcomes = v.job_outcomes;
+  VOCABULARY.modes = v.modes;
+}
 
 export function badge(state) {
   return h("span", { class: `badge ${state || ""}` }, state || "–");
