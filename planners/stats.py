@@ -35,8 +35,9 @@ from typing import Any, Iterable, Mapping, NamedTuple, Optional, Sequence
 import numpy as np
 from scipy import stats as _st
 
-__all__ = ["MIN_BOOTSTRAP", "ConfidenceInterval", "MeanComparison", "RateComparison", "aggregate", "compare_means",
-           "compare_rates", "holm", "proportion", "summarize", "table_rows"]
+__all__ = ["MIN_BOOTSTRAP", "ConfidenceInterval", "Heterogeneity", "MeanComparison", "ProblemComparison",
+           "RateComparison", "aggregate", "compare_means", "compare_problems", "compare_rates", "holm", "proportion",
+           "sample_size_mean", "sample_size_rate", "summarize", "table_rows"]
 
 
 def _confidence_iv(confidence: Any) -> float:
@@ -548,7 +549,7 @@ def holm(pvalues: Iterable[Any]) -> np.ndarray:
     (``scipy.stats.false_discovery_control`` is Benjamini-Hochberg, which
     controls a different quantity, the false discovery rate.)
 
-    >>> holm([0.01, 0.04, 0.03, 0.005]).tolist()
+    >>> [round(float(v), 12) for v in holm([0.01, 0.04, 0.03, 0.005])]
     [0.03, 0.06, 0.06, 0.02]
 
     Reference: Holm, *Scand. J. Statist.* 6 (1979) 65-70.
@@ -563,4 +564,233 @@ def holm(pvalues: Iterable[Any]) -> np.ndarray:
         order = idx[np.argsort(p[idx], kind="stable")]
         adjusted = np.maximum.accumulate((m - np.arange(m)) * p[order])
         out[order] = np.minimum(adjusted, 1.0)
-    return np.round(out, 15)
+    # full precision, never below the unadjusted value (a product of floats can round just under it)
+    return np.where(np.isfinite(out), np.maximum(out, p), out)
+
+
+# ----------------------------------------------------------------------------- over problems: the unit of inference
+
+
+class Heterogeneity(NamedTuple):
+    """How much the per-problem differences disagree beyond their own uncertainty (a configuration x problem
+    interaction): Cochran's ``q`` on ``df`` degrees of freedom with its ``pvalue`` (chi-squared), and
+    ``i2`` = max(0, (q - df) / q), the share of the spread between problems that is real rather than noise
+    (Higgins & Thompson 2002).  Where the repetitions of every problem agree exactly (a deterministic
+    simulation), the per-problem differences have no noise: ``i2`` is 1 when they differ and 0 when they do
+    not, and ``q``/``pvalue`` are NaN.  NaN throughout when some problems have a standard error and others
+    none."""
+
+    q: float
+    df: int
+    pvalue: float
+    i2: float
+
+
+def heterogeneity(differences: Sequence[float], standard_errors: Sequence[float]) -> Heterogeneity:
+    """Cochran's Q and I² of per-problem ``differences`` with their ``standard_errors`` (same unit)."""
+    d = np.asarray(differences, dtype=float)
+    se = np.asarray(standard_errors, dtype=float)
+    k = int(d.size)
+    nan = math.nan
+    if k < 2:
+        return Heterogeneity(nan, max(k - 1, 0), nan, nan)
+    if np.all(se == 0):
+        return Heterogeneity(nan, k - 1, nan, 0.0 if _constant(d) else 1.0)
+    if not np.all(np.isfinite(se) & (se > 0)):
+        return Heterogeneity(nan, k - 1, nan, nan)
+    w = 1.0 / se ** 2
+    mean = float((w * d).sum() / w.sum())
+    q = float((w * (d - mean) ** 2).sum())
+    i2 = max(0.0, (q - (k - 1)) / q) if q > 0 else 0.0
+    return Heterogeneity(q, k - 1, float(_st.chi2.sf(q, k - 1)), i2)
+
+
+@dataclass(frozen=True)
+class ProblemComparison:
+    """Configuration a against b pooled over problems, the problem being the unit of inference.
+
+    Each problem (environment, start/goal plan) contributes one difference ``a - b`` of its own means (over
+    its runs: its repetitions estimate the within-problem noise, they are not independent evidence about
+    other problems).  ``difference`` is the mean of the ``differences`` (every problem weighs the same),
+    ``mean_a``/``mean_b`` the means of the per-problem means.  The test is over the problems: a one-sample
+    t on the differences (``problem-t``; with its Student-t interval on ``n_problems - 1`` degrees of
+    freedom — for a balanced design the same inference as a mixed model with a random problem effect) or
+    the Wilcoxon signed-rank test (``problem-wilcoxon``, with the same t interval).  ``effect_size`` is the
+    mean difference over their standard deviation (a problem-level d_z).  ``favour_a``/``favour_b`` count
+    the problems whose difference is positive/negative (``ties`` none); ``heterogeneity``: see
+    :class:`Heterogeneity`.  ``n_a``/``n_b`` are the runs behind the problems' means.
+    """
+
+    statistic: float
+    pvalue: float
+    test: str
+    n_problems: int
+    n_a: int
+    n_b: int
+    mean_a: float
+    mean_b: float
+    difference: float
+    effect_size: float
+    confidence_level: float
+    problems: tuple
+    differences: tuple
+    favour_a: int
+    favour_b: int
+    ties: int
+    heterogeneity: Heterogeneity
+    alternative: str = "two-sided"
+    note: str = ""
+    effect: str = "problem-dz"
+    paired: bool = True
+    _ci: ConfidenceInterval = field(default=ConfidenceInterval(math.nan, math.nan), repr=False, compare=False)
+
+    def confidence_interval(self, confidence_level: Optional[float] = None) -> ConfidenceInterval:
+        """Student-t interval of the mean per-problem difference over the ``n_problems`` problems."""
+        c = self.confidence_level if confidence_level is None else _confidence_iv(confidence_level)
+        if c == self.confidence_level:
+            return self._ci
+        return _t_interval(np.asarray(self.differences, dtype=float), c, self.alternative)
+
+
+def _t_interval(d: np.ndarray, c: float, alternative: str) -> ConfidenceInterval:
+    if d.size < 2 or _constant(d):
+        return ConfidenceInterval(math.nan, math.nan)
+    ci = _st.ttest_1samp(d, 0.0, alternative=alternative).confidence_interval(confidence_level=c)
+    return ConfidenceInterval(float(ci.low), float(ci.high))
+
+
+#: fewer problems than this: no pooled verdict, per-problem results only (a test over two problems has one
+#: degree of freedom and no check of its assumptions; its interval spans most of the line)
+MIN_PROBLEMS = 3
+
+
+def compare_problems(
+    mean_a: Sequence[float],
+    mean_b: Sequence[float],
+    *,
+    problems: Sequence[Any],
+    standard_errors: Optional[Sequence[float]] = None,
+    runs_a: int = 0,
+    runs_b: int = 0,
+    test: str = "t",
+    alternative: str = "two-sided",
+    confidence: float = 0.95,
+    min_problems: int = MIN_PROBLEMS,
+) -> ProblemComparison:
+    """Pool a comparison over problems: one difference per problem, the test and interval over problems.
+
+    Parameters
+    ----------
+    mean_a, mean_b : sequences of float
+        Per problem, a's and b's mean of the metric (same unit; a rate as a fraction).
+    problems : sequence
+        The problems' names, in the same order.
+    standard_errors : sequence of float, optional
+        Per problem, the standard error of ``mean_a - mean_b`` from its repetitions (0 where they agree
+        exactly, NaN where there are too few): the heterogeneity needs them.
+    runs_a, runs_b : int
+        How many runs are behind the means (reported, not used).
+    test : {"t", "rank"}
+        One-sample t over the problems' differences, or the Wilcoxon signed-rank test.
+    min_problems : int
+        Below this many problems no test and no interval (the ``note`` says so); default 3.
+
+    Returns
+    -------
+    ProblemComparison
+
+    References
+    ----------
+    The "summary statistics" approach to clustered data (e.g. Holmes & Friston 1998): inference at the
+    level of the unit that was sampled; Cochran (1954), Higgins & Thompson (2002) for Q and I².
+    """
+    c = _confidence_iv(confidence)
+    alt = _alternative_iv(alternative)
+    if test not in ("t", "rank"):
+        raise ValueError(f"`test` must be 't' or 'rank', got {test!r}")
+    a = np.asarray(mean_a, dtype=float)
+    b = np.asarray(mean_b, dtype=float)
+    if a.shape != b.shape or a.ndim != 1 or len(problems) != a.size:
+        raise ValueError("`mean_a`, `mean_b` and `problems` must be one value per problem")
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise ValueError("per-problem means must be finite (leave out a problem without a value)")
+    d = a - b
+    se = np.full(d.size, math.nan) if standard_errors is None else np.asarray(standard_errors, dtype=float)
+    nan = math.nan
+    k = int(d.size)
+    base = dict(n_problems=k, n_a=int(runs_a), n_b=int(runs_b), mean_a=float(a.mean()) if k else nan,
+                mean_b=float(b.mean()) if k else nan, difference=float(d.mean()) if k else nan,
+                confidence_level=c, alternative=alt, problems=tuple(problems), differences=tuple(float(x) for x in d),
+                favour_a=int((d > 0).sum()), favour_b=int((d < 0).sum()), ties=int((d == 0).sum()),
+                heterogeneity=heterogeneity(d, se))
+    undefined = dict(statistic=nan, pvalue=nan, test="", effect_size=nan)
+    if k < min_problems:
+        return ProblemComparison(**base, **undefined, note=f"{k} problem(s): at least {min_problems} are needed for "
+                                                           "a verdict over problems; see each problem's result")
+    if _constant(d):
+        same = "no difference on any problem" if d[0] == 0 else "every problem differs by the same amount"
+        return ProblemComparison(**base, **undefined, note=f"{same}: no spread between problems, so no interval or test")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if test == "t":
+            r = _st.ttest_1samp(d, 0.0, alternative=alt)
+            name = "problem-t"
+        else:
+            r = _st.wilcoxon(d, alternative=alt)
+            name = "problem-wilcoxon"
+    effect = float(d.mean() / d.std(ddof=1))
+    return ProblemComparison(**base, statistic=float(r.statistic), pvalue=float(r.pvalue), test=name,
+                             effect_size=effect, _ci=_t_interval(d, c, alt))
+
+
+def sample_size_mean(effect_size: float, *, paired: bool = True, power: float = 0.8, alpha: float = 0.05,
+                     alternative: str = "two-sided", limit: int = 100_000) -> Optional[int]:
+    """Units needed to detect a standardised difference ``effect_size`` with a t-test.
+
+    ``paired``: a one-sample t on the differences (problems, or pairs of repetitions), ``effect_size`` =
+    mean / sd of the differences; else Welch's t with two equal groups of the returned size each,
+    ``effect_size`` = difference / pooled sd.  The power is exact (noncentral t: ``scipy.stats.nct``).
+    None when ``effect_size`` is 0 or not finite, or more than ``limit`` would be needed.
+
+    Reference: Cohen, *Statistical Power Analysis for the Behavioral Sciences* (1988), ch. 2.
+    """
+    _alternative_iv(alternative)
+    if not (0 < power < 1) or not (0 < alpha < 1):
+        raise ValueError("`power` and `alpha` must be in (0, 1)")
+    if not (isinstance(effect_size, (int, float)) and math.isfinite(effect_size)) or effect_size == 0:
+        return None
+    es = abs(float(effect_size))
+    tails = 2 if alternative == "two-sided" else 1
+
+    def achieved(n: int) -> float:
+        df = n - 1 if paired else 2 * n - 2
+        nc = es * math.sqrt(n if paired else n / 2)
+        crit = float(_st.t.ppf(1 - alpha / tails, df))
+        return float(_st.nct.sf(crit, df, nc) + (_st.nct.cdf(-crit, df, nc) if tails == 2 else 0.0))
+
+    lo, hi = 2, 2
+    while achieved(hi) < power:
+        lo, hi = hi, hi * 2
+        if hi > limit:
+            return None
+    while lo < hi:  # the smallest n reaching the power
+        mid = (lo + hi) // 2
+        lo, hi = (mid + 1, hi) if achieved(mid) < power else (lo, mid)
+    return hi
+
+
+def sample_size_rate(rate_a: float, rate_b: float, *, power: float = 0.8, alpha: float = 0.05,
+                     limit: int = 100_000) -> Optional[int]:
+    """Runs per configuration needed to tell success rates ``rate_a`` and ``rate_b`` apart (two-sided, normal
+    approximation to the two-proportion test; Fleiss, *Statistical Methods for Rates and Proportions*, 1981);
+    None when the rates are equal or more than ``limit`` would be needed."""
+    if not (0 < power < 1) or not (0 < alpha < 1):
+        raise ValueError("`power` and `alpha` must be in (0, 1)")
+    p1, p2 = float(rate_a), float(rate_b)
+    if not (0 <= p1 <= 1 and 0 <= p2 <= 1) or p1 == p2:
+        return None
+    za, zb = float(_st.norm.ppf(1 - alpha / 2)), float(_st.norm.ppf(power))
+    pbar = (p1 + p2) / 2
+    n = (za * math.sqrt(2 * pbar * (1 - pbar)) + zb * math.sqrt(p1 * (1 - p1) + p2 * (1 - p2))) ** 2 / (p1 - p2) ** 2
+    n = max(2, math.ceil(n))
+    return n if n <= limit else None

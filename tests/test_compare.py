@@ -81,11 +81,13 @@ def test_a_planner_that_only_fails_on_the_field():
     rows_out = comps.rows()
     assert list(rows_out[0])[:14] == ["metric", "mode", "a", "b", "n_a", "n_b", "mean_a", "mean_b", "diff", "ci_low",
                                       "ci_high", "test", "p", "p_holm"]
+    assert rows_out[0]["problem"] == "room A" and rows_out[0]["n_problems"] == 1  # one problem: its row
     assert list(COMPARISON_COLUMNS[:14]) == list(rows_out[0])[:14]
     answers = which_is_better(data, comps)
     assert [a.mode for a in answers] == ["twb", "sim"]  # the field first
     field = answers[0]
-    assert field.verdicts == ["FM² is better than corner on the field: it reached the goal significantly more often."]
+    assert field.verdicts == ["FM² is better than corner on the field on room A: it reached the goal "
+                              "significantly more often. (One problem: its answer says nothing about other problems.)"]
     text = " ".join(field.facts)
     assert "corner reached the goal in 0 of 5 runs (95% CI 0–43 %); collided 5 times." in text
     assert "5/5 vs 0/5" in text and "Fisher's exact p = 0.0079" in text and "Holm-adjusted p = 0.016" in text
@@ -103,7 +105,7 @@ def test_identical_repetitions_count_once_and_get_no_fake_interval():
     c = data.compare().get("length_m", "sim", "fm2", "fmm")
     assert c.difference == pytest.approx(2.268 - 2.31)
     assert not c.tested and math.isnan(c.pvalue_holm) and all(math.isnan(v) for v in c.confidence_interval())
-    assert c.note.startswith("identical repetitions (deterministic simulation): counted once per problem")
+    assert c.note.startswith("identical repetitions (deterministic simulation): counted once")
     assert "no interval or test" in c.note
     row = c.row()
     assert row["ci_low"] != row["ci_low"] and row["p"] != row["p"]  # NaN: empty cells in comparisons.csv
@@ -111,7 +113,9 @@ def test_identical_repetitions_count_once_and_get_no_fake_interval():
     assert "identical repetitions (deterministic simulation)" in words
 
 
-def test_unpaired_when_a_job_was_refused_and_means_are_over_completed_runs():
+def test_a_refused_job_leaves_its_problem_out_of_the_comparison():
+    """prm's job on room B was refused: the two are compared where both ran (room A, paired by repetition);
+    fm2's runs on room B compare with nothing, they do not enter room A's comparison."""
     rng = np.random.default_rng(4)
     rows = []
     for prob in (("room", "A"), ("room", "B")):
@@ -123,9 +127,19 @@ def test_unpaired_when_a_job_was_refused_and_means_are_over_completed_runs():
                  rejected={("room", "B", "prm")})
     prm = [o for o in data.outcomes() if o.configuration == "prm"][0]
     assert prm.not_submitted == 3 and prm.not_counted == 3 and prm.counted == 3
-    c = data.compare().get("length_m", "twb", "fm2", "prm")
-    assert not c.result.paired and (c.result.n_a, c.result.n_b) == (6, 3)
-    assert c.result.test == "welch-t" and c.tested
+    comps = data.compare()
+    assert {c.problem for c in comps} == {("room", "A")}  # no pooled row, no room B row
+    c = comps.get("length_m", "twb", "fm2", "prm")
+    assert c.problem == ("room", "A") and c.result.paired and (c.result.n_a, c.result.n_b) == (3, 3)
+    assert c.result.test == "paired-t" and c.tested
+
+
+def test_unpaired_when_the_repetitions_differ():
+    rng = np.random.default_rng(5)
+    rows = [run("fm2", "twb", rep, length=2 + rng.normal(0, 0.05)) for rep in range(1, 7)]
+    rows += [run("prm", "twb", rep, length=2.3 + rng.normal(0, 0.05)) for rep in range(1, 5)]
+    c = study(rows, configs=("fm2", "prm"), modes=("twb",), reps=6).compare().get("length_m", "twb", "fm2", "prm")
+    assert not c.result.paired and (c.result.n_a, c.result.n_b) == (6, 4) and c.result.test == "welch-t"
 
 
 def test_testbed_errors_are_not_the_planners():
@@ -281,3 +295,109 @@ def test_jitter_waypoints_and_labels_reach_the_jobs():
         StudySpec.from_json({**SPEC, "planners": ["fm2", {"name": "fm2"}]})
     with pytest.raises(StudySpecError, match="either `params`"):
         StudySpec.from_json({**SPEC, "planners": [{"name": "x", "params": {"a": 1}, "waypoints": []}]})
+
+
+# ----------------------------------------------------------------------------- the problem is the unit of inference
+
+PROBLEMS = tuple(("env", p) for p in "ABCDEF")
+
+
+def _problem_study(effects: dict, *, noise=0.005, reps=5, seed=3, configs=("fmm", "fm2"), mode="twb") -> StudyData:
+    """Runs of two configurations on the problems of ``effects`` (problem -> a - b in length, m)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for prob, effect in effects.items():
+        base = 2.0 + rng.uniform(-0.5, 0.5)  # problems differ in length; only a - b matters
+        for rep in range(1, reps + 1):
+            common = rng.normal(0, noise)  # common random numbers: the repetition's noise, shared
+            rows.append(run(configs[0], mode, rep, problem=prob, length=base + effect + common + rng.normal(0, noise)))
+            rows.append(run(configs[1], mode, rep, problem=prob, length=base + common + rng.normal(0, noise)))
+    return study(rows, configs=configs, modes=(mode,), reps=reps, problems=tuple(effects))
+
+
+def test_two_problems_that_disagree_give_no_pooled_verdict_and_say_so():
+    """The issue's FMM vs FM² case: two problems whose differences are -0.062 and -0.500 m. Pooled as ten
+    independent pairs they looked certain (p = 0.004); over two problems there is no verdict to draw."""
+    data = _problem_study({("env", "A"): -0.062, ("env", "B"): -0.500})
+    comps = data.compare(["length_m"], n_resamples=999)
+    assert [c.problem for c in comps if c.metric == "length_m"] == [("env", "A"), ("env", "B")]  # no pooled row
+    assert comps.get("length_m", "twb", "fmm", "fm2") is None
+    a, b = (comps.get("length_m", "twb", "fmm", "fm2", p) for p in (("env", "A"), ("env", "B")))
+    assert a.difference == pytest.approx(-0.062, abs=0.01) and b.difference == pytest.approx(-0.5, abs=0.01)
+    assert a.significant() and b.significant() and a.result.paired  # each problem's own answer is clear
+    verdict = which_is_better(data, comps)[0].verdicts[0]
+    assert verdict == ("With 2 problems there is no verdict over problems (at least 3 are needed); on the field: "
+                       "FMM is better than FM² on env A on path length; FMM is better than FM² on env B on path length.")
+
+
+def test_opposite_signs_on_two_problems_name_each_problem():
+    data = _problem_study({("env", "A"): -0.3, ("env", "B"): +0.3})
+    comps = data.compare(["length_m"], n_resamples=999)
+    answer = which_is_better(data, comps)[0]
+    assert "FMM is better than FM² on env A on path length; FM² is better than FMM on env B on path length." \
+        in answer.verdicts[0]
+    assert all(not c.pooled for c in comps)
+
+
+def test_a_pooled_verdict_comes_from_the_problems_and_names_the_exception():
+    effects = {p: -0.1 for p in PROBLEMS}
+    effects[("env", "D")] = +0.05  # on D fmm is longer
+    data = _problem_study(effects, seed=7)
+    comps = data.compare(["length_m"], n_resamples=999)
+    c = comps.get("length_m", "twb", "fmm", "fm2")
+    assert c.pooled and c.result.n_problems == 6 and c.result.test == "problem-t"
+    # brute force: a one-sample t over the six per-problem differences of means
+    per = comps.of("length_m", "twb", "fmm", "fm2")
+    d = np.array([p.difference for p in per])
+    from scipy import stats as st
+
+    ref = st.ttest_1samp(d, 0.0)
+    assert c.pvalue == pytest.approx(ref.pvalue) and c.difference == pytest.approx(d.mean())
+    assert tuple(c.confidence_interval()) == pytest.approx(tuple(ref.confidence_interval(0.95)))
+    assert c.favouring() == (5, 1, 0) and c.better() == "fmm"
+    assert c.result.heterogeneity.i2 > 0.9  # D disagrees far beyond the repetitions' noise
+    row = c.row()
+    assert row["problem"] == "" and row["n_problems"] == 6 and (row["favour_a"], row["favour_b"]) == (5, 1)
+    assert row["needed_unit"] == "problems" and row["n_needed"] >= 2
+    from planners.stats import sample_size_mean
+
+    assert row["n_needed"] == sample_size_mean(d.mean() / d.std(ddof=1))
+    facts = " ".join(which_is_better(data, comps)[0].facts)
+    assert "Path length: FMM is shorter on 5 of 6 problems; on env D it is longer (+0.05" in facts
+    assert "the problems disagree (I² = " in facts
+
+
+def test_mixed_problems_give_an_interval_over_zero_not_a_confident_verdict():
+    data = _problem_study({("env", "A"): -0.2, ("env", "B"): +0.15, ("env", "C"): -0.05, ("env", "D"): +0.1})
+    comps = data.compare(["length_m"], n_resamples=999)
+    c = comps.get("length_m", "twb", "fmm", "fm2")
+    assert c.pooled and not c.significant() and c.confidence_interval().low < 0 < c.confidence_interval().high
+    assert all(p.significant() for p in comps.of("length_m", "twb", "fmm", "fm2"))  # each problem is clear
+    verdict = which_is_better(data, comps)[0].verdicts[0]
+    assert "over 4 problems" in verdict and "more problems would" in verdict and "more repetitions" in verdict
+
+
+def test_holm_never_goes_below_the_unadjusted_p_value():
+    from planners.stats import holm
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        p = np.concatenate([10.0 ** -rng.uniform(0, 30, rng.integers(1, 8)), rng.uniform(0, 1, rng.integers(0, 5))])
+        adj = holm(p)
+        assert np.all(adj >= p) and np.all(adj <= 1)
+    assert holm([8.4e-24, 0.3])[0] == pytest.approx(1.68e-23, rel=1e-12)  # not rounded to 0
+
+
+def test_success_rates_are_pooled_over_problems_too():
+    rows = []
+    for i, prob in enumerate(PROBLEMS[:4]):
+        for rep in range(1, 6):
+            rows.append(run("a", "twb", rep, problem=prob, length=2.0))
+            fail = rep <= 2 + (i % 2)  # b fails 2 or 3 of 5 on each problem
+            rows.append(run("b", "twb", rep, problem=prob, length=2.0, outcome="collision" if fail else "success"))
+    data = study(rows, configs=("a", "b"), modes=("twb",), problems=PROBLEMS[:4])
+    rate = data.compare([]).get("success_rate", "twb", "a", "b")
+    assert rate.pooled and rate.result.n_problems == 4 and rate.difference == pytest.approx(0.5)
+    assert rate.significant() and rate.better() == "a" and rate.favouring() == (4, 0, 0)
+    per = data.compare([]).of("success_rate", "twb", "a", "b")
+    assert [p.result.test for p in per] == ["fisher-exact"] * 4 and per[0].needed() is not None

@@ -364,8 +364,8 @@ def test_failed_field_runs_are_in_runs_csv_with_outcome_and_where_they_stopped(o
 def test_summary_says_which_planner_is_better_and_keeps_the_failures(overshoot_dir):
     summary = (overshoot_dir / "summary.md").read_text()
     answer = summary[summary.index("## Which planner is better?"):summary.index("## Outcomes per configuration")]
-    assert "**On the field (Teleworkbench):** FM² is better than corner on the field: it reached the goal " \
-           "significantly more often." in answer
+    assert "**On the field (Teleworkbench):** FM² is better than corner on the field on overshoot A: it reached the " \
+           "goal significantly more often. (One problem: its answer says nothing about other problems.)" in answer
     assert "corner reached the goal in 0 of 5 runs (95% CI 0–43 %); collided 5 times." in answer
     assert "5/5 vs 0/5" in answer and "Fisher's exact p = 0.0079, Holm-adjusted p = 0.016" in answer
     assert "| corner | twb | 5 | 0 | 5 | 0 | 0 | 0 | 0/5 (95% CI 0–43 %) |" in summary

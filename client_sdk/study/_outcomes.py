@@ -20,64 +20,21 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Iterable, Optional
 
 from contract.vocabulary import NOT_COUNTED
+from planners.comparisons import IDENTITY_METRICS, counted, distinct_runs, identical_repetitions
 
 from ._records import StudyRecords
 
-__all__ = ["COUNTED", "IDENTITY_METRICS", "NOT_COUNTED", "OutcomeSummary", "distinct_runs", "outcome_table"]
+__all__ = ["COUNTED", "IDENTITY_METRICS", "NOT_COUNTED", "OutcomeSummary", "counted", "distinct_runs",
+           "identical_repetitions", "outcome_table"]
 
 #: the outcome columns of the tables: success, the two common failures, everything else
 COUNTED = ("success", "collision", "timeout", "other")
-#: metrics compared to decide that repetitions are identical (a single robot's, then a fleet's: a row has one set)
-IDENTITY_METRICS = ("length_m", "execution_time_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m",
-                    "path_length_sum_m", "robot_distance_min_m", "safety_time_s", "makespan_s")
 
 
 def _proportion(k: int, n: int) -> dict[str, Any]:
     from planners.stats import proportion
 
     return proportion(k, n)
-
-
-def counted(row: dict[str, Any]) -> bool:
-    """The run ended in the job's own outcome (success or a failure), not a testbed fault."""
-    return row.get("outcome") not in NOT_COUNTED
-
-
-def _same(values: list[Any]) -> bool:
-    """All None, or all numbers equal up to rounding (1e-9 relative: times are differences of clock readings)."""
-    if all(v is None for v in values):
-        return True
-    if any(not isinstance(v, (int, float)) or isinstance(v, bool) for v in values):
-        return len(set(values)) == 1
-    hi = max(abs(v) for v in values)
-    return max(values) - min(values) <= 1e-9 * max(1.0, hi)
-
-
-def identical_repetitions(rows: list[dict[str, Any]]) -> bool:
-    """At least two counted runs, all with the same outcome and the same metrics (up to rounding)."""
-    mine = [r for r in rows if counted(r)]
-    return (len(mine) >= 2 and len({r.get("outcome") for r in mine}) == 1
-            and all(_same([r.get(k) for r in mine]) for k in IDENTITY_METRICS))
-
-
-def distinct_runs(rows: Iterable[dict[str, Any]]) -> tuple[list[dict[str, Any]], bool]:
-    """The counted runs with identical repetitions of one problem kept once; and whether any were merged.
-
-    ``rows`` are one configuration's runs in one mode; problems are
-    (environment, plan).
-    """
-    by_problem: dict[tuple, list[dict[str, Any]]] = {}
-    for r in rows:
-        if counted(r):
-            by_problem.setdefault((r.get("environment"), r.get("plan")), []).append(r)
-    out, merged = [], False
-    for group in by_problem.values():
-        if identical_repetitions(group):
-            out.append(group[0])
-            merged = True
-        else:
-            out.extend(group)
-    return out, merged
 
 
 @dataclass(frozen=True)

@@ -67,24 +67,31 @@ def outcome_rows(outcomes: list[OutcomeSummary]) -> tuple[list[str], list[list[s
 
 def comparison_rows(comparisons: Comparisons) -> tuple[list[str], list[list[str]]]:
     """The comparisons table (a − b), as strings."""
-    header = ["metric", "mode", "a", "b", "n a", "n b", "mean a", "mean b", "diff (a − b)", "95% CI", "test", "p",
-              "p (Holm)", "effect size", "note"]
+    header = ["metric", "mode", "a", "b", "problem", "n a", "n b", "mean a", "mean b", "diff (a − b)", "95% CI",
+              "test", "p", "p (Holm)", "effect size", "problems a/b better", "I²", "n for 80% power", "note"]
     body = []
     for c in comparisons:
         r, ci = c.result, c.confidence_interval()
         dec = 3 if c.metric == "success_rate" else METRIC_WORDS.get(c.metric, ("", "", 3))[2]
         num = (lambda v: "–" if not math.isfinite(v) else f"{v:.{dec}f}")  # noqa: E731
-        body.append([c.metric, c.mode, c.a, c.b, str(r.n_a), str(r.n_b), num(r.mean_a), num(r.mean_b),
+        row = c.row()
+        where = f"all {r.n_problems}" if c.pooled else row["problem"]
+        split = f"{row['favour_a']}/{row['favour_b']}" if c.pooled else ""
+        i2 = row["heterogeneity_i2"]
+        need = "" if row["n_needed"] is None else f"{row['n_needed']} {row['needed_unit']}"
+        body.append([c.metric, c.mode, c.a, c.b, where, str(r.n_a), str(r.n_b), num(r.mean_a), num(r.mean_b),
                      num(r.difference), "–" if not math.isfinite(ci.low) else f"[{num(ci.low)}, {num(ci.high)}]",
                      _TEST_NAMES.get(r.test, r.test or "–"), _p(r.pvalue), _p(c.pvalue_holm),
                      "–" if not math.isfinite(r.effect_size) else f"{_EFFECT_NAMES.get(r.effect, r.effect)} "
-                                                                  f"{r.effect_size:.2f}", c.note])
+                                                                  f"{r.effect_size:.2f}",
+                     split, "" if i2 is None or not math.isfinite(i2) else f"{i2:.2f}", need, c.note])
     return header, body
 
 
 _TEST_NAMES = {"welch-t": "Welch t", "paired-t": "paired t", "mann-whitney-u": "Mann-Whitney U",
-               "wilcoxon": "Wilcoxon", "fisher-exact": "Fisher exact"}
-_EFFECT_NAMES = {"hedges-g": "g", "cohen-dz": "d_z", "risk-difference": "RD"}
+               "wilcoxon": "Wilcoxon", "fisher-exact": "Fisher exact", "problem-t": "t over problems",
+               "problem-wilcoxon": "Wilcoxon over problems"}
+_EFFECT_NAMES = {"hedges-g": "g", "cohen-dz": "d_z", "risk-difference": "RD", "problem-dz": "d (problems)"}
 
 
 def _p(p: float) -> str:
@@ -108,8 +115,10 @@ def summary_tables(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = N
     tables = [("Outcomes per configuration and mode (success rate with its Wilson 95% interval over the counted "
                "runs: completed or failed; a testbed error is not the planner's)", *outcome_rows(outcomes))]
     if comparisons is not None and len(comparisons):
-        tables.append(("Comparisons: every pair, per mode and metric (difference a − b; bootstrap 95% CI; "
-                       "Holm-adjusted p per metric)", *comparison_rows(comparisons)))
+        tables.append(("Comparisons: every pair, per mode and metric — over all problems (one observation per "
+                       "problem, t interval over problems; only with 3 or more problems) and on each problem "
+                       "(difference a − b, bootstrap 95% CI over its repetitions); Holm-adjusted p per metric and level",
+                       *comparison_rows(comparisons)))
     if data.spec.fleet:
         return tables + fleet_tables(data)
     header = ["configuration", "mode", "completed"] + [h for _, h in SUMMARY_METRICS]
@@ -184,13 +193,18 @@ def _failures(data: StudyData) -> list[str]:
     return out
 
 
-METHOD = ("How to read this: success rates are over the counted runs (completed or failed) with Wilson 95% "
-          "intervals and Fisher's exact test; metrics are over completed runs only (a planner that fails often "
-          "is judged on its successes there, so read them with its success rate), as the difference of means "
-          "a − b with a studentized bootstrap 95% interval and Welch's t (paired t when every configuration ran every "
-          "problem and repetition); p-values are Holm-adjusted per metric; effect sizes are Hedges' g (d_z "
-          "paired) and the risk difference. Identical repetitions (the deterministic simulation without jitter) "
-          "count once. Details: docs/study.md.")
+METHOD = ("How to read this: the problem (an environment with a start/goal plan) is the unit of inference — its "
+          "repetitions say how a configuration varies on that problem, not how it does on others. With 3 or more "
+          "problems the verdict is over problems: each problem contributes the difference of its means, and the "
+          "interval and test (one-sample t) are over those differences, with how many problems favour each side "
+          "and how much they disagree (I²); with fewer, each problem has its own answer. On a problem, success "
+          "rates are over the counted runs (completed or failed) with Wilson 95% intervals and Fisher's exact "
+          "test; metrics are over completed runs only (a planner that fails often is judged on its successes "
+          "there, so read them with its success rate), as the difference of means a − b with a studentized "
+          "bootstrap 95% interval and the paired t by repetition (the study gives every configuration the same "
+          "noise per repetition), else Welch's t. p-values are Holm-adjusted per metric and level; effect sizes "
+          "are Hedges' g, d_z paired, the risk difference, and d over problems. Identical repetitions (the "
+          "deterministic simulation without jitter) count once. Details: docs/study.md.")
 
 
 #: what a fleet study adds to :data:`METHOD`

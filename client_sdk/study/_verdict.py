@@ -11,6 +11,12 @@ metrics that differ significantly after Holm's correction, and a verdict:
   is better *on those metrics*; when they point both ways, it is a trade-off;
 - otherwise there is no significant difference: the data cannot tell them
   apart (which is not the same as "equal").
+
+The verdict is drawn over problems (each problem one observation) when the study
+has at least three; then the words also say how the problems split ("FMM is
+shorter on 5 of 6 problems; on room B it is longer") and whether they disagree.
+With fewer problems there is no verdict over problems: each problem gets its own,
+and the words say that one problem's answer says nothing about others.
 """
 
 from __future__ import annotations
@@ -20,6 +26,8 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 from contract.vocabulary import Mode
+from planners.comparisons import problem_name
+from planners.stats import MIN_PROBLEMS
 
 from ._compare import DIRECTION, Comparison, Comparisons, compared_over
 from ._data import StudyData
@@ -46,8 +54,10 @@ METRIC_WORDS = {
 REACH = {False: "reached the goal", True: "got every robot to its goal"}
 MODE_WORDS = {"twb": "On the field (Teleworkbench)", "sim": "In simulation"}
 _TESTS = {"welch-t": "Welch's t", "paired-t": "paired t", "mann-whitney-u": "Mann-Whitney U", "wilcoxon": "Wilcoxon",
-          "fisher-exact": "Fisher's exact"}
-_EFFECTS = {"hedges-g": "Hedges' g", "cohen-dz": "Cohen's d_z", "risk-difference": "risk difference"}
+          "fisher-exact": "Fisher's exact", "problem-t": "t over problems",
+          "problem-wilcoxon": "Wilcoxon signed-rank over problems"}
+_EFFECTS = {"hedges-g": "Hedges' g", "cohen-dz": "Cohen's d_z", "risk-difference": "risk difference",
+            "problem-dz": "d over problems"}
 
 
 def display_name(name: str) -> str:
@@ -108,6 +118,8 @@ def _outcome_sentence(o: OutcomeSummary, reach: str = REACH[False]) -> str:
 def _rate_sentence(c: Comparison, alpha: float, reach: str = REACH[False]) -> str:
     r = c.result
     a, b = display_name(c.a), display_name(c.b)
+    if c.pooled:
+        return _pooled_rate_sentence(c, alpha, reach)
     if not c.tested:
         return f"Success rates of {a} and {b}: not compared ({c.note or r.note})."
     counts = f"{r.k_a}/{r.n_a} vs {r.k_b}/{r.n_b}"
@@ -123,12 +135,30 @@ def _rate_sentence(c: Comparison, alpha: float, reach: str = REACH[False]) -> st
     return f"The success rates do not differ significantly ({counts}: {w} ahead by {diff}; {p})."
 
 
+def _pooled_rate_sentence(c: Comparison, alpha: float, reach: str) -> str:
+    """A success-rate comparison over problems: the mean of the problems' rates and of their differences."""
+    r = c.result
+    a, b = display_name(c.a), display_name(c.b)
+    ci = c.confidence_interval()
+    over = f"over {r.n_problems} problems"
+    if not c.tested:
+        return (f"Success rates of {a} and {b} {over}: {100 * r.mean_a:.0f} % vs {100 * r.mean_b:.0f} % on average "
+                f"(not tested: {c.note or r.note}).")
+    diff = (f"{100 * r.difference:+.0f} percentage points (95% CI {100 * ci.low:+.0f} to {100 * ci.high:+.0f}; "
+            f"{_TESTS.get(r.test, r.test)} {fmt_p(r.pvalue)}, Holm-adjusted {fmt_p(c.pvalue_holm)})")
+    if c.significant(alpha):
+        w, l_ = (a, b) if r.difference > 0 else (b, a)
+        return f"{w} {reach} significantly more often than {l_} {over}: {diff}."
+    return f"The success rates {over} do not differ significantly: {a} − {b} {diff}."
+
+
 def _metric_sentence(c: Comparison) -> str:
     r = c.result
     words, unit, dec = METRIC_WORDS.get(c.metric, (c.metric, "", 3))
     a, b = display_name(c.a), display_name(c.b)
     ci = c.confidence_interval()
-    n = f"{r.n_a} pairs" if r.paired else f"n = {r.n_a} and {r.n_b}"
+    n = (f"{r.n_problems} problems, {r.n_a} and {r.n_b} runs" if c.pooled else
+         f"{r.n_a} pairs" if r.paired else f"n = {r.n_a} and {r.n_b}")
     favour = c.better()
     tail = f" — in favour of {display_name(favour)}" if favour else ""
     level = 1 - r.confidence_level
@@ -137,48 +167,47 @@ def _metric_sentence(c: Comparison) -> str:
     effect = f"{_EFFECTS.get(r.effect, r.effect)} = {r.effect_size:.2g}" if math.isfinite(r.effect_size) else ""
     unit = f" {unit}" if unit else ""
     interval = (f"95% CI {ci.low:+.{dec}f} to {ci.high:+.{dec}f}" if math.isfinite(ci.low) and math.isfinite(ci.high)
-                else "no interval: too few runs for the bootstrap")
+                else "no interval: too few problems" if c.pooled else "no interval: too few runs for the bootstrap")
     return (f"{words.capitalize()}: {a} {_num(r.mean_a, dec)} vs {b} {_num(r.mean_b, dec)}{unit}, difference "
             f"{r.difference:+.{dec}f}{unit} ({interval}; {n}; "
             f"{_TESTS.get(r.test, r.test)} {fmt_p(r.pvalue)}, Holm-adjusted {fmt_p(c.pvalue_holm)}"
             f"{'; ' + effect if effect else ''}){tail}.")
 
 
-def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float,
-          reach: str = REACH[False]) -> tuple[str, list[str]]:
+def _words(metric: str) -> str:
+    return METRIC_WORDS.get(metric, (metric,))[0]
+
+
+def _judge(rows: list[Comparison], a: str, b: str, where: str, alpha: float,
+           reach: str, brief: bool = False) -> tuple[Optional[str], list[str]]:
+    """The verdict of one level (pooled over problems, or one problem) from its comparisons, and the facts.
+    None for the verdict when nothing differs significantly (the caller words it for its level); ``brief``
+    leaves the success rates out of a verdict on metrics (they are in the facts)."""
     facts = []
     an, bn = display_name(a), display_name(b)
-    rate = comps.get("success_rate", mode, a, b)
+    rate = next((c for c in rows if c.metric == "success_rate"), None)
     if rate is not None:
         facts.append(_rate_sentence(rate, alpha, reach))
-    metrics = [c for c in comps if c.mode == mode and c.a == a and c.b == b and c.metric != "success_rate"]
+    metrics = [c for c in rows if c.metric != "success_rate"]
     sig = [c for c in metrics if c.significant(alpha)]
     facts += [_metric_sentence(c) for c in sig]
     calm = [c for c in metrics if c.tested and not c.significant(alpha)]
     if calm:
-        facts.append("No significant difference in " + ", ".join(METRIC_WORDS.get(c.metric, (c.metric,))[0]
-                                                                   for c in calm)
+        facts.append("No significant difference in " + ", ".join(_words(c.metric) for c in calm)
                      + f" (Holm-adjusted p > {alpha:g}).")
     untested: dict[str, list[str]] = {}
     for c in metrics:
         if not c.tested:
-            untested.setdefault(c.note or c.result.note, []).append(METRIC_WORDS.get(c.metric, (c.metric,))[0])
+            untested.setdefault(c.note or c.result.note, []).append(_words(c.metric))
     for note, names in untested.items():
         facts.append(f"Not tested: {', '.join(names)} — {note}.")
-    if metrics and any(c.tested for c in metrics):
-        paired = any(c.result.paired for c in metrics if c.tested)
-        wide = [METRIC_WORDS.get(c.metric, (c.metric,))[0] for c in metrics if compared_over(c.metric) == "measured"]
-        facts.append("Metrics are over completed runs" + (
-            f" ({', '.join(wide)}: over every measured run, failed ones included)" if wide else "") + ", " + (
-            "paired by problem and repetition." if paired else "unpaired (the two did not run the same problems "
-                                                               "and repetitions)."))
-        if rate is not None and rate.result.n_a and rate.result.n_b and \
-                rate.result.k_a * rate.result.n_b != rate.result.k_b * rate.result.n_a:
-            which = "the completed-run metrics" if wide else "they"
-            facts.append(f"Careful: {which} describe successful runs only — {an} {rate.result.k_a} of "
-                         f"{rate.result.n_a}, {bn} {rate.result.k_b} of {rate.result.n_b} — so the one that fails "
-                         "more is judged on its easier runs (survivor bias); read them with the success rates.")
-    where = {"twb": "on the field", "sim": "in simulation"}.get(mode, f"in {mode}")
+    if rate is not None and not rate.pooled and rate.result.n_a and rate.result.n_b and \
+            rate.result.k_a * rate.result.n_b != rate.result.k_b * rate.result.n_a and metrics:
+        wide = any(compared_over(c.metric) == "measured" for c in metrics)
+        which = "the completed-run metrics" if wide else "the metrics"
+        facts.append(f"Careful: {which} describe successful runs only — {an} {rate.result.k_a} of "
+                     f"{rate.result.n_a}, {bn} {rate.result.k_b} of {rate.result.n_b} — so the one that fails "
+                     "more is judged on its easier runs (survivor bias); read them with the success rates.")
     if rate is not None and rate.significant(alpha):
         w, l_ = (an, bn) if rate.difference > 0 else (bn, an)
         return f"{w} is better than {l_} {where}: it {reach} significantly more often.", facts
@@ -187,22 +216,100 @@ def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float,
     if len(winners) == 1:
         w = winners.pop()
         l_ = b if w == a else a
-        on = ", ".join(METRIC_WORDS.get(c.metric, (c.metric,))[0] for c in judged)
-        if rate is None or not rate.tested:
+        on = ", ".join(_words(c.metric) for c in judged)
+        if rate is None or not rate.tested or brief:
             rates = ""
-        elif rate.result.k_a * rate.result.n_b == rate.result.k_b * rate.result.n_a:
+        elif rate.difference == 0:
             rates = f"; both {reach} equally often"
         else:
             rates = "; the success rates do not differ significantly"
         return f"{display_name(w)} is better than {display_name(l_)} {where} on {on}{rates}.", facts
     if len(winners) > 1:
-        parts = [f"{display_name(w)} on " + ", ".join(METRIC_WORDS.get(c.metric, (c.metric,))[0]
-                                                      for c in judged if c.better() == w) for w in (a, b)]
+        parts = [f"{display_name(w)} on " + ", ".join(_words(c.metric) for c in judged if c.better() == w)
+                 for w in (a, b)]
         return f"A trade-off {where}: {parts[0]}; {parts[1]}.", facts
-    if not any(c.tested for c in metrics) and (rate is None or not rate.tested):
-        return f"{an} vs {bn} {where}: nothing to test (see below).", facts
-    return (f"No significant difference between {an} and {bn} {where}: the data cannot tell them apart "
-            "(more repetitions, or jitter in simulation, would)."), facts
+    return None, facts
+
+
+def _problem_sentences(c: Comparison) -> list[str]:
+    """How a pooled comparison's problems split, in words: "FMM is shorter on 5 of 6 problems; on room B it is
+    longer (+0.120 m)." — and how much they disagree."""
+    r = c.result
+    words, unit, dec = METRIC_WORDS.get(c.metric, (c.metric, "", 3)) if c.metric != "success_rate" else \
+        ("success rate", "", 2)
+    a, b = display_name(c.a), display_name(c.b)
+    k = r.n_problems
+    fa, fb, ties = c.favouring() if c.direction else (r.favour_a, r.favour_b, r.ties)
+    adj = {("length_m", -1): ("shorter", "longer"), ("execution_time_s", -1): ("faster", "slower"),
+           ("time_to_goal_s", -1): ("faster", "slower"), ("clearance_min_m", 1): ("further from obstacles",
+                                                                                "closer to obstacles"),
+           ("success_rate", 1): ("more successful", "less successful")}
+    good, bad = adj.get((c.metric, c.direction), ("better", "worse") if c.direction else ("higher", "lower"))
+    lead, other = (a, b) if fa >= fb else (b, a)
+    n_lead = max(fa, fb)
+    unit_s = f" {unit}" if unit else ""
+    out = [f"{words.capitalize()}: {lead} is {good} on {n_lead} of {k} problems" + (f" ({ties} tied)" if ties else "")]
+    against = [(p, d) for p, d in zip(r.problems, r.differences)
+               if (c.direction or 1) * d * (1 if lead == a else -1) < 0]
+    if against and len(against) <= 3:
+        out[0] += "; " + "; ".join(f"on {p} it is {bad} ({'+' if (lead == a) == (d > 0) else '-'}"
+                                    f"{abs(d):.{dec}f}{unit_s})" for p, d in against)
+    h = r.heterogeneity
+    if math.isfinite(h.i2) and k >= 2:
+        if h.i2 >= 0.5 and n_lead < k:
+            out.append(f"the problems disagree (I² = {h.i2:.2f}: {100 * h.i2:.0f} % of the spread between problems "
+                       "is real, not noise): which is better depends on the problem")
+        elif h.i2 >= 0.5:
+            out.append(f"the size of the difference varies between problems (I² = {h.i2:.2f})")
+    return ["; ".join(out) + "."]
+
+
+def _pair(mode: str, a: str, b: str, comps: Comparisons, alpha: float,
+          reach: str = REACH[False]) -> tuple[str, list[str]]:
+    where = {"twb": "on the field", "sim": "in simulation"}.get(mode, f"in {mode}")
+    an, bn = display_name(a), display_name(b)
+    mine = [c for c in comps if c.mode == mode and c.a == a and c.b == b]
+    pooled = [c for c in mine if c.pooled]
+    problems = list(dict.fromkeys(c.problem for c in mine if not c.pooled))
+    facts: list[str] = []
+    if pooled:
+        verdict, facts = _judge(pooled, a, b, where, alpha, reach)
+        k = max(c.result.n_problems for c in pooled)
+        facts.insert(0, f"Over {k} problems (each problem one observation: the mean of its runs; the uncertainty "
+                        "comes from how the problems differ, not from the runs):")
+        for c in pooled:
+            if c.result.ties == c.result.n_problems:
+                continue  # the same on every problem: nothing to split
+            if c.significant(alpha) or c.metric == "success_rate" or (
+                    math.isfinite(c.result.heterogeneity.i2) and c.result.heterogeneity.i2 >= 0.5):
+                facts += _problem_sentences(c)
+        if verdict is None:
+            unsure = [c for c in pooled if c.tested and not c.significant(alpha) and c.needed() is not None]
+            more = ""
+            if unsure:
+                n = max(c.needed() for c in unsure)
+                more = f" (about {n} problems would detect differences of the sizes seen with 80 % power)"
+            verdict = (f"No significant difference between {an} and {bn} {where} over {k} problems: the data "
+                       f"cannot tell them apart — more problems would{more}, more repetitions of the same "
+                       "problems would not.")
+        return verdict, facts
+    if not problems:
+        return f"{an} vs {bn} {where}: nothing to compare.", facts
+    lines = []
+    n = len(problems)
+    for p in problems:
+        rows = [c for c in mine if c.problem == p]
+        name = problem_name(p)
+        verdict, pf = _judge(rows, a, b, f"{where} on {name}" if n == 1 else f"on {name}", alpha, reach, n > 1)
+        lines.append(verdict or f"no significant difference on {name}")
+        facts += [f"{name}: {f}" for f in pf] if n > 1 else pf
+    if n == 1:
+        if verdict is None:
+            return (f"No significant difference between {an} and {bn} {where} on {problem_name(problems[0])}: the "
+                    "data cannot tell them apart on this problem (one problem says nothing about others)."), facts
+        return lines[0] + " (One problem: its answer says nothing about other problems.)", facts
+    return (f"With {n} problems there is no verdict over problems (at least {MIN_PROBLEMS} are needed); {where}: "
+            + "; ".join(v.rstrip(".") for v in lines) + "."), facts
 
 
 def which_is_better(data: StudyData, comparisons: Optional[Comparisons] = None,
