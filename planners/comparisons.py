@@ -32,7 +32,7 @@ per-problem rows.  p-values keep full precision (an adjusted p-value is never be
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from itertools import combinations
 from typing import Any, Callable, Hashable, Iterable, Mapping, Optional, Sequence
 
