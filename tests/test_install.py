@@ -77,6 +77,11 @@ def test_the_server_runs_from_an_installed_wheel(tmp_path):
 
     assert revisions == sorted(s.revision for s in ScriptDirectory(str(ROOT / "alembic")).walk_revisions())
 
+    # compile the simulation kernels into the fresh venv first, as the Docker image does: the server's
+    # workers would compile them at start otherwise, and stopping waits for that (a minute on a busy machine)
+    subprocess.run([str(python), "-c", "from robot_agent.engine.sim import warm_up; warm_up()"], cwd=tmp_path,
+                   check=True, env=env, timeout=600)
+
     out = open(tmp_path / "server.log", "w")
     proc = subprocess.Popen([str(venv / "bin" / "twb"), "server", "--port", "0", "--data-dir", str(tmp_path / "data"),
                              "--token", "wheel-token"], cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT,
