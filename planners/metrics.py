@@ -85,9 +85,11 @@ __all__ = [
     "turning_angles",
 ]
 
-#: Points P0 is resampled to for deviation, clearance, Hausdorff and Fréchet (docs/metrics.md, "The contract's metrics").
+#: Points P0 is resampled to for deviation, clearance, Hausdorff and Fréchet
+#: (docs/metrics.md, "The contract's metrics").
 DEFAULT_SAMPLES = 200
-#: Segment length (m) of the smoothness resampling when no segment count is given (docs/metrics.md, "Smoothness κ′").
+#: Segment length (m) of the smoothness resampling when no segment count is given
+#: (docs/metrics.md, "Smoothness κ′").
 DEFAULT_SEGMENT_LENGTH = 0.05
 #: Largest distance (m) between the performed path's last point and the goal that counts as arrived.
 DEFAULT_GOAL_TOLERANCE = 0.05
@@ -454,8 +456,8 @@ def smoothness_polyline(
     """The polyline κ', AOL and curvature are measured on: ``path`` resampled into ``m`` segments.
 
     ``m = segments`` when given, else ``max(2, ceil(l(P) / segment_length))``
-    (segments of at most ``segment_length`` metres, default 0.05 m; docs/metrics.md,
-    "Smoothness κ′").
+    (segments of at most ``segment_length`` metres, default 0.05 m;
+    docs/metrics.md, "Smoothness κ′").
 
     Returns
     -------
