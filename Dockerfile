@@ -1,8 +1,9 @@
 # The Teleworkbench emulator: one image for the server and the robot agents.
 #   docker build -t teleworkbench .
 #   docker run -p 8000:8000 teleworkbench up --host 0.0.0.0 --port 8000
-# The project is installed from its wheel (migrations and dashboard are package data), so the
-# image holds no source tree; the build stage makes the wheels (scikit-fmm compiles there).
+# The project is installed from its wheel (migrations and dashboard are package data; the top-level
+# alembic/ directory goes in as server/migrations), so the image holds no source tree; the build
+# stage makes the wheels (scikit-fmm compiles there).
 FROM python:3.11-slim AS build
 RUN apt-get update \
  && apt-get install -y --no-install-recommends gcc g++ \
@@ -13,6 +14,7 @@ COPY contract contract
 COPY planners planners
 COPY robot_agent robot_agent
 COPY server server
+COPY alembic alembic
 COPY client_sdk client_sdk
 COPY twb twb
 RUN pip wheel --no-cache-dir --wheel-dir /wheels .

@@ -1,4 +1,5 @@
-"""The closed loop's cost (issue 16): ``PO`` lines at the tracker's 30 Hz and ``T,T,V`` back, for 64 field robots.
+"""The closed loop's cost (docs/performance.md, "Many robots live"): ``PO`` lines at the tracker's 30 Hz and ``T,T,V``
+back, for 64 field robots.
 
 One ``twb agent`` process runs ``--robots`` emulated field robots (a world each, the whole field, time
 scale 1, as on the real testbed).  This process connects once to every robot, has the gripper place

@@ -1,4 +1,5 @@
-"""Moving obstacles benchmark (issue 17): st_astar's planning time and the simulation's speed with discs.
+"""Moving obstacles benchmark (docs/planners.md, "Space-time A*"): st_astar's planning time and the simulation's speed
+with discs.
 
 Per plan of the built-in ``crossing``: ``st_astar`` and ``fmm`` end to end
 (``plan_path``, the testbed's planning margin), and the headless run of the

@@ -1,4 +1,5 @@
-"""A fleet live (issue 17): 64 field robots on the full field with moving obstacles, at time scale 1.
+"""A fleet live (docs/performance.md, "Many robots live"): 64 field robots on the full field with moving obstacles, at
+time scale 1.
 
 One ``twb agent`` process runs ``--robots`` emulated field robots, each with the whole field (3.6 m x
 3.6 m) as a world of its own, live (time scale 1), tracking at 30 Hz into CSV files.  This process

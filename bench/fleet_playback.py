@@ -1,4 +1,5 @@
-"""A multi-robot run played out live by the server (issue 17): its CPU while it shows 64 robots at time scale 1.
+"""A multi-robot run played out live by the server (docs/performance.md, "Many robots live"): its CPU while it shows
+64 robots at time scale 1.
 
 A fleet run is computed as one task, then played out at the time scale (``server/pipeline/playback.py``):
 every 0.1 s the server releases each robot's poses that came due, publishes them as live events and logs

@@ -1,4 +1,5 @@
-"""Prioritized space-time planning benchmark (issue 17): 16 robots on the 3.6 m field's 360² grid.
+"""Prioritized space-time planning benchmark (docs/planners.md, "Several robots: prioritized planning"): 16 robots on
+the 3.6 m field's 360² grid.
 
 The field of ``bench/planners.py`` (room and blocks on the four sub-fields,
 a 360 x 360 grid at 1 cm).  Sixteen robots stand at the start and goal poses

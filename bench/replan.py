@@ -1,4 +1,5 @@
-"""Replanning benchmark (issue 17): what a replan costs, and what checking the path ahead costs.
+"""Replanning benchmark (docs/controllers.md, "Replanning"): what a replan costs, and what checking the path ahead
+costs.
 
 - ``replans``: regulated pure pursuit with ``replan`` = 1 drives fmm's path of each plan of the built-in
   ``crossing`` on both backends for ``--seeds`` seeds (headless); every ``REPLAN`` event's planning wall

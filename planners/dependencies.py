@@ -1,4 +1,6 @@
-"""Execution of a multi-robot plan by its order of passage: an action dependency graph (issue 17).
+"""Execution of a multi-robot plan by its order of passage: an action dependency graph.
+
+docs/planners.md, "Several robots: prioritized planning" (execution by dependencies), has the overview.
 
 A prioritized plan (:mod:`planners.prioritized`) is a set of timed paths that
 keep the robots apart *if* every robot keeps to its timing.  Robots do not:

@@ -1,4 +1,5 @@
-"""Metrics of a multi-robot run (issue 17): how close the robots came, what they hit, when they all arrived.
+"""Metrics of a multi-robot run (docs/metrics.md, "Several robots"): how close the robots came, what they hit, when
+they all arrived.
 
 Every robot's tracker poses ``(N_i, 4)`` (t s, x m, y m, theta rad, one
 clock for the fleet) are resampled on one time grid of ``dt`` from 0 to the

@@ -18,7 +18,7 @@ Building blocks (arrays in, arrays out):
   :func:`collided`;
 - :func:`hausdorff_distance`, :func:`discrete_frechet`, :func:`frechet_distance`.
 
-JSON-ready dictionaries with the §6 key names:
+JSON-ready dictionaries with the contract's key names (docs/design.md, "Metrics"):
 
 - :func:`path_metrics` — one path (planned or performed: the same keys);
 - :func:`comparison_metrics` — deviation, Hausdorff and Fréchet between two
@@ -85,9 +85,11 @@ __all__ = [
     "turning_angles",
 ]
 
-#: Points P0 is resampled to for deviation, clearance, Hausdorff and Fréchet (§6).
+#: Points P0 is resampled to for deviation, clearance, Hausdorff and Fréchet
+#: (docs/metrics.md, "The contract's metrics").
 DEFAULT_SAMPLES = 200
-#: Segment length (m) of the smoothness resampling when no segment count is given (§6).
+#: Segment length (m) of the smoothness resampling when no segment count is given
+#: (docs/metrics.md, "Smoothness κ′").
 DEFAULT_SEGMENT_LENGTH = 0.05
 #: Largest distance (m) between the performed path's last point and the goal that counts as arrived.
 DEFAULT_GOAL_TOLERANCE = 0.05
@@ -348,7 +350,7 @@ def deviation(planned: np.ndarray, performed: np.ndarray, n: int = DEFAULT_SAMPL
     planned, performed : (N, 2) or (N, 3) float arrays, m
         P0 and Pr, at least 2 points each.
     n : int
-        Samples of P0 (default 200, §6).
+        Samples of P0 (default 200; docs/metrics.md, "The contract's metrics").
 
     Returns
     -------
@@ -454,7 +456,8 @@ def smoothness_polyline(
     """The polyline κ', AOL and curvature are measured on: ``path`` resampled into ``m`` segments.
 
     ``m = segments`` when given, else ``max(2, ceil(l(P) / segment_length))``
-    (segments of at most ``segment_length`` metres, default 0.05 m, §6).
+    (segments of at most ``segment_length`` metres, default 0.05 m;
+    docs/metrics.md, "Smoothness κ′").
 
     Returns
     -------
@@ -487,12 +490,13 @@ def _shape(p: np.ndarray, segments: int | None, segment_length: float) -> tuple[
 
 
 def smoothness(path: np.ndarray, segments: int | None = None, segment_length: float = DEFAULT_SEGMENT_LENGTH) -> float:
-    """Smoothness κ' (rad): the RMS turning angle of ``path`` resampled into ``m`` segments (§6).
+    """Smoothness κ' (rad): the RMS turning angle of ``path`` resampled into ``m`` segments.
 
     ``κ' = sqrt(Σ_{i=2..m} α_i² / (m - 1))`` with α_i the turning angle
     between segments ``i - 1`` and ``i`` (:func:`turning_angles`), after
     dropping zero-length segments (``m`` then counts the remaining ones).
-    0 for a straight path, and for a path with fewer than 2 non-zero segments.
+    0 for a straight path, and for a path with fewer than 2 non-zero segments
+    (docs/metrics.md, "Smoothness κ′").
 
     Parameters
     ----------
@@ -609,7 +613,7 @@ class MetricSettings:
     ----------
     samples : int
         ``n`` of the deviation, clearance-mean, Hausdorff and Fréchet
-        resampling (default 200, §6).
+        resampling (default 200; docs/metrics.md, "The contract's metrics").
     segments : int or None
         ``m`` of the smoothness resampling; None: segments of
         ``segment_length``.

@@ -1,4 +1,6 @@
-"""Prioritized planning for several robots in space-time (issue 17, multi-robot: the pure planner).
+"""Prioritized planning for several robots in space-time, the pure planner.
+
+docs/planners.md, "Several robots: prioritized planning", has the overview.
 
 Robots are planned one after the other, in the order given (robot 0 first,
 the highest priority), each with the space-time A* of :mod:`planners.st_astar`

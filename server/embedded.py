@@ -6,7 +6,7 @@ robots have a whole-field world each.  They listen on free ports of
 127.0.0.1 like any agent and the run pipeline drives them over TCP, but
 they register and deliver their tracker poses directly (no HTTP), and the
 pipeline seeds their next path and flushes their tracker through
-:class:`EmbeddedField`'s :class:`~server.pipeline.runner.RobotHooks`.
+:class:`EmbeddedField`'s :class:`~server.pipeline.context.RobotHooks`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Which run goes where: the queue, the four sub-fields and the simulation pool (pure logic).
 
-Policy (docs/server.md, "Scheduling"):
+Policy (docs/server.md, "A job, from submission to metrics", step 3, Scheduling):
 
 - ``sim`` runs go to any idle robot of the simulation pool; ``twb`` runs need
   a free sub-field with its field robot; a full-field ``twb`` run needs all

@@ -14,7 +14,7 @@ from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
 
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (issue 17)
+from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (docs/server.md, "Multi-robot jobs")
 
 from .status import RunStatus
 

@@ -1,4 +1,5 @@
-"""Multi-robot jobs made in the dashboard's submit form (issue 17), in Chromium against a real `twb up --time-scale max`.
+"""Multi-robot jobs made in the dashboard's submit form (docs/dashboard.md, "Pages"), in Chromium against a real
+`twb up --time-scale max`.
 
 A two-robot job placed on the map and typed in is stored with `robots` as entered and its runs complete; with
 "an explicit path" each robot gets its own waypoints, sent as its `path`; the "Swap scenario" shortcut fills the built-in environment's four corners with `prioritized`; the preview draws

@@ -1,4 +1,5 @@
-"""The dashboard polish of issue 19 ("what a new user hit") in Chromium against a real `twb up --time-scale max`.
+"""The dashboard polish for what a new user hit (docs/dashboard.md, "Tests") in Chromium against a real
+`twb up --time-scale max`.
 
 The runs and experiment tables fit 1440 and 1024 px (no column cut off, nothing to scroll sideways);
 the aggregates table names metrics as the other tables do; a 95% interval that reaches below 0 (or

@@ -1,6 +1,6 @@
 """Moving obstacles end to end: the built-in `crossing` scenario, the space-time planner and exact replay
-(issue 17).  Runs are the agent's simulation core stepped headless (robot_agent.engine.headless), which the
-pipeline tests show equal to the same run over TCP."""
+(docs/planners.md, "Moving obstacles" and "Space-time A*").  Runs are the agent's simulation core stepped headless
+(robot_agent.engine.headless), which the pipeline tests show equal to the same run over TCP."""
 
 from __future__ import annotations
 

@@ -112,7 +112,8 @@ def test_environment_files_and_robots_agree_on_which_blocks_fit():
     assert agreed[True] > 50 and agreed[False] > 50  # both kinds were tried
 
 
-# ---------------------------------------------------------------- moving obstacles (issue 17)
+# ---------------------------------------------------------------- moving obstacles
+# (docs/planners.md, "Moving obstacles")
 
 def crossing(**over):
     ob = {"radius": 0.04, "waypoints": [[0.2, 1.2], [0.8, 1.2]], "speed": 0.05, "repeat": "once", "delay_s": 2}

@@ -1,6 +1,6 @@
-"""On the emulated field moving obstacles are robots the testbed drives (issue 17): they lag behind their exact
-tracks but stay close, replay exactly, collide as robots, stop when hit, are measured where they were, and
-count toward the field's robots; in simulation nothing changed."""
+"""On the emulated field moving obstacles are robots the testbed drives (docs/protocol.md, "Moving obstacles"): they
+lag behind their exact tracks but stay close, replay exactly, collide as robots, stop when hit, are measured where
+they were, and count toward the field's robots; in simulation nothing changed."""
 
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
-"""Uploaded planner programs for multi-robot jobs on a real `twb up --enable-uploads` (issue 17): the program gets
-a robot port per robot, sends one T,T,P on each, and the robots drive those paths; a missing or mismatched path
-fails the experiment naming the robot; the SDK, `twb submit` and docs/uploads.md's commands.
+"""Uploaded planner programs for multi-robot jobs (docs/uploads.md, "Multi-robot jobs: one T,T,P per robot port") on a
+real `twb up --enable-uploads`: the program gets a robot port per robot, sends one T,T,P on each, and the robots drive
+those paths; a missing or mismatched path fails the experiment naming the robot; the SDK, `twb submit` and
+docs/uploads.md's commands.
 
 (The single-robot contract and the sandbox's limits: tests/test_uploads.py, tests/test_sandbox.py.)
 """

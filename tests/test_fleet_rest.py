@@ -1,5 +1,6 @@
-"""Multi-robot jobs through a real `twb up` (issue 17): POST /experiments with `robots`, one task per run, poses per
-robot, the fleet's metrics, failures naming the robots, 422s naming the field, the SDK and `twb submit FILE`.
+"""Multi-robot jobs (docs/server.md, "Multi-robot jobs") through a real `twb up`: POST /experiments with `robots`, one
+task per run, poses per robot, the fleet's metrics, failures naming the robots, 422s naming the field, the SDK and
+`twb submit FILE`.
 
 (The migration's way up and down: tests/test_migrations.py; the fleet simulation and its metrics without a server:
 tests/test_fleet.py.)

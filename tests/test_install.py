@@ -2,7 +2,9 @@
 
 The Docker image installs the wheel too; this is what shows that the server
 finds everything it needs (migrations, built-in environments, dashboard
-files) as package data, not next to a source tree.
+files) as package data, not next to a source tree.  The migrations live in the
+repository's top-level alembic/ and go into the wheel as server/migrations
+(pyproject.toml), never as a top-level package that would shadow the library.
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ import shutil
 import subprocess
 import sys
 import time
+import tomllib
+import zipfile
 from pathlib import Path
 
 import httpx
@@ -53,6 +57,31 @@ def test_the_server_runs_from_an_installed_wheel(tmp_path):
                            capture_output=True, text=True, check=True).stdout.strip()
     assert Path(where).is_relative_to(venv), where  # the wheel's copy, not this checkout
 
+    # the migrations: the repository's alembic/ as server/migrations, file for file; no top-level alembic
+    names = zipfile.ZipFile(wheel).namelist()
+    assert not [n for n in names if n.startswith("alembic/")], names
+    repo = sorted(p.relative_to(ROOT / "alembic").as_posix() for p in (ROOT / "alembic").rglob("*")
+                  if p.is_file() and p.suffix in (".py", ".mako"))
+    assert sorted(n[len("server/migrations/"):] for n in names if n.startswith("server/migrations/")) == repo
+    found = subprocess.run(
+        [str(python), "-c", "import alembic; from alembic.script import ScriptDirectory; "
+         "from server.core.db import MIGRATIONS; print(alembic.__file__); print(MIGRATIONS); "
+         "print(' '.join(sorted(s.revision for s in ScriptDirectory(MIGRATIONS).walk_revisions())))"],
+        cwd=tmp_path, capture_output=True, text=True, check=True).stdout.split("\n")
+    library, migrations, revisions = Path(found[0]), Path(found[1]), found[2].split()
+    assert library.is_relative_to(venv) and library.parent.name == "alembic", library  # the library itself
+    assert migrations.is_relative_to(venv) and migrations.parts[-2:] == ("server", "migrations"), migrations
+    for name in repo:
+        assert (migrations / name).read_bytes() == (ROOT / "alembic" / name).read_bytes(), name
+    from alembic.script import ScriptDirectory
+
+    assert revisions == sorted(s.revision for s in ScriptDirectory(str(ROOT / "alembic")).walk_revisions())
+
+    # compile the simulation kernels into the fresh venv first, as the Docker image does: the server's
+    # workers would compile them at start otherwise, and stopping waits for that (a minute on a busy machine)
+    subprocess.run([str(python), "-c", "from robot_agent.engine.sim import warm_up; warm_up()"], cwd=tmp_path,
+                   check=True, env=env, timeout=600)
+
     out = open(tmp_path / "server.log", "w")
     proc = subprocess.Popen([str(venv / "bin" / "twb"), "server", "--port", "0", "--data-dir", str(tmp_path / "data"),
                              "--token", "wheel-token"], cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT,
@@ -78,3 +107,33 @@ def test_the_server_runs_from_an_installed_wheel(tmp_path):
         proc.terminate()
         proc.wait(30)
         out.close()
+
+
+def _packaging() -> dict:
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+
+
+def test_the_package_list_names_every_directory_of_the_tree():
+    """pyproject.toml lists the packages (discovery cannot map alembic/ to server.migrations): a directory
+    missing from the list would be missing from the wheel, so every one of the tree is there."""
+    cfg = _packaging()
+    dirs = {name: ROOT / name for name in cfg["packages"] if "." not in name}
+    dirs |= {name: ROOT / path for name, path in cfg["package-dir"].items()}
+    tree = set()
+    for name, where in dirs.items():
+        for d in [where, *where.rglob("*")]:
+            if d.is_dir() and "__pycache__" not in d.parts and not d.name.endswith(".egg-info"):
+                tree.add(".".join([name, *d.relative_to(where).parts]))
+    assert sorted(cfg["packages"]) == sorted(tree)
+    assert cfg["package-dir"] == {"server.migrations": "alembic"}
+    assert "alembic" not in cfg["packages"]  # it would shadow the Alembic library
+
+
+def test_the_docker_image_copies_every_packaged_directory():
+    """The Dockerfile's build stage copies the source directories one by one: each the wheel is built from."""
+    import re
+
+    cfg = _packaging()
+    needed = {name for name in cfg["packages"] if "." not in name} | set(cfg["package-dir"].values())
+    copied = set(re.findall(r"^COPY (\S+) \1$", (ROOT / "Dockerfile").read_text(), re.M))
+    assert needed <= copied, needed - copied

@@ -466,7 +466,8 @@ def test_bad_arguments_are_refused_naming_the_parameter():
         collided(env_with(), SQUARE * 0.5, robot_radius=-1)
 
 
-# ---------------------------------------------------------------- moving obstacles (issue 17)
+# ---------------------------------------------------------------- moving obstacles
+# (docs/metrics.md, "Moving obstacles and collisions by kind")
 
 
 def test_obstacle_distance_and_time_within_a_safety_radius():

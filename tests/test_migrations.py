@@ -1,6 +1,11 @@
-"""Alembic migrations: they build exactly the models' schema and keep data across upgrades."""
+"""Alembic migrations: they build exactly the models' schema and keep data across upgrades; they live at the
+repository's top level (alembic/) and `alembic upgrade head` from there builds the schema too."""
 
+import os
 import sqlite3
+import subprocess
+import sys
+from pathlib import Path
 
 from alembic import command
 from alembic.autogenerate import compare_metadata
@@ -9,6 +14,9 @@ from alembic.migration import MigrationContext
 
 from server.core.db import MIGRATIONS, make_engine, migrate
 from server.models import Base
+
+ROOT = Path(__file__).resolve().parents[1]
+ALEMBIC = Path(sys.executable).with_name("alembic")
 
 
 def config(url: str) -> Config:
@@ -25,6 +33,42 @@ def test_migrations_match_the_models(database_url):
         diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
     assert diff == []
     migrate(engine)  # idempotent
+
+
+def test_a_checkout_migrates_from_its_top_level_alembic_directory():
+    assert Path(MIGRATIONS) == ROOT / "alembic"
+    assert (ROOT / "alembic" / "env.py").is_file() and not (ROOT / "alembic" / "__init__.py").exists()
+    assert not (ROOT / "server" / "migrations").exists()
+
+
+def test_alembic_upgrade_head_from_the_repository_root(tmp_path):
+    """The command line as docs/server.md shows it: alembic.ini at the root, the URL from TWB_DATABASE_URL."""
+    from alembic.script import ScriptDirectory
+
+    url = f"sqlite:///{tmp_path / 'db.sqlite'}"
+    env = {**os.environ, "TWB_DATABASE_URL": url}
+    out = subprocess.run([str(ALEMBIC), "upgrade", "head"], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    engine = make_engine(url)
+    with engine.connect() as conn:
+        diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
+        version = MigrationContext.configure(conn).get_current_revision()
+    engine.dispose()
+    assert diff == []
+    assert version == ScriptDirectory(MIGRATIONS).get_current_head()
+    current = subprocess.run([str(ALEMBIC), "current"], cwd=ROOT, env=env, capture_output=True, text=True,
+                             timeout=120)
+    assert current.returncode == 0 and f"{version} (head)" in current.stdout, current.stderr
+
+
+def test_the_alembic_directory_does_not_shadow_the_library():
+    """From the repository root (the current directory first on sys.path) `alembic` is still the library."""
+    out = subprocess.run([sys.executable, "-c", "import alembic, alembic.command; print(alembic.__file__)"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    where = Path(out.stdout.strip())
+    assert where.name == "__init__.py" and not where.is_relative_to(ROOT / "alembic"), where
 
 
 def test_upgrade_from_the_first_revision_keeps_data(tmp_path):

@@ -1,8 +1,8 @@
-"""A field run's obstacle robots are stored with it (issue 17): the tracker's poses of the robots the testbed drove
-as its moving obstacles, in the run's one end transaction, for runs on an agent's robot (replayed by the server),
-runs computed as a task and multi-robot runs; served by ``GET /api/v1/runs/{id}/obstacles`` (the exact tracks
-where none are stored), by the SDK, drawn by ``twb replay`` and the dashboard -- and never mistaken for the run's
-own poses."""
+"""A field run's obstacle robots are stored with it (docs/server.md, "Moving obstacles, where they were"): the
+tracker's poses of the robots the testbed drove as its moving obstacles, in the run's one end transaction, for runs on
+an agent's robot (replayed by the server), runs computed as a task and multi-robot runs; served by
+``GET /api/v1/runs/{id}/obstacles`` (the exact tracks where none are stored), by the SDK, drawn by ``twb replay`` and
+the dashboard -- and never mistaken for the run's own poses."""
 
 from __future__ import annotations
 

@@ -267,8 +267,9 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
 
 @pytest.mark.parametrize("planner", ["fmm", "st_astar"])
 async def test_the_crossing_disc_fails_an_uncoordinated_run_and_not_a_space_time_one(tmp_path, planner):
-    """Issue 17: plan A of the built-in `crossing` on the agent's robot, planned by the testbed; fmm's path
-    meets the disc that crosses it (a collision naming it, counted as one), st_astar's does not."""
+    """Moving obstacles (docs/planners.md, "Moving obstacles"): plan A of the built-in `crossing` on the agent's
+    robot, planned by the testbed; fmm's path meets the disc that crosses it (a collision naming it, counted as one),
+    st_astar's does not."""
     from planners import load_environment
 
     crossing = load_environment("crossing").to_dict()
@@ -296,9 +297,9 @@ async def test_the_crossing_disc_fails_an_uncoordinated_run_and_not_a_space_time
 
 
 async def test_a_replanning_run_counts_its_replans_on_the_agent_and_as_a_task(tmp_path):
-    """Issue 17: fmm's path of `crossing` A with regulated pure pursuit replanning, on the agent's robot and
-    as an engine task: both reach the goal around the disc, log the EV,REPLAN lines and count them in the
-    same metrics (``replans``; ``replan_time_s`` is the machine's)."""
+    """Replanning (docs/controllers.md, "Replanning"): fmm's path of `crossing` A with regulated pure pursuit
+    replanning, on the agent's robot and as an engine task: both reach the goal around the disc, log the EV,REPLAN
+    lines and count them in the same metrics (``replans``; ``replan_time_s`` is the machine's)."""
     from planners import load_environment
 
     crossing = load_environment("crossing").to_dict()

@@ -1,4 +1,6 @@
-"""A run computed as a task, played out at the time scale (issue 17: fleets shown live while they run).
+"""A run computed as a task, played out at the time scale, so fleets are shown live while they run.
+
+docs/server.md, "Multi-robot jobs" (live and in time), describes it.
 
 The bookkeeping (:class:`server.pipeline.playback.Playback`) without a clock; :func:`play` cancelled part way;
 then a real `twb up` at time scale 4: a field fleet's robots are published live one after the other as their

@@ -1,4 +1,5 @@
-"""The simulation pool on Ray (issue 15 part 2): real Ray clusters started by real testbed processes.
+"""The simulation pool on Ray (docs/scale-out.md, "The simulation pool on Ray"): real Ray clusters started by real
+testbed processes.
 
 (Failed runs — a collision, where the robot stopped — are compared the same way in-process, on the same
 task code without Ray: tests/test_pipeline.py.)  Held tolerance for "same seed, same numbers" between a run on a local agent and the same run as a Ray task:

@@ -1,5 +1,5 @@
-"""Replanning in the built-in controllers (issue 17): the path-ahead check, the replan around the moving
-obstacles' known tracks, its events, its determinism, and that a run without it is the run it was."""
+"""Replanning in the built-in controllers (docs/controllers.md, "Replanning"): the path-ahead check, the replan around
+the moving obstacles' known tracks, its events, its determinism, and that a run without it is the run it was."""
 
 from __future__ import annotations
 

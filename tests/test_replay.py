@@ -1,5 +1,5 @@
 """Replays (client_sdk.study.replay_animation): every robot of a fleet and every moving obstacle is drawn where
-it was at the frame's time, read back from the saved GIF's pixels (issue 17)."""
+it was at the frame's time, read back from the saved GIF's pixels (`twb replay`: docs/sdk.md, "Job commands")."""
 
 from __future__ import annotations
 

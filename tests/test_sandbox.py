@@ -1,4 +1,6 @@
-"""The sandbox launcher on its own: what each isolation level enforces (docs/uploads.md, "what is enforced where").
+"""The sandbox launcher on its own: what each isolation level enforces.
+
+docs/uploads.md, "The sandbox: what is enforced where", describes each level.
 
 Jobs go straight to ``python -m server.sandbox.launch``.  The unprivileged
 cases run the launcher as uid 65534 without capabilities (``setpriv``) in a

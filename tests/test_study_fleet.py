@@ -1,6 +1,7 @@
-"""Fleet studies (issue 17): study files that cross robot counts (fleet problems: explicit robots, the circle
-generator) and obstacle scenarios; their validation, the circle's geometry, a small fleet study through a real
-testbed (outcomes by kind, fleet metrics with intervals, figures) and the ready `twb study fleet`.
+"""Fleet studies (docs/study.md, "The fleet study" and "Fleets: robot counts and obstacle scenarios"): study files
+that cross robot counts (fleet problems: explicit robots, the circle generator) and obstacle scenarios; their
+validation, the circle's geometry, a small fleet study through a real testbed (outcomes by kind, fleet metrics with
+intervals, figures) and the ready `twb study fleet`.
 
 (Single-robot studies: tests/test_study.py; multi-robot jobs without a study: tests/test_fleet_rest.py.)
 """

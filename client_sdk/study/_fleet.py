@@ -1,4 +1,5 @@
-"""Fleet problems of a study (issue 17): several robots in one world, given robot by robot or generated.
+"""Fleet problems of a study (docs/study.md, "Fleets: robot counts and obstacle scenarios"): several robots in one
+world, given robot by robot or generated.
 
 A ``plans`` entry of a study file is a fleet problem when it has ``robots``
 (explicit: ``{"name": "swap4", "robots": [{"start": [x, y, theta], "goal":

@@ -527,9 +527,9 @@ DISCS: dict[str, Any] = {
     ],
 }
 
-#: The ready fleet study (issue 17): prioritized planning against FMM per robot (uncoordinated) on the circle
-#: benchmark with 2, 4 and 8 robots, in the empty sub-field and with two moving discs, 3 repetitions x sim and
-#: field (72 runs; `twb study fleet --embedded`).
+#: The ready fleet study (docs/study.md, "The fleet study"): prioritized planning against FMM per robot
+#: (uncoordinated) on the circle benchmark with 2, 4 and 8 robots, in the empty sub-field and with two moving discs, 3
+#: repetitions x sim and field (72 runs; `twb study fleet --embedded`).
 FLEET: dict[str, Any] = {
     "name": "fleet",
     "description": "Robot counts x obstacle scenarios: prioritized (space-time, coordinated) against FMM per robot "

@@ -9,7 +9,7 @@ path geometry below: the robot's *projection* on the path (the nearest
 point, searched forward from the last one over a short window so that a
 path passing close to itself is never skipped) and points a given arc
 length further on (the follower updates the projection before it steers).  ``params`` is the robot's row of the controller
-parameter table, in the order of its :class:`ControllerSpec`; ``mem`` its
+parameter table, in the order of its :class:`~contract.controller_specs.ControllerSpec`; ``mem`` its
 row of controller memory (projection segment and fraction, Kanayama's
 reference segment and fraction).  Equations and sources: docs/controllers.md.
 Units: m, rad, s.

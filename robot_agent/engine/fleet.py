@@ -1,4 +1,6 @@
-"""Several robots' run as one function call: one shared world, one clock, no socket (issue 17).
+"""Several robots' run as one function call: one shared world, one clock, no socket.
+
+docs/server.md, "Multi-robot jobs", describes such runs.
 
 The multi-robot sibling of :func:`robot_agent.engine.headless.simulate_run`.  ``N``
 robots stand in ONE world of the environment's size (frame origin (0, 0) for

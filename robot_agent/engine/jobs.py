@@ -207,8 +207,9 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
               controller: str = "schema", controller_params: Optional[dict[str, float]] = None,
               platform: str = "BeBot", overrides: Optional[dict[str, float]] = None,
               plan_seed: Optional[int] = None, execution: str = "dependencies") -> dict[str, Any]:
-    """A multi-robot run as one task (issue 17): plan every robot, run them all in one world on one clock
-    (:func:`robot_agent.engine.fleet.simulate_fleet`), measure them (:func:`planners.fleet_metrics.fleet_metrics`).
+    """A multi-robot run as one task (docs/server.md, "Multi-robot jobs"): plan every robot, run them all in one world
+    on one clock (:func:`robot_agent.engine.fleet.simulate_fleet`), measure them
+    (:func:`planners.fleet_metrics.fleet_metrics`).
 
     ``robots``: per robot ``{"start", "goal", "path"?}`` (m, rad).  ``planner`` ``prioritized`` plans them
     together (timed paths) and ``execution`` says how the robots keep to it: ``dependencies`` (a robot

@@ -1,4 +1,6 @@
-"""Moving obstacles on the emulated field: robots the testbed drives itself along their tracks (issue 17).
+"""Moving obstacles on the emulated field: robots the testbed drives itself along their tracks.
+
+docs/protocol.md, "Moving obstacles", describes them from the outside.
 
 In a simulation (ideal backend) a moving obstacle is a disc that moves
 exactly as :mod:`planners.moving` says.  On the emulated field (field

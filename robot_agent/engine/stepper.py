@@ -17,7 +17,7 @@ Array groups (each passed as a tuple, modified in place):
   points, offset, count, cid, cpar, cmem, want)``: the path follower's state
   and each robot's controller (id, parameters, memory, a plug-in's
   commands; see ``SimCore`` and :mod:`robot_agent.engine.controllers`);
-- ``phys`` = :attr:`Emulated.arrays`; ``world`` = :attr:`World.arrays`;
+- ``phys`` = :attr:`.backends.Emulated.arrays`; ``world`` = :attr:`.world.World.arrays`;
 - ``out`` = ``(events (E, 5) int64: step, robot, old wp, new wp, flags;
   pose_rows (P, 2) int64: step, robot; pose_xyt (P, 3); and per-robot
   scratch: flags, old wp, moving, check, hit, measurement (3,))``.
@@ -82,7 +82,7 @@ def clearance(i: int, x: float, y: float, t: float, believed: np.ndarray, world:
 def control_fleet(belief: np.ndarray, moving: np.ndarray, ctrl: tuple, g: Gains, flags: np.ndarray,
                   old: np.ndarray, world: tuple, radius: float) -> None:
     """The follower's step for every robot: its flags, its waypoint before the step in ``old``;
-    robots not ``moving`` get zero commands.  ``world`` (:attr:`World.arrays`) and the collision
+    robots not ``moving`` get zero commands.  ``world`` (:attr:`.world.World.arrays`) and the collision
     ``radius`` (m) give the clearance that regulated pure pursuit slows down by."""
     state, aligning, wp, k, timeout, cmd, anchor, anchor_k, points, offset, count, cid, cpar, cmem, want = ctrl
     for i in range(len(belief)):

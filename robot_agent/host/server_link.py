@@ -33,7 +33,8 @@ _RETRY_STATUS = {408, 429}
 
 
 class ServerLink:
-    """Posts registrations and tracker batches to ``server_url`` with ``token`` (a :class:`TrackerSink`)."""
+    """Posts registrations and tracker batches to ``server_url`` with ``token``
+    (a :class:`~robot_agent.host.sinks.TrackerSink`)."""
 
     def __init__(self, server_url: str, token: str, *, timeout_s: float = 5.0, retry_initial_s: float = 0.5,
                  retry_max_s: float = 30.0, max_batch_poses: int = 5000, max_pending_poses: int = 1_000_000,

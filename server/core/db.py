@@ -2,9 +2,10 @@
 
 SQLite runs in WAL mode with a busy timeout, so the API threads and the run
 pipeline can write concurrently; Alembic migrations are applied automatically
-when the server starts (``upgrade head``).  They ship inside the package
-(``server/migrations``) and are found as a package resource, so an installed
-wheel migrates like a checkout.
+when the server starts (``upgrade head``).  They live in the repository's
+top-level ``alembic/`` directory (Alembic's standard layout, for ``alembic``
+commands run from the repository root); the wheel carries that directory as
+``server/migrations``, so an installed wheel migrates like a checkout.
 """
 
 from __future__ import annotations
@@ -17,8 +18,19 @@ from sqlalchemy.orm import Session, sessionmaker
 
 __all__ = ["MIGRATIONS", "make_engine", "make_session_factory", "migrate", "private_sqlite_file"]
 
-#: Alembic's script location: the ``migrations`` directory of the ``server`` package
-MIGRATIONS = "server:migrations"
+
+def _script_location() -> str:
+    """The migrations' directory: ``server/migrations`` in an installed wheel, else the checkout's ``alembic/``."""
+    server = Path(__file__).resolve().parents[1]
+    packaged = server / "migrations"
+    if (packaged / "env.py").is_file():
+        return str(packaged)
+    return str(server.parent / "alembic")
+
+
+#: Alembic's script location (a directory path): the installed wheel's ``server/migrations``,
+#: or ``alembic/`` at the root of a checkout (an editable install too)
+MIGRATIONS = _script_location()
 
 
 def make_engine(url: str) -> Engine:

@@ -51,7 +51,7 @@ class ControllerRelay:
     robot must stop.  ``ended`` resolves with the robot's ending ``EV,FAIL``
     fields (``STOPPED`` when the program or the server stopped it).  ``seed``
     gives the robot's velocity mode the job's noise seed (whether it could:
-    :meth:`RobotHooks.seed_next_path`), so that its obstacle robots replay.
+    :meth:`.context.RobotHooks.seed_next_path`), so that its obstacle robots replay.
     """
 
     def __init__(self, link: AgentLink, ctx: RunContext, goal: tuple[float, float], tolerance_m: float,

@@ -1,4 +1,6 @@
-"""A multi-robot run as one task (issue 17): every robot planned, driven in one world on one clock, measured.
+"""A multi-robot run as one task: every robot planned, driven in one world on one clock, measured.
+
+docs/server.md, "Multi-robot jobs", describes such jobs.
 
 The robots of a multi-robot job (``robots`` on the experiment) run together
 in :func:`robot_agent.engine.jobs.fleet_job`, one task in the compute pool

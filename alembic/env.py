@@ -3,6 +3,9 @@
 The server calls migrations itself at start-up with an open connection
 (``server.core.db.migrate``); ``alembic upgrade head`` from the repository
 root also works (alembic.ini) and reads ``TWB_DATABASE_URL`` / ``TWB_DATA_DIR``.
+This directory is installed as ``server/migrations`` by the wheel
+(pyproject.toml), never as a top-level ``alembic``: it has no ``__init__.py``,
+so it cannot shadow the Alembic library from the repository root either.
 """
 
 from __future__ import annotations
