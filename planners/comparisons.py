@@ -362,9 +362,11 @@ def _pooled(results: list[tuple[Hashable, Any, int, int, str, float]], test: str
                            problems=[problem_name(p) for p, *_ in usable], standard_errors=[u[4] for u in usable],
                            runs_a=sum(u[2] for u in usable), runs_b=sum(u[3] for u in usable), test=test,
                            confidence=confidence)
+    what = "counted runs" if metric == "success_rate" else "completed runs"
+    if not usable:
+        return res, 0, 0, f"no problem has {what} of both"
     notes = [res.note] if res.note else []
     if left:
-        what = "counted runs" if metric == "success_rate" else "completed runs"
         notes.append(f"{left} problem(s) left out: no {what} of one side")
     return res, res.n_a, res.n_b, "; ".join(notes)
 

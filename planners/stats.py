@@ -615,7 +615,9 @@ class ProblemComparison:
     ``mean_a``/``mean_b`` the means of the per-problem means.  The test is over the problems: a one-sample
     t on the differences (``problem-t``; with its Student-t interval on ``n_problems - 1`` degrees of
     freedom — for a balanced design the same inference as a mixed model with a random problem effect) or
-    the Wilcoxon signed-rank test (``problem-wilcoxon``, with the same t interval).  ``effect_size`` is the
+    the Wilcoxon signed-rank test (``problem-wilcoxon``, with the same t interval); where every problem
+    differs by the same amount (a success rate of 100 % against 0 % on each) there is no spread for either,
+    and the test is the exact sign test over the problems (``problem-sign``, no interval).  ``effect_size`` is the
     mean difference over their standard deviation (a problem-level d_z).  ``favour_a``/``favour_b`` count
     the problems whose difference is positive/negative (``ties`` none); ``heterogeneity``: see
     :class:`Heterogeneity`.  ``n_a``/``n_b`` are the runs behind the problems' means.
@@ -658,6 +660,8 @@ def _t_interval(d: np.ndarray, c: float, alternative: str) -> ConfidenceInterval
     ci = _st.ttest_1samp(d, 0.0, alternative=alternative).confidence_interval(confidence_level=c)
     return ConfidenceInterval(float(ci.low), float(ci.high))
 
+
+_SIGN_ALTERNATIVE = {"two-sided": "two-sided", "greater": "greater", "less": "less"}
 
 #: fewer problems than this: no pooled verdict, per-problem results only (a test over two problems has one
 #: degree of freedom and no check of its assumptions; its interval spans most of the line)
@@ -728,8 +732,16 @@ def compare_problems(
         return ProblemComparison(**base, **undefined, note=f"{k} problem(s): at least {min_problems} are needed for "
                                                            "a verdict over problems; see each problem's result")
     if _constant(d):
-        same = "no difference on any problem" if d[0] == 0 else "every problem differs by the same amount"
-        return ProblemComparison(**base, **undefined, note=f"{same}: no spread between problems, so no interval or test")
+        if d[0] == 0:
+            return ProblemComparison(**base, **undefined,
+                                     note="no difference on any problem: nothing to test")
+        # the same difference on every problem (e.g. 100 % against 0 % everywhere): no spread for a t interval,
+        # but k problems all on one side are evidence over problems — the exact sign test says how much
+        r = _st.binomtest(int((d > 0).sum()), k, 0.5, alternative=_SIGN_ALTERNATIVE[alt])
+        return ProblemComparison(**base, statistic=float((d > 0).sum()), pvalue=float(r.pvalue), test="problem-sign",
+                                 effect_size=nan,
+                                 note="every problem differs by the same amount: no spread for an interval; the exact "
+                                      "sign test over problems")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         if test == "t":

@@ -401,3 +401,22 @@ def test_success_rates_are_pooled_over_problems_too():
     assert rate.significant() and rate.better() == "a" and rate.favouring() == (4, 0, 0)
     per = data.compare([]).of("success_rate", "twb", "a", "b")
     assert [p.result.test for p in per] == ["fisher-exact"] * 4 and per[0].needed() is not None
+
+
+def test_the_same_difference_on_every_problem_gets_the_sign_test_not_a_fake_interval():
+    """100 % against 0 % on each of 6 problems: no spread for a t interval; 6 of 6 on one side is what the
+    problems can say (exact sign test: 2 / 2**6), and the words say it for every problem without calling it
+    significant after Holm over both modes."""
+    rows = []
+    for prob in PROBLEMS:
+        for mode in ("sim", "twb"):
+            for rep in range(1, 4):
+                rows.append(run("prioritized", mode, rep, problem=prob, length=2.0))
+                rows.append(run("fmm", mode, rep, problem=prob, outcome="collision", length=1.0))
+    data = study(rows, configs=("prioritized", "fmm"), problems=PROBLEMS, reps=3)
+    rate = data.compare([]).get("success_rate", "twb", "prioritized", "fmm")
+    assert rate.pooled and rate.result.test == "problem-sign" and rate.pvalue == pytest.approx(2 / 2 ** 6)
+    assert math.isnan(rate.confidence_interval().low) and rate.pvalue_holm == pytest.approx(4 / 2 ** 6)
+    facts = " ".join(which_is_better(data)[0].facts)
+    assert "prioritized reached the goal more often than fmm on every one of the 6 problems, but over so few " \
+           "problems that is not significant: +100 percentage points (the same on all 6 problems" in facts

@@ -90,7 +90,7 @@ def comparison_rows(comparisons: Comparisons) -> tuple[list[str], list[list[str]
 
 _TEST_NAMES = {"welch-t": "Welch t", "paired-t": "paired t", "mann-whitney-u": "Mann-Whitney U",
                "wilcoxon": "Wilcoxon", "fisher-exact": "Fisher exact", "problem-t": "t over problems",
-               "problem-wilcoxon": "Wilcoxon over problems"}
+               "problem-wilcoxon": "Wilcoxon over problems", "problem-sign": "sign test over problems"}
 _EFFECT_NAMES = {"hedges-g": "g", "cohen-dz": "d_z", "risk-difference": "RD", "problem-dz": "d (problems)"}
 
 

@@ -55,7 +55,7 @@ REACH = {False: "reached the goal", True: "got every robot to its goal"}
 MODE_WORDS = {"twb": "On the field (Teleworkbench)", "sim": "In simulation"}
 _TESTS = {"welch-t": "Welch's t", "paired-t": "paired t", "mann-whitney-u": "Mann-Whitney U", "wilcoxon": "Wilcoxon",
           "fisher-exact": "Fisher's exact", "problem-t": "t over problems",
-          "problem-wilcoxon": "Wilcoxon signed-rank over problems"}
+          "problem-wilcoxon": "Wilcoxon signed-rank over problems", "problem-sign": "sign test over problems"}
 _EFFECTS = {"hedges-g": "Hedges' g", "cohen-dz": "Cohen's d_z", "risk-difference": "risk difference",
             "problem-dz": "d over problems"}
 
@@ -144,11 +144,16 @@ def _pooled_rate_sentence(c: Comparison, alpha: float, reach: str) -> str:
     if not c.tested:
         return (f"Success rates of {a} and {b} {over}: {100 * r.mean_a:.0f} % vs {100 * r.mean_b:.0f} % on average "
                 f"(not tested: {c.note or r.note}).")
-    diff = (f"{100 * r.difference:+.0f} percentage points (95% CI {100 * ci.low:+.0f} to {100 * ci.high:+.0f}; "
+    interval = (f"95% CI {100 * ci.low:+.0f} to {100 * ci.high:+.0f}; " if math.isfinite(ci.low) else
+                f"the same on all {r.n_problems} problems, so no interval; ")
+    diff = (f"{100 * r.difference:+.0f} percentage points ({interval}"
             f"{_TESTS.get(r.test, r.test)} {fmt_p(r.pvalue)}, Holm-adjusted {fmt_p(c.pvalue_holm)})")
+    w, l_ = (a, b) if r.difference > 0 else (b, a)
     if c.significant(alpha):
-        w, l_ = (a, b) if r.difference > 0 else (b, a)
         return f"{w} {reach} significantly more often than {l_} {over}: {diff}."
+    if max(c.favouring()[:2]) == r.n_problems:
+        return (f"{w} {reach} more often than {l_} on every one of the {r.n_problems} problems, but over so few "
+                f"problems that is not significant: {diff}.")
     return f"The success rates {over} do not differ significantly: {a} − {b} {diff}."
 
 
@@ -202,7 +207,7 @@ def _judge(rows: list[Comparison], a: str, b: str, where: str, alpha: float,
     for note, names in untested.items():
         facts.append(f"Not tested: {', '.join(names)} — {note}.")
     if rate is not None and not rate.pooled and rate.result.n_a and rate.result.n_b and \
-            rate.result.k_a * rate.result.n_b != rate.result.k_b * rate.result.n_a and metrics:
+            rate.result.k_a * rate.result.n_b != rate.result.k_b * rate.result.n_a and any(c.tested for c in metrics):
         wide = any(compared_over(c.metric) == "measured" for c in metrics)
         which = "the completed-run metrics" if wide else "the metrics"
         facts.append(f"Careful: {which} describe successful runs only — {an} {rate.result.k_a} of "
@@ -221,6 +226,10 @@ def _judge(rows: list[Comparison], a: str, b: str, where: str, alpha: float,
             rates = ""
         elif rate.difference == 0:
             rates = f"; both {reach} equally often"
+        elif rate.pooled and max(rate.favouring()[:2]) == rate.result.n_problems:
+            ahead = display_name(rate.a if rate.difference > 0 else rate.b)
+            rates = (f"; {ahead} also {reach} more often on all {rate.result.n_problems} problems, short of "
+                     f"significance over so few problems (Holm-adjusted {fmt_p(rate.pvalue_holm)})")
         else:
             rates = "; the success rates do not differ significantly"
         return f"{display_name(w)} is better than {display_name(l_)} {where} on {on}{rates}.", facts
