@@ -411,12 +411,12 @@ def test_the_same_difference_on_every_problem_gets_the_sign_test_not_a_fake_inte
     for prob in PROBLEMS:
         for mode in ("sim", "twb"):
             for rep in range(1, 4):
-                rows.append(run("prioritized", mode, rep, problem=prob, length=2.0))
+                rows.append(run("coordinated", mode, rep, problem=prob, length=2.0))
                 rows.append(run("fmm", mode, rep, problem=prob, outcome="collision", length=1.0))
-    data = study(rows, configs=("prioritized", "fmm"), problems=PROBLEMS, reps=3)
-    rate = data.compare([]).get("success_rate", "twb", "prioritized", "fmm")
+    data = study(rows, configs=("coordinated", "fmm"), problems=PROBLEMS, reps=3)
+    rate = data.compare([]).get("success_rate", "twb", "coordinated", "fmm")
     assert rate.pooled and rate.result.test == "problem-sign" and rate.pvalue == pytest.approx(2 / 2 ** 6)
     assert math.isnan(rate.confidence_interval().low) and rate.pvalue_holm == pytest.approx(4 / 2 ** 6)
     facts = " ".join(which_is_better(data)[0].facts)
-    assert "prioritized reached the goal more often than fmm on every one of the 6 problems, but over so few " \
+    assert "coordinated reached the goal more often than FMM on every one of the 6 problems, but over so few " \
            "problems that is not significant: +100 percentage points (the same on all 6 problems" in facts
