@@ -154,3 +154,44 @@ def test_an_agent_stops_on_ctrl_c_and_sigterm_even_when_started_with_ctrl_c_igno
         finally:
             proc.kill()
             proc.wait()
+
+
+def _pool_workers(server_pid: int) -> list[int]:
+    """The compute pool's worker processes of a server (spawned by multiprocessing; not its resource tracker)."""
+    out = []
+    for pid in descendants(server_pid):
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            continue
+        if "multiprocessing.spawn" in cmd and "resource_tracker" not in cmd:
+            out.append(pid)
+    return out
+
+
+def test_a_killed_planning_worker_is_replaced_and_costs_one_retry(tmp_path):
+    """SIGKILL one worker (what the out-of-memory killer does): the broken pool is replaced, the job that met
+    it ends its try as a testbed error and is retried, and every later job plans as before."""
+    p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
+    try:
+        with p.client() as c:
+            deadline = time.monotonic() + 120
+            while not c.get("/health").json()["compute"]["ready"]:
+                assert time.monotonic() < deadline, p.output()
+                time.sleep(0.2)
+            workers = _pool_workers(p.proc.pid)
+            assert workers, descendants(p.proc.pid)
+            os.kill(workers[0], signal.SIGKILL)
+            job = {**SLOW_JOB, "environment": "room", "modes": ["sim"]}
+            first = wait_for(c, c.post("/api/v1/experiments", json=job).json()["id"], timeout=120)
+            assert first["status"] == "completed", first
+            run = first["runs"][0]  # the try it cost, and why (a completed second try keeps the note)
+            assert "a worker process of the compute pool died" in (run["error"] or ""), run
+            health = c.get("/health").json()
+            assert health["compute"]["restarts"] == 1 and "terminated abruptly" in health["compute"]["last_failure"]
+            later = wait_for(c, c.post("/api/v1/experiments", json={**job, "seed": 1}).json()["id"], timeout=120)
+            assert later["status"] == "completed" and c.get("/health").json()["compute"]["restarts"] == 1
+            assert workers[0] not in _pool_workers(p.proc.pid) and len(_pool_workers(p.proc.pid)) == len(workers)
+    finally:
+        p.stop()
+    assert "Traceback" not in p.output(), p.output()

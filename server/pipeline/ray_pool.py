@@ -222,6 +222,12 @@ class RayPool:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
             raise EngineFault(f"Ray lost the task ({type(exc).__name__}): {first}") from None
 
+    def status(self) -> dict[str, Any]:
+        """``{"workers", "ready", "restarts", "last_failure"}`` for ``GET /health``, as the local pool's (Ray
+        replaces its own workers; a lost task is an :class:`EngineFault` of its run)."""
+        return {"workers": self.slots, "ready": self._ray is not None, "restarts": 0, "last_failure": None,
+                "engine": "ray"}
+
     def stop(self) -> None:
         """Disconnect and, for a local cluster, end it."""
         if self._ray is not None and self._ray.is_initialized():
