@@ -32,8 +32,8 @@ from .environment import Environment, load_environment
 from .errors import NoPathFound, PlanningError
 from .st_astar import SpaceTimeAStar, TimedPath, movers_table, plan_timed
 
-__all__ = ["DESCRIPTION", "MultiPlan", "check_fleet_params", "fleet_defaults", "fleet_parameters", "fleet_waypoints",
-           "min_separation", "plan_prioritized", "timed_waypoints"]
+__all__ = ["DESCRIPTION", "EXECUTION_PARAM", "MultiPlan", "check_fleet_params", "fleet_defaults", "fleet_parameters",
+           "fleet_waypoints", "min_separation", "plan_prioritized", "timed_waypoints"]
 
 #: the space-time defaults for fleets: waits allowed, a smaller time margin (robots that can be timed)
 FLEET_DEFAULTS = {"wait": True, "time_margin_s": 0.5, "clearance": 0.0}
