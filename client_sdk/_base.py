@@ -27,6 +27,7 @@ from urllib.parse import quote
 import httpx
 import numpy as np
 
+from contract.plugins import LoadError
 from contract.vocabulary import Mode
 
 from ._config import missing_token_hint, resolve_token, resolve_url
@@ -285,6 +286,18 @@ class BaseClient:
 
     def _list_controllers(self) -> Call:
         return Call("GET", f"{API_PREFIX}/controllers", lambda body: list(_json(body)["data"]))
+
+    def _list_planners(self) -> Call:
+        return Call("GET", f"{API_PREFIX}/planners", lambda body: list(_json(body)["data"]))
+
+    def _plugin_load_errors(self) -> Flow[list[LoadError]]:
+        """The planner plug-ins, then the controller plug-ins, the server could not load (none from a server
+        whose listings have no ``load_errors``)."""
+        out: list[LoadError] = []
+        for kind in ("planners", "controllers"):
+            body = yield Call("GET", f"{API_PREFIX}/{kind}", _json)
+            out += [LoadError.from_dict(e) for e in body.get("load_errors") or []]
+        return out
 
     def _me(self) -> Call:
         return Call("GET", f"{API_PREFIX}/users/me", _one(User.from_json))

@@ -15,6 +15,8 @@ from typing import Any, Literal, Mapping, Optional, Sequence, TypeVar, overload
 import httpx
 import numpy as np
 
+from contract.plugins import LoadError
+
 from ._base import BaseClient, Call, Flow, Sleep, program_body, translate_errors
 from ._exceptions import TwbError
 from ._models import (
@@ -179,8 +181,19 @@ class Client(BaseClient):
 
     def list_controllers(self) -> list[dict[str, Any]]:
         """The robots' path-tracking controllers: name, description, source, whether compiled, and parameters
-        (name, unit, default, range; SI units)."""
+        (name, type, unit, default, range; SI units)."""
         return self._send(self._list_controllers())
+
+    def list_planners(self) -> list[dict[str, Any]]:
+        """The testbed's planners: name, description, defaults, parameters (name, type, unit, default, range;
+        None: any) and whether it plans multi-robot jobs only (``fleet_only``)."""
+        return self._send(self._list_planners())
+
+    def plugin_load_errors(self) -> list[LoadError]:
+        """The plug-ins (planners, then controllers) the testbed's server could not load, each a
+        :class:`contract.plugins.LoadError` (``name``, ``kind``, ``source``, ``error_type``, ``message``,
+        ``distribution``)."""
+        return self._run(self._plugin_load_errors())
 
     # ------------------------------------------------------------------ experiments
 
@@ -419,6 +432,14 @@ class AsyncClient(BaseClient):
     async def list_controllers(self) -> list[dict[str, Any]]:
         """See :meth:`Client.list_controllers`."""
         return await self._send(self._list_controllers())
+
+    async def list_planners(self) -> list[dict[str, Any]]:
+        """See :meth:`Client.list_planners`."""
+        return await self._send(self._list_planners())
+
+    async def plugin_load_errors(self) -> list[LoadError]:
+        """See :meth:`Client.plugin_load_errors`."""
+        return await self._run(self._plugin_load_errors())
 
     async def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
                                limit: int = 50) -> Page[ExperimentSummary]:

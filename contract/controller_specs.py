@@ -9,15 +9,20 @@ plug-in distribution adds controllers that run in Python, declared in its
     [project.entry-points."teleworkbench.controllers"]
     wiggle = "my_package.controllers:Wiggle"
 
-The object (a class is instantiated) has ``params`` (a sequence of
-:class:`Param`, may be empty), an optional ``description``, and
+The object (a class is instantiated, then configured: :class:`Controller`,
+a :class:`contract.plugins.Plugin`, is the interface) has ``parameters`` (a
+sequence of :class:`~contract.parameters.Param` of type ``number`` or
+``integer``, at most 8, may be empty; ``params`` is the older name), an
+optional ``description`` and ``source``, and
 ``command(pose, path, progress, params, dt) -> (v, w)``: the body velocities
 (m/s, rad/s) for the believed ``pose`` (x, y, theta), the path ``(P, 3)``,
 ``progress`` (the segment and fraction of the robot's projection on the
 path), the validated ``params`` dict and the control step ``dt`` (s).  The
 follower's arrival, alignment, stall, timeout and limits apply as for the
-built-ins.  Built-in names cannot be taken over.  Everything here is plain
-Python (no numba): the server and the sandbox import it cheaply.
+built-ins.  Built-in names cannot be taken over.  Loading, and keeping load
+errors as data, is :class:`contract.plugins.PluginRegistry`'s, shared with the
+planners.  Everything here is plain Python (no numba): the server and the
+sandbox import it cheaply.
 
 Parameters with ``compiled=False`` (regulated pure pursuit's ``replan*``) are
 not in the compiled row: the agent reads them in Python
@@ -26,17 +31,19 @@ not in the compiled row: the agent reads them in Python
 
 from __future__ import annotations
 
-import importlib
 import math
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
-from typing import Any, Mapping, Optional, Protocol, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["BUILTINS", "DEFAULT_CONTROLLER", "ENTRY_POINT_GROUP", "REPLAN_PARAMS", "ControllerError", "ControllerSpec",
-           "Param", "PluginController", "Selection", "available_controllers", "controller_report", "controller_spec",
-           "register_controller", "select"]
+from .parameters import Param, ParamError, check_values
+from .plugins import LoadError, Plugin, PluginRegistry, PluginStatus
+
+__all__ = ["BUILTINS", "DEFAULT_CONTROLLER", "ENTRY_POINT_GROUP", "PLUGINS", "REPLAN_PARAMS", "Controller",
+           "ControllerError", "ControllerSpec", "LoadError", "Param", "PluginController", "PluginStatus", "Selection",
+           "available_controllers", "controller_report", "controller_spec", "register_controller",
+           "unregister_controller", "select"]
 
 ENTRY_POINT_GROUP = "teleworkbench.controllers"
 DEFAULT_CONTROLLER = "schema"
@@ -53,35 +60,11 @@ class ControllerError(ValueError):
         self.field = field_name
 
 
-@dataclass(frozen=True)
-class Param:
-    """One controller parameter: ``name`` (its unit as the suffix), ``unit``, ``default`` and the
-    closed range ``[low, high]`` it must lie in, and what it does; an ``integer`` one takes whole numbers
-    only (a switch: 0 or 1); one not ``compiled`` is read in Python, not by the compiled controller."""
-
-    name: str
-    unit: str
-    default: float
-    low: float
-    high: float
-    doc: str = ""
-    integer: bool = False
-    compiled: bool = True
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form (what ``GET /api/v1/controllers`` lists); integer parameters say so."""
-        out = {"name": self.name, "unit": self.unit, "default": self.default, "range": [self.low, self.high],
-               "description": self.doc}
-        if self.integer:
-            out["integer"] = True
-        return out
-
-
 #: replanning (robot_agent.engine.replan): off by default, so every run without it stays as it was
 REPLAN_PARAMS = (
     Param("replan", "0|1", 0, 0, 1, "1: check the path ahead 5 times a second and, when a moving obstacle "
           "(where it will be) or another robot (where it is) blocks it, replan to the goal with st_astar "
-          "around the obstacles' known trajectories", integer=True, compiled=False),
+          "around the obstacles' known trajectories", type="integer", compiled=False),
     Param("replan_horizon_s", "s", 3.0, 0.5, 30.0, "how far ahead the check looks, in seconds of driving at "
           "speed_m_s", compiled=False),
     Param("replan_min_interval_s", "s", 1.0, 0.2, 60.0, "at least this long between two replans",
@@ -155,85 +138,84 @@ BUILTINS: dict[str, ControllerSpec] = {s.name: s for s in (
 )}
 
 
-class PluginController(Protocol):
-    """What a plug-in controller provides (see the module docstring)."""
+class Controller(Plugin):
+    """The interface of a plug-in controller (a :class:`~contract.plugins.Plugin`: ``configure`` once before
+    first use, ``cleanup`` when dropped): ``parameters`` (numbers), ``description``, ``source`` and
+    :meth:`command`.  Plug-ins need not subclass it: an object with these attributes will do."""
 
-    params: Sequence[Param]
+    source: str = ""
+    parameters: Sequence[Param] = ()
 
     def command(self, pose: np.ndarray, path: np.ndarray, progress: tuple[int, float], params: dict[str, float],
-                dt: float) -> tuple[float, float]: ...
+                dt: float) -> tuple[float, float]:
+        """Body velocities ``(v, w)`` (m/s, rad/s) for the believed ``pose`` on ``path`` (see the module)."""
+        raise NotImplementedError
 
 
-_plugins: dict[str, ControllerSpec] = {}
+#: the older name of the interface
+PluginController = Controller
 
 
-def _plugin_entry_points() -> dict[str, Any]:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name not in BUILTINS}
+def _declared(obj: Any) -> tuple[Any, ...]:
+    """A controller object's declared parameters: ``parameters``, or the older ``params``."""
+    declared = getattr(obj, "parameters", None) or getattr(obj, "params", None) or ()
+    return tuple(declared)
 
 
-def _load(name: str, ep: Any) -> ControllerSpec:
-    importlib.invalidate_caches()
-    try:
-        obj = ep.load()
-        if isinstance(obj, type):
-            obj = obj()
-        params = tuple(obj.params if hasattr(obj, "params") else ())
-        if not callable(getattr(obj, "command", None)) or not all(isinstance(p, Param) for p in params):
-            raise TypeError("a controller has `command(pose, path, progress, params, dt)` and `params` (Param)")
-        if len(params) > _SLOTS:
-            raise TypeError(f"a controller has at most {_SLOTS} parameters")
-    except Exception as exc:  # a broken plug-in must not take the testbed down
-        raise ControllerError("controller", f"plug-in controller {name!r} ({ep.value}) failed to load: {exc}") \
-            from exc
-    desc = str(getattr(obj, "description", "") or f"plug-in {ep.value}")
-    return ControllerSpec(name, _PLUGIN_ID, desc, str(getattr(obj, "source", "") or ep.value), params, obj)
+def _adapt(name: str, obj: Any, source: str) -> ControllerSpec:
+    """A created, configured plug-in object as the :class:`ControllerSpec` ``name``; TypeError if it lacks the
+    interface."""
+    params = _declared(obj)
+    if not callable(getattr(obj, "command", None)) or not all(isinstance(p, Param) for p in params):
+        raise TypeError("a controller has `command(pose, path, progress, params, dt)` and `parameters` (Param)")
+    if len(params) > _SLOTS:
+        raise TypeError(f"a controller has at most {_SLOTS} parameters")
+    words = [p.name for p in params if p.type not in ("number", "integer")]
+    if words:
+        raise TypeError(f"a controller's parameters are numbers (type number or integer); not {', '.join(words)}")
+    desc = str(getattr(obj, "description", "") or f"plug-in {source}")
+    return ControllerSpec(name, _PLUGIN_ID, desc, str(getattr(obj, "source", "") or source), params, obj)
+
+
+def _refuse(message: str) -> ControllerError:
+    return ControllerError("controller", message)
+
+
+#: the plug-in controllers of this process
+PLUGINS: PluginRegistry[ControllerSpec] = PluginRegistry("controller", ENTRY_POINT_GROUP, adapt=_adapt,
+                                                         refuse=_refuse, reserved=BUILTINS)
 
 
 def register_controller(name: str, obj: Any) -> ControllerSpec:
     """Register a plug-in controller object under ``name`` for this process (tests, notebooks)."""
-    if name in BUILTINS:
-        raise ValueError(f"{name!r} is a built-in controller and cannot be replaced")
+    return PLUGINS.register(name, obj)
 
-    class _Given:
-        value = f"registered {name}"
 
-        @staticmethod
-        def load() -> Any:
-            return obj
-
-    _plugins[name] = _load(name, _Given)
-    return _plugins[name]
+def unregister_controller(name: str) -> None:
+    """Drop the plug-in controller ``name`` of this process (its ``cleanup`` runs); nothing if it is not loaded."""
+    PLUGINS.unregister(name)
 
 
 def controller_spec(name: str) -> ControllerSpec:
-    """The controller called ``name``; :class:`ControllerError` listing the choices if none."""
+    """The controller called ``name``; :class:`ControllerError` listing the choices if none, or saying why a
+    plug-in failed to load (its :class:`~contract.plugins.LoadError` as ``load_error``)."""
     if name in BUILTINS:
         return BUILTINS[name]
-    if name in _plugins:
-        return _plugins[name]
-    eps = _plugin_entry_points()
-    if name not in eps:
+    spec = PLUGINS.get(name)
+    if spec is None:
         raise ControllerError("controller", f"unknown controller {name!r} (available: "
                                             f"{', '.join(available_controllers())})")
-    _plugins[name] = _load(name, eps[name])
-    return _plugins[name]
+    return spec
 
 
-def controller_report() -> list[tuple[str, str, str]]:
-    """Every installed plug-in controller, loaded now (or tried): ``(name, module:object, error or "")``."""
-    out = []
-    for name, ep in sorted(_plugin_entry_points().items()):
-        try:
-            controller_spec(name)
-            out.append((name, ep.value, ""))
-        except ControllerError as exc:
-            out.append((name, ep.value, str(exc).split(" failed to load: ", 1)[-1]))
-    return out
+def controller_report() -> list[PluginStatus]:
+    """Every installed plug-in controller, loaded now (or tried): what ``twb plugins list`` shows."""
+    return PLUGINS.report()
 
 
 def available_controllers() -> list[str]:
     """Every selectable controller name: the built-ins, then plug-ins (by name)."""
-    return [*BUILTINS, *sorted(set(_plugin_entry_points()) | set(_plugins))]
+    return [*BUILTINS, *PLUGINS.names()]
 
 
 @dataclass(frozen=True)
@@ -262,24 +244,12 @@ def select(name: Optional[str] = None, params: Optional[Mapping[str, Any]] = Non
     """Validate a controller choice: ``name`` (default ``schema``) and ``params`` (names of its parameters,
     numbers in their ranges); :class:`ControllerError` naming the field otherwise."""
     spec = controller_spec(name or DEFAULT_CONTROLLER)
-    given = dict(params or {})
-    known = {p.name: p for p in spec.params}
-    unknown = sorted(set(given) - set(known))
-    if unknown:
-        allowed = ", ".join(known) or "none"
-        raise ControllerError(f"controller_params.{unknown[0]}", f"controller_params.{unknown[0]}: controller "
-                                                                 f"{spec.name!r} has no parameter {unknown[0]!r} "
-                                                                 f"(its parameters: {allowed})")
-    out: dict[str, float] = {}
-    for p in spec.params:
-        v = given.get(p.name, p.default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not p.low <= v <= p.high:
-            raise ControllerError(f"controller_params.{p.name}", f"controller_params.{p.name} must be a number in "
-                                                                 f"[{p.low:g}, {p.high:g}] ({p.unit}), got {v!r}")
-        if p.integer and v != int(v):
-            raise ControllerError(f"controller_params.{p.name}", f"controller_params.{p.name} must be a whole "
-                                                                 f"number in [{p.low:g}, {p.high:g}], got {v!r}")
-        out[p.name] = float(v)
+    try:
+        checked = check_values(spec.params, params, owner=f"controller {spec.name!r}", label="controller_params.")
+    except ParamError as exc:
+        where = f"controller_params.{exc.param}"
+        raise ControllerError(where, f"{where}: {exc}" if exc.unknown else str(exc)) from None
+    out = {k: float(v) for k, v in checked.items()}
     if spec.name == "regulated_pure_pursuit" and out["min_lookahead_m"] > out["max_lookahead_m"]:
         raise ControllerError("controller_params.min_lookahead_m", "controller_params.min_lookahead_m must not "
                                                                    "exceed max_lookahead_m")

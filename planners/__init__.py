@@ -10,7 +10,7 @@ metres and radians throughout.
 """
 
 from .api import DEFAULT_PLANNING_MARGIN, DEFAULT_ROBOT_RADIUS, PlanResult, check_query, parse_pose, plan_path
-from .base import Planner
+from .base import Param, Planner
 from .environment import Block, Environment, Plan, builtin_names, load_environment, parse_environment
 from .errors import InvalidEnvironment, InvalidPose, NoPathFound, PlanningError, UnknownPlanner
 from .geometry import distance_to_obstacles, signed_distance_to_blocks
@@ -29,6 +29,7 @@ __all__ = sorted(
         "InvalidEnvironment",
         "InvalidPose",
         "NoPathFound",
+        "Param",
         "Plan",
         "PlanResult",
         "Planner",

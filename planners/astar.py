@@ -58,7 +58,7 @@ class AStarPlanner(Planner):
 
     name = "astar"
     description = "A* on the 8-connected grid (optimal grid path; SciPy csgraph search)"
-    defaults = {}
+    parameters = ()
 
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int

@@ -13,7 +13,7 @@ Write a plug-in by subclassing :class:`Planner`::
     class StraightLine(Planner):
         name = "straight"
         description = "Straight segment; fails if blocked"
-        defaults = {}
+        parameters = (Param("margin", "m", 0.0, 0.0, 0.5, "unused: an example"),)
 
         def solve(self, space, start, goal, params, seed):
             path = np.array([start, goal])
@@ -22,34 +22,59 @@ Write a plug-in by subclassing :class:`Planner`::
             return path
 
 and registering it under the entry-point group ``teleworkbench.planners``
-(see docs/planners.md).
+(see docs/planners.md).  A planner is a :class:`contract.plugins.Plugin`: the
+loader calls its ``configure()`` once before first use and ``cleanup()`` when
+it is dropped; its parameters are :class:`contract.parameters.Param` s, as a
+controller's.
 """
 
 from __future__ import annotations
 
-import math
-from typing import Any, Mapping
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
+from contract.parameters import Param, check_values, defaults_of, params_from_defaults
+from contract.plugins import Plugin
+
 from .grid import ConfigSpace
 
-__all__ = ["Planner", "SolveResult"]
+__all__ = ["Param", "Planner", "SolveResult"]
 
 SolveResult = np.ndarray | tuple[np.ndarray, dict[str, Any]]
 
 
-class Planner:
-    """Base class of planners: set ``name``, ``description``, ``defaults`` and implement :meth:`solve`.
+class _Defaults:
+    """``defaults``: the declared parameters as ``{name: default}`` (None: any parameters).
 
-    ``defaults`` maps each accepted parameter to its default value; the type of
-    the default (bool, int, float, str) is the type a user value must have.
-    Set ``defaults = None`` to accept any JSON parameters unchecked.
+    The older way to declare parameters, a ``defaults`` dict (each value's type the parameter's), still
+    works: assigning one, on a subclass or an instance, declares :attr:`Planner.parameters` from it.
     """
 
-    name: str = ""
-    description: str = ""
-    defaults: Mapping[str, Any] | None = {}
+    def __get__(self, obj: Optional["Planner"], owner: type) -> Optional[dict[str, Any]]:
+        return defaults_of((owner if obj is None else obj).parameters)
+
+    def __set__(self, obj: "Planner", value: Optional[Mapping[str, Any]]) -> None:
+        obj.parameters = params_from_defaults(value)
+
+
+class Planner(Plugin):
+    """Base class of planners: set ``name``, ``description``, ``parameters`` and implement :meth:`solve`.
+
+    ``parameters`` declares each accepted parameter (:class:`~contract.parameters.Param`: type, default,
+    range, unit, description); ``None`` accepts any JSON parameters unchecked.  Rules between parameters go
+    in :meth:`check_params`.
+    """
+
+    parameters: Optional[Sequence[Param]] = ()
+    defaults = _Defaults()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "defaults" in cls.__dict__ and not isinstance(cls.__dict__["defaults"], _Defaults):
+            if "parameters" not in cls.__dict__:  # the older form: a defaults dict declares the parameters
+                cls.parameters = params_from_defaults(cls.__dict__["defaults"])
+            delattr(cls, "defaults")  # the base's view takes over
 
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
@@ -58,41 +83,14 @@ class Planner:
         raise NotImplementedError
 
     def validate_params(self, params: Mapping[str, Any] | None) -> dict[str, Any]:
-        """Merge ``params`` over ``defaults``; ``ValueError`` naming an unknown or mistyped parameter."""
-        params = dict(params or {})
-        if self.defaults is None:
-            return params
-        out = dict(self.defaults)
-        for key, value in params.items():
-            if key not in self.defaults:
-                allowed = ", ".join(sorted(self.defaults)) or "none"
-                raise ValueError(f"planner {self.name!r} has no parameter {key!r} (parameters: {allowed})")
-            default = self.defaults[key]
-            out[key] = _coerce(value, default, f"{self.name}.{key}")
+        """``params`` over the declared defaults, each checked (:func:`~contract.parameters.check_values`),
+        then :meth:`check_params`; ``ValueError`` (:class:`~contract.parameters.ParamError`) naming the
+        parameter otherwise."""
+        if self.parameters is None:
+            return dict(params or {})
+        out = check_values(self.parameters, params, owner=f"planner {self.name!r}", label=f"parameter {self.name}.")
         self.check_params(out)
         return out
 
     def check_params(self, params: dict[str, Any]) -> None:
-        """Range checks of merged parameters; raise ``ValueError`` naming the parameter and the rule."""
-
-
-def _coerce(value: Any, default: Any, where: str) -> Any:
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"parameter {where} must be true or false, got {value!r}")
-        return value
-    if isinstance(default, (int, float)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"parameter {where} must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ValueError(f"parameter {where} must be finite, got {value!r}")
-        if isinstance(default, int):
-            if float(value) != int(value):
-                raise ValueError(f"parameter {where} must be an integer, got {value!r}")
-            return int(value)
-        return float(value)
-    if isinstance(default, str):
-        if not isinstance(value, str):
-            raise ValueError(f"parameter {where} must be a string, got {value!r}")
-        return value
-    return value
+        """Rules between checked parameters; raise ``ValueError`` naming the parameter and the rule."""

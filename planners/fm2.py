@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .base import Planner
+from .base import Param, Planner
 from .fast_marching import descend, travel_time
 from .grid import ConfigSpace
 
@@ -30,15 +30,12 @@ class FM2Planner(Planner):
 
     name = "fm2"
     description = "Fast Marching Square: clearance-weighted fast marching (smooth, safe paths)"
-    defaults = {"saturation": 0.2, "min_speed": 0.01, "step": 1.0}
-
-    def check_params(self, params: dict[str, Any]) -> None:
-        if params["saturation"] <= 0:
-            raise ValueError("parameter fm2.saturation must be > 0 (metres)")
-        if not 0 < params["min_speed"] <= 1:
-            raise ValueError("parameter fm2.min_speed must be in (0, 1]")
-        if not 0.05 <= params["step"] <= 1.0:
-            raise ValueError("parameter fm2.step must be in [0.05, 1] cells")
+    parameters = (
+        Param("saturation", "m", 0.2, 0.0, None, "clearance beyond the robot radius at which the speed reaches 1",
+              low_exclusive=True),
+        Param("min_speed", "", 0.01, 0.0, 1.0, "the lowest normalised speed (next to obstacles)", low_exclusive=True),
+        Param("step", "cells", 1.0, 0.05, 1.0, "length of a descent step along the travel time's gradient"),
+    )
 
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int

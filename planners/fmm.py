@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .base import Planner
+from .base import Param, Planner
 from .fast_marching import descend, travel_time
 from .grid import ConfigSpace
 
@@ -23,11 +23,8 @@ class FMMPlanner(Planner):
 
     name = "fmm"
     description = "Fast Marching Method: geodesic shortest path (scikit-fmm), sub-cell descent"
-    defaults = {"step": 1.0}
-
-    def check_params(self, params: dict[str, Any]) -> None:
-        if not 0.05 <= params["step"] <= 1.0:
-            raise ValueError("parameter fmm.step must be in [0.05, 1] cells")
+    parameters = (Param("step", "cells", 1.0, 0.05, 1.0, "length of a descent step along the travel time's "
+                        "gradient"),)
 
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int

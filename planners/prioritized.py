@@ -19,6 +19,7 @@ names it), where another order would have worked.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -26,13 +27,15 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from contract.parameters import Param, check_values, defaults_of
+
 from .api import DEFAULT_ROBOT_RADIUS, check_query
 from .environment import Environment, load_environment
 from .errors import NoPathFound, PlanningError
 from .st_astar import SpaceTimeAStar, TimedPath, movers_table, plan_timed
 
-__all__ = ["DESCRIPTION", "MultiPlan", "fleet_defaults", "fleet_waypoints", "min_separation", "plan_prioritized",
-           "timed_waypoints"]
+__all__ = ["DESCRIPTION", "EXECUTION_PARAM", "MultiPlan", "check_fleet_params", "fleet_defaults", "fleet_parameters",
+           "fleet_waypoints", "min_separation", "plan_prioritized", "timed_waypoints"]
 
 #: the space-time defaults for fleets: waits allowed, a smaller time margin (robots that can be timed)
 FLEET_DEFAULTS = {"wait": True, "time_margin_s": 0.5, "clearance": 0.0}
@@ -45,10 +48,27 @@ DESCRIPTION = ("plans the robots of a multi-robot job together, one after the ot
                "planner plans each robot alone (the uncoordinated baseline)")
 
 
+#: ``execution`` as the listings show it (checked by the server, which keeps to the plan: its values are a choice)
+EXECUTION_PARAM = Param("execution", default=EXECUTIONS[0], type="string",
+                        doc=f"how the robots keep to the plan: {' or '.join(EXECUTIONS)} (in its order of passing, "
+                            "or by the clock)")
+
+
+def fleet_parameters() -> tuple[Param, ...]:
+    """The planner's own parameters: the space-time planner's, with :data:`FLEET_DEFAULTS` as their defaults."""
+    return tuple(dataclasses.replace(p, default=FLEET_DEFAULTS.get(p.name, p.default))
+                 for p in SpaceTimeAStar.parameters or ())
+
+
+def check_fleet_params(params: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``params`` over :func:`fleet_parameters`' defaults, each checked; ``ValueError`` naming a bad one."""
+    return check_values(fleet_parameters(), params, owner="planner 'prioritized'", label="parameter prioritized.")
+
+
 def fleet_defaults() -> dict[str, Any]:
     """Every parameter a multi-robot job's ``planner_params`` may give ``prioritized``, with its default: the
     space-time planner's, :data:`FLEET_DEFAULTS` over them, and ``execution``."""
-    return {**SpaceTimeAStar.defaults, **FLEET_DEFAULTS, "execution": EXECUTIONS[0]}
+    return {**(defaults_of(fleet_parameters()) or {}), "execution": EXECUTIONS[0]}
 
 
 @dataclass
@@ -98,7 +118,7 @@ def plan_prioritized(env: Environment | str, starts: Sequence[Sequence[float]], 
     s_xy, g_xy = _poses(env, starts, "starts"), _poses(env, goals, "goals")
     if len(s_xy) != len(g_xy):
         raise PlanningError(f"{len(s_xy)} starts but {len(g_xy)} goals")
-    checked = SpaceTimeAStar().validate_params({**FLEET_DEFAULTS, **dict(params or {})})
+    checked = check_fleet_params(params)
     radius = robot_radius + planning_margin
     for what, pts in (("start", s_xy), ("goal", g_xy)):
         d = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))

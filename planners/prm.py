@@ -21,7 +21,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from .base import Planner
+from .base import Param, Planner
 from .errors import NoPathFound
 from .grid import ConfigSpace
 
@@ -87,7 +87,8 @@ class PRMPlanner(Planner):
 
     name = "prm"
     description = "Probabilistic RoadMap: seeded samples, k-nearest edges, Dijkstra query"
-    defaults = {"samples": 500, "k": 10}
+    parameters = (Param("samples", "", 500, 2, 200_000, "free samples of the roadmap", type="integer"),
+                  Param("k", "", 10, 1, 100, "nearest neighbours each sample is joined to", type="integer"))
 
     def __init__(self) -> None:
         self._cache: weakref.WeakKeyDictionary[ConfigSpace, dict[tuple[int, int, int], Roadmap]]
@@ -102,12 +103,6 @@ class PRMPlanner(Planner):
         rm = build_roadmap(space, samples, k, seed)
         per_space[key] = rm
         return rm, False
-
-    def check_params(self, params: dict[str, Any]) -> None:
-        if not 2 <= params["samples"] <= 200_000:
-            raise ValueError("parameter prm.samples must be in [2, 200000]")
-        if not 1 <= params["k"] <= 100:
-            raise ValueError("parameter prm.k must be in [1, 100]")
 
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int

@@ -7,16 +7,17 @@ A plug-in distribution declares, in its ``pyproject.toml``::
 
 The object may be a :class:`~planners.base.Planner` subclass or instance, or
 a plain function ``f(space, start, goal, params, seed) -> (N, 2) array``.
-Built-in names cannot be taken over by plug-ins.
+Built-in names cannot be taken over by plug-ins.  Loading (and keeping load
+errors as data) is :class:`contract.plugins.PluginRegistry`'s, shared with the
+controllers.
 """
 
 from __future__ import annotations
 
-import importlib
 import inspect
-from dataclasses import dataclass
-from importlib.metadata import EntryPoint, entry_points
-from typing import Any, Callable, Optional
+from typing import Any, Callable
+
+from contract.plugins import RESTART_HINT, LoadError, PluginRegistry, PluginStatus
 
 from .astar import AStarPlanner
 from .base import Planner
@@ -26,13 +27,10 @@ from .fmm import FMMPlanner
 from .prm import PRMPlanner
 from .st_astar import SpaceTimeAStar
 
-__all__ = ["ENTRY_POINT_GROUP", "RESTART_HINT", "PluginStatus", "available_planners", "get_planner", "plugin_report",
-           "register_planner"]
+__all__ = ["ENTRY_POINT_GROUP", "PLUGINS", "RESTART_HINT", "LoadError", "PluginStatus", "available_planners",
+           "get_planner", "plugin_report", "register_planner", "unregister_planner"]
 
 ENTRY_POINT_GROUP = "teleworkbench.planners"
-#: what a plug-in that fails to load needs most often: a process started before it was installed
-RESTART_HINT = ("if you installed it while the testbed was running, restart the testbed (stop `twb up` or "
-                "`twb server` and start it again) so that its processes see the new package")
 _BUILTINS: dict[str, type[Planner]] = {
     "fmm": FMMPlanner,
     "fm2": FM2Planner,
@@ -40,13 +38,13 @@ _BUILTINS: dict[str, type[Planner]] = {
     "astar": AStarPlanner,
     "st_astar": SpaceTimeAStar,
 }
-_instances: dict[str, Planner] = {}
+_builtin_instances: dict[str, Planner] = {}
 
 
 class FunctionPlanner(Planner):
     """Adapts a plain function ``f(space, start, goal, params, seed)`` to the interface."""
 
-    defaults = None
+    parameters = None
 
     def __init__(self, name: str, fn: Callable[..., Any]) -> None:
         self.name = name
@@ -57,73 +55,54 @@ class FunctionPlanner(Planner):
         return self._fn(space, start, goal, params, seed)
 
 
-def _adapt(name: str, obj: Any) -> Planner:
-    if isinstance(obj, type) and issubclass(obj, Planner):
-        obj = obj()
+def _adapt(name: str, obj: Any, source: str) -> Planner:
+    """A created, configured plug-in object (from ``source``) as a :class:`Planner` named ``name``; TypeError
+    if it is none."""
     if isinstance(obj, Planner):
         if not obj.name:
             obj.name = name
         return obj
     if callable(obj):
         return FunctionPlanner(name, obj)
-    raise TypeError(f"planner {name!r} must be a Planner subclass, a Planner instance or a function")
+    raise TypeError(f"planner {name!r} ({source}) must be a Planner subclass, a Planner instance or a function")
+
+
+#: the plug-in planners of this process
+PLUGINS: PluginRegistry[Planner] = PluginRegistry("planner", ENTRY_POINT_GROUP, adapt=_adapt, refuse=UnknownPlanner,
+                                                  reserved=_BUILTINS)
 
 
 def register_planner(name: str, planner: Any) -> Planner:
     """Register ``planner`` (class, instance or function) under ``name`` for this process."""
-    if name in _BUILTINS:
-        raise ValueError(f"{name!r} is a built-in planner and cannot be replaced")
-    _instances[name] = _adapt(name, planner)
-    return _instances[name]
+    return PLUGINS.register(name, planner)
 
 
-def _plugin_entry_points() -> dict[str, Any]:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name not in _BUILTINS}
+def unregister_planner(name: str) -> None:
+    """Drop the plug-in planner ``name`` of this process (its ``cleanup`` runs); nothing if it is not loaded."""
+    PLUGINS.unregister(name)
 
 
 def available_planners() -> dict[str, str]:
     """Every selectable planner name with its one-line description (plug-ins load lazily)."""
     out = {name: cls.description for name, cls in _BUILTINS.items()}
-    for name, ep in sorted(_plugin_entry_points().items()):
-        out[name] = f"plug-in {ep.value}"
-    for name, inst in _instances.items():
-        out.setdefault(name, inst.description or "registered planner")
+    eps = PLUGINS.entry_points()
+    for name in PLUGINS.names():
+        loaded = PLUGINS.loaded(name)
+        out[name] = (loaded.description or "registered planner") if loaded is not None else f"plug-in {eps[name].value}"
     return out
 
 
 def get_planner(name: str) -> Planner:
-    """The planner registered as ``name``; :class:`UnknownPlanner` listing the choices if none."""
-    if name in _instances:
-        return _instances[name]
+    """The planner called ``name``; :class:`UnknownPlanner` listing the choices if none, or saying why a
+    plug-in failed to load (its :class:`~contract.plugins.LoadError` as ``load_error``)."""
     if name in _BUILTINS:
-        _instances[name] = _BUILTINS[name]()
-        return _instances[name]
-    eps = _plugin_entry_points()
-    if name not in eps:
+        if name not in _builtin_instances:
+            _builtin_instances[name] = _BUILTINS[name]()
+        return _builtin_instances[name]
+    planner = PLUGINS.get(name)
+    if planner is None:
         raise UnknownPlanner(f"unknown planner {name!r} (available: {', '.join(available_planners())})")
-    _instances[name] = _load_plugin(name, eps[name])
-    return _instances[name]
-
-
-def _load_plugin(name: str, ep: EntryPoint) -> Planner:
-    """Import a plug-in's entry point and adapt it; :class:`UnknownPlanner` saying why it failed."""
-    importlib.invalidate_caches()  # a package installed after this process started is found
-    try:
-        return _adapt(name, ep.load())
-    except Exception as exc:  # a broken plug-in must not take the testbed down
-        raise UnknownPlanner(f"plug-in planner {name!r} ({ep.value}) failed to load: {exc} ({RESTART_HINT})") from exc
-
-
-@dataclass(frozen=True)
-class PluginStatus:
-    """One plug-in entry point: its ``name``, ``target`` (``module:object``), the distribution that
-    declares it (``"name version"``), whether it loads, and why not (``error``)."""
-
-    name: str
-    target: str
-    distribution: str
-    loaded: bool
-    error: str = ""
+    return planner
 
 
 def plugin_report() -> list[PluginStatus]:
@@ -131,23 +110,4 @@ def plugin_report() -> list[PluginStatus]:
 
     Entry points that use a built-in's name are listed as refused.
     """
-    out = []
-    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
-        dist = _distribution(ep)
-        if ep.name in _BUILTINS:
-            out.append(PluginStatus(ep.name, ep.value, dist, False, "a built-in planner has this name"))
-            continue
-        try:
-            _instances[ep.name] = _instances.get(ep.name) or _load_plugin(ep.name, ep)
-            out.append(PluginStatus(ep.name, ep.value, dist, True))
-        except UnknownPlanner as exc:
-            reason = str(exc).split(" failed to load: ", 1)[-1]
-            out.append(PluginStatus(ep.name, ep.value, dist, False, reason))
-    return out
-
-
-def _distribution(ep: EntryPoint) -> str:
-    dist: Optional[Any] = getattr(ep, "dist", None)
-    if dist is None:
-        return ""
-    return f"{dist.metadata['Name']} {dist.version}"
+    return PLUGINS.report()

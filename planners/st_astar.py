@@ -44,7 +44,7 @@ from scipy import ndimage
 from scipy.sparse.csgraph import dijkstra
 
 from .astar import grid_graph
-from .base import Planner
+from .base import Param, Planner
 from .errors import NoPathFound
 from .grid import ConfigSpace
 from .moving import MovingObstacle, positions
@@ -157,16 +157,16 @@ class SpaceTimeAStar(Planner):
 
     name = "st_astar"
     description = "space-time A* on an 8-connected lattice, avoiding moving obstacles at the robot's speed"
-    defaults = {"cell": 0.05, "speed": 0.18, "time_margin_s": 1.0, "clearance": 0.02, "wait": False,
-                "arrive_s": 2.0, "horizon_s": 0.0}
-
-    def check_params(self, params: dict[str, Any]) -> None:
-        for key in ("cell", "speed"):
-            if not params[key] > 0:
-                raise ValueError(f"`{key}` must be > 0, got {params[key]}")
-        for key in ("time_margin_s", "clearance", "arrive_s", "horizon_s"):
-            if not params[key] >= 0:
-                raise ValueError(f"`{key}` must be >= 0, got {params[key]}")
+    parameters = (
+        Param("cell", "m", 0.05, 0.0, None, "spacing of the lattice", low_exclusive=True),
+        Param("speed", "m/s", 0.18, 0.0, None, "the speed the robot is modelled to drive the path at",
+              low_exclusive=True),
+        Param("time_margin_s", "s", 1.0, 0.0, None, "each conflict with a moving obstacle widened by this, both ways"),
+        Param("clearance", "m", 0.02, 0.0, None, "extra distance kept from moving obstacles"),
+        Param("wait", default=False, type="boolean", doc="whether the plan may stand still"),
+        Param("arrive_s", "s", 2.0, 0.0, None, "how long the goal must stay clear after the arrival"),
+        Param("horizon_s", "s", 0.0, 0.0, None, "how far ahead the search looks (0: automatic)"),
+    )
 
     def solve(self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any],
               seed: int) -> tuple[np.ndarray, dict[str, Any]]:

@@ -125,15 +125,14 @@ def _planner_params(body: ExperimentCreate) -> dict[str, Any]:
         return {}
     try:
         if body.planner == FLEET_PLANNER:
-            from planners.prioritized import EXECUTIONS, FLEET_DEFAULTS
-            from planners.st_astar import SpaceTimeAStar
+            from planners.prioritized import EXECUTIONS, check_fleet_params
 
             params = dict(body.planner_params)
             execution = params.pop("execution", EXECUTIONS[0])
             if execution not in EXECUTIONS:
                 raise PreflightError(f"planner_params.execution: {' or '.join(map(repr, EXECUTIONS))} (how the robots "
                                      f"keep to the plan: in its order of passing, or by the clock), got {execution!r}")
-            return {**SpaceTimeAStar().validate_params({**FLEET_DEFAULTS, **params}), "execution": execution}
+            return {**check_fleet_params(params), "execution": execution}
         return get_planner(body.planner).validate_params(body.planner_params)
     except (PlanningError, ValueError) as exc:
         raise PreflightError(f"planner_params: {exc}" if body.planner == FLEET_PLANNER else str(exc)) from None

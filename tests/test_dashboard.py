@@ -362,7 +362,7 @@ def test_server_validation_errors_are_shown_next_to_the_field(page, testbed):
     page.fill("#f-repetitions", "1")
     page.fill("#f-param-step", "7")
     page.click("#submit-button")
-    expect(page.locator("#err-planner_params")).to_contain_text("step must be in")
+    expect(page.locator("#err-planner_params")).to_contain_text("step must be a number in [0.05, 1]")
     expect(page.locator("#f-param-step")).to_have_attribute("aria-invalid", "true")
     # nothing was queued; the only console errors are the browser's notes on the three 422 answers
     assert page.console.unexpected("status of 422") == []

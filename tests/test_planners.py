@@ -172,7 +172,7 @@ def test_unknown_planner_and_bad_parameters():
         plan_path("room", (0.3, 0.3), (1.5, 1.5), "prm", params={"samples": 2.5})
     with pytest.raises(PlanningError, match="parameter fm2.saturation must be finite"):
         plan_path("room", (0.3, 0.3), (1.5, 1.5), "fm2", params={"saturation": float("inf")})
-    with pytest.raises(PlanningError, match=r"parameter fm2.saturation must be > 0"):
+    with pytest.raises(PlanningError, match=r"parameter fm2.saturation must be a number > 0 \(m\), got 0"):
         plan_path("room", (0.3, 0.3), (1.5, 1.5), "fm2", params={"saturation": 0})
     with pytest.raises(PlanningError, match="`seed` must be an integer"):
         plan_path("room", (0.3, 0.3), (1.5, 1.5), "prm", seed=-1)

@@ -1,8 +1,10 @@
-"""``twb plugins list`` and ``twb plugins install``: planner plug-ins of the interpreter running ``twb``.
+"""``twb plugins list`` and ``twb plugins install``: planner and controller plug-ins of the interpreter running ``twb``.
 
 A plug-in is a distribution declaring an entry point in ``teleworkbench.planners``
-(docs/planners.md).  ``install`` puts it into the environment ``twb`` runs in: with
-uv when it is on PATH (a uv-made virtualenv has no pip), else with ``python -m pip``.
+(docs/planners.md) or ``teleworkbench.controllers`` (docs/controllers.md).  ``install``
+puts it into the environment ``twb`` runs in: with uv when it is on PATH (a uv-made
+virtualenv has no pip), else with ``python -m pip``.  ``list`` shows each plug-in that
+does not load with its :class:`~contract.plugins.LoadError` (message and type).
 """
 
 from __future__ import annotations
@@ -11,15 +13,18 @@ import importlib.util
 import shutil
 import subprocess
 import sys
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from .errors import fail
 
-__all__ = ["install", "installer_command", "list_plugins", "plugins_app"]
+if TYPE_CHECKING:
+    from contract.plugins import PluginStatus
 
-plugins_app = typer.Typer(help="Planner plug-ins: list them, install one into this twb's environment.",
+__all__ = ["install", "installer_command", "list_plugins", "plugins_app", "status_line"]
+
+plugins_app = typer.Typer(help="Planner and controller plug-ins: list them, install one into this twb's environment.",
                           no_args_is_help=True)
 
 
@@ -28,9 +33,19 @@ def where() -> str:
     return f"{sys.prefix} (Python {sys.version.split()[0]}, {sys.executable})"
 
 
+def status_line(p: PluginStatus) -> str:
+    """One plug-in's line: name, ``module:object``, distribution, and ``ok`` or why it fails to load (the
+    :class:`~contract.plugins.LoadError`'s message and type, and what to do)."""
+    from contract.plugins import RESTART_HINT
+
+    state = "ok" if p.error is None else f"FAILED to load: {p.error.message} [{p.error.error_type}] ({RESTART_HINT})"
+    return f"  {p.name:12s} {p.target}  [{p.distribution or 'unknown distribution'}]  {state}"
+
+
 @plugins_app.command("list")
 def list_plugins() -> None:
-    """The installed planner plug-ins, loaded now: which work and why the others fail."""
+    """The installed planner and controller plug-ins, loaded now: which work and why the others fail (exit
+    status 1 if any fails)."""
     from contract.controller_specs import controller_report
     from planners.registry import plugin_report
 
@@ -39,14 +54,13 @@ def list_plugins() -> None:
     if not report:
         typer.echo("  none (install one with `twb plugins install SPEC`, see docs/planners.md)")
     for p in report:
-        state = "ok" if p.loaded else f"FAILED to load: {p.error}"
-        typer.echo(f"  {p.name:12s} {p.target}  [{p.distribution or 'unknown distribution'}]  {state}")
+        typer.echo(status_line(p))
     controllers = controller_report()
     if controllers:
         typer.echo("Controller plug-ins (docs/controllers.md):")
-    for name, target, error in controllers:
-        typer.echo(f"  {name:12s} {target}  {'ok' if not error else f'FAILED to load: {error}'}")
-    if any(not p.loaded for p in report) or any(error for _, _, error in controllers):
+    for p in controllers:
+        typer.echo(status_line(p))
+    if any(not p.loaded for p in (*report, *controllers)):
         raise typer.Exit(1)
 
 
@@ -70,7 +84,7 @@ def install(
     editable: Annotated[bool, typer.Option("--editable", "-e", help="Install a directory in editable mode.")] = False,
     no_deps: Annotated[bool, typer.Option("--no-deps", help="Do not install its dependencies.")] = False,
 ) -> None:
-    """Install a planner plug-in into the environment this twb runs in, then list the plug-ins."""
+    """Install a planner or controller plug-in into the environment this twb runs in, then list the plug-ins."""
     cmd = installer_command(spec, editable=editable, no_deps=no_deps)
     typer.echo(f"Installing {spec} into {where()} with {'uv' if 'uv' in cmd[0] else 'pip'}:", err=True)
     typer.echo("  " + " ".join(cmd), err=True)

@@ -8,6 +8,7 @@ In the server (asyncio):
 
 In the launcher (``python -m server.sandbox.launch``, one process tree per program):
 
+- :mod:`.link` — the line link between the two: its message kinds, and how a line is encoded and parsed;
 - :mod:`.launch` — the entry point: JSON job in, one JSON result line out;
 - :mod:`.lifetime` — ending early: SIGTERM from the server, or its death;
 - :mod:`.cgroups` — the program's cgroup: one memory limit for all its processes;

@@ -38,6 +38,7 @@ import contract.protocol  # noqa: F401 - see _check_single_threaded
 from . import cgroups
 from .isolation import CAP_SETGID, CAP_SETUID, PR_SET_PDEATHSIG, enter_namespaces, has_cap, prctl
 from .lifetime import EndRequest
+from .link import LinkKind, encode, parse
 from .seccomp import seccomp_program
 from .supervise import blank_result, supervise
 
@@ -48,10 +49,11 @@ def main() -> int:
     """Run the job on stdin; the exit status (0 whenever a result was printed)."""
     ending = EndRequest()
     ending.listen(watch_parent=True)
-    raw = sys.stdin.buffer.readline()  # the job is one JSON line; a controller's relay follows on stdin
-    try:
-        job = json.loads(raw)
-    except ValueError:
+    raw = sys.stdin.buffer.readline()  # the job is one link line; a controller's relay follows on stdin
+    first = parse(raw)
+    if first is not None and first.kind is LinkKind.JSON and first.data is not None:
+        job = first.data
+    else:  # a job spread over several lines (written by hand): the whole of stdin
         job = json.loads(raw + sys.stdin.buffer.read())
     if not job.get("relay"):
         sys.stdin.close()
@@ -197,8 +199,8 @@ def _check_single_threaded() -> None:
 def _emit(obj: dict[str, Any]) -> None:
     try:
         os.set_blocking(1, True)
-        sys.stdout.write(json.dumps(obj) + "\n")
-        sys.stdout.flush()
+        sys.stdout.buffer.write(encode(LinkKind.JSON, obj))
+        sys.stdout.buffer.flush()
     except BrokenPipeError:  # the server is gone
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import asyncio
 import fcntl
-import json
 import logging
 import os
 import signal
@@ -24,6 +23,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional, Protocol
 
+from .link import RUN_ENDED, LinkKind, encode, parse
 from .outcome import ProgramOutcome, to_controller_outcome, to_outcome
 from .program import ProgramSpec, program_argv, program_env, program_files
 
@@ -139,17 +139,16 @@ class Sandbox:
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=launcher_env(),
             start_new_session=True)
         try:
-            out, err = await asyncio.wait_for(proc.communicate(json.dumps(job).encode()), timeout_s)
+            out, err = await asyncio.wait_for(proc.communicate(encode(LinkKind.JSON, job)), timeout_s)
         except BaseException:
             # cancelled (the experiment, the server) or the launcher hangs: end the sandbox
             await _stop(proc)
             raise
         result = None
-        for line in out.decode("utf-8", "replace").splitlines():
-            try:
-                result = json.loads(line)
-            except ValueError:
-                continue
+        for line in out.splitlines():
+            msg = parse(line)
+            if msg is not None and msg.kind is LinkKind.JSON:
+                result = msg.data
         return result, err.decode("utf-8", "replace")
 
     async def probe(self) -> dict[str, Any]:
@@ -263,26 +262,25 @@ class Sandbox:
                     pass
 
         async def push() -> None:
-            """Unsolicited robot lines to the program; at the run's end, ``E``."""
+            """Unsolicited robot lines to the program; at the run's end, ``END``."""
             while (line := await relay.from_robot()) is not None:
-                await write(b"R " + line.encode("ascii", "replace") + b"\n")
-            await write(b"E the run ended\n")
+                await write(encode(LinkKind.ROBOT, line))
+            await write(encode(LinkKind.END, RUN_ENDED))
 
         async def converse() -> None:
             nonlocal result, pushing
-            await write(json.dumps(job).encode() + b"\n")
+            await write(encode(LinkKind.JSON, job))
             while raw := await proc.stdout.readline():  # type: ignore[union-attr]
-                text = raw.decode("utf-8", "replace").rstrip("\n")
-                if text == "C" and pushing is None:
+                msg = parse(raw)
+                if msg is None:
+                    continue
+                if msg.kind is LinkKind.CONNECTED and pushing is None:
                     await relay.connected()
                     pushing = asyncio.create_task(push(), name="twb-controller-push")
-                elif text.startswith("R "):
-                    await write(b"R " + (await relay.to_robot(text[2:])).encode("ascii", "replace") + b"\n")
-                elif text.startswith("{"):
-                    try:
-                        result = json.loads(text)
-                    except ValueError:
-                        continue
+                elif msg.kind is LinkKind.ROBOT:
+                    await write(encode(LinkKind.ROBOT, await relay.to_robot(msg.text)))
+                elif msg.kind is LinkKind.JSON:
+                    result = msg.data
 
         err_task = asyncio.create_task(proc.stderr.read())
         try:

@@ -27,6 +27,7 @@ from typing import Any, Callable, Optional
 from .cgroups import ProgramCgroup
 from .confine import confinement
 from .isolation import CAP_SETGID, CAP_SETUID, PR_SET_CHILD_SUBREAPER, has_cap, loopback_up, prctl, set_up_mounts
+from .link import LinkKind, encode, parse
 from .processes import count_processes, kill_uid
 from .robot_port import RobotPort, send
 from .seccomp import seccomp_program
@@ -250,11 +251,11 @@ def _accept(prog: Program, sel: selectors.BaseSelector, link: PortLink) -> None:
     send(conn, link.robot.greeting())
     sel.register(conn, selectors.EVENT_READ, ("conn", prog.ports.index(link)))
     if link.robot.relay:
-        _to_server(b"C\n")
+        _to_server(encode(LinkKind.CONNECTED))
 
 
 def _to_server(data: bytes) -> None:
-    """Relay: lines for the server on stdout (``C``: the program connected; ``R <line>``: for the robot)."""
+    """Relay: link lines (:mod:`.link`) for the server on stdout: the program connected, lines for the robot."""
     while data:
         try:
             data = data[os.write(1, data):]
@@ -265,7 +266,8 @@ def _to_server(data: bytes) -> None:
 
 
 def _relay_in(prog: Program, sel: selectors.BaseSelector, key: selectors.SelectorKey) -> None:
-    """Relay: the server's lines on stdin, ``R <line>`` for the program, ``E <why>`` (or EOF) the run's end."""
+    """Relay: the server's link lines (:mod:`.link`) on stdin: robot lines for the program, or (also EOF) the
+    run's end."""
     try:
         data = os.read(0, 65536)
     except BlockingIOError:
@@ -278,11 +280,13 @@ def _relay_in(prog: Program, sel: selectors.BaseSelector, key: selectors.Selecto
     *lines, prog.relay_buf = prog.relay_buf.split(b"\n")
     out = b""
     for line in lines:
-        text = line.decode("ascii", "replace")
-        if text.startswith("R "):
-            out += prog.port.from_robot(text[2:])
-        elif text.startswith("E"):
-            prog.run_ended = text[2:] or "the run ended"
+        msg = parse(line)
+        if msg is None:
+            continue
+        if msg.kind is LinkKind.ROBOT:
+            out += prog.port.from_robot(msg.text)
+        elif msg.kind is LinkKind.END:
+            prog.run_ended = msg.text
     conn = prog.ports[0].conn
     if conn is not None and out:
         send(conn, out)
@@ -302,7 +306,7 @@ def _converse(prog: Program, sel: selectors.BaseSelector, link: PortLink) -> Non
     replies, done = port.feed(data, time.monotonic() - prog.t0)
     send(link.conn, replies)
     if port.forward:
-        _to_server(b"".join(b"R " + line.encode() + b"\n" for line in port.forward))
+        _to_server(b"".join(encode(LinkKind.ROBOT, line) for line in port.forward))
         port.forward.clear()
     if done:
         sel.unregister(link.conn)

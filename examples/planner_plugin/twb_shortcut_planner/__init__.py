@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planners import Planner, get_planner
+from planners import Param, Planner, get_planner
 
 __all__ = ["ShortcutPlanner"]
 
@@ -19,7 +19,8 @@ class ShortcutPlanner(Planner):
 
     name = "shortcut"
     description = "grid A* with greedy line-of-sight shortcuts (any-angle, like Theta*)"
-    defaults = {"lookahead": 400}   # how many points ahead to try (bounds the work per point)
+    parameters = (Param("lookahead", "points", 400, 1, 100_000, "how many points ahead to try (bounds the work per "
+                        "point)", type="integer"),)
 
     def solve(self, space, start, goal, params, seed):
         out = get_planner("astar").solve(space, start, goal, {}, seed)     # (N, 2), or (path, info)

@@ -1,4 +1,5 @@
-"""Path-tracking controllers the robots offer: built-ins and installed plug-ins (docs/controllers.md)."""
+"""Path-tracking controllers the robots offer: built-ins and installed plug-ins (docs/controllers.md), and the
+plug-ins that fail to load."""
 
 from __future__ import annotations
 
@@ -13,13 +14,13 @@ router = APIRouter(prefix="/controllers", tags=["controllers"], responses=AUTHEN
 @router.get("")
 def list_controllers(_: CurrentUser) -> dict:
     """Every selectable controller: name, description, source, whether it runs compiled, and its parameters
-    (name, unit, default, range [low, high], description; SI units)."""
-    from contract.controller_specs import ControllerError, available_controllers, controller_spec
+    (name, type, unit, default, range [low, high], description; SI units).  ``load_errors``: each installed
+    plug-in controller that does not load (name, kind, source, error_type, message, distribution); it is not
+    in ``data``."""
+    from contract.controller_specs import PLUGINS, available_controllers, controller_spec
 
-    out = []
-    for name in available_controllers():
-        try:
-            out.append(controller_spec(name).to_dict())
-        except ControllerError:  # a broken plug-in is left out, not an error for everyone
-            continue
-    return {"data": out, "count": len(out)}
+    errors = PLUGINS.load_errors()  # every plug-in is tried: the others are loaded now
+    plugins = set(PLUGINS.names())
+    out = [controller_spec(name).to_dict() for name in available_controllers()
+           if name not in plugins or PLUGINS.loaded(name) is not None]
+    return {"data": out, "count": len(out), "load_errors": [e.to_dict() for e in errors]}

@@ -1,4 +1,4 @@
-"""Planners the testbed offers: built-ins and installed plug-ins."""
+"""Planners the testbed offers: built-ins and installed plug-ins, and the plug-ins that fail to load."""
 
 from __future__ import annotations
 
@@ -13,19 +13,26 @@ router = APIRouter(prefix="/planners", tags=["planners"], responses=AUTHENTICATE
 
 @router.get("")
 def list_planners(_: CurrentUser) -> dict:
-    """Every selectable planner: name, description, parameter defaults (null: any parameters) and whether it
-    plans multi-robot jobs only (``fleet_only``: ``prioritized``; any other plans each robot alone)."""
+    """Every selectable planner: name, description, parameter defaults (null: any parameters), its
+    ``parameters`` (name, type, unit, default, range, description; null: any) and whether it plans
+    multi-robot jobs only (``fleet_only``: ``prioritized``; any other plans each robot alone).
+    ``load_errors``: each installed plug-in planner that does not load (name, kind, source, error_type,
+    message, distribution); it is not in ``data``."""
+    from contract.parameters import defaults_of
     from planners import get_planner
-    from planners.prioritized import DESCRIPTION, fleet_defaults
-    from planners.registry import available_planners
+    from planners.prioritized import DESCRIPTION, EXECUTION_PARAM, fleet_defaults, fleet_parameters
+    from planners.registry import PLUGINS, available_planners
 
+    errors = PLUGINS.load_errors()  # every plug-in is tried: the others are loaded now
+    plugins = set(PLUGINS.names())
     out = []
     for name in available_planners():
-        try:
-            p = get_planner(name)
-        except Exception:  # noqa: BLE001 - a broken plug-in is left out, not an error for everyone
-            continue
-        out.append({"name": name, "description": p.description,
-                    "defaults": dict(p.defaults) if p.defaults is not None else None, "fleet_only": False})
-    out.append({"name": FLEET_PLANNER, "description": DESCRIPTION, "defaults": fleet_defaults(), "fleet_only": True})
-    return {"data": out, "count": len(out)}
+        if name in plugins and PLUGINS.loaded(name) is None:
+            continue  # it failed to load: in load_errors
+        p = get_planner(name)
+        params = None if p.parameters is None else [q.to_dict() for q in p.parameters]
+        out.append({"name": name, "description": p.description, "defaults": defaults_of(p.parameters),
+                    "parameters": params, "fleet_only": False})
+    out.append({"name": FLEET_PLANNER, "description": DESCRIPTION, "defaults": fleet_defaults(),
+                "parameters": [q.to_dict() for q in (*fleet_parameters(), EXECUTION_PARAM)], "fleet_only": True})
+    return {"data": out, "count": len(out), "load_errors": [e.to_dict() for e in errors]}

@@ -32,6 +32,14 @@ export function fieldOfMessage(msg) {
   return null;
 }
 
+/** A planner's parameters as the server declares them (`parameters`: name, type, unit, default, range,
+ * description), or, from a server that lists only `defaults`, each default's JSON type. */
+export function plannerParams(planner) {
+  if (Array.isArray(planner.parameters)) return planner.parameters;
+  return Object.entries(planner.defaults || {}).map(([name, v]) => ({ name, default: v, unit: "", description: "", range: null,
+    type: typeof v === "boolean" ? "boolean" : typeof v === "string" ? "string" : "number" }));  // 1.0 reads as 1 in JSON
+}
+
 /** Where a server message goes: a form field, `{robot, part}` for one robot of several, or null (the top of the
  * form); `loc`: a request-model error's location. */
 export function errorKey(msg, loc = null) {
@@ -290,16 +298,18 @@ export class SubmitPage {
         h("textarea", { id: "f-params-json", rows: 3, placeholder: "{}", "aria-describedby": "err-planner_params" }));
       return;
     }
-    const entries = Object.entries(p.defaults);
-    box.replaceChildren(...(entries.length ? entries.map(([k, v]) => {
-      const id = `f-param-${k}`;
-      const input = typeof v === "boolean"
-        ? h("select", { id, "data-param": k, "data-kind": "bool", "aria-describedby": "err-planner_params" },
-          h("option", { value: "" }, `default (${v})`), h("option", { value: "true" }, "true"), h("option", { value: "false" }, "false"))
-        : h("input", { id, "data-param": k, "data-kind": typeof v === "number" ? (Number.isInteger(v) ? "int" : "number") : "string",
-          type: typeof v === "number" ? "number" : "text", step: typeof v === "number" ? "any" : null, placeholder: String(v),
-          "aria-describedby": "err-planner_params" });
-      return h("label", { for: id }, k, input);
+    const params = plannerParams(p);
+    box.replaceChildren(...(params.length ? params.map((q) => {
+      const id = `f-param-${q.name}`;
+      const [low, high] = q.range || [null, null];
+      const title = q.description ? `${q.description}${q.unit ? ` (${q.unit})` : ""}` : null;
+      const input = q.type === "boolean"
+        ? h("select", { id, "data-param": q.name, "data-kind": "bool", title, "aria-describedby": "err-planner_params" },
+          h("option", { value: "" }, `default (${q.default})`), h("option", { value: "true" }, "true"), h("option", { value: "false" }, "false"))
+        : h("input", { id, "data-param": q.name, "data-kind": q.type === "string" ? "string" : q.type === "integer" ? "int" : "number",
+          type: q.type === "string" ? "text" : "number", step: q.type === "integer" ? "1" : q.type === "string" ? null : "any",
+          min: low, max: high, title, placeholder: String(q.default), "aria-describedby": "err-planner_params" });
+      return h("label", { for: id }, q.name, input);
     }) : [h("p", { class: "muted small" }, "This planner takes no parameters.")]));
   }
 
