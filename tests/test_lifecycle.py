@@ -195,3 +195,39 @@ def test_a_killed_planning_worker_is_replaced_and_costs_one_retry(tmp_path):
     finally:
         p.stop()
     assert "Traceback" not in p.output(), p.output()
+
+
+def test_a_stop_during_start_up_ends_everything_at_once(tmp_path):
+    """SIGTERM while the first start compiles the simulation kernels (a fresh kernel cache: the longest
+    start-up there is, up to minutes on a busy machine): the process and its workers end at once instead of
+    after the compile; nothing had run, so nothing is lost."""
+    import subprocess
+    import sys
+
+    log = open(tmp_path / "out.log", "w")
+    proc = subprocess.Popen([sys.executable, "-m", "twb", "up", "--time-scale", "max", "--port", "0", "--data-dir",
+                             str(tmp_path / "data")], stdout=log, stderr=subprocess.STDOUT,
+                            env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "kernels"), "PYTHONUNBUFFERED": "1"})
+    try:
+        deadline = time.monotonic() + 120
+        while len(kids := descendants(proc.pid)) < 2:  # the compute workers are up: start-up is under way
+            assert time.monotonic() < deadline and proc.poll() is None, (tmp_path / "out.log").read_text()
+            time.sleep(0.1)
+        time.sleep(1.0)
+        assert "is up" not in (tmp_path / "out.log").read_text()  # still starting (compiling)
+        kids = descendants(proc.pid)
+        proc.send_signal(signal.SIGTERM)
+        t0 = time.monotonic()
+        assert proc.wait(60) == 0
+        took = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        log.close()
+    out = (tmp_path / "out.log").read_text()
+    assert took < 10, f"stopping during start-up took {took:.1f} s: {out}"  # the compile alone takes longer
+    assert "stopped during start-up" in out and "Traceback" not in out, out
+    deadline = time.monotonic() + 10
+    while left := [k for k in kids if alive(k)]:
+        assert time.monotonic() < deadline, f"processes outlived their server: {left}"
+        time.sleep(0.1)

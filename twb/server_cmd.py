@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import gc
 import math
 import os
@@ -22,27 +23,63 @@ from .sdk_support import TokenOpt, UrlOpt, sdk_client
 users_app = typer.Typer(help="Manage testbed users (needs the admin token).", no_args_is_help=True)
 
 
+#: seconds a stop may take from the signal to the end of the process: the testbed's own stop (runs end
+#: ``interrupted``, robots stop, workers end) normally takes well under one; what does not answer in time is
+#: killed, as ``kill -9`` would (nothing is lost: a run left ``running`` is marked interrupted at the next start)
+STOP_GRACE_S = 3.0
+
+
+def _exit_now(testbed, why: str, code: int = 0) -> None:  # type: ignore[no-untyped-def]
+    """End the process at once: the compute workers killed, the rest with the process (no thread joined)."""
+    print(f"twb: {why}", file=sys.stderr, flush=True)
+    try:
+        testbed.pool.kill()
+    finally:
+        sys.stdout.flush()
+        os._exit(code)
+
+
 async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ignore[no-untyped-def]
-    """Run uvicorn on the current loop until a signal; ``on_ready(url)`` is awaited once it listens."""
+    """Run uvicorn on the current loop until a signal; ``on_ready(url)`` is awaited once it listens.
+
+    A signal during start-up (the first start compiles the simulation kernels in a thread that cannot be
+    interrupted) ends the process at once: nothing has run that a hard stop would lose.  After start-up the
+    testbed stops in order, within :data:`STOP_GRACE_S` — or is ended like a ``kill -9``; a second signal
+    ends it at once."""
+    import threading
+
     import uvicorn
 
     from server.app import create_app
 
     app = create_app(settings, testbed)
     config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="on",
-                            timeout_graceful_shutdown=5)
+                            timeout_graceful_shutdown=1)
     server = uvicorn.Server(config)
-    server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
+    # the signals are ours (below), not uvicorn's: it would hold them until its start-up ends, then raise them again
+    server.capture_signals = contextlib.nullcontext  # type: ignore[method-assign]
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
+
+    def on_signal() -> None:
+        if stop.is_set():
+            _exit_now(testbed, "stopped (second signal)", 130)
+        stop.set()
+        deadline = threading.Timer(STOP_GRACE_S, _exit_now, (testbed, f"stopped: what did not end within "
+                                                             f"{STOP_GRACE_S:g} s was killed"))
+        deadline.daemon = True
+        deadline.start()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+        loop.add_signal_handler(sig, on_signal)
     if os.environ.get("TWB_EXIT_WITH_PARENT") == "1":  # started by a program (twb study --embedded, tests)
         from server.core.lifeline import exit_with_parent
 
         exit_with_parent(action=lambda: os.kill(os.getpid(), signal.SIGTERM))
     serving = asyncio.create_task(server.serve())
     while not server.started:
+        if stop.is_set():
+            _exit_now(testbed, "stopped during start-up")
         if serving.done():
             serving.result()
             fail(f"the server could not start on {host}:{port}")

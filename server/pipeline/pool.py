@@ -118,3 +118,12 @@ class WorkerPool:
             executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=False, cancel_futures=True)
+
+    def kill(self) -> None:
+        """End the workers now (SIGKILL), whatever they are doing: for a process that must exit at once."""
+        executor = self._executor
+        for proc in list(getattr(executor, "_processes", {}).values()) if executor is not None else ():
+            try:
+                proc.kill()
+            except (OSError, ValueError):  # gone already, or its handle closed
+                pass

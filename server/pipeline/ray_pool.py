@@ -228,6 +228,10 @@ class RayPool:
         return {"workers": self.slots, "ready": self._ray is not None, "restarts": 0, "last_failure": None,
                 "engine": "ray"}
 
+    def kill(self) -> None:
+        """End now: as :meth:`stop` (the local head's own lifeline ends its workers)."""
+        self.stop()
+
     def stop(self) -> None:
         """Disconnect and, for a local cluster, end it."""
         if self._ray is not None and self._ray.is_initialized():
