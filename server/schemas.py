@@ -10,7 +10,7 @@ from __future__ import annotations
 import ipaddress
 import re
 from datetime import datetime, timezone
-from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
+from typing import Annotated, Any, Generic, Literal, Optional, TypeVar, Union
 
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -19,20 +19,40 @@ from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (iss
 from .status import RunStatus
 
 __all__ = [
+    "ControllerParamPublic",
+    "ControllerPublic",
+    "DirectComparisonPublic",
     "EnvironmentCreate",
     "EnvironmentPublic",
     "ExperimentCreate",
+    "ExperimentMetricsPublic",
     "ExperimentPublic",
     "ExperimentSummary",
+    "HealthPublic",
+    "MessagePublic",
+    "MetricSummaryPublic",
+    "ModeAggregatePublic",
+    "ModeOutcomesPublic",
+    "ObstacleTrackPublic",
     "Page",
+    "PlanPublic",
+    "PlannerPublic",
     "ProgramCreate",
     "ProgramPublic",
+    "ProportionPublic",
     "RobotIn",
     "RobotPublic",
     "RobotRegister",
+    "RunMetricsPublic",
+    "RunObstaclesPublic",
+    "RunPosesPublic",
     "RunPublic",
+    "SandboxIsolationPublic",
+    "SandboxLimitsPublic",
+    "SandboxPublic",
     "SubfieldPublic",
     "TrackerBatch",
+    "TrackerBatchResult",
     "UserCreate",
     "UserPublic",
     "UserWithToken",
@@ -133,11 +153,21 @@ class EnvironmentCreate(Strict):
         return self.model_dump()
 
 
-class EnvironmentPublic(BaseModel):
+class PlanPublic(BaseModel):
+    """A named start/goal pair of an environment, poses ``[x, y, theta]`` (m, rad)."""
+
     name: str
-    size: list[float]
-    blocks: list[dict[str, float]]
-    plans: list[dict[str, Any]] = []
+    start: list[float]
+    goal: list[float]
+
+
+class EnvironmentPublic(BaseModel):
+    """An environment: its file (docs/design.md, "Environment file") and who owns it."""
+
+    name: str
+    size: list[float] = Field(description="[width, height], m.")
+    blocks: list[dict[str, float]] = Field(description="Rectangular blocks: centre x, y, size w, h (m), angle (rad).")
+    plans: list[PlanPublic] = []
     description: str = ""
     moving_obstacles: list[dict[str, Any]] = []
     moving_tracks: list[dict[str, Any]] = Field(default_factory=list, description=(
@@ -434,6 +464,126 @@ class CancelledMany(BaseModel):
     not_cancelled: list[NotCancelled]
 
 
+# --------------------------------------------------------------------------- results (docs/metrics.md)
+
+#: a JSON number as sent: an integer stays an integer (a parameter's default 0 is sent as 0, not 0.0)
+Number = Union[int, float]
+
+
+class RunMetricsPublic(BaseModel):
+    """One run's metrics as the experiment's metrics list them (a failed run's too, flagged by ``outcome``)."""
+
+    run_id: int
+    mode: str
+    repetition: int
+    status: RunStatus
+    outcome: str = Field(description=(
+        "success, why it failed (collision, timeout ...), or its status (error, cancelled, interrupted; pending "
+        "while it has not ended)."))
+    stopped_at: Optional[list[float]] = Field(description="Where a run that failed on its robot stopped, [x, y] (m).")
+    metrics: dict[str, Any] = Field(description="The run's metrics (docs/metrics.md; SI units).")
+
+
+class ProportionPublic(BaseModel):
+    """A rate ``k / n`` with its Wilson interval (None while ``n`` is 0)."""
+
+    n: int
+    k: int
+    rate: Optional[float]
+    ci_low: Optional[float]
+    ci_high: Optional[float]
+    confidence: float
+
+
+class ModeOutcomesPublic(BaseModel):
+    """How one mode's runs ended: ``counts`` per outcome and the success rate over the job's own outcomes."""
+
+    runs: int
+    counts: dict[str, int]
+    success: ProportionPublic
+
+
+class MetricSummaryPublic(BaseModel):
+    """Mean, sample std and Student-t interval of one metric over ``n`` runs (None where undefined)."""
+
+    n: int
+    mean: Optional[float]
+    std: Optional[float]
+    ci_low: Optional[float]
+    ci_high: Optional[float]
+    confidence: float
+
+
+class ModeAggregatePublic(BaseModel):
+    """One mode's completed runs: how many, and a summary per numeric metric."""
+
+    runs: int
+    metrics: dict[str, MetricSummaryPublic]
+
+
+class DirectComparisonPublic(BaseModel):
+    """The paper's direct comparison "ST" of one repetition: the field path against the simulated one (m)."""
+
+    repetition: int
+    sim_run_id: int
+    twb_run_id: int
+    deviation_mean_m: Optional[float]
+    deviation_max_m: Optional[float]
+    hausdorff_m: Optional[float]
+    frechet_m: Optional[float]
+
+
+class ExperimentMetricsPublic(BaseModel):
+    """An experiment's metrics: per run, outcomes and aggregates per mode, direct sim-vs-twb per repetition."""
+
+    experiment_id: int
+    status: RunStatus
+    planned: Optional[dict[str, Any]] = Field(description="The planned path's own metrics (None before planning).")
+    runs: list[RunMetricsPublic]
+    outcomes: dict[str, ModeOutcomesPublic] = Field(description="Per mode.")
+    aggregates: dict[str, ModeAggregatePublic] = Field(description="Per mode, over its completed runs.")
+    direct: list[DirectComparisonPublic] = Field(description="Not for multi-robot jobs.")
+
+
+# --------------------------------------------------------------------------- runs' logs
+
+
+class RunPosesPublic(BaseModel):
+    """A run's logged poses: rows of ``columns`` (t s, x m, y m, theta rad; a multi-robot run's with ``robot``)."""
+
+    run_id: int
+    count: int
+    columns: list[str]
+    poses: list[list[Number]] = Field(description="Rows [t, x, y, theta] or [t, x, y, theta, robot], oldest first.")
+
+
+class ObstacleTrackPublic(BaseModel):
+    """Where one moving obstacle was: ``poses`` ``[t, x, y, theta]`` rows (s, m, m, rad), oldest first."""
+
+    index: int = Field(description="Its index in the environment's `moving_obstacles`.")
+    radius: float = Field(description="m.")
+    count: int
+    poses: list[list[float]]
+
+
+class RunObstaclesPublic(BaseModel):
+    """Where a run's moving obstacles were: tracked (``exact`` false) or their exact tracks (true)."""
+
+    run_id: int
+    columns: list[str]
+    exact: bool
+    obstacles: list[ObstacleTrackPublic]
+
+
+class MessagePublic(FromRow):
+    """A protocol line sent to (``>``) or received from (``<``) the robot; ``o``/``e``/``s``: a program's."""
+
+    t: Optional[float] = Field(description="Experiment time on the agent's clock (s).")
+    t_estimated: bool = Field(description="`t` extrapolated from the agent's last report.")
+    direction: str
+    line: str
+
+
 # --------------------------------------------------------------------------- uploaded programs
 
 
@@ -570,3 +720,97 @@ class TrackerBatch(BaseModel):
     poses: list[Any] = Field(max_length=100_000, description="Rows [t, x, y, theta] (s, m, m, rad); "
                                                               "rows that are not four finite numbers are counted "
                                                               "in `rejected`.")
+
+
+class TrackerBatchResult(BaseModel):
+    """What became of a tracker batch: rows received, accepted, rejected and stored with a run."""
+
+    received: int
+    accepted: int
+    rejected: int
+    stored: int = Field(description="Accepted rows stored with the robot's current run.")
+    run_id: Optional[int] = Field(description="That run, if the robot runs one.")
+
+
+# --------------------------------------------------------------------------- the testbed
+
+
+class HealthPublic(BaseModel):
+    """Liveness; with a valid token also the queue and the fleet (the other keys are absent without one)."""
+
+    status: Literal["ok"]
+    version: str
+    queued_runs: Optional[int] = None
+    running_runs: Optional[int] = None
+    field_robots: Optional[int] = None
+    sim_robots: Optional[int] = None
+    time_scale: Optional[float] = Field(default=None, description=(
+        "Experiment seconds per wall second; null: as fast as possible (`max`)."))
+
+
+class PlannerPublic(BaseModel):
+    """A selectable planner: parameter defaults (null: any parameters), multi-robot jobs only or not."""
+
+    name: str
+    description: str
+    defaults: Optional[dict[str, Any]]
+    fleet_only: bool
+
+
+class ControllerParamPublic(BaseModel):
+    """A controller parameter: unit, default and range [low, high] (SI units); ``integer`` only when true."""
+
+    name: str
+    unit: str
+    default: Number
+    range: list[Number] = Field(min_length=2, max_length=2)
+    description: str
+    integer: bool = Field(default=False, description="Present (true) only for integer parameters.")
+
+
+class ControllerPublic(BaseModel):
+    """A selectable path-tracking controller (docs/controllers.md)."""
+
+    name: str
+    description: str
+    source: str = Field(description="Where it comes from in the literature.")
+    compiled: bool = Field(description="Runs inside the compiled core (built-ins), not in Python (plug-ins).")
+    parameters: list[ControllerParamPublic]
+
+
+class SandboxLimitsPublic(BaseModel):
+    """The limits an uploaded program runs under, in the units their names say."""
+
+    wall_s: float
+    cpu_s: int
+    memory_mb: int
+    file_mb: int
+    processes: int
+    open_files: int
+    output_kib: int
+    tmp_mb: int
+    max_program_bytes: int
+    concurrent_programs: int
+
+
+class SandboxIsolationPublic(BaseModel):
+    """The isolation uploaded programs get on this machine (docs/uploads.md)."""
+
+    namespaces: list[str]
+    user_namespace: bool
+    network: str
+    seccomp: bool
+    runs_as: str
+    memory_limit: str
+    cgroup: Optional[str]
+    memory_note: str
+    note: str
+
+
+class SandboxPublic(BaseModel):
+    """Whether uploads are enabled, the interpreters, the limits and the isolation (null: uploads disabled)."""
+
+    uploads_enabled: bool
+    interpreters: list[str]
+    limits: SandboxLimitsPublic
+    isolation: Optional[SandboxIsolationPublic]

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
+from ...schemas import ControllerPublic, Page
 from ..deps import CurrentUser
 from ..responses import AUTHENTICATED
 
 router = APIRouter(prefix="/controllers", tags=["controllers"], responses=AUTHENTICATED)
 
 
-@router.get("")
-def list_controllers(_: CurrentUser) -> dict:
+@router.get("", response_model=Page[ControllerPublic], response_model_exclude_unset=True)
+def list_controllers(_: CurrentUser) -> Page[ControllerPublic]:
     """Every selectable controller: name, description, source, whether it runs compiled, and its parameters
     (name, unit, default, range [low, high], description; SI units)."""
     from contract.controller_specs import ControllerError, available_controllers, controller_spec
@@ -22,4 +23,4 @@ def list_controllers(_: CurrentUser) -> dict:
             out.append(controller_spec(name).to_dict())
         except ControllerError:  # a broken plug-in is left out, not an error for everyone
             continue
-    return {"data": out, "count": len(out)}
+    return Page[ControllerPublic].model_validate({"data": out, "count": len(out)})

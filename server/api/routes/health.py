@@ -4,20 +4,19 @@ from __future__ import annotations
 
 from fastapi import APIRouter, HTTPException, Request
 
+from ...schemas import HealthPublic
 from ..deps import TestbedDep, authenticate, bearer_token
 
 router = APIRouter(tags=["health"])
 
 
-@router.get("/health")
-async def health(request: Request, testbed: TestbedDep) -> dict:
+@router.get("/health", response_model=HealthPublic, response_model_exclude_unset=True)
+async def health(request: Request, testbed: TestbedDep) -> HealthPublic:
     """Liveness (no token needed); with a valid token also the queue and the fleet."""
-    out = {"status": "ok", "version": "1"}
     token = bearer_token(request)
     if token:
         try:
             await authenticate(request, token)
         except HTTPException:
-            return out
-        out.update(testbed.dispatcher.summary())
-    return out
+            token = None
+    return HealthPublic(status="ok", version="1", **(testbed.dispatcher.summary() if token else {}))
