@@ -118,6 +118,9 @@ class Environment(_FromJson):
     builtin: bool = False
     owner: Optional[str] = None
     moving_obstacles: list[dict[str, Any]] = _field(default_factory=list)
+    #: derived by the testbed, for drawing (not part of the file, :meth:`to_json`): each moving obstacle as it
+    #: moves, ``radius`` (m), ``speed`` (m/s), ``repeat``, ``delay_s`` (s) and its ``waypoints`` (m)
+    moving_tracks: list[dict[str, Any]] = _field(default_factory=list)
 
     _conv = {"plans": lambda ps: [Plan.from_json(p) for p in ps]}
 
@@ -437,6 +440,11 @@ class Robot(_FromJson):
     area: list[float] = _field(default_factory=list)
     subfield: Optional[int] = None
     last_seen: Optional[datetime] = None
+    #: why an offline robot is offline
+    status_reason: Optional[str] = None
+    #: the last tracked pose ``[t, x, y, theta]`` in field coordinates (s, m, m, rad), if any (not shown while it
+    #: runs someone else's run)
+    last_pose: Optional[list[float]] = None
 
     _conv = {"last_seen": _dt}
 

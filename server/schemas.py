@@ -79,7 +79,16 @@ class Strict(BaseModel):
     model_config = ConfigDict(allow_inf_nan=False, extra="forbid", strict=True)
 
 
-class FromRow(BaseModel):
+class Public(BaseModel):
+    """Response bodies: every field is always sent, so the OpenAPI document lists each one as required
+    (a body that leaves out unset fields, ``response_model_exclude_unset``, is a plain ``BaseModel``)."""
+
+    model_config = ConfigDict(json_schema_serialization_defaults_required=True)
+
+
+class FromRow(Public):
+    """A response body built from a table row (``model_validate(row)``)."""
+
     model_config = ConfigDict(from_attributes=True)
 
 
@@ -153,7 +162,7 @@ class EnvironmentCreate(Strict):
         return self.model_dump()
 
 
-class PlanPublic(BaseModel):
+class PlanPublic(Public):
     """A named start/goal pair of an environment, poses ``[x, y, theta]`` (m, rad)."""
 
     name: str
@@ -161,7 +170,7 @@ class PlanPublic(BaseModel):
     goal: list[float]
 
 
-class EnvironmentPublic(BaseModel):
+class EnvironmentPublic(Public):
     """An environment: its file (docs/design.md, "Environment file") and who owns it."""
 
     name: str
@@ -454,12 +463,12 @@ class CancelMany(Strict):
     ids: list[Annotated[int, Field(ge=1, le=2**63 - 1)]] = Field(min_length=1, max_length=1000)
 
 
-class NotCancelled(BaseModel):
+class NotCancelled(Public):
     id: int
     reason: str = Field(description="`not found` (unknown, or not yours) or `already <status>`.")
 
 
-class CancelledMany(BaseModel):
+class CancelledMany(Public):
     cancelled: list[int] = Field(description="Experiments whose queued runs were cancelled and running ones stopped.")
     not_cancelled: list[NotCancelled]
 
@@ -470,7 +479,7 @@ class CancelledMany(BaseModel):
 Number = Union[int, float]
 
 
-class RunMetricsPublic(BaseModel):
+class RunMetricsPublic(Public):
     """One run's metrics as the experiment's metrics list them (a failed run's too, flagged by ``outcome``)."""
 
     run_id: int
@@ -484,7 +493,7 @@ class RunMetricsPublic(BaseModel):
     metrics: dict[str, Any] = Field(description="The run's metrics (docs/metrics.md; SI units).")
 
 
-class ProportionPublic(BaseModel):
+class ProportionPublic(Public):
     """A rate ``k / n`` with its Wilson interval (None while ``n`` is 0)."""
 
     n: int
@@ -495,7 +504,7 @@ class ProportionPublic(BaseModel):
     confidence: float
 
 
-class ModeOutcomesPublic(BaseModel):
+class ModeOutcomesPublic(Public):
     """How one mode's runs ended: ``counts`` per outcome and the success rate over the job's own outcomes."""
 
     runs: int
@@ -503,7 +512,7 @@ class ModeOutcomesPublic(BaseModel):
     success: ProportionPublic
 
 
-class MetricSummaryPublic(BaseModel):
+class MetricSummaryPublic(Public):
     """Mean, sample std and Student-t interval of one metric over ``n`` runs (None where undefined)."""
 
     n: int
@@ -514,14 +523,14 @@ class MetricSummaryPublic(BaseModel):
     confidence: float
 
 
-class ModeAggregatePublic(BaseModel):
+class ModeAggregatePublic(Public):
     """One mode's completed runs: how many, and a summary per numeric metric."""
 
     runs: int
     metrics: dict[str, MetricSummaryPublic]
 
 
-class DirectComparisonPublic(BaseModel):
+class DirectComparisonPublic(Public):
     """The paper's direct comparison "ST" of one repetition: the field path against the simulated one (m)."""
 
     repetition: int
@@ -533,7 +542,7 @@ class DirectComparisonPublic(BaseModel):
     frechet_m: Optional[float]
 
 
-class ExperimentMetricsPublic(BaseModel):
+class ExperimentMetricsPublic(Public):
     """An experiment's metrics: per run, outcomes and aggregates per mode, direct sim-vs-twb per repetition."""
 
     experiment_id: int
@@ -548,7 +557,7 @@ class ExperimentMetricsPublic(BaseModel):
 # --------------------------------------------------------------------------- runs' logs
 
 
-class RunPosesPublic(BaseModel):
+class RunPosesPublic(Public):
     """A run's logged poses: rows of ``columns`` (t s, x m, y m, theta rad; a multi-robot run's with ``robot``)."""
 
     run_id: int
@@ -557,7 +566,7 @@ class RunPosesPublic(BaseModel):
     poses: list[list[Number]] = Field(description="Rows [t, x, y, theta] or [t, x, y, theta, robot], oldest first.")
 
 
-class ObstacleTrackPublic(BaseModel):
+class ObstacleTrackPublic(Public):
     """Where one moving obstacle was: ``poses`` ``[t, x, y, theta]`` rows (s, m, m, rad), oldest first."""
 
     index: int = Field(description="Its index in the environment's `moving_obstacles`.")
@@ -566,7 +575,7 @@ class ObstacleTrackPublic(BaseModel):
     poses: list[list[float]]
 
 
-class RunObstaclesPublic(BaseModel):
+class RunObstaclesPublic(Public):
     """Where a run's moving obstacles were: tracked (``exact`` false) or their exact tracks (true)."""
 
     run_id: int
@@ -677,7 +686,7 @@ def host_name(text: str) -> str:
     return ascii_name
 
 
-class RobotPublic(BaseModel):
+class RobotPublic(Public):
     robot_id: str
     host: str
     port: int
@@ -695,7 +704,7 @@ class RobotPublic(BaseModel):
         default=None, description="Last tracked pose [t, x, y, theta] in field coordinates (s, m, rad), if any.")
 
 
-class SubfieldPublic(BaseModel):
+class SubfieldPublic(Public):
     id: int
     state: str
     environment: Optional[str]
@@ -722,7 +731,7 @@ class TrackerBatch(BaseModel):
                                                               "in `rejected`.")
 
 
-class TrackerBatchResult(BaseModel):
+class TrackerBatchResult(Public):
     """What became of a tracker batch: rows received, accepted, rejected and stored with a run."""
 
     received: int
@@ -748,7 +757,7 @@ class HealthPublic(BaseModel):
         "Experiment seconds per wall second; null: as fast as possible (`max`)."))
 
 
-class PlannerPublic(BaseModel):
+class PlannerPublic(Public):
     """A selectable planner: parameter defaults (null: any parameters), multi-robot jobs only or not."""
 
     name: str
@@ -768,7 +777,7 @@ class ControllerParamPublic(BaseModel):
     integer: bool = Field(default=False, description="Present (true) only for integer parameters.")
 
 
-class ControllerPublic(BaseModel):
+class ControllerPublic(Public):
     """A selectable path-tracking controller (docs/controllers.md)."""
 
     name: str
@@ -778,7 +787,7 @@ class ControllerPublic(BaseModel):
     parameters: list[ControllerParamPublic]
 
 
-class SandboxLimitsPublic(BaseModel):
+class SandboxLimitsPublic(Public):
     """The limits an uploaded program runs under, in the units their names say."""
 
     wall_s: float
@@ -793,7 +802,7 @@ class SandboxLimitsPublic(BaseModel):
     concurrent_programs: int
 
 
-class SandboxIsolationPublic(BaseModel):
+class SandboxIsolationPublic(Public):
     """The isolation uploaded programs get on this machine (docs/uploads.md)."""
 
     namespaces: list[str]
@@ -807,7 +816,7 @@ class SandboxIsolationPublic(BaseModel):
     note: str
 
 
-class SandboxPublic(BaseModel):
+class SandboxPublic(Public):
     """Whether uploads are enabled, the interpreters, the limits and the isolation (null: uploads disabled)."""
 
     uploads_enabled: bool
