@@ -13,6 +13,7 @@ import shutil
 import subprocess
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import httpx
@@ -43,6 +44,8 @@ def test_the_server_runs_from_an_installed_wheel(tmp_path):
                            capture_output=True, text=True, env=env, timeout=300)
     assert built.returncode == 0, built.stderr
     wheel = next((tmp_path / "dist").glob("teleworkbench-*.whl"))
+    with zipfile.ZipFile(wheel) as whl:  # PEP 561: the packages users import say they are typed
+        assert {"client_sdk/py.typed", "contract/py.typed", "planners/py.typed"} <= set(whl.namelist())
     venv = tmp_path / "venv"
     subprocess.run([*uv, "venv", "-q", "--python", sys.executable, str(venv)], check=True, env=env, timeout=120)
     python = venv / "bin" / "python"
