@@ -1,7 +1,8 @@
 """Typed results: dataclasses mirroring the server's JSON responses (docs/design.md, "REST API").
 
 They are defined here, not imported from the server, so the SDK runs without
-the server's dependencies.  Units are SI: metres, radians, seconds.  Unknown
+the server's dependencies (``tests/test_sdk_models.py`` checks them against the
+server's OpenAPI document).  Units are SI: metres, radians, seconds.  Unknown
 keys in a response are ignored, so a newer server does not break an older SDK;
 ``from_json`` builds each type from a decoded response.
 """
