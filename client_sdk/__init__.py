@@ -28,6 +28,7 @@ from ._exceptions import (
     TransportError,
     TwbError,
     Unauthorized,
+    Unavailable,
     ValidationError,
     WaitTimeout,
 )
@@ -92,6 +93,7 @@ __all__ = sorted(
         "TransportError",
         "TwbError",
         "Unauthorized",
+        "Unavailable",
         "ValidationError",
         "WaitTimeout",
         "path_with_headings",

@@ -8,18 +8,22 @@ several requests (waiting, making sure an environment exists) is a *flow*: a
 generator that yields :class:`Call` s (and :class:`Sleep` s) and receives
 their results, or their errors thrown in; each client drives it with its own
 I/O.  HTTP errors become the SDK's exceptions in :func:`raise_for_status`
-and :func:`translate_errors`, nowhere else.
+and :func:`translate_errors`, nowhere else.  Whether to send a request again
+after a 429 or 503 with ``Retry-After``, and when, is decided here too
+(:meth:`BaseClient._retry_delay`); the clients only sleep.
 """
 
 from __future__ import annotations
 
 import base64
 import contextlib
+import email.utils
 import os
 import re
 import sys
 import time
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable, Generator, Iterator, Mapping, Optional, Sequence, TypeVar, Union
 from urllib.parse import quote
@@ -49,12 +53,17 @@ from ._models import (
     User,
 )
 
-__all__ = ["API_PREFIX", "BaseClient", "Call", "Flow", "Sleep", "Waiter", "raise_for_status", "translate_errors"]
+__all__ = ["API_PREFIX", "BaseClient", "Call", "Flow", "Sleep", "Waiter", "raise_for_status", "retry_after",
+           "translate_errors"]
 
 T = TypeVar("T")
 
 API_PREFIX = "/api/v1"
 USER_AGENT = "teleworkbench-sdk/0.1"
+#: answers after which a request may be sent again, when they say when (``Retry-After``)
+RETRY_STATUSES = frozenset({429, 503})
+#: methods whose request has the same effect sent once or twice (RFC 9110, 9.2.2): only these are sent again
+IDEMPOTENT_METHODS = frozenset({"GET", "HEAD", "OPTIONS", "PUT", "DELETE"})
 
 
 @dataclass(frozen=True)
@@ -79,9 +88,26 @@ class Sleep:
 Flow = Generator[Union[Call, Sleep], Any, T]
 
 
+def retry_after(value: Optional[str], now: Optional[datetime] = None) -> Optional[float]:
+    """Seconds a ``Retry-After`` header value asks to wait: delay-seconds or an HTTP date (0 once past);
+    None when there is none or it is neither (RFC 9110, 10.2.3)."""
+    if value is None:
+        return None
+    text = value.strip()
+    if text.isascii() and text.isdigit():
+        return float(text)
+    try:
+        when = email.utils.parsedate_to_datetime(text)
+    except (TypeError, ValueError):
+        return None
+    if when.tzinfo is None:  # "-0000": UTC by RFC 5322
+        when = when.replace(tzinfo=timezone.utc)
+    return max(0.0, (when - (now or datetime.now(timezone.utc))).total_seconds())
+
+
 def raise_for_status(response: httpx.Response, hint_401: str = "") -> None:
     """Raise the :class:`ApiError` subclass for an error status, carrying the server's ``detail``
-    (and, for a 401, ``hint_401``: what to do about it)."""
+    (for a 401, ``hint_401``: what to do about it; ``retry_after`` from its header)."""
     if response.status_code < 400:
         return
     try:
@@ -91,7 +117,8 @@ def raise_for_status(response: httpx.Response, hint_401: str = "") -> None:
         detail = response.text.strip() or response.reason_phrase
     cls = STATUS_ERRORS.get(response.status_code, ApiError)
     hint = hint_401 if response.status_code == 401 else ""
-    raise cls(response.status_code, detail, method=response.request.method, url=str(response.request.url), hint=hint)
+    raise cls(response.status_code, detail, method=response.request.method, url=str(response.request.url), hint=hint,
+              retry_after=retry_after(response.headers.get("Retry-After")))
 
 
 @contextlib.contextmanager
@@ -185,12 +212,26 @@ class BaseClient:
         (see :mod:`client_sdk._config`).
     timeout : float, s
         Timeout of each HTTP request (default 30 s).
+    max_retries : int
+        How often a GET (any idempotent request; never a POST) is sent again
+        after a 429 or 503 whose ``Retry-After`` says when (default 3; 0:
+        never).  Then the error is raised (:class:`RateLimited`,
+        :class:`Unavailable`, carrying ``retry_after``).
+    max_retry_wait : float, s
+        The longest all waits for one request may add up to (default 30 s):
+        a ``Retry-After`` that would go beyond it raises at once.
     """
 
-    def __init__(self, url: Optional[str] = None, token: Optional[str] = None, *, timeout: float = 30.0) -> None:
+    def __init__(self, url: Optional[str] = None, token: Optional[str] = None, *, timeout: float = 30.0,
+                 max_retries: int = 3, max_retry_wait: float = 30.0) -> None:
+        if max_retries < 0 or not max_retry_wait >= 0:
+            raise ValueError(f"`max_retries` and `max_retry_wait` must be >= 0, got {max_retries!r}, "
+                             f"{max_retry_wait!r}")
         self.url = resolve_url(url)
         self.token = resolve_token(token)
         self.timeout = timeout
+        self.max_retries = max_retries
+        self.max_retry_wait = max_retry_wait
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(url={self.url!r})"
@@ -204,6 +245,20 @@ class BaseClient:
     def _finish(self, call: Call, response: httpx.Response) -> Any:
         raise_for_status(response, "" if self.token else missing_token_hint())
         return call.parse(response)
+
+    def _retry_delay(self, call: Call, response: httpx.Response, retries: int, waited: float) -> Optional[float]:
+        """Seconds to wait before sending ``call`` again after ``response``, or None: answer it as it is.
+
+        Again only after a 429 or 503 with a ``Retry-After``, for an
+        idempotent method, at most ``max_retries`` times and while the
+        waits (``waited`` so far) stay within ``max_retry_wait``.
+        """
+        if response.status_code not in RETRY_STATUSES or call.method.upper() not in IDEMPOTENT_METHODS:
+            return None
+        delay = retry_after(response.headers.get("Retry-After"))
+        if delay is None or retries >= self.max_retries or waited + delay > self.max_retry_wait:
+            return None
+        return delay
 
     # ------------------------------------------------------------------ endpoints (no I/O)
 

@@ -53,17 +53,20 @@ class Client(BaseClient):
 
     Parameters
     ----------
-    url, token, timeout
+    url, token, timeout, max_retries, max_retry_wait
         See :class:`~client_sdk._base.BaseClient` (``$TWB_URL``, ``$TWB_TOKEN``,
-        the token file of ``twb up``).
+        the token file of ``twb up``; a GET answered 429 or 503 with
+        ``Retry-After`` is sent again after that many seconds, 3 times and 30 s
+        at most by default).
     transport : httpx.BaseTransport, optional
         Injected transport, e.g. ``httpx.MockTransport`` in tests or
         ``httpx.HTTPTransport(retries=3)``.
     """
 
     def __init__(self, url: Optional[str] = None, token: Optional[str] = None, *, timeout: float = 30.0,
-                 transport: Optional[httpx.BaseTransport] = None) -> None:
-        super().__init__(url, token, timeout=timeout)
+                 transport: Optional[httpx.BaseTransport] = None, max_retries: int = 3,
+                 max_retry_wait: float = 30.0) -> None:
+        super().__init__(url, token, timeout=timeout, max_retries=max_retries, max_retry_wait=max_retry_wait)
         self._http = httpx.Client(base_url=self.url, headers=self._headers(), timeout=timeout, transport=transport)
 
     def __enter__(self) -> "Client":
@@ -77,9 +80,16 @@ class Client(BaseClient):
         self._http.close()
 
     def _send(self, call: Call) -> Any:
-        with translate_errors(self.url):
-            response = self._http.request(call.method, call.path, params=call.params, json=call.json)
-        return self._finish(call, response)
+        """Send ``call``, again after a ``Retry-After`` while :meth:`_retry_delay` says so; its result."""
+        retries, waited = 0, 0.0
+        while True:
+            with translate_errors(self.url):
+                response = self._http.request(call.method, call.path, params=call.params, json=call.json)
+            delay = self._retry_delay(call, response, retries, waited)
+            if delay is None:
+                return self._finish(call, response)
+            time.sleep(delay)
+            retries, waited = retries + 1, waited + delay
 
     def _run(self, flow: Flow[T]) -> T:
         """Drive a flow: send its calls, sleep its pauses, throw errors back into it."""
@@ -313,8 +323,9 @@ class AsyncClient(BaseClient):
     """
 
     def __init__(self, url: Optional[str] = None, token: Optional[str] = None, *, timeout: float = 30.0,
-                 transport: Optional[httpx.AsyncBaseTransport] = None) -> None:
-        super().__init__(url, token, timeout=timeout)
+                 transport: Optional[httpx.AsyncBaseTransport] = None, max_retries: int = 3,
+                 max_retry_wait: float = 30.0) -> None:
+        super().__init__(url, token, timeout=timeout, max_retries=max_retries, max_retry_wait=max_retry_wait)
         self._http = httpx.AsyncClient(base_url=self.url, headers=self._headers(), timeout=timeout,
                                        transport=transport)
 
@@ -329,9 +340,16 @@ class AsyncClient(BaseClient):
         await self._http.aclose()
 
     async def _send(self, call: Call) -> Any:
-        with translate_errors(self.url):
-            response = await self._http.request(call.method, call.path, params=call.params, json=call.json)
-        return self._finish(call, response)
+        """See :meth:`Client._send` (sleeping with asyncio)."""
+        retries, waited = 0, 0.0
+        while True:
+            with translate_errors(self.url):
+                response = await self._http.request(call.method, call.path, params=call.params, json=call.json)
+            delay = self._retry_delay(call, response, retries, waited)
+            if delay is None:
+                return self._finish(call, response)
+            await asyncio.sleep(delay)
+            retries, waited = retries + 1, waited + delay
 
     async def _run(self, flow: Flow[T]) -> T:
         """See :meth:`Client._run` (sleeping with asyncio)."""

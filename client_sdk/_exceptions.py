@@ -10,19 +10,23 @@
     │   ├── Conflict                    409: wrong state (e.g. cancelling a finished experiment)
     │   ├── TooLarge                    413: request body too large
     │   ├── ValidationError             422: invalid input; ``detail`` is the server's reason
-    │   └── RateLimited                 429: too many queued experiments
+    │   ├── RateLimited                 429: too many queued experiments, or unknown tokens
+    │   └── Unavailable                 503: the testbed cannot serve for the moment
     ├── TransportError                  the server (or a robot agent) could not be reached
     ├── RobotError                      a robot agent answered something that is not protocol v1
     └── WaitTimeout                     also a ``TimeoutError``: ``wait()`` ran out of time
 
 Errors of the HTTP library are translated in one place
 (:func:`client_sdk._base.translate_errors`) with ``raise ... from exc``, so the
-original exception stays available as ``__cause__``.
+original exception stays available as ``__cause__``.  An :class:`ApiError`
+carries ``retry_after``: the seconds the server's ``Retry-After`` asked to
+wait (None without one); the clients wait that long and ask again themselves
+before a 429 or 503 becomes an error (``docs/sdk.md``, "Retries").
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 __all__ = [
     "ApiError",
@@ -35,6 +39,7 @@ __all__ = [
     "TransportError",
     "TwbError",
     "Unauthorized",
+    "Unavailable",
     "ValidationError",
     "WaitTimeout",
 ]
@@ -48,15 +53,18 @@ class ApiError(TwbError):
     """The server answered ``status`` (>= 400); ``detail`` is its ``{"detail": ...}`` message.
 
     ``str(err)`` is one line: ``"404 Not Found: Experiment not found"``, then the
-    ``hint`` (what to do about it) when there is one.
+    ``hint`` (what to do about it) when there is one.  ``retry_after``: the
+    seconds the server's ``Retry-After`` header asked to wait, or None.
     """
 
-    def __init__(self, status: int, detail: Any, *, method: str = "", url: str = "", hint: str = "") -> None:
+    def __init__(self, status: int, detail: Any, *, method: str = "", url: str = "", hint: str = "",
+                 retry_after: Optional[float] = None) -> None:
         self.status = status
         self.detail = detail
         self.method = method
         self.url = url
         self.hint = hint
+        self.retry_after = retry_after
         text = f"{status} {_REASONS.get(status, 'Error')}: {format_detail(detail)}"
         super().__init__(f"{text} ({hint})" if hint else text)
 
@@ -87,7 +95,11 @@ class ValidationError(ApiError):
 
 
 class RateLimited(ApiError):
-    """429: too many queued experiments (or requests)."""
+    """429: too many queued experiments, or too many unknown tokens from this client (``retry_after`` s)."""
+
+
+class Unavailable(ApiError):
+    """503: the testbed cannot serve for the moment, e.g. its database is unreachable (``retry_after`` s)."""
 
 
 class TransportError(TwbError):
@@ -130,6 +142,7 @@ STATUS_ERRORS: dict[int, type[ApiError]] = {
     413: TooLarge,
     422: ValidationError,
     429: RateLimited,
+    503: Unavailable,
 }
 
 

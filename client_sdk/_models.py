@@ -1,7 +1,8 @@
 """Typed results: dataclasses mirroring the server's JSON responses (docs/design.md, "REST API").
 
 They are defined here, not imported from the server, so the SDK runs without
-the server's dependencies.  Units are SI: metres, radians, seconds.  Unknown
+the server's dependencies (``tests/test_sdk_models.py`` checks them against the
+server's OpenAPI document).  Units are SI: metres, radians, seconds.  Unknown
 keys in a response are ignored, so a newer server does not break an older SDK;
 ``from_json`` builds each type from a decoded response.
 """
@@ -120,6 +121,9 @@ class Environment(_FromJson):
     builtin: bool = False
     owner: Optional[str] = None
     moving_obstacles: list[dict[str, Any]] = _field(default_factory=list)
+    #: derived by the testbed, for drawing (not part of the file, :meth:`to_json`): each moving obstacle as it
+    #: moves, ``radius`` (m), ``speed`` (m/s), ``repeat``, ``delay_s`` (s) and its ``waypoints`` (m)
+    moving_tracks: list[dict[str, Any]] = _field(default_factory=list)
 
     _conv = {"plans": lambda ps: [Plan.from_json(p) for p in ps]}
 
@@ -435,6 +439,11 @@ class Robot(_FromJson):
     area: list[float] = _field(default_factory=list)
     subfield: Optional[int] = None
     last_seen: Optional[datetime] = None
+    #: why an offline robot is offline
+    status_reason: Optional[str] = None
+    #: the last tracked pose ``[t, x, y, theta]`` in field coordinates (s, m, m, rad), if any (not shown while it
+    #: runs someone else's run)
+    last_pose: Optional[list[float]] = None
 
     _conv = {"last_seen": _dt}
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import ipaddress
 import re
 from datetime import datetime, timezone
-from typing import Annotated, Any, Generic, Literal, Optional, TypeVar
+from typing import Annotated, Any, Generic, Literal, Optional, TypeVar, Union
 
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -19,20 +19,43 @@ from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (doc
 from .status import RunStatus
 
 __all__ = [
+    "ComputePublic",
+    "ControllerPublic",
+    "DirectComparisonPublic",
     "EnvironmentCreate",
     "EnvironmentPublic",
     "ExperimentCreate",
+    "ExperimentMetricsPublic",
     "ExperimentPublic",
     "ExperimentSummary",
+    "HealthPublic",
+    "LoadErrorPublic",
+    "MessagePublic",
+    "MetricSummaryPublic",
+    "ModeAggregatePublic",
+    "ModeOutcomesPublic",
+    "ObstacleTrackPublic",
     "Page",
+    "ParamPublic",
+    "PlanPublic",
+    "PlannerPublic",
+    "PluginPage",
     "ProgramCreate",
     "ProgramPublic",
+    "ProportionPublic",
     "RobotIn",
     "RobotPublic",
     "RobotRegister",
+    "RunMetricsPublic",
+    "RunObstaclesPublic",
+    "RunPosesPublic",
     "RunPublic",
+    "SandboxIsolationPublic",
+    "SandboxLimitsPublic",
+    "SandboxPublic",
     "SubfieldPublic",
     "TrackerBatch",
+    "TrackerBatchResult",
     "UserCreate",
     "UserPublic",
     "UserWithToken",
@@ -59,7 +82,16 @@ class Strict(BaseModel):
     model_config = ConfigDict(allow_inf_nan=False, extra="forbid", strict=True)
 
 
-class FromRow(BaseModel):
+class Public(BaseModel):
+    """Response bodies: every field is always sent, so the OpenAPI document lists each one as required
+    (a body that leaves out unset fields, ``response_model_exclude_unset``, is a plain ``BaseModel``)."""
+
+    model_config = ConfigDict(json_schema_serialization_defaults_required=True)
+
+
+class FromRow(Public):
+    """A response body built from a table row (``model_validate(row)``)."""
+
     model_config = ConfigDict(from_attributes=True)
 
 
@@ -133,11 +165,21 @@ class EnvironmentCreate(Strict):
         return self.model_dump()
 
 
-class EnvironmentPublic(BaseModel):
+class PlanPublic(Public):
+    """A named start/goal pair of an environment, poses ``[x, y, theta]`` (m, rad)."""
+
     name: str
-    size: list[float]
-    blocks: list[dict[str, float]]
-    plans: list[dict[str, Any]] = []
+    start: list[float]
+    goal: list[float]
+
+
+class EnvironmentPublic(Public):
+    """An environment: its file (docs/design.md, "Environment file") and who owns it."""
+
+    name: str
+    size: list[float] = Field(description="[width, height], m.")
+    blocks: list[dict[str, float]] = Field(description="Rectangular blocks: centre x, y, size w, h (m), angle (rad).")
+    plans: list[PlanPublic] = []
     description: str = ""
     moving_obstacles: list[dict[str, Any]] = []
     moving_tracks: list[dict[str, Any]] = Field(default_factory=list, description=(
@@ -424,14 +466,134 @@ class CancelMany(Strict):
     ids: list[Annotated[int, Field(ge=1, le=2**63 - 1)]] = Field(min_length=1, max_length=1000)
 
 
-class NotCancelled(BaseModel):
+class NotCancelled(Public):
     id: int
     reason: str = Field(description="`not found` (unknown, or not yours) or `already <status>`.")
 
 
-class CancelledMany(BaseModel):
+class CancelledMany(Public):
     cancelled: list[int] = Field(description="Experiments whose queued runs were cancelled and running ones stopped.")
     not_cancelled: list[NotCancelled]
+
+
+# --------------------------------------------------------------------------- results (docs/metrics.md)
+
+#: a JSON number as sent: an integer stays an integer (a parameter's default 0 is sent as 0, not 0.0)
+Number = Union[int, float]
+
+
+class RunMetricsPublic(Public):
+    """One run's metrics as the experiment's metrics list them (a failed run's too, flagged by ``outcome``)."""
+
+    run_id: int
+    mode: str
+    repetition: int
+    status: RunStatus
+    outcome: str = Field(description=(
+        "success, why it failed (collision, timeout ...), or its status (error, cancelled, interrupted; pending "
+        "while it has not ended)."))
+    stopped_at: Optional[list[float]] = Field(description="Where a run that failed on its robot stopped, [x, y] (m).")
+    metrics: dict[str, Any] = Field(description="The run's metrics (docs/metrics.md; SI units).")
+
+
+class ProportionPublic(Public):
+    """A rate ``k / n`` with its Wilson interval (None while ``n`` is 0)."""
+
+    n: int
+    k: int
+    rate: Optional[float]
+    ci_low: Optional[float]
+    ci_high: Optional[float]
+    confidence: float
+
+
+class ModeOutcomesPublic(Public):
+    """How one mode's runs ended: ``counts`` per outcome and the success rate over the job's own outcomes."""
+
+    runs: int
+    counts: dict[str, int]
+    success: ProportionPublic
+
+
+class MetricSummaryPublic(Public):
+    """Mean, sample std and Student-t interval of one metric over ``n`` runs (None where undefined)."""
+
+    n: int
+    mean: Optional[float]
+    std: Optional[float]
+    ci_low: Optional[float]
+    ci_high: Optional[float]
+    confidence: float
+
+
+class ModeAggregatePublic(Public):
+    """One mode's completed runs: how many, and a summary per numeric metric."""
+
+    runs: int
+    metrics: dict[str, MetricSummaryPublic]
+
+
+class DirectComparisonPublic(Public):
+    """The paper's direct comparison "ST" of one repetition: the field path against the simulated one (m)."""
+
+    repetition: int
+    sim_run_id: int
+    twb_run_id: int
+    deviation_mean_m: Optional[float]
+    deviation_max_m: Optional[float]
+    hausdorff_m: Optional[float]
+    frechet_m: Optional[float]
+
+
+class ExperimentMetricsPublic(Public):
+    """An experiment's metrics: per run, outcomes and aggregates per mode, direct sim-vs-twb per repetition."""
+
+    experiment_id: int
+    status: RunStatus
+    planned: Optional[dict[str, Any]] = Field(description="The planned path's own metrics (None before planning).")
+    runs: list[RunMetricsPublic]
+    outcomes: dict[str, ModeOutcomesPublic] = Field(description="Per mode.")
+    aggregates: dict[str, ModeAggregatePublic] = Field(description="Per mode, over its completed runs.")
+    direct: list[DirectComparisonPublic] = Field(description="Not for multi-robot jobs.")
+
+
+# --------------------------------------------------------------------------- runs' logs
+
+
+class RunPosesPublic(Public):
+    """A run's logged poses: rows of ``columns`` (t s, x m, y m, theta rad; a multi-robot run's with ``robot``)."""
+
+    run_id: int
+    count: int
+    columns: list[str]
+    poses: list[list[Number]] = Field(description="Rows [t, x, y, theta] or [t, x, y, theta, robot], oldest first.")
+
+
+class ObstacleTrackPublic(Public):
+    """Where one moving obstacle was: ``poses`` ``[t, x, y, theta]`` rows (s, m, m, rad), oldest first."""
+
+    index: int = Field(description="Its index in the environment's `moving_obstacles`.")
+    radius: float = Field(description="m.")
+    count: int
+    poses: list[list[float]]
+
+
+class RunObstaclesPublic(Public):
+    """Where a run's moving obstacles were: tracked (``exact`` false) or their exact tracks (true)."""
+
+    run_id: int
+    columns: list[str]
+    exact: bool
+    obstacles: list[ObstacleTrackPublic]
+
+
+class MessagePublic(FromRow):
+    """A protocol line sent to (``>``) or received from (``<``) the robot; ``o``/``e``/``s``: a program's."""
+
+    t: Optional[float] = Field(description="Experiment time on the agent's clock (s).")
+    t_estimated: bool = Field(description="`t` extrapolated from the agent's last report.")
+    direction: str
+    line: str
 
 
 # --------------------------------------------------------------------------- uploaded programs
@@ -527,7 +689,7 @@ def host_name(text: str) -> str:
     return ascii_name
 
 
-class RobotPublic(BaseModel):
+class RobotPublic(Public):
     robot_id: str
     host: str
     port: int
@@ -545,7 +707,7 @@ class RobotPublic(BaseModel):
         default=None, description="Last tracked pose [t, x, y, theta] in field coordinates (s, m, rad), if any.")
 
 
-class SubfieldPublic(BaseModel):
+class SubfieldPublic(Public):
     id: int
     state: str
     environment: Optional[str]
@@ -570,3 +732,133 @@ class TrackerBatch(BaseModel):
     poses: list[Any] = Field(max_length=100_000, description="Rows [t, x, y, theta] (s, m, m, rad); "
                                                               "rows that are not four finite numbers are counted "
                                                               "in `rejected`.")
+
+
+class TrackerBatchResult(Public):
+    """What became of a tracker batch: rows received, accepted, rejected and stored with a run."""
+
+    received: int
+    accepted: int
+    rejected: int
+    stored: int = Field(description="Accepted rows stored with the robot's current run.")
+    run_id: Optional[int] = Field(description="That run, if the robot runs one.")
+
+
+# --------------------------------------------------------------------------- the testbed
+
+
+class ComputePublic(BaseModel):
+    """The compute pool (planning, metrics, simulation tasks): its workers, whether they have run a job, how
+    often a broken pool was replaced and why it last broke."""
+
+    workers: int
+    ready: bool
+    restarts: int
+    last_failure: Optional[str]
+    engine: Optional[str] = Field(default=None, description="`ray` for the Ray pool (absent: the local workers).")
+
+
+class HealthPublic(BaseModel):
+    """Liveness; with a valid token also the queue, the fleet and the compute pool (absent without one).
+    ``degraded``: the compute pool was restarted and its fresh workers have not run a job yet."""
+
+    status: Literal["ok", "degraded"]
+    version: str
+    queued_runs: Optional[int] = None
+    running_runs: Optional[int] = None
+    field_robots: Optional[int] = None
+    sim_robots: Optional[int] = None
+    time_scale: Optional[float] = Field(default=None, description=(
+        "Experiment seconds per wall second; null: as fast as possible (`max`)."))
+    compute: Optional[ComputePublic] = None
+
+
+class ParamPublic(BaseModel):
+    """A planner's or controller's parameter (contract/parameters.py): unit, default and range [low, high]
+    (null: unbounded; SI units); ``type`` only when not a number, ``integer`` and ``low_exclusive`` only when
+    true."""
+
+    name: str
+    unit: str
+    default: Any
+    range: list[Optional[Number]] = Field(min_length=2, max_length=2)
+    description: str
+    type: Optional[Literal["integer", "boolean", "string"]] = None
+    integer: Optional[bool] = None
+    low_exclusive: Optional[bool] = None
+
+
+class LoadErrorPublic(BaseModel):
+    """An installed plug-in that does not load, as data (docs/planners.md, "When a plug-in does not load")."""
+
+    name: str
+    kind: str
+    source: str
+    error_type: str
+    message: str
+    distribution: str
+
+
+class PluginPage(Page[T], Generic[T]):
+    """A page of plug-ins and built-ins, with the installed plug-ins that fail to load (not in ``data``)."""
+
+    load_errors: list[LoadErrorPublic]
+
+
+class PlannerPublic(BaseModel):
+    """A selectable planner: parameter defaults and declarations (null: any parameters), multi-robot jobs only
+    or not."""
+
+    name: str
+    description: str
+    defaults: Optional[dict[str, Any]]
+    parameters: Optional[list[ParamPublic]]
+    fleet_only: bool
+
+
+class ControllerPublic(BaseModel):
+    """A selectable path-tracking controller (docs/controllers.md)."""
+
+    name: str
+    description: str
+    source: str = Field(description="Where it comes from in the literature.")
+    compiled: bool = Field(description="Runs inside the compiled core (built-ins), not in Python (plug-ins).")
+    parameters: list[ParamPublic]
+
+
+class SandboxLimitsPublic(Public):
+    """The limits an uploaded program runs under, in the units their names say."""
+
+    wall_s: float
+    cpu_s: int
+    memory_mb: int
+    file_mb: int
+    processes: int
+    open_files: int
+    output_kib: int
+    tmp_mb: int
+    max_program_bytes: int
+    concurrent_programs: int
+
+
+class SandboxIsolationPublic(Public):
+    """The isolation uploaded programs get on this machine (docs/uploads.md)."""
+
+    namespaces: list[str]
+    user_namespace: bool
+    network: str
+    seccomp: bool
+    runs_as: str
+    memory_limit: str
+    cgroup: Optional[str]
+    memory_note: str
+    note: str
+
+
+class SandboxPublic(Public):
+    """Whether uploads are enabled, the interpreters, the limits and the isolation (null: uploads disabled)."""
+
+    uploads_enabled: bool
+    interpreters: list[str]
+    limits: SandboxLimitsPublic
+    isolation: Optional[SandboxIsolationPublic]

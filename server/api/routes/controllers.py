@@ -5,14 +5,15 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
+from ...schemas import ControllerPublic, PluginPage
 from ..deps import CurrentUser
 from ..responses import AUTHENTICATED
 
 router = APIRouter(prefix="/controllers", tags=["controllers"], responses=AUTHENTICATED)
 
 
-@router.get("")
-def list_controllers(_: CurrentUser) -> dict:
+@router.get("", response_model=PluginPage[ControllerPublic], response_model_exclude_unset=True)
+def list_controllers(_: CurrentUser) -> PluginPage[ControllerPublic]:
     """Every selectable controller: name, description, source, whether it runs compiled, and its parameters
     (name, type, unit, default, range [low, high], description; SI units).  ``load_errors``: each installed
     plug-in controller that does not load (name, kind, source, error_type, message, distribution); it is not
@@ -23,4 +24,5 @@ def list_controllers(_: CurrentUser) -> dict:
     plugins = set(PLUGINS.names())
     out = [controller_spec(name).to_dict() for name in available_controllers()
            if name not in plugins or PLUGINS.loaded(name) is not None]
-    return {"data": out, "count": len(out), "load_errors": [e.to_dict() for e in errors]}
+    return PluginPage[ControllerPublic].model_validate(
+        {"data": out, "count": len(out), "load_errors": [e.to_dict() for e in errors]})

@@ -14,8 +14,16 @@ from ..responses import AUTHENTICATED
 router = APIRouter(tags=["events"], responses=AUTHENTICATED)
 
 
-@router.get("/events")
-async def events(request: Request, user: CurrentUser, testbed: TestbedDep) -> StreamingResponse:
+class EventStream(StreamingResponse):
+    """A ``text/event-stream`` response (so the OpenAPI document names that media type, not JSON)."""
+
+    media_type = "text/event-stream"
+
+
+@router.get("/events", response_class=EventStream, responses={200: {
+    "description": "Server-sent events: `event: <kind>` and `data: <JSON>` lines, a blank line after each.",
+    "content": {"text/event-stream": {"schema": {"type": "string"}}}}})
+async def events(request: Request, user: CurrentUser, testbed: TestbedDep) -> EventStream:
     """Server-sent events: ``experiment``, ``run``, ``subfield``, ``robot`` and ``pose`` (JSON data).
 
     You receive your own experiments' and runs' events, the sub-fields, and
@@ -32,5 +40,4 @@ async def events(request: Request, user: CurrentUser, testbed: TestbedDep) -> St
                 break
             yield chunk
 
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
+    return EventStream(stream(), headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})

@@ -13,8 +13,8 @@ from ...dispatch import pending_of
 from ...errors import Conflict
 from ...models import Experiment
 from ...results import experiment_metrics
-from ...schemas import (CancelledMany, CancelMany, ExperimentCreate, ExperimentPublic, ExperimentSummary,
-                        NotCancelled, Page)
+from ...schemas import (CancelledMany, CancelMany, ExperimentCreate, ExperimentMetricsPublic, ExperimentPublic,
+                        ExperimentSummary, NotCancelled, Page)
 from ...status import TERMINAL, RunStatus
 from ...submission import submit
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep, TestbedDep
@@ -125,12 +125,13 @@ async def cancel_experiment(experiment_id: IdPath, user: CurrentUser, testbed: T
     return await anyio.to_thread.run_sync(load)
 
 
-@router.get("/{experiment_id:int}/metrics", responses=errors(404))
-def get_experiment_metrics(experiment_id: IdPath, session: SessionDep, user: CurrentUser) -> dict:
+@router.get("/{experiment_id:int}/metrics", response_model=ExperimentMetricsPublic, responses=errors(404))
+def get_experiment_metrics(experiment_id: IdPath, session: SessionDep, user: CurrentUser) -> ExperimentMetricsPublic:
     """Metrics per run, mean/std/95% CI per mode, and the direct sim-vs-twb comparison per repetition.
 
     ``direct`` is the paper's "ST": for each repetition with both a completed
     ``sim`` and ``twb`` run, the deviation (and Hausdorff / Fréchet distances)
     of the field path from the simulated one.
     """
-    return experiment_metrics(session, owned(session, user, Experiment, experiment_id, "Experiment"))
+    exp = owned(session, user, Experiment, experiment_id, "Experiment")
+    return ExperimentMetricsPublic.model_validate(experiment_metrics(session, exp))

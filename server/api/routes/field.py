@@ -8,7 +8,7 @@ import anyio
 from fastapi import APIRouter, Request
 
 from ...errors import Forbidden, NotFound
-from ...schemas import Page, RobotPublic, RobotRegister, SubfieldPublic, TrackerBatch
+from ...schemas import Page, RobotPublic, RobotRegister, SubfieldPublic, TrackerBatch, TrackerBatchResult
 from ...tracking import parse_batch
 from ..deps import AgentToken, CurrentUser, TestbedDep
 from ..responses import AUTHENTICATED, errors
@@ -48,9 +48,10 @@ async def register_robot(body: RobotRegister, who: AgentToken, testbed: TestbedD
     return testbed.field.robot_view(slot, testbed.tracker.last_pose(slot.robot_id))
 
 
-@router.post("/tracker/poses", responses=errors(404, 413), openapi_extra={"requestBody": {"required": True, "content": {
-    "application/json": {"schema": TrackerBatch.model_json_schema()}}}})
-async def ingest_poses(request: Request, who: AgentToken, testbed: TestbedDep) -> dict:
+@router.post("/tracker/poses", response_model=TrackerBatchResult, responses=errors(404, 413),
+             openapi_extra={"requestBody": {"required": True, "content": {
+                 "application/json": {"schema": TrackerBatch.model_json_schema()}}}})
+async def ingest_poses(request: Request, who: AgentToken, testbed: TestbedDep) -> TrackerBatchResult:
     """A batch of tracker poses ``[t, x, y, theta]`` of one robot (agent or admin token).
 
     Body: :class:`TrackerBatch`.  Rows that are not four finite numbers are
@@ -60,14 +61,14 @@ async def ingest_poses(request: Request, who: AgentToken, testbed: TestbedDep) -
     """
     raw = await request.body()
 
-    def work() -> dict:
+    def work() -> TrackerBatchResult:
         robot_id, poses, received = parse_batch(raw)
         if not testbed.field.known(robot_id):
             raise NotFound(f"Unknown robot {robot_id!r}: register it with POST /api/v1/robots first")
         if not testbed.field.may_track(robot_id, who):
             raise Forbidden(f"robot {robot_id!r} was registered with another token; only that token posts its poses")
         stored, run_id = testbed.tracker.ingest(robot_id, poses)
-        return {"received": received, "accepted": len(poses), "rejected": received - len(poses),
-                "stored": stored, "run_id": run_id}
+        return TrackerBatchResult(received=received, accepted=len(poses), rejected=received - len(poses),
+                                  stored=stored, run_id=run_id)
 
     return await anyio.to_thread.run_sync(work)

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from ...schemas import FLEET_PLANNER
+from ...schemas import FLEET_PLANNER, PlannerPublic, PluginPage
 from ..deps import CurrentUser
 from ..responses import AUTHENTICATED
 
 router = APIRouter(prefix="/planners", tags=["planners"], responses=AUTHENTICATED)
 
 
-@router.get("")
-def list_planners(_: CurrentUser) -> dict:
+@router.get("", response_model=PluginPage[PlannerPublic], response_model_exclude_unset=True)
+def list_planners(_: CurrentUser) -> PluginPage[PlannerPublic]:
     """Every selectable planner: name, description, parameter defaults (null: any parameters), its
     ``parameters`` (name, type, unit, default, range, description; null: any) and whether it plans
     multi-robot jobs only (``fleet_only``: ``prioritized``; any other plans each robot alone).
@@ -35,4 +35,5 @@ def list_planners(_: CurrentUser) -> dict:
                     "parameters": params, "fleet_only": False})
     out.append({"name": FLEET_PLANNER, "description": DESCRIPTION, "defaults": fleet_defaults(),
                 "parameters": [q.to_dict() for q in (*fleet_parameters(), EXECUTION_PARAM)], "fleet_only": True})
-    return {"data": out, "count": len(out), "load_errors": [e.to_dict() for e in errors]}
+    return PluginPage[PlannerPublic].model_validate(
+        {"data": out, "count": len(out), "load_errors": [e.to_dict() for e in errors]})

@@ -17,7 +17,7 @@ from sqlalchemy import func, select
 from ...access import owned
 from ...errors import Forbidden, Invalid, TooLarge
 from ...models import Program
-from ...schemas import Page, ProgramCreate, ProgramPublic
+from ...schemas import Page, ProgramCreate, ProgramPublic, SandboxPublic
 from ...submission import UPLOADS_DISABLED
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep, TestbedDep
 from ..responses import AUTHENTICATED, errors
@@ -25,16 +25,16 @@ from ..responses import AUTHENTICATED, errors
 router = APIRouter(prefix="/programs", tags=["programs"], responses=AUTHENTICATED)
 
 
-@router.get("/sandbox")
-async def sandbox_info(user: CurrentUser, testbed: TestbedDep) -> dict:
+@router.get("/sandbox", response_model=SandboxPublic)
+async def sandbox_info(user: CurrentUser, testbed: TestbedDep) -> SandboxPublic:
     """Whether uploads are enabled, the interpreters, the limits and the isolation programs get here."""
     settings = testbed.settings
-    return {
-        "uploads_enabled": settings.uploads_enabled,
-        "interpreters": sorted(settings.sandbox_interpreters),
-        "limits": testbed.sandbox.limits,
-        "isolation": await testbed.sandbox.probe() if settings.uploads_enabled else None,
-    }
+    return SandboxPublic(
+        uploads_enabled=settings.uploads_enabled,
+        interpreters=sorted(settings.sandbox_interpreters),
+        limits=testbed.sandbox.limits,
+        isolation=await testbed.sandbox.probe() if settings.uploads_enabled else None,
+    )
 
 
 @router.post("", response_model=ProgramPublic, status_code=201, responses=errors(413))
@@ -88,7 +88,10 @@ def get_program(program_id: IdPath, session: SessionDep, user: CurrentUser) -> P
     return ProgramPublic.model_validate(owned(session, user, Program, program_id, "Program"))
 
 
-@router.get("/{program_id:int}/content", response_class=Response, responses=errors(404))
+@router.get("/{program_id:int}/content", response_class=Response, responses={
+    200: {"description": "The file's bytes.",
+          "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}},
+    **errors(404)})
 def get_program_content(program_id: IdPath, session: SessionDep, user: CurrentUser) -> Response:
     """The uploaded file itself."""
     prog = owned(session, user, Program, program_id, "Program")

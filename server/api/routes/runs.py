@@ -6,13 +6,13 @@ import io
 from typing import Literal, Optional
 
 from fastapi import APIRouter, Query
-from fastapi.responses import PlainTextResponse
+from fastapi.responses import JSONResponse, PlainTextResponse
 from sqlalchemy import func, select
 
 from ...access import owned
 from ...models import Message, Run
 from ...obstacles import run_obstacles
-from ...schemas import MAX_ROBOTS, RunPublic
+from ...schemas import MAX_ROBOTS, MessagePublic, Page, RunObstaclesPublic, RunPosesPublic, RunPublic
 from ...store.poses import run_poses
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep
 from ..responses import AUTHENTICATED, errors
@@ -26,14 +26,12 @@ def get_run(run_id: IdPath, session: SessionDep, user: CurrentUser) -> RunPublic
     return RunPublic.model_validate(owned(session, user, Run, run_id, "Run"))
 
 
-_POSES_CONTENT = {"application/json": {"schema": {"type": "object", "properties": {
-    "run_id": {"type": "integer"}, "count": {"type": "integer"}, "columns": {"type": "array", "items": {"type": "string"}},
-    "poses": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}}}}},
-    "text/csv": {"schema": {"type": "string"}}}
-
-
-@router.get("/{run_id:int}/poses", response_model=None,
-            responses={200: {"description": "The poses, as JSON or CSV.", "content": _POSES_CONTENT}, **errors(404)})
+# JSONResponse: the body encoded by json.dumps, byte for byte as before the route had a model (pydantic's JSON
+# writes a small float without exponent: 9.8e-05 as 0.000098)
+@router.get("/{run_id:int}/poses", response_model=RunPosesPublic, response_class=JSONResponse, responses={
+    200: {"description": "The poses, as JSON or CSV (`format=csv`).",
+          "content": {"text/csv": {"schema": {"type": "string"}}}},
+    **errors(404)})
 def get_poses(
     run_id: IdPath,
     session: SessionDep,
@@ -44,7 +42,7 @@ def get_poses(
                                      description="Only poses later than this experiment time (s): for polling."),
     robot: Optional[int] = Query(default=None, ge=0, lt=MAX_ROBOTS, description=(
         "A multi-robot run: only this robot's poses (its index in the job's `robots`).")),
-):
+) -> RunPosesPublic | PlainTextResponse:
     """Logged poses of a run, oldest first: tracker measurements (twb) or ground truth (sim).
 
     Times are experiment seconds on the robot's clock; x, y in metres and
@@ -66,11 +64,11 @@ def get_poses(
             buf.write(f"{row[0]:.4f},{row[1]:.5f},{row[2]:.5f},{row[3]:.5f}" + (f",{row[4]}" if fleet else "") + "\n")
         return PlainTextResponse(buf.getvalue(), media_type="text/csv",
                                  headers={"Content-Disposition": f'attachment; filename="run-{run_id}-poses.csv"'})
-    return {"run_id": run_id, "count": len(rows), "columns": columns, "poses": rows}
+    return RunPosesPublic(run_id=run_id, count=len(rows), columns=columns, poses=rows)
 
 
-@router.get("/{run_id:int}/obstacles", responses=errors(404))
-def get_obstacles(run_id: IdPath, session: SessionDep, user: CurrentUser) -> dict:
+@router.get("/{run_id:int}/obstacles", response_model=RunObstaclesPublic, responses=errors(404))
+def get_obstacles(run_id: IdPath, session: SessionDep, user: CurrentUser) -> RunObstaclesPublic:
     """Where the run's moving obstacles were: a field run's obstacle robots as the tracker saw them, else exact.
 
     One entry per moving obstacle of the environment (``index`` in its
@@ -83,17 +81,18 @@ def get_obstacles(run_id: IdPath, session: SessionDep, user: CurrentUser) -> dic
     be replayed, or that ran before they were stored).
     """
     run = owned(session, user, Run, run_id, "Run")
-    return {"run_id": run_id, "columns": ["t", "x", "y", "theta"], **run_obstacles(session, run)}
+    return RunObstaclesPublic.model_validate({"run_id": run_id, "columns": ["t", "x", "y", "theta"],
+                                              **run_obstacles(session, run)})
 
 
-@router.get("/{run_id:int}/messages", responses=errors(404))
+@router.get("/{run_id:int}/messages", response_model=Page[MessagePublic], responses=errors(404))
 def get_messages(
     run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
     offset: int = Query(default=0, ge=0, le=MAX_OFFSET),
     limit: int = Query(default=1000, ge=1, le=10000),
-) -> dict:
+) -> Page[MessagePublic]:
     """Every protocol line sent to (``>``) or received from (``<``) the robot, with experiment time.
 
     ``t`` is the agent's clock: exact for ``ST``/``EV`` lines, extrapolated
@@ -106,5 +105,4 @@ def get_messages(
         select(Message).where(Message.run_id == run_id).order_by(Message.id).offset(offset).limit(limit)
     ).all()
     count = session.scalar(select(func.count(Message.id)).where(Message.run_id == run_id)) or 0
-    return {"data": [{"t": m.t, "t_estimated": m.t_estimated, "direction": m.direction, "line": m.line}
-                     for m in rows], "count": count}
+    return Page(data=[MessagePublic.model_validate(m) for m in rows], count=count)
