@@ -61,6 +61,7 @@ ENDPOINTS: dict[str, tuple[Any, ...]] = {
     "_get_program": (1,),
     "_sandbox_info": (),
     "_list_controllers": (),
+    "_list_planners": (),
     "_me": (),
     "_list_users": (),
     "_create_user": ("u", False),
@@ -68,7 +69,10 @@ ENDPOINTS: dict[str, tuple[Any, ...]] = {
 
 #: fields the server sends that the SDK leaves out on purpose: schema -> {field: why}
 NOT_EXPOSED: dict[str, dict[str, str]] = {
-    "Page_ControllerPublic_": {"count": "list_controllers() returns the list"},
+    "PluginPage_ControllerPublic_": {"count": "list_controllers() returns the list",
+                                     "load_errors": "plugin_load_errors() reads them"},
+    "PluginPage_PlannerPublic_": {"count": "list_planners() returns the list",
+                                  "load_errors": "plugin_load_errors() reads them"},
     "ObstacleTrackPublic": {"index": "tracks[k] is moving_obstacles[k]", "count": "len(tracks[k])"},
     "RunObstaclesPublic": {"columns": "always t, x, y, theta: the array's columns"},
     "RunPosesPublic": {"run_id": "the caller's own argument", "count": "len() of the array"},
