@@ -385,34 +385,17 @@ def test_export_ompl_command_appends_replaces_and_refuses(capsys, monkeypatch, s
 
 @pytest.fixture(scope="module")
 def ompl_db(tmp_path_factory) -> Path:
-    """A database OMPL's real tools made: its Benchmark class (RRTConnect, and RRT* reporting progress) on the
-    room's plan A as a 2-D point problem with twb's obstacles, its log read by ompl_benchmark_statistics."""
+    """A database OMPL's real tools made, as docs/study.md does: examples/ompl_room_benchmark.py runs OMPL's
+    Benchmark class (RRTConnect, and RRT* reporting progress) on the room's plan A, ompl_benchmark_statistics
+    reads its log."""
     pytest.importorskip("ompl", reason="the ompl package is not installed (pip install -e '.[ompl]')")
     d = tmp_path_factory.mktemp("ompl")
-    script = f"""
-import sys
-from ompl import base as ob, geometric as og, tools as ot
-from planners import load_environment
-from planners.geometry import distance_to_obstacles
-import numpy as np, json
-env = load_environment(json.load(open({str(Path(__file__).resolve().parents[1] / 'planners/data/room.json')!r})))
-space = ob.RealVectorStateSpace(2)
-bounds = ob.RealVectorBounds(2); bounds.setLow(0.0); bounds.setHigh(1.8); space.setBounds(bounds)
-ss = og.SimpleSetup(space)
-ss.setStateValidityChecker(lambda s: float(distance_to_obstacles(env, np.array([[s[0], s[1]]]))[0]) > 0.045)
-start, goal = space.allocState(), space.allocState()
-start[0], start[1], goal[0], goal[1] = 0.3, 0.3, 1.5, 1.5
-ss.setStartAndGoalStates(start, goal)
-b = ot.Benchmark(ss, "room-A")
-si = ss.getSpaceInformation()
-b.addPlanner(og.RRTConnect(si)); b.addPlanner(og.RRTstar(si))
-b.benchmark(ot.Request(0.5, 1024.0, 3, 0.01, False, False, True))
-b.saveResultsToFile("ompl.log")
-"""
-    r = subprocess.run([sys.executable, "-c", script], cwd=d, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0 and (d / "ompl.log").exists(), r.stderr[-2000:]
+    example = Path(__file__).resolve().parents[1] / "examples" / "ompl_room_benchmark.py"
+    r = subprocess.run([sys.executable, str(example), "--runs", "3", "--time", "0.5"], cwd=d, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0 and "wrote room-A.log" in r.stdout, r.stderr[-2000:]
     r = subprocess.run([sys.executable, "-m", "ompl.ompl_benchmark_statistics", "-d", str(d / "ompl.db"),
-                        str(d / "ompl.log")], capture_output=True, text=True, timeout=120)
+                        str(d / "room-A.log")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     return d / "ompl.db"
 
@@ -479,12 +462,16 @@ def test_appending_to_omplss_real_database_and_ompls_script_appending_to_ours(st
     done = export_ompl(study, db, mode="append")
     assert_kept(before, table_rows(db))
     assert done.runs_before == 6 and done.version.startswith("OMPL ") and done.experiments == {"room-A": "room-A"}
+    # the example's state clearance is the export's: the two planners' solution_clearance are one quantity
+    clearance = dict(query(db, "SELECT p.name LIKE 'geometric_%', avg(r.solution_clearance) FROM runs r "
+                               "JOIN plannerConfigs p ON p.id = r.plannerid GROUP BY 1"))
+    assert all(0.045 < c < 0.5 for c in clearance.values()) and len(clearance) == 2
     # the other way round: twb's database first, OMPL's log appended by its own script
     ours = tmp_path / "ours.db"
     export_ompl(study, ours, version=done.version)
     mine = table_rows(ours)
     r = subprocess.run([sys.executable, "-m", "ompl.ompl_benchmark_statistics", "-a", "-d", str(ours),
-                        str(ompl_db.with_name("ompl.log"))], capture_output=True, text=True, timeout=120)
+                        str(ompl_db.with_name("room-A.log"))], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert_kept(mine, table_rows(ours))
     assert query(ours, "SELECT count(*) FROM runs") == [(26,)]
