@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client_sdk.study import OmplExportError, PlannerStatus, StudyData, StudySpec, export_ompl, load_study
+from client_sdk.study import OmplExportError, PlannerStatus, StudyData, StudySpec, export_ompl
 from client_sdk.study._ompl import OUTCOME_ENUM, STATUS_DESCRIPTIONS, ompl_clearance, ompl_smoothness
+from contract.vocabulary import TERMINAL, RunStatus
 from planners import load_environment, plan_path
 from sdk_helpers import invoke
 
@@ -318,8 +319,12 @@ def test_an_existing_database_is_never_deleted_unless_asked(study, tmp_path):
     with pytest.raises(OmplExportError, match="exists: --append .* --replace"):
         export_ompl(study, db)
     assert table_rows(db) == before
+    with pytest.raises(OmplExportError, match="no problem 'blocks-B'"):  # a replacement that fails: the old kept
+        export_ompl(study, db, mode="replace", experiment={"blocks-B": "X"})
+    assert table_rows(db) == before and sorted(f.name for f in tmp_path.iterdir()) == ["ompl.db"]
     export_ompl(study, db, mode="replace")
     assert query(db, "SELECT count(*) FROM runs") == [(20,)]
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["ompl.db"]
 
 
 @pytest.mark.parametrize("make, message", [
@@ -350,7 +355,8 @@ def test_a_database_of_twbs_earlier_export_is_refused_with_the_way_out(study, tm
     ompl_reference_db(db)
     con = sqlite3.connect(db)
     con.execute("DELETE FROM enums")
-    con.executemany("INSERT INTO enums VALUES ('status', ?, ?)", enumerate(["completed", "failed", "error"]))
+    old_codes = [s.value for s in RunStatus if s in TERMINAL]  # the status enum twb's export used to write
+    con.executemany("INSERT INTO enums VALUES ('status', ?, ?)", enumerate(old_codes))
     con.commit()
     con.close()
     with pytest.raises(OmplExportError, match=r"value 0 is 'completed', OMPL's is 'Unknown status' .*--replace"):

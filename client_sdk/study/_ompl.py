@@ -208,7 +208,7 @@ def planner_status(row: Mapping[str, Any], experiment: Optional[Mapping[str, Any
 
 
 def _fleet_planned(experiment: Mapping[str, Any]) -> bool:
-    paths = experiment.get("planned_paths")
+    paths = experiment.get("planned_paths") or []
     return bool(experiment.get("robots")) and bool(paths) and all(p is not None for p in paths)
 
 
@@ -431,17 +431,18 @@ def export_ompl(data: StudyData, db_path: str | Path, *, mode: Mode = "create",
     if exists and not path.is_file():
         raise OmplExportError(f"{path} is not a file")
     path.parent.mkdir(parents=True, exist_ok=True)
-    if exists and mode == "replace":
-        path.unlink()
+    # a replaced database is written beside it and moved over it at the end: a failed export keeps the old one
+    target = path.with_name(f".{path.name}.twb-export") if exists and mode == "replace" else path
+    if target != path:
+        target.unlink(missing_ok=True)
         exists = False
-    con = sqlite3.connect(path, isolation_level=None)  # one explicit transaction: all of it or nothing
+    con = sqlite3.connect(target, isolation_level=None)  # one explicit transaction: all of it or nothing
     done: Optional[OmplExport] = None
     try:
         con.execute("PRAGMA FOREIGN_KEYS = ON")
         con.execute("BEGIN")
         done = _write(data, con, path, exists, experiment, version)
         con.execute("COMMIT")
-        return done
     except sqlite3.DatabaseError as exc:
         raise OmplExportError(f"{path}: {exc}; nothing was written") from None
     finally:
@@ -449,7 +450,10 @@ def export_ompl(data: StudyData, db_path: str | Path, *, mode: Mode = "create",
             con.execute("ROLLBACK")
         con.close()
         if done is None and not exists:
-            path.unlink(missing_ok=True)  # the file this call created and could not fill
+            target.unlink(missing_ok=True)  # the file this call created and could not fill
+    if target != path:
+        target.replace(path)
+    return done
 
 
 def _write(data: StudyData, con: sqlite3.Connection, path: Path, exists: bool,
@@ -482,14 +486,14 @@ def _write(data: StudyData, con: sqlite3.Connection, path: Path, exists: bool,
     counts["enums"] += added
 
     exps = {e["experiment_id"]: e for e in data.experiments}
-    envs = {name: env for name, env in data.environments.items()}
+    envs = dict(data.environments)
     values: list[dict[str, Any]] = []
     for r in data.rows:
         e = exps.get(r.get("experiment_id")) or {}
         status = planner_status(r, e)
-        v = _ompl_values(r, e, envs.get(r.get("environment")), status)
-        outcome = r.get("outcome")
-        if outcome not in outcome_codes and outcome is not None:
+        v = _ompl_values(r, e, envs.get(str(r.get("environment"))), status)
+        outcome = str(r.get("outcome") or "")
+        if outcome and outcome not in outcome_codes:
             outcome_codes[outcome] = max(outcome_codes.values(), default=-1) + 1
             c.execute("INSERT INTO enums VALUES (?, ?, ?)", (OUTCOME, outcome_codes[outcome], outcome))
             counts["enums"] += 1
@@ -530,7 +534,7 @@ def _write(data: StudyData, con: sqlite3.Connection, path: Path, exists: bool,
                    str(data.meta.get("server", "")),
                    "Teleworkbench emulator (sim: ideal robot; twb: emulated field robot)",
                    _ompl_date(data.meta.get("started_at")), str(data.spec.seed), setup))
-        exp_ids[(env, plan)] = c.lastrowid
+        exp_ids[(env, plan)] = int(c.lastrowid or 0)
         counts["experiments"] += 1
 
     planner_ids: dict[tuple[str, str], int] = {}
@@ -549,7 +553,7 @@ def _write(data: StudyData, con: sqlite3.Connection, path: Path, exists: bool,
                 planner_ids[pk] = found[0]
                 continue
             c.execute("INSERT INTO plannerConfigs (name, settings) VALUES (?, ?)", (name, settings))
-            planner_ids[pk] = c.lastrowid
+            planner_ids[pk] = int(c.lastrowid or 0)
             counts["plannerConfigs"] += 1
 
     cols = list(types)
