@@ -522,3 +522,9 @@ def test_planner_arena_loads_and_plots_both(study, ompl_db, tmp_path):
     assert set(progress["planner"].cast(pl.String).to_list()) == {"RRTstar"}
     (p9.ggplot(progress, p9.aes(x="time", y="best cost", color="planner", fill="planner"))
      + p9.geom_smooth(na_rm=True, method="loess", span=0.1, se=False)).draw()
+    # twb's database alone: its Performance page as above, an empty Progress page (nothing to fit)
+    export_ompl(study, tmp_path / "twb.db")
+    alone = load_database(tmp_path / "twb.db")
+    assert alone["progress"].is_empty() and alone["runs"].height == 20
+    boxplot(alone["runs"], "time", [], "o", False).draw()
+    enums_plot(alone["runs"], alone["enums"].filter(pl.col("name") == "status"), []).draw()
