@@ -185,28 +185,53 @@ def test_ompl_database_is_readable(study_dir, tmp_path):
     con = sqlite3.connect(study_dir / "study.db")
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     assert {"experiments", "plannerConfigs", "enums", "runs", "progress"} <= tables
-    assert con.execute("SELECT name, runcount FROM experiments").fetchall() == [("room-A", 1)]
+    assert con.execute("SELECT name, runcount, version FROM experiments").fetchall() == [
+        ("room-A", 1, "Teleworkbench 0.1.0")]
     assert sorted(r[0] for r in con.execute("SELECT name FROM plannerConfigs")) == [
         "fm2_sim", "fm2_twb", "fmm_sim", "fmm_twb"]
     cols = {r[1]: r[2] for r in con.execute("PRAGMA table_info(runs)")}
     assert cols["time"] == "REAL" and cols["solved"] == "BOOLEAN" and cols["status"] == "ENUM"
-    assert cols["length_m"] == "REAL" and cols["goal_reached"] == "BOOLEAN"
-    rows = con.execute("SELECT p.name, r.solved, r.length_m, r.solution_length FROM runs r "
+    assert cols["twb_outcome"] == "ENUM" and cols["twb_length_m"] == "REAL" and cols["twb_goal_reached"] == "BOOLEAN"
+    rows = con.execute("SELECT p.name, r.solved, r.status, r.twb_length_m, r.solution_length, r.time, "
+                       "r.solution_smoothness, r.solution_clearance, r.twb_planned_length_m FROM runs r "
                        "JOIN plannerConfigs p ON r.plannerid = p.id").fetchall()
-    assert len(rows) == 4 and all(solved == 1 and length > 1.5 and sol > 1.5 for _, solved, length, sol in rows)
-    assert con.execute("SELECT count(*) FROM progress").fetchone()[0] > 4
-    assert con.execute("SELECT description FROM enums WHERE name='status' AND value=0").fetchone() == ("completed",)
+    assert len(rows) == 4
+    for _, solved, status, length, sol, t, smooth, clear, planned in rows:
+        assert solved == 1 and status == 6 and length > 1.5 and sol == planned > 1.5 and t > 0  # OMPL: exact
+        assert smooth >= 0 and 0 < clear < 0.9  # PathGeometric's, of the planned path
+    assert con.execute("SELECT count(*) FROM progress").fetchone()[0] == 0  # the planners are not anytime
+    assert con.execute("SELECT description FROM enums WHERE name='status' AND value=6").fetchone() == ("Exact solution",)
+    assert con.execute("SELECT description FROM enums WHERE name='twb_outcome' AND value=0").fetchone() == ("success",)
     con.close()
-    counts = export_ompl(load_study(study_dir), tmp_path / "again.db", progress=False)
-    assert counts["runs"] == 4 and counts["progress"] == 0
+    done = export_ompl(load_study(study_dir), tmp_path / "again.db")
+    assert done["runs"] == 4 and done["progress"] == 0
 
 
 def test_export_ompl_command(capsys, monkeypatch, study_dir, tmp_path):
     r = invoke(capsys, monkeypatch, "export-ompl", str(study_dir), "--out", str(tmp_path / "x.db"))
     assert r.returncode == 0, r.stderr
-    assert "1 experiments, 4 planner configurations, 4 runs" in r.stdout
+    assert "1 experiments (room-A), 4 planner configurations, 4 runs added; version 'Teleworkbench 0.1.0'" in r.stdout
+    r = invoke(capsys, monkeypatch, "export-ompl", str(study_dir))  # study.db is there: kept
+    assert r.returncode == 2 and "study.db exists: --append adds the runs to it" in r.stderr
+    r = invoke(capsys, monkeypatch, "export-ompl", str(study_dir), "--out", str(tmp_path / "x.db"), "--replace")
+    assert r.returncode == 0 and "4 runs added;" in r.stdout
     r = invoke(capsys, monkeypatch, "export-ompl", str(tmp_path))
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "is not a study directory" in r.stderr
+
+
+def test_twb_study_keeps_an_existing_ompl_database(capsys, monkeypatch, testbed, tmp_path):
+    db = tmp_path / "ompl.db"
+    db.write_text("someone's benchmark\n")
+    spec = tmp_path / "tiny.json"
+    spec.write_text(json.dumps({**SMALL, "name": "tiny", "planners": ["fmm"], "modes": ["sim"]}))
+    r = invoke(capsys, monkeypatch, "study", str(spec), "--out", str(tmp_path / "out"), "--ompl", str(db),
+               "--url", testbed.url, "--token", testbed.token, "--no-progress")
+    assert r.returncode == 2 and "ompl.db exists: --ompl-append adds the runs to it" in r.stderr
+    r = invoke(capsys, monkeypatch, "study", str(spec), "--out", str(tmp_path / "out"), "--ompl", str(db),
+               "--ompl-append", "--url", testbed.url, "--token", testbed.token, "--no-progress")
+    assert r.returncode == 2 and "ompl.db is not an SQLite database" in r.stderr
+    assert not (tmp_path / "out" / "runs.csv").exists()  # refused before anything ran
+    assert db.read_text() == "someone's benchmark\n"
 
 
 def test_paper_spec_is_48_runs():

@@ -298,12 +298,16 @@ def test_a_fleet_studys_poses_plans_and_figures(fleet_dir):
 def test_a_fleet_study_exports_to_ompl_without_progress(fleet_dir, tmp_path):
     import sqlite3
 
-    counts = export_ompl(load_study(fleet_dir), tmp_path / "fleet.db")
-    assert counts["runs"] == 16 and counts["progress"] == 0  # a fleet has a goal per robot, not one
+    done = export_ompl(load_study(fleet_dir), tmp_path / "fleet.db")
+    assert done["runs"] == 16 and done["progress"] == 0
     con = sqlite3.connect(tmp_path / "fleet.db")
     setup = json.loads(con.execute("SELECT setup FROM experiments WHERE name = 'swap-circle-4'").fetchone()[0])
+    # the fleet's plan is every robot's path: solved where all were planned, no one path's length
+    runs = con.execute("SELECT status, solved, solution_length FROM runs").fetchall()
     con.close()
     assert setup["robots"] == circle_robots(4, 0.6, (0.9, 0.9))
+    assert (6, 1) in {r[:2] for r in runs} and all(solved == (status == 6) for status, solved, _ in runs if status)
+    assert all(length is None for *_, length in runs)
 
 
 #: one fleet of two in the empty sub-field and one among the moving discs, simulation and field, once each

@@ -34,7 +34,9 @@ def study(
     spec: Annotated[str, typer.Argument(help="'paper' (the paper's 48 runs), 'noise' (sensor noise and control inaccuracies, 80 field runs), 'controllers' (every built-in controller, 64 runs), 'fleet' (prioritized vs uncoordinated FMM on 2, 4, 8 robots, 72 runs) or a study file (JSON; see docs/study.md).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory (created).")] = Path("study"),
     embedded: Annotated[bool, typer.Option("--embedded", help="Start a testbed of our own (twb up --time-scale max) in OUT/testbed and stop it after.")] = False,
-    ompl: Annotated[Optional[Path], typer.Option("--ompl", help="Also write an OMPL benchmark database (Planner Arena) here.")] = None,
+    ompl: Annotated[Optional[Path], typer.Option("--ompl", help="Also write an OMPL benchmark database (Planner Arena) here; an existing one only with --ompl-append or --ompl-replace.")] = None,
+    ompl_append: Annotated[bool, typer.Option("--ompl-append", help="Add the study's runs to the existing OMPL database --ompl names (e.g. one OMPL's tools wrote; its runs are kept).")] = False,
+    ompl_replace: Annotated[bool, typer.Option("--ompl-replace", help="Overwrite the database --ompl names if it exists.")] = False,
     sim_robots: Annotated[int, typer.Option(help="With --embedded: size of the simulation pool.", min=1, max=64)] = 4,
     seed: Annotated[Optional[int], typer.Option(help="The study's seed (planner sampling, every run's noise); "
                                                      "default: the study file's (paper: 0).", min=0)] = None,
@@ -56,6 +58,7 @@ def study(
     from client_sdk.study import load_spec
 
     study_spec = load_spec(spec)  # bad files fail before anything starts
+    ompl_mode = _ompl_mode(ompl, ompl_append, ompl_replace, "--ompl-")  # so does a database it would not write
     if seed is not None:
         study_spec = dataclasses.replace(study_spec, seed=seed)
     out.mkdir(parents=True, exist_ok=True)
@@ -69,7 +72,7 @@ def study(
             data = _collect(study_spec, u, tok, progress, timeout, out)
     else:
         data = _collect(study_spec, url, token, progress, timeout, out)
-    _write(data, out, ompl, progress)
+    _write(data, out, ompl, ompl_mode, progress)
     code = _outcome_line(data, study_spec, time.monotonic() - t0, out)
     _print_findings(data, out)
     if code:
@@ -119,7 +122,31 @@ def _collect(spec, url, token, progress, timeout, out):  # type: ignore[no-untyp
             fail(f"{where}: nothing was run ({len(exc.reasons)} reasons above)")
 
 
-def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # type: ignore[no-untyped-def]
+def _ompl_mode(db: Optional[Path], append: bool, replace: bool, flag: str = "--") -> str:
+    """How to write the OMPL database ``db``: ``create`` (it must not exist), ``append`` or ``replace``."""
+    if append and replace:
+        fail(f"give either {flag}append or {flag}replace, not both")
+    if db is None:
+        if append or replace:
+            fail(f"{flag}append and {flag}replace need --ompl FILE")
+        return "create"
+    if db.exists() and not (append or replace):
+        fail(f"{db} exists: {flag}append adds the runs to it (its runs are kept), {flag}replace overwrites it")
+    if append and db.exists():
+        from client_sdk.study._ompl import check_ompl_database
+
+        check_ompl_database(db)  # not OMPL's: refused now, not after the study ran
+    return "append" if append else "replace" if replace else "create"
+
+
+def _print_export(done, progress: bool = True) -> None:  # type: ignore[no-untyped-def]
+    """The notes of an OMPL export (names the database lacks, the name it took) on stderr."""
+    if progress:
+        for note in done.notes:
+            typer.echo(f"twb: note: {note}", err=True)
+
+
+def _write(data, out: Path, ompl: Optional[Path], ompl_mode: str, progress: bool) -> None:  # type: ignore[no-untyped-def]
     from client_sdk.study import export_ompl as _export
     from client_sdk.study import write_findings, write_report
 
@@ -130,9 +157,12 @@ def _write(data, out: Path, ompl: Optional[Path], progress: bool) -> None:  # ty
     write_report(data, out)
     write_findings(data, out)  # none for a fleet: the paper's findings concern one robot's paths
     if ompl is not None:
-        counts = _export(data, ompl)
+        done = _export(data, ompl, mode=ompl_mode)  # type: ignore[arg-type]
+        _print_export(done, progress)
         if progress:
-            typer.echo(f"OMPL database {ompl}: {counts['runs']} runs, {counts['experiments']} experiments", err=True)
+            typer.echo(f"OMPL database {ompl}: {done['runs']} runs, {done['experiments']} experiments"
+                       + (f" added to its {done.runs_before} runs" if done.runs_before else "")
+                       + f" (version {done.version!r})", err=True)
 
 
 def _print_findings(data, out: Path) -> None:  # type: ignore[no-untyped-def]
@@ -160,19 +190,46 @@ def _print_findings(data, out: Path) -> None:  # type: ignore[no-untyped-def]
 def export_ompl(
     study_dir: Annotated[Path, typer.Argument(help="A study directory written by `twb study`.")],
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="SQLite file (default: STUDY_DIR/study.db).")] = None,
+    append: Annotated[bool, typer.Option("--append", help="Add the study's runs to an existing OMPL benchmark database (one OMPL's ompl_benchmark_statistics.py wrote, or this command): every run it has is kept, its experiment name and version are used so Planner Arena plots both together.")] = False,
+    replace: Annotated[bool, typer.Option("--replace", help="Overwrite the database if it exists.")] = False,
+    experiment: Annotated[Optional[list[str]], typer.Option("--experiment", help="Experiment name to write a problem under: NAME (a one-problem study) or PROBLEM=NAME (e.g. room-A=MyProblem; repeat for more). Default: the problem's name (room-A); appending a one-problem study to a database of one experiment, that one's.")] = None,
+    version: Annotated[Optional[str], typer.Option("--version", help="The experiments' version field (default: the appended database's, else 'Teleworkbench <version>'); Planner Arena plots one version at a time, e.g. 'OMPL 2.0.1'.")] = None,
     report: Annotated[bool, typer.Option("--report", help="Also redraw summary.md, figures, report.html and the findings.")] = False,
 ) -> None:
-    """Export a study to OMPL's benchmark database (SQLite) for Planner Arena; works offline."""
+    """Export a study to OMPL's benchmark database (SQLite) for Planner Arena; works offline.
+
+    An existing database is kept: --append adds the study to it, --replace overwrites it; without either the
+    command refuses.  Exit status 2 when the database is not OMPL's or the names are ambiguous (nothing written).
+    """
     from client_sdk.study import export_ompl as _export
     from client_sdk.study import load_study, write_report
 
+    path = out or study_dir / "study.db"
+    mode = _ompl_mode(path, append, replace)
     data = load_study(study_dir)
     if report:
         from client_sdk.study import write_findings
 
         write_report(data, study_dir)
         write_findings(data, study_dir)
-    path = out or study_dir / "study.db"
-    counts = _export(data, path)
-    typer.echo(f"{path}: {counts['experiments']} experiments, {counts['plannerConfigs']} planner configurations, "
-               f"{counts['runs']} runs, {counts['progress']} progress rows")
+    done = _export(data, path, mode=mode, experiment=_experiment_names(experiment), version=version)  # type: ignore[arg-type]
+    _print_export(done)
+    kept = f" (kept its {done.runs_before} runs)" if done.runs_before else ""
+    typer.echo(f"{path}: {done['experiments']} experiments ({', '.join(dict.fromkeys(done.experiments.values()))}), "
+               f"{done['plannerConfigs']} planner configurations, {done['runs']} runs added{kept}; "
+               f"version {done.version!r}")
+
+
+def _experiment_names(values: Optional[list[str]]) -> Optional[str | dict[str, str]]:
+    """``--experiment`` values: one NAME, or PROBLEM=NAME pairs."""
+    if not values:
+        return None
+    if len(values) == 1 and "=" not in values[0]:
+        return values[0]
+    names: dict[str, str] = {}
+    for v in values:
+        problem, sep, name = v.partition("=")
+        if not sep or not problem or not name:
+            fail(f"--experiment {v!r}: give PROBLEM=NAME (e.g. room-A=MyProblem) when naming several problems")
+        names[problem] = name
+    return names

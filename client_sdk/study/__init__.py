@@ -26,7 +26,7 @@ from ._figure_set import make_figures
 from ._figures import figure_metrics, figure_outcomes, figure_paths, figure_ratios, save_figures
 from ._limits import StudyRefused, check_study
 from ._findings import FINDINGS, Finding, findings_json, findings_markdown, paper_findings, write_findings
-from ._ompl import export_ompl
+from ._ompl import OmplExport, OmplExportError, PlannerStatus, export_ompl
 from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
 from ._fleet import Circle, circle_robots
@@ -72,6 +72,9 @@ __all__ = sorted(
         "check_study",
         "compare",
         "export_ompl",
+        "OmplExport",
+        "OmplExportError",
+        "PlannerStatus",
         "noise_spec",
         "figure_metrics",
         "figure_outcomes",
