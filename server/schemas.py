@@ -256,6 +256,21 @@ class ExperimentCreate(Strict):
     controller_program: Optional[int] = Field(default=None, ge=1, description=(
         "An uploaded program's id that drives the robot along the planned path over its robot port "
         "(T,T,O / T,T,V; docs/controllers.md \"Your own controller program\") instead of `controller`."))
+    label: Optional[str] = Field(default=None, min_length=1, max_length=64, description=(
+        "The configuration's name in comparisons (GET /api/v1/comparisons groups runs by it). Default: the "
+        "planner with the parameters given (`fm2(saturation=0.1)`), `/controller` when not `schema`, "
+        "` · ` and the profile overrides when given."))
+    problem: Optional[str] = Field(default=None, min_length=1, max_length=100, description=(
+        "The problem's name in comparisons (the unit of inference). Default: `<environment> <plan>` when the "
+        "start and goal are one of the environment's plans, else `<environment> (x,y)→(x,y)` (m, to the cm); "
+        "a multi-robot job's `<environment> <n> robots`."))
+
+    @field_validator("label", "problem")
+    @classmethod
+    def _name(cls, v: Optional[str]) -> Optional[str]:
+        if v is not None and (not v.strip() or any(ord(c) < 32 for c in v)):
+            raise ValueError("must be a name: not blank, no control characters")
+        return v
 
     _pose = field_validator("start", "goal")(_check_pose)
     _path = field_validator("path")(_check_path)
@@ -384,6 +399,13 @@ class ExperimentSummary(FromRow):
     controller_program: Optional[int] = Field(
         default=None, validation_alias=AliasChoices("controller_program_id", "controller_program"),
         description="The uploaded program driving the robots (instead of `controller`), if any.")
+    label: str = Field(default="", description="The configuration's name in comparisons (the job's, or derived).")
+    problem: str = Field(default="", description="The problem's name in comparisons (the job's, or derived).")
+
+    @field_validator("label", "problem", mode="before")
+    @classmethod
+    def _names(cls, v: Any) -> Any:
+        return v or ""
     error: str
     created_at: UTCDateTime
     finished_at: Optional[UTCDateTime]
