@@ -19,6 +19,8 @@ from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (iss
 from .status import RunStatus
 
 __all__ = [
+    "ComparisonRow",
+    "ComparisonsPublic",
     "EnvironmentCreate",
     "EnvironmentPublic",
     "ExperimentCreate",
@@ -454,6 +456,108 @@ class NotCancelled(BaseModel):
 class CancelledMany(BaseModel):
     cancelled: list[int] = Field(description="Experiments whose queued runs were cancelled and running ones stopped.")
     not_cancelled: list[NotCancelled]
+
+
+# --------------------------------------------------------------------------- comparisons
+
+
+class ComparedExperiment(BaseModel):
+    """One experiment of a comparison: its label and problem, and the ``configuration`` its runs are compared
+    as (the label, or ``#<id> <label>`` where two selected experiments share the label and the problem)."""
+
+    id: int
+    label: str
+    problem: str
+    configuration: str
+    status: str
+    environment: str
+    planner: Optional[str] = None
+    modes: list[str]
+    repetitions: int
+    seed: int
+    robots: int = Field(description="How many robots (1, or a multi-robot job's).")
+
+
+class SuccessRate(BaseModel):
+    """Successes ``k`` of ``n`` distinct counted runs, the ``rate`` and its Wilson interval (None without runs)."""
+
+    n: int
+    k: int
+    rate: Optional[float] = None
+    ci_low: Optional[float] = None
+    ci_high: Optional[float] = None
+    confidence: float
+
+
+class ConfigurationOutcomes(BaseModel):
+    """How the runs of one configuration in one mode ended, over its experiments (all problems)."""
+
+    configuration: str
+    mode: str
+    experiments: list[int]
+    runs: int
+    counts: dict[str, int] = Field(description="Runs per outcome (success, collision, timeout, ..., error, "
+                                               "cancelled, interrupted, pending).")
+    counted: int = Field(description="Runs that ended in the job's own outcome (success or a failure).")
+    success: SuccessRate = Field(description="The success rate over the distinct counted runs: identical "
+                                             "repetitions of a problem count once (`identical`).")
+    identical: bool
+
+
+class ComparisonRow(BaseModel):
+    """One comparison of configurations ``a`` and ``b`` on ``metric`` in ``mode``: on ``problem``, or pooled
+    over ``n_problems`` problems (``problem`` empty).  The columns of a study's ``comparisons.csv``
+    (``planners.comparisons.COLUMNS``); numbers that are undefined (no test, no interval) are null."""
+
+    metric: str
+    mode: str
+    a: str
+    b: str
+    n_a: int
+    n_b: int
+    mean_a: Optional[float] = None
+    mean_b: Optional[float] = None
+    diff: Optional[float] = Field(default=None, description="a − b (a rate: a fraction); pooled: the mean of the "
+                                                            "problems' differences.")
+    ci_low: Optional[float] = None
+    ci_high: Optional[float] = None
+    test: str
+    p: Optional[float] = None
+    p_holm: Optional[float] = None
+    effect: str
+    effect_size: Optional[float] = None
+    paired: bool
+    runs_a: int
+    runs_b: int
+    family_size: int
+    problem: str
+    n_problems: int
+    favour_a: Optional[int] = None
+    favour_b: Optional[int] = None
+    heterogeneity_i2: Optional[float] = None
+    heterogeneity_p: Optional[float] = None
+    n_needed: Optional[int] = None
+    needed_unit: str
+    note: str
+
+
+class ComparisonsPublic(BaseModel):
+    """``GET /api/v1/comparisons``: the experiments, how each configuration's runs ended, and the comparisons
+    (pooled over problems first, then each problem's, per metric, mode and pair) with how to read them."""
+
+    experiments: list[ComparedExperiment]
+    configurations: list[str]
+    problems: list[str]
+    metrics: list[str] = Field(description="Compared after the success rate (which always comes first).")
+    test: str
+    family: str
+    confidence: float
+    n_resamples: int
+    seed: int
+    min_problems: int = Field(description="Problems needed for a comparison over problems.")
+    outcomes: list[ConfigurationOutcomes]
+    rows: list[ComparisonRow]
+    method: str = Field(description="How to read this.")
 
 
 # --------------------------------------------------------------------------- uploaded programs
