@@ -21,8 +21,10 @@ from planners.comparisons import COLUMNS, compare
 from planners.stats import proportion
 from planners.compared import (COMPARED_METRICS, DIRECTION, enters, flat_metrics, job_configuration, plain,
                                problem_label)
-from servers import TOKEN, serve, wait_for
 from sdk_helpers import invoke, study_process
+from servers import serve, wait_for
+from test_dashboard import OUTPUT, login, no_horizontal_overflow
+from test_dashboard import browser, page  # noqa: F401  (the shared fixtures: Chromium against this module's testbed)
 
 #: three problems (room's plans A and B, and C given here) x two planners, five jittered repetitions in simulation:
 #: repetitions differ, every problem has a bootstrap interval, and there is a verdict over problems
@@ -266,3 +268,118 @@ def test_a_job_without_names_is_named_and_twins_stay_apart(testbed):
     assert not [x for x in r["rows"] if "fmm/pure_pursuit" in (x["a"], x["b"])]
     assert r["metrics"] == list(COMPARED_METRICS) + ["cross_track_error_mean_m", "heading_error_rms_rad",
                                                      "time_to_goal_s", "jerk_linear_rms_m_s3"]
+
+
+# ----------------------------------------------------------------------------- the dashboard shows the same numbers
+
+
+def js_num(v, digits: int = 3) -> str:
+    """dom.js num(): fixed decimals, exponential below 10^-digits and from 1e5, "–" for none."""
+    if v is None:
+        return "–"
+    a = abs(v)
+    if a < 1e-12:
+        return f"{0:.{digits}f}"
+    if a < 10 ** -digits or a >= 1e5:
+        mantissa, exp = f"{v:.2e}".split("e")
+        return f"{mantissa}e{'+' if int(exp) >= 0 else '-'}{abs(int(exp))}"
+    return f"{v:.{digits}f}"
+
+
+def js_round(x: float) -> int:
+    """JavaScript's Math.round: halves up."""
+    return math.floor(x + 0.5)
+
+
+def pct(v) -> str:  # type: ignore[no-untyped-def]
+    return "–" if v is None else f"{js_round(100 * v)} %"
+
+
+def points(v: float) -> str:
+    return f"{'+' if v > 0 else ''}{js_round(100 * v)}"
+
+
+def fmt_p(p) -> str:  # type: ignore[no-untyped-def]
+    """compare.js fmtP: two significant digits (Number.toPrecision(2)), "< 0.001" below."""
+    if p is None:
+        return "–"
+    if p < 0.001:
+        return "< 0.001"
+    exp = int(f"{p:.1e}".split("e")[1])
+    return f"{p:.{max(0, 1 - exp)}f}"
+
+
+TEST_WORDS = {"paired-t": "paired t", "welch-t": "Welch's t", "fisher-exact": "Fisher's exact",
+              "problem-t": "t over problems", "": "–"}
+
+CELLS = """() => [...document.querySelectorAll('#compare-pooled tbody tr, #compare-differences tbody tr')].map((tr) => ({
+  ...tr.dataset,
+  cells: Object.fromEntries([...tr.querySelectorAll('td')].map((td) => [td.dataset.k, {text: td.textContent, v: td.dataset.v ?? null}])),
+}))"""
+
+
+def shown(row: dict, unit: str) -> dict[str, str]:
+    """A comparisons.csv row as the compare page formats it."""
+    value = {k: (None if row[k] == "" else float(row[k])) for k in
+             ("mean_a", "mean_b", "diff", "ci_low", "ci_high", "p", "p_holm", "heterogeneity_i2")}
+    rate = row["metric"] == "success_rate"
+    out = {"mean_a": pct(value["mean_a"]) if rate else js_num(value["mean_a"]),
+           "mean_b": pct(value["mean_b"]) if rate else js_num(value["mean_b"]),
+           "diff": "–" if value["diff"] is None else f"{points(value['diff'])} points" if rate
+           else f"{js_num(value['diff'])} {unit}",
+           "ci": "–" if value["ci_low"] is None else
+           f"[{points(value['ci_low'])}, {points(value['ci_high'])}]" if rate else
+           f"[{js_num(value['ci_low'])}, {js_num(value['ci_high'])}]",
+           "p": fmt_p(value["p"]), "p_holm": fmt_p(value["p_holm"]), "test": TEST_WORDS[row["test"]],
+           "note": row["note"]}
+    if row["problem"]:
+        out.update(n_a=row["n_a"], n_b=row["n_b"])
+    else:
+        out.update(favour=f"{row['favour_a']} / {row['favour_b']} of {row['n_problems']}",
+                   i2=pct(value["heterogeneity_i2"]))
+    return out
+
+
+UNITS = {"length_m": "m", "execution_time_s": "s", "average_speed_m_s": "m/s", "deviation_mean_m": "m",
+         "smoothness_rad": "rad", "clearance_min_m": "m"}
+
+
+def test_the_dashboard_compare_page_shows_the_studys_numbers(page, testbed, study):
+    """The compare page of the study's experiments in a real browser: every row of comparisons.csv, pooled and
+    per problem, with its numbers formatted as the page formats them (and the raw numbers behind them equal
+    to full precision); the outcomes as outcomes.csv has them."""
+    from playwright.sync_api import expect
+
+    out, ids = study
+    login(page, testbed.url)
+    page.goto(f"{testbed.url}/#/compare?ids={','.join(map(str, ids))}")
+    expect(page.locator("#compare-pooled")).to_be_visible()
+    expect(page.locator("#compare-no-verdict")).to_have_count(0)
+    expect(page.locator("#compare-differences section.compare-problem h3")).to_have_text(
+        ["On room A", "On room B", "On room C"])
+    with open(out / "comparisons.csv", newline="") as f:
+        expected = list(csv.DictReader(f))
+    seen = page.evaluate(CELLS)
+    key = ("metric", "mode", "a", "b", "problem")
+    # the pooled rows first (the server's order within them), then each problem's
+    assert [tuple(tr[k] for k in key) for tr in seen] == [tuple(r[k] for k in key) for r in expected if not r["problem"]] \
+        + [tuple(r[k] for k in key) for p in ("room A", "room B", "room C") for r in expected if r["problem"] == p]
+    rows = {tuple(r[k] for k in key): r for r in expected}
+    for tr in seen:
+        row = rows[tuple(tr[k] for k in key)]
+        texts = {k: c["text"] for k, c in tr["cells"].items()}
+        want = shown(row, UNITS.get(row["metric"], ""))
+        assert {k: texts[k] for k in want} == want, row
+        for column in ("mean_a", "mean_b", "diff", "p", "p_holm"):
+            raw = tr["cells"][column]["v"]
+            assert (raw is None and row[column] == "") or float(raw) == float(row[column]), (column, row)
+    with open(out / "outcomes.csv", newline="") as f:
+        for o in csv.DictReader(f):
+            cell = page.locator(f'#compare-outcomes tr[data-configuration="{o["configuration"]}"][data-mode="{o["mode"]}"] '
+                                'td[data-rate]')
+            lo, hi = float(o["ci_low"]), float(o["ci_high"])
+            expect(cell).to_have_text(f"{o['success']}/{o['distinct_runs']} ({pct(lo)}–{pct(hi)})")
+            assert float(cell.get_attribute("data-ci-low")) == lo and float(cell.get_attribute("data-ci-high")) == hi
+    page.screenshot(path=OUTPUT / "compare-study.png", full_page=True)
+    assert no_horizontal_overflow(page)
+    assert page.console.errors == []
