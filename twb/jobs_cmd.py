@@ -502,11 +502,13 @@ def _print_rows(con: Any, title: str, rows: list[Any], wide: bool, *, pooled: bo
 
     def build(kept: list[str]) -> Any:
         table = compact_table(kept, title, numeric=("mean a", "mean b", "a − b", "95% CI", "p", "Holm p", "I²"))
+        if "note" in kept:  # the note wraps rather than widens the table: it says why a number is missing
+            table.columns[kept.index("note")].max_width = 44
         for row in table_rows:
             table.add_row(*(row[c] for c in kept))
         return table
 
-    optional = [c for c in ("note", "test", "mean b", "mean a", "I²", "Holm p") if c in cols]
+    optional = [c for c in ("test", "mean b", "mean a", "I²", "Holm p", "note") if c in cols]
     print_fitted(con, build, cols, optional, wide)
 
 
