@@ -19,7 +19,6 @@ computation; the statistics are :mod:`planners.comparisons`'.
 from __future__ import annotations
 
 import math
-from itertools import combinations
 from operator import itemgetter
 from typing import Any, Hashable, Iterable, Mapping, NamedTuple, Optional, Sequence
 
@@ -33,7 +32,7 @@ from .comparisons import Comparisons, compare, distinct_runs, problem_of
 from .stats import MIN_PROBLEMS, proportion
 
 __all__ = ["COMPARED_METRICS", "CONTROLLER_METRICS", "DEFAULT_CONTROLLER", "DIRECTION", "FLEET_COMPARED",
-           "FLEET_METHOD", "FLEET_METRICS", "LABEL_LENGTH", "METHOD", "PROBLEM_LENGTH", "FleetMetric",
+           "FLEET_KINDS", "FLEET_METHOD", "FLEET_METRICS", "LABEL_LENGTH", "METHOD", "PROBLEM_LENGTH", "FleetMetric",
            "compare_runs", "compared_over", "comparisons_job", "configuration_name", "default_metrics", "enters",
            "flat_metrics", "fleet_outcome", "fleet_row", "job_configuration", "measured", "outcome_summaries",
            "plain", "problem_label", "shorten"]
@@ -349,14 +348,12 @@ def plain(value: Any) -> Any:
 def comparisons_job(rows: Sequence[Mapping[str, Any]], metrics: Optional[Sequence[str]], options: Mapping[str, Any]
                     ) -> dict[str, Any]:
     """The comparisons of runs whose problem is their ``problem`` key, as plain data for a worker process:
-    ``{"rows": [...], "outcomes": [...], "problems": [...]}`` (rows' keys :data:`~planners.comparisons.COLUMNS`;
-    NaN as None).  ``options``: ``fleet``, ``controllers``, ``confidence``, ``family``, ``test``,
+    ``{"rows": [...], "outcomes": [...], "problems": [...]}`` (rows' keys :data:`~planners.comparisons.COLUMNS`,
+    NaN as None; outcomes :func:`outcome_summaries`; problems in the order first seen).  ``options``: ``fleet``, ``controllers``, ``confidence``, ``family``, ``test``,
     ``n_resamples``, ``seed`` of :func:`compare_runs`."""
     key = itemgetter("problem")
     opts = dict(options)
     comps = compare_runs(rows, metrics, problem=key, **opts)
-    configs = list(dict.fromkeys(r["configuration"] for r in rows))
     return {"rows": plain(comps.rows()),
             "outcomes": plain(outcome_summaries(rows, problem=key, confidence=opts.get("confidence", 0.95))),
-            "configurations": configs, "problems": list(dict.fromkeys(key(r) for r in rows)),
-            "pairs": [list(p) for p in combinations(configs, 2)]}
+            "problems": list(dict.fromkeys(key(r) for r in rows))}

@@ -79,8 +79,8 @@ _NOT_METRICS = {"configuration", "mode", "repetition", "status", "outcome", "pro
 
 @dataclass(frozen=True)
 class ComparisonInput:
-    """What the comparison is of: the experiments' entries, the runs' rows, the metrics and whether fleets
-    and controllers are compared."""
+    """What the comparison is of: the experiments' entries (in the order given), the runs' rows and the
+    metrics to compare after the success rate."""
 
     experiments: list[dict[str, Any]]
     rows: list[dict[str, Any]]
