@@ -349,8 +349,9 @@ def comparisons_job(rows: Sequence[Mapping[str, Any]], metrics: Optional[Sequenc
                     ) -> dict[str, Any]:
     """The comparisons of runs whose problem is their ``problem`` key, as plain data for a worker process:
     ``{"rows": [...], "outcomes": [...], "problems": [...]}`` (rows' keys :data:`~planners.comparisons.COLUMNS`,
-    NaN as None; outcomes :func:`outcome_summaries`; problems in the order first seen).  ``options``: ``fleet``, ``controllers``, ``confidence``, ``family``, ``test``,
-    ``n_resamples``, ``seed`` of :func:`compare_runs`."""
+    NaN as None; outcomes :func:`outcome_summaries`; problems in the order first seen).  ``options``:
+    ``fleet``, ``controllers``, ``confidence``, ``family``, ``test``, ``n_resamples``, ``seed`` of
+    :func:`compare_runs`."""
     key = itemgetter("problem")
     opts = dict(options)
     comps = compare_runs(rows, metrics, problem=key, **opts)

@@ -99,7 +99,8 @@ def _problem(exp: Experiment) -> str:
                                         start=exp.start, goal=exp.goal, robots=exp.robots)
 
 
-def comparison_input(session: Session, user: Principal, ids: Sequence[int], metrics: list[str] | None) -> ComparisonInput:
+def comparison_input(session: Session, user: Principal, ids: Sequence[int],
+                     metrics: list[str] | None) -> ComparisonInput:
     """The experiments ``ids`` (the user's, or anyone's for an admin: NotFound naming the first that is not)
     with their runs as rows, and the metrics to compare (``metrics``, checked against the metrics the runs
     have and the known ones: Invalid otherwise; None: :func:`planners.compared.default_metrics`)."""

@@ -441,7 +441,8 @@ def _rate_text(o: Any) -> str:
         return f"{s.get('k', 0)}/{s.get('n', 0)}"
     ci = f"{100 * s['ci_low']:.0f}–{100 * s['ci_high']:.0f} %"
     if o.identical:
-        return f"{o.counts.get('success', 0)}/{o.counted} runs; identical repetitions counted once: {s['k']}/{s['n']} ({ci})"
+        return (f"{o.counts.get('success', 0)}/{o.counted} runs; identical repetitions counted once: "
+                f"{s['k']}/{s['n']} ({ci})")
     return f"{s['k']}/{s['n']} ({ci})"
 
 
