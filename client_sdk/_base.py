@@ -39,6 +39,7 @@ from ._exceptions import STATUS_ERRORS, ApiError, Conflict, NotFound, TransportE
 from ._progress import BuildEstimate, LineReporter, ProgressBar, gripper_seconds_per_block
 from ._models import (
     CancelResult,
+    ComparisonReport,
     Environment,
     Experiment,
     ExperimentMetrics,
@@ -301,6 +302,16 @@ class BaseClient:
 
     def _get_metrics(self, experiment_id: int) -> Call:
         return Call("GET", f"{API_PREFIX}/experiments/{int(experiment_id)}/metrics", _one(ExperimentMetrics.from_json))
+
+    def _compare(self, experiment_ids: Sequence[int], metrics: Optional[Sequence[str]], test: str, family: str,
+                 confidence: float) -> Call:
+        if isinstance(experiment_ids, (str, bytes)) or isinstance(metrics, (str, bytes)):
+            raise TypeError("give `experiment_ids` (and `metrics`) as sequences, e.g. [1, 2, 3] and ['length_m']")
+        params: dict[str, Any] = {"experiments": ",".join(str(int(i)) for i in experiment_ids), "test": test,
+                                  "family": family, "confidence": confidence}
+        if metrics is not None:
+            params["metrics"] = ",".join(metrics)
+        return Call("GET", f"{API_PREFIX}/comparisons", _one(ComparisonReport.from_json), params=params)
 
     def _get_run(self, run_id: int) -> Call:
         return Call("GET", f"{API_PREFIX}/runs/{int(run_id)}", _one(Run.from_json))

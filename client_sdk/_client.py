@@ -21,6 +21,7 @@ from ._base import BaseClient, Call, Flow, Sleep, program_body, translate_errors
 from ._exceptions import TwbError
 from ._models import (
     CancelResult,
+    ComparisonReport,
     Environment,
     Experiment,
     ExperimentMetrics,
@@ -216,7 +217,8 @@ class Client(BaseClient):
                profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
                controller_params: Optional[Mapping[str, float]] = None,
                controller_program: Optional[int] = None,
-               robots: Optional[Sequence[Mapping[str, Any]]] = None) -> Experiment:
+               robots: Optional[Sequence[Mapping[str, Any]]] = None, label: Optional[str] = None,
+               problem: Optional[str] = None) -> Experiment:
         """Queue a job; returns the new experiment (status ``queued``).
 
         ``environment`` is a name, or a whole job mapping (as in a JSON job
@@ -240,6 +242,9 @@ class Client(BaseClient):
         ``planner="prioritized"`` plans them together, any other planner each
         robot alone, an uploaded ``program`` sends each robot's path on its own
         robot port (docs/server.md, "Multi-robot jobs"; docs/uploads.md).
+        ``label`` names the job's configuration and ``problem`` its problem
+        in comparisons (:meth:`compare`; default: derived by the server, e.g.
+        ``fm2(saturation=0.1)`` and ``room A``).
         :class:`ValidationError` carries the server's reason when the job
         cannot run.
         """
@@ -247,7 +252,8 @@ class Client(BaseClient):
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
-                      controller_params=controller_params, controller_program=controller_program, robots=robots)
+                      controller_params=controller_params, controller_program=controller_program, robots=robots,
+                      label=label, problem=problem)
         return self._send(self._submit(job, fields))
 
     def list_experiments(self, *, status: Optional[str] = None, offset: int = 0,
@@ -270,6 +276,21 @@ class Client(BaseClient):
     def get_metrics(self, experiment_id: int) -> ExperimentMetrics:
         """Metrics per run, mean/std per mode, and the direct sim-vs-twb comparison per repetition."""
         return self._send(self._get_metrics(experiment_id))
+
+    def compare(self, experiment_ids: Sequence[int], *, metrics: Optional[Sequence[str]] = None, test: str = "t",
+                family: str = "metric", confidence: float = 0.95) -> ComparisonReport:
+        """Compare the configurations of these experiments (``GET /api/v1/comparisons``): per problem and, with
+        three or more problems, over the problems; the same numbers as a study's comparisons.csv.
+
+        Each experiment is its ``label`` (the configuration) on its ``problem``; configurations come in the
+        order of ``experiment_ids``.  ``metrics`` (default: a study's), ``test`` (``"t"`` or ``"rank"``),
+        ``family`` (Holm's: ``"metric"`` or ``"all"``) and ``confidence`` as in
+        :func:`client_sdk.study.compare`.  The result's ``rows`` are :class:`ComparisonRow` s (the pooled
+        ones first, ``problem`` empty), its ``outcomes`` how each configuration's runs ended.
+        :class:`NotFound` when one of the experiments is not yours, :class:`ValidationError` for bad
+        arguments (fewer than 2 experiments, an unknown metric, ...).
+        """
+        return self._send(self._compare(experiment_ids, metrics, test, family, confidence))
 
     def wait(self, experiment_id: int, *, timeout: Optional[float] = None, progress: Optional[bool] = None,
              interval: float = 0.25) -> Experiment:
@@ -420,13 +441,15 @@ class AsyncClient(BaseClient):
                      profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
                      controller_params: Optional[Mapping[str, float]] = None,
                      controller_program: Optional[int] = None,
-                     robots: Optional[Sequence[Mapping[str, Any]]] = None) -> Experiment:
+                     robots: Optional[Sequence[Mapping[str, Any]]] = None, label: Optional[str] = None,
+                     problem: Optional[str] = None) -> Experiment:
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
                       planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
-                      controller_params=controller_params, controller_program=controller_program, robots=robots)
+                      controller_params=controller_params, controller_program=controller_program, robots=robots,
+                      label=label, problem=problem)
         return await self._send(self._submit(job, fields))
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
@@ -479,6 +502,11 @@ class AsyncClient(BaseClient):
     async def get_metrics(self, experiment_id: int) -> ExperimentMetrics:
         """See :meth:`Client.get_metrics`."""
         return await self._send(self._get_metrics(experiment_id))
+
+    async def compare(self, experiment_ids: Sequence[int], *, metrics: Optional[Sequence[str]] = None,
+                      test: str = "t", family: str = "metric", confidence: float = 0.95) -> ComparisonReport:
+        """See :meth:`Client.compare`."""
+        return await self._send(self._compare(experiment_ids, metrics, test, family, confidence))
 
     async def wait(self, experiment_id: int, *, timeout: Optional[float] = None, progress: Optional[bool] = None,
                    interval: float = 0.25) -> Experiment:

@@ -21,6 +21,10 @@ from contract.vocabulary import TERMINAL, run_outcome
 
 __all__ = [
     "TERMINAL_STATES",
+    "ComparedExperiment",
+    "ComparisonReport",
+    "ComparisonRow",
+    "ConfigurationOutcome",
     "DirectComparison",
     "Environment",
     "Experiment",
@@ -231,6 +235,9 @@ class ExperimentSummary(_FromJson):
     controller: str = "schema"
     #: the uploaded program driving the robots instead of ``controller`` (docs/controllers.md), or None
     controller_program: Optional[int] = None
+    #: the configuration's name in comparisons (the job's ``label``, or the server's default) and the problem's
+    label: str = ""
+    problem: str = ""
     error: str = ""
     created_at: Optional[datetime] = None
     finished_at: Optional[datetime] = None
@@ -375,6 +382,147 @@ class ExperimentMetrics:
             direct=[DirectComparison.from_json(d) for d in data.get("direct", [])],
             outcomes={m: Outcomes.from_json(o) for m, o in data.get("outcomes", {}).items()},
         )
+
+
+@dataclass
+class ComparedExperiment(_FromJson):
+    """An experiment of a comparison: its ``label`` and ``problem``, and the ``configuration`` its runs are
+    compared as (the label, or ``#<id> <label>`` where two of the selection share the label and the problem)."""
+
+    id: int
+    label: str
+    problem: str
+    configuration: str
+    status: str = ""
+    environment: str = ""
+    planner: Optional[str] = None
+    modes: list[str] = _field(default_factory=list)
+    repetitions: int = 1
+    seed: int = 0
+    robots: int = 1
+
+
+@dataclass
+class ConfigurationOutcome(_FromJson):
+    """How the runs of one configuration in one mode ended, over its ``experiments``: ``counts`` per outcome,
+    ``counted`` (success or a failure) and ``success`` (``n``, ``k``, ``rate``, ``ci_low``, ``ci_high``: the
+    Wilson interval over the distinct counted runs; ``identical``: identical repetitions counted once)."""
+
+    configuration: str
+    mode: str
+    experiments: list[int]
+    runs: int
+    counts: dict[str, int]
+    counted: int
+    success: dict[str, Any]
+    identical: bool = False
+
+
+@dataclass
+class ComparisonRow(_FromJson):
+    """One comparison of configurations ``a`` and ``b`` on ``metric`` in ``mode``: on ``problem``, or pooled
+    over ``n_problems`` problems (``problem`` empty, :attr:`pooled`).  The columns of a study's
+    ``comparisons.csv`` (:data:`planners.comparisons.COLUMNS`, :attr:`COLUMNS`), in the metric's unit (a rate
+    as a fraction); ``diff`` is a − b; None where there is no value (no test, no interval)."""
+
+    #: the columns, in order (a study's comparisons.csv)
+    COLUMNS: ClassVar[tuple[str, ...]] = (
+        "metric", "mode", "a", "b", "n_a", "n_b", "mean_a", "mean_b", "diff", "ci_low", "ci_high", "test", "p",
+        "p_holm", "effect", "effect_size", "paired", "runs_a", "runs_b", "family_size", "problem", "n_problems",
+        "favour_a", "favour_b", "heterogeneity_i2", "heterogeneity_p", "n_needed", "needed_unit", "note")
+
+    metric: str
+    mode: str
+    a: str
+    b: str
+    n_a: int
+    n_b: int
+    mean_a: Optional[float]
+    mean_b: Optional[float]
+    diff: Optional[float]
+    ci_low: Optional[float]
+    ci_high: Optional[float]
+    test: str
+    p: Optional[float]
+    p_holm: Optional[float]
+    effect: str
+    effect_size: Optional[float]
+    paired: bool
+    runs_a: int
+    runs_b: int
+    family_size: int
+    problem: str
+    n_problems: int
+    favour_a: Optional[int]
+    favour_b: Optional[int]
+    heterogeneity_i2: Optional[float]
+    heterogeneity_p: Optional[float]
+    n_needed: Optional[int]
+    needed_unit: str
+    note: str
+
+    @property
+    def pooled(self) -> bool:
+        """Over problems (True), or on one problem."""
+        return not self.problem
+
+    def significant(self, alpha: float = 0.05) -> bool:
+        """Holm-adjusted p-value at most ``alpha``."""
+        return self.p_holm is not None and self.p_holm <= alpha
+
+    def row(self) -> dict[str, Any]:
+        """The row as a dict in :attr:`COLUMNS` order (a study's comparisons.csv row, None for an empty cell)."""
+        return {c: getattr(self, c) for c in self.COLUMNS}
+
+
+@dataclass
+class ComparisonReport:
+    """``GET /api/v1/comparisons`` (:meth:`Client.compare`): the experiments, how each configuration's runs
+    ended (``outcomes``) and the comparisons (``rows``: per metric, mode and pair, the pooled one first when
+    there are at least ``min_problems`` problems, then each problem's), with ``method``: how to read them."""
+
+    experiments: list[ComparedExperiment]
+    configurations: list[str]
+    problems: list[str]
+    metrics: list[str]
+    outcomes: list[ConfigurationOutcome]
+    rows: list[ComparisonRow]
+    method: str = ""
+    test: str = "t"
+    family: str = "metric"
+    confidence: float = 0.95
+    n_resamples: int = 9999
+    seed: int = 0
+    min_problems: int = 3
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "ComparisonReport":
+        plain = {k: data[k] for k in ("method", "test", "family", "confidence", "n_resamples", "seed",
+                                      "min_problems") if k in data}
+        return cls(experiments=[ComparedExperiment.from_json(e) for e in data.get("experiments", [])],
+                   configurations=list(data.get("configurations", [])), problems=list(data.get("problems", [])),
+                   metrics=list(data.get("metrics", [])),
+                   outcomes=[ConfigurationOutcome.from_json(o) for o in data.get("outcomes", [])],
+                   rows=[ComparisonRow.from_json(r) for r in data.get("rows", [])], **plain)
+
+    def pooled(self) -> list[ComparisonRow]:
+        """The comparisons over problems (none with fewer than ``min_problems`` problems)."""
+        return [r for r in self.rows if r.pooled]
+
+    def per_problem(self, problem: Optional[str] = None) -> list[ComparisonRow]:
+        """The comparisons on one problem each (every problem's, or ``problem``'s)."""
+        return [r for r in self.rows if not r.pooled and (problem is None or r.problem == problem)]
+
+    def get(self, metric: str, mode: str, a: str, b: str, problem: Optional[str] = None) -> Optional[ComparisonRow]:
+        """The row of ``a`` against ``b`` (either order: the signs are as stored) on ``problem``, or without one
+        the pooled row; None where there is none."""
+        return next((r for r in self.rows if (r.metric, r.mode) == (metric, mode) and {r.a, r.b} == {a, b}
+                     and r.problem == (problem or "")), None)
+
+    def table(self) -> list[dict[str, Any]]:
+        """Every row as a dict in :attr:`ComparisonRow.COLUMNS` order (write it as CSV: a study's
+        comparisons.csv)."""
+        return [r.row() for r in self.rows]
 
 
 @dataclass

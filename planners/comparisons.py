@@ -378,6 +378,7 @@ def compare(
     modes: Optional[Iterable[str]] = None,
     pairs: Optional[Iterable[tuple[str, str]]] = None,
     problem: Callable[[Row], Hashable] = problem_of,
+    problems: Optional[Iterable[Hashable]] = None,
     enters: Callable[[Row, str], bool] = _enters_completed,
     direction: Optional[Mapping[str, int]] = None,
     confidence: float = 0.95,
@@ -401,6 +402,9 @@ def compare(
         Default: the modes in the rows' order; every pair of configurations in the rows' order (a before b).
     problem : callable
         A run's problem (default ``(environment, plan)``).
+    problems : iterable, optional
+        The problems' order (their rows', and so which bootstrap stream each comparison gets); problems not
+        listed follow in the order first seen.  Default: the order first seen in ``rows``.
     enters : callable
         Whether a run enters a metric's comparison (default: completed runs).
     direction : mapping, optional
@@ -433,7 +437,7 @@ def compare(
     index: dict[tuple, list[Row]] = {}
     for r in rows:
         index.setdefault((r["configuration"], r["mode"], problem(r)), []).append(r)
-    problems = list(dict.fromkeys(problem(r) for r in rows))
+    problems = list(dict.fromkeys([*(problems or ()), *(problem(r) for r in rows)]))
     raw: list[tuple] = []  # (metric, mode, a, b, problem, result, runs_a, runs_b, note)
     stream = 0
     for metric in names:

@@ -15,8 +15,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from .api.deps import authenticate, bearer_token
 from .api.middleware import BodyLimit
-from .api.routes import (controllers, dashboard, environments, events, experiments, field, health, meta, planners,
-                         programs, runs, users)
+from .api.routes import (comparisons, controllers, dashboard, environments, events, experiments, field, health, meta,
+                         planners, programs, runs, users)
 from .core.settings import Settings
 from .errors import RequestRefused
 from .testbed import Testbed
@@ -95,7 +95,8 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
 
     app.include_router(health.router)
     app.include_router(dashboard.router)
-    for module in (meta, users, environments, experiments, runs, field, events, planners, controllers, programs):
+    for module in (meta, users, environments, experiments, comparisons, runs, field, events, planners, controllers,
+                   programs):
         app.include_router(module.router, prefix=API_PREFIX)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     return app

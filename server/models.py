@@ -146,6 +146,10 @@ class Experiment(Base):
     #: an uploaded program drives the robots along the planned path instead of a built-in controller
     controller_program_id: Mapped[Optional[int]] = mapped_column(
         ForeignKey("programs.id", ondelete="SET NULL"), nullable=True)
+    #: the configuration's name (the job's ``label``, or derived: planners.compared.job_configuration) and the
+    #: problem's (the job's ``problem``, or derived: planners.compared.problem_label); what comparisons group by
+    label: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)
+    problem: Mapped[Optional[str]] = mapped_column(String(100), nullable=True)
     error: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[Optional[datetime]] = mapped_column(DateTime(timezone=True), nullable=True)

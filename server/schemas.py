@@ -19,6 +19,8 @@ from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (doc
 from .status import RunStatus
 
 __all__ = [
+    "ComparisonRow",
+    "ComparisonsPublic",
     "ComputePublic",
     "ControllerPublic",
     "DirectComparisonPublic",
@@ -298,6 +300,21 @@ class ExperimentCreate(Strict):
     controller_program: Optional[int] = Field(default=None, ge=1, description=(
         "An uploaded program's id that drives the robot along the planned path over its robot port "
         "(T,T,O / T,T,V; docs/controllers.md \"Your own controller program\") instead of `controller`."))
+    label: Optional[str] = Field(default=None, min_length=1, max_length=64, description=(
+        "The configuration's name in comparisons (GET /api/v1/comparisons groups runs by it). Default: the "
+        "planner with the parameters given (`fm2(saturation=0.1)`), `/controller` when not `schema`, "
+        "` · ` and the profile overrides when given."))
+    problem: Optional[str] = Field(default=None, min_length=1, max_length=100, description=(
+        "The problem's name in comparisons (the unit of inference). Default: `<environment> <plan>` when the "
+        "start and goal are one of the environment's plans, else `<environment> (x,y)→(x,y)` (m, to the cm); "
+        "a multi-robot job's `<environment> <n> robots`."))
+
+    @field_validator("label", "problem")
+    @classmethod
+    def _name(cls, v: Optional[str]) -> Optional[str]:
+        if v is not None and (not v.strip() or any(ord(c) < 32 for c in v)):
+            raise ValueError("must be a name: not blank, no control characters")
+        return v
 
     _pose = field_validator("start", "goal")(_check_pose)
     _path = field_validator("path")(_check_path)
@@ -426,6 +443,13 @@ class ExperimentSummary(FromRow):
     controller_program: Optional[int] = Field(
         default=None, validation_alias=AliasChoices("controller_program_id", "controller_program"),
         description="The uploaded program driving the robots (instead of `controller`), if any.")
+    label: str = Field(default="", description="The configuration's name in comparisons (the job's, or derived).")
+    problem: str = Field(default="", description="The problem's name in comparisons (the job's, or derived).")
+
+    @field_validator("label", "problem", mode="before")
+    @classmethod
+    def _names(cls, v: Any) -> Any:
+        return v or ""
     error: str
     created_at: UTCDateTime
     finished_at: Optional[UTCDateTime]
@@ -594,6 +618,106 @@ class MessagePublic(FromRow):
     t_estimated: bool = Field(description="`t` extrapolated from the agent's last report.")
     direction: str
     line: str
+# --------------------------------------------------------------------------- comparisons
+
+
+class ComparedExperiment(BaseModel):
+    """One experiment of a comparison: its label and problem, and the ``configuration`` its runs are compared
+    as (the label, or ``#<id> <label>`` where two selected experiments share the label and the problem)."""
+
+    id: int
+    label: str
+    problem: str
+    configuration: str
+    status: str
+    environment: str
+    planner: Optional[str] = None
+    modes: list[str]
+    repetitions: int
+    seed: int
+    robots: int = Field(description="How many robots (1, or a multi-robot job's).")
+
+
+class SuccessRate(BaseModel):
+    """Successes ``k`` of ``n`` distinct counted runs, the ``rate`` and its Wilson interval (None without runs)."""
+
+    n: int
+    k: int
+    rate: Optional[float] = None
+    ci_low: Optional[float] = None
+    ci_high: Optional[float] = None
+    confidence: float
+
+
+class ConfigurationOutcomes(BaseModel):
+    """How the runs of one configuration in one mode ended, over its experiments (all problems)."""
+
+    configuration: str
+    mode: str
+    experiments: list[int]
+    runs: int
+    counts: dict[str, int] = Field(description="Runs per outcome (success, collision, timeout, ..., error, "
+                                               "cancelled, interrupted, pending).")
+    counted: int = Field(description="Runs that ended in the job's own outcome (success or a failure).")
+    success: SuccessRate = Field(description="The success rate over the distinct counted runs: identical "
+                                             "repetitions of a problem count once (`identical`).")
+    identical: bool
+
+
+class ComparisonRow(BaseModel):
+    """One comparison of configurations ``a`` and ``b`` on ``metric`` in ``mode``: on ``problem``, or pooled
+    over ``n_problems`` problems (``problem`` empty).  The columns of a study's ``comparisons.csv``
+    (``planners.comparisons.COLUMNS``); numbers that are undefined (no test, no interval) are null."""
+
+    metric: str
+    mode: str
+    a: str
+    b: str
+    n_a: int
+    n_b: int
+    mean_a: Optional[float] = None
+    mean_b: Optional[float] = None
+    diff: Optional[float] = Field(default=None, description="a − b (a rate: a fraction); pooled: the mean of the "
+                                                            "problems' differences.")
+    ci_low: Optional[float] = None
+    ci_high: Optional[float] = None
+    test: str
+    p: Optional[float] = None
+    p_holm: Optional[float] = None
+    effect: str
+    effect_size: Optional[float] = None
+    paired: bool
+    runs_a: int
+    runs_b: int
+    family_size: int
+    problem: str
+    n_problems: int
+    favour_a: Optional[int] = None
+    favour_b: Optional[int] = None
+    heterogeneity_i2: Optional[float] = None
+    heterogeneity_p: Optional[float] = None
+    n_needed: Optional[int] = None
+    needed_unit: str
+    note: str
+
+
+class ComparisonsPublic(BaseModel):
+    """``GET /api/v1/comparisons``: the experiments, how each configuration's runs ended, and the comparisons
+    (pooled over problems first, then each problem's, per metric, mode and pair) with how to read them."""
+
+    experiments: list[ComparedExperiment]
+    configurations: list[str]
+    problems: list[str]
+    metrics: list[str] = Field(description="Compared after the success rate (which always comes first).")
+    test: str
+    family: str
+    confidence: float
+    n_resamples: int
+    seed: int
+    min_problems: int = Field(description="Problems needed for a comparison over problems.")
+    outcomes: list[ConfigurationOutcomes]
+    rows: list[ComparisonRow]
+    method: str = Field(description="How to read this.")
 
 
 # --------------------------------------------------------------------------- uploaded programs

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
-
 import threading
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
+
+from planners.compared import job_configuration, problem_label
 
 from .access import environment_named
 from .core.security import Principal
@@ -16,9 +18,9 @@ from .errors import Forbidden, Invalid, QuotaExceeded
 from .models import Experiment, Program, User
 from .schemas import ExperimentCreate
 from .store.experiments import count_queued, create_experiment
-from .validation import preflight
+from .validation import Preflight, preflight
 
-__all__ = ["UPLOADS_DISABLED", "UserLocks", "submit"]
+__all__ = ["UPLOADS_DISABLED", "UserLocks", "job_names", "submit"]
 
 UPLOADS_DISABLED = "uploads are disabled on this testbed"
 
@@ -65,8 +67,22 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
     if queued >= settings.max_queued_per_user:
         raise QuotaExceeded(f"you already have {queued} queued experiments (limit {settings.max_queued_per_user})")
     checked = preflight(body, env_row.data, settings.robot_radius_m, settings.planning_margin_m)
+    label, problem = job_names(body, checked, env_row.data)
     return create_experiment(session, owner=user, body=body, checked=checked, robot_radius=settings.robot_radius_m,
-                             planning_margin=settings.planning_margin_m)
+                             planning_margin=settings.planning_margin_m, label=label, problem=problem)
+
+
+def job_names(body: ExperimentCreate, checked: Preflight, env_data: dict[str, Any]) -> tuple[str, str]:
+    """The job's configuration label and problem name: its own ``label`` and ``problem``, else derived as a
+    study derives them (:func:`planners.compared.job_configuration`: the planner with the parameters *given*;
+    :func:`planners.compared.problem_label`: a plan of the environment, or the start and goal)."""
+    label = body.label or job_configuration(
+        planner=body.planner, planner_params=body.planner_params, program=body.program, controller=body.controller,
+        controller_params=body.controller_params, controller_program=body.controller_program,
+        profile_overrides=body.profile_overrides)
+    problem = body.problem or problem_label(checked.env.name, plans=env_data.get("plans") or [],
+                                            start=checked.start, goal=checked.goal, robots=checked.robots)
+    return label, problem
 
 
 def _check_program(session: Session, user: Principal, program_id: int, settings: Settings,

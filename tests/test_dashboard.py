@@ -512,7 +512,8 @@ CORNER = {"start": [0.9, 0.3, 1.5708], "goal": [1.5, 0.69, 0.0]}  # the path tur
 
 def test_a_crash_is_marked_and_experiments_compare_side_by_side(page, testbed):
     """The field robot overshoots a corner into a block, the ideal one does not: the experiment page marks where
-    each failed run stopped; the compare view shows both experiments' outcomes, means and differences."""
+    each failed run stopped; the compare view shows both experiments' outcomes, means and the server's
+    comparisons on their one problem (and says that one problem gives no verdict over problems)."""
     from playwright.sync_api import expect
 
     with testbed.client() as c:
@@ -554,23 +555,35 @@ def test_a_crash_is_marked_and_experiments_compare_side_by_side(page, testbed):
     assert page.url.endswith(f"#/compare?ids={safe['id']},{corner['id']}")
     expect(page.locator("#compare-title")).to_have_text(f"Compare experiments #{safe['id']}, #{corner['id']}")
     expect(page.locator("#compare-facts tbody tr")).to_have_count(2)
-    crash_row = page.locator(f'#compare-outcomes tr[data-experiment="{corner["id"]}"][data-mode="twb"]')
+    assert (safe["label"], corner["label"]) == ("fm2", "explicit path")  # the server's names for these jobs
+    assert safe["problem"] == corner["problem"] == "dash-overshoot (0.90,0.30)→(1.50,0.69)"
+    expect(page.locator("#compare-facts tbody tr").first).to_contain_text("dash-overshoot (0.90,0.30)→(1.50,0.69)")
+    # outcomes per configuration (each one experiment here), with the server's Wilson interval
+    crash_row = page.locator('#compare-outcomes tr[data-configuration="explicit path"][data-mode="twb"]')
     expect(crash_row.locator('td[data-outcome="collision"]')).to_have_text("2")
     expect(crash_row.locator('td[data-outcome="success"]')).to_have_text("0")
-    expect(crash_row).to_contain_text("0/2 (0 %–66 %)")  # the server's Wilson interval
-    safe_row = page.locator(f'#compare-outcomes tr[data-experiment="{safe["id"]}"][data-mode="twb"]')
+    expect(crash_row).to_contain_text("0/2 (0 %–66 %)")
+    safe_row = page.locator('#compare-outcomes tr[data-configuration="fm2"][data-mode="twb"]')
     expect(safe_row).to_contain_text("2/2 (34 %–100 %)")
+    expect(safe_row).to_have_attribute("data-experiments", str(safe["id"]))
+    # the simulation repeats itself without jitter: its two runs are one observation, said so
+    sim_row = page.locator('#compare-outcomes tr[data-configuration="fm2"][data-mode="sim"]')
+    expect(sim_row).to_contain_text("2/2 runs; identical repetitions (deterministic simulation) counted once: 1/1")
     # means: the field column of the crashing path has no completed run, and says so
     expect(page.locator('#compare-means tr[data-metric="length_m"] td').nth(2)).to_have_text("no completed run (0 of 2)")
     # sim repetitions without jitter are identical: said, not given an interval
     expect(page.locator('#compare-means tr[data-metric="length_m"] td').nth(1)).to_contain_text(
         "identical repetitions (deterministic simulation)")
-    # differences: the success rate on the field, Fisher's exact p of 2/2 against 0/2 (1/3)
-    rate = page.locator(f'#compare-differences tr[data-a="{safe["id"]}"][data-mode="twb"][data-metric="success_rate"]')
+    # one problem: no verdict over problems, in words; its own comparisons below
+    expect(page.locator("#compare-no-verdict")).to_contain_text("No verdict over problems: these experiments are on 1 "
+                                                                 "problem")
+    expect(page.locator("#compare-pooled")).to_have_count(0)
+    # the problem's comparisons: the success rate on the field, Fisher's exact p of 2/2 against 0/2 (1/3)
+    rate = page.locator('#compare-differences tr[data-a="fm2"][data-mode="twb"][data-metric="success_rate"]')
     expect(rate.locator('td[data-k="diff"]')).to_have_text("+100 points")
     expect(rate.locator('td[data-k="p"]')).to_have_text("0.33")
     twb_length = page.locator('#compare-differences tr[data-mode="twb"][data-metric="length_m"]')
-    expect(twb_length.locator('td[data-k="note"]')).to_have_text(f"no completed run of #{corner['id']}")
+    expect(twb_length.locator('td[data-k="note"]')).to_have_text("no completed run of explicit path")
     sim_length = page.locator('#compare-differences tr[data-mode="sim"][data-metric="length_m"]')
     expect(sim_length.locator('td[data-k="ci"]')).to_have_text("–")
     expect(sim_length.locator('td[data-k="note"]')).to_contain_text("identical repetitions (deterministic simulation)")
@@ -578,6 +591,8 @@ def test_a_crash_is_marked_and_experiments_compare_side_by_side(page, testbed):
     cor = [r["metrics"]["length_m"] for r in corner["runs"] if r["mode"] == "sim"]
     shown = float(sim_length.locator('td[data-k="diff"]').inner_text().split()[0])
     assert shown == pytest.approx(fm2[0] - cor[0], abs=1e-3)
+    expect(page.locator("#compare-method")).to_contain_text("the problem (an environment with a start/goal plan) is "
+                                                            "the unit of inference")
     page.screenshot(path=OUTPUT / "compare.png", full_page=True)
     assert no_horizontal_overflow(page)
     assert page.console.errors == []

@@ -85,7 +85,7 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0012",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0014",)]
 
 
 def _old_run(c, mode: str) -> None:  # type: ignore[no-untyped-def]
@@ -195,5 +195,51 @@ def test_poses_lose_their_row_check_and_keep_their_cascade(database_url):
         assert c.execute(text("select count(*) from poses")).scalar() == 0
     with pytest.raises(IntegrityError), engine.begin() as c:
         c.execute(text("insert into poses (run_id, t, x, y, theta) values (99, 0.5, 2.0, 2.0, 0.0)"))
+    engine.dispose()
+    command.upgrade(cfg, "head")
+
+
+def test_label_and_problem_migration_names_old_experiments(database_url):
+    """0014 on both databases: old experiments get the names a job gets by default (the planner without the
+    parameters, which their rows keep with the defaults filled in; a plan of the environment's; the start and
+    goal to the cm; a fleet's robot count), and the downgrade drops the columns and keeps the rest."""
+    from alembic.script import ScriptDirectory
+    from sqlalchemy import inspect, text
+
+    cfg = config(database_url)
+    before = ScriptDirectory.from_config(cfg).get_revision("0014").down_revision  # 0013 once merged, else 0012
+    command.upgrade(cfg, before)
+    engine = make_engine(database_url)
+    env = '{"name": "room", "plans": [{"name": "A", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708]}]}'
+    with engine.begin() as c:
+        _old_run(c, "sim")  # experiment 1: no planner (an explicit path) from (0.3, 0.3) to (1.5, 1.5)
+        for i, (planner, start, goal, extra) in enumerate([
+                ("fm2", "[0.3, 0.3, 0.0]", "[1.5, 1.5, 1.5708]", {}),
+                ("fmm", "[0.3, 0.3]", "[1.5, 1.5, 1.5708]", {"controller": "pure_pursuit",
+                                                           "profile_overrides": '{"tracker_noise_xy_m": 0.003}'}),
+                ("prioritized", "[0.3, 0.3]", "[1.5, 1.5]", {"robots": '[{"start": [0.3, 0.3], "goal": [1, 1]}, '
+                                                                       '{"start": [1, 1], "goal": [0.3, 0.3]}]'})],
+                start=2):
+            cols = ", ".join(extra)
+            c.execute(text(
+                "insert into experiments (id, owner_id, status, environment, environment_data, start, goal, planner,"
+                " planner_params, modes, repetitions, seed, field, robot_radius, planning_info, error, created_at"
+                f"{', ' + cols if cols else ''}) values (:id, 1, 'completed', 'room', :env, :start, :goal, :planner,"
+                " '{\"samples\": 3}', '[\"sim\"]', 1, 0, 'sub', 0.045, '{}', '', '2026-01-01'"
+                f"{''.join(', :' + k for k in extra)})"),
+                {"id": i, "env": env, "start": start, "goal": goal, "planner": planner, **extra})
+    command.upgrade(cfg, "0014")
+    with engine.begin() as c:
+        assert c.execute(text("select id, label, problem from experiments order by id")).all() == [
+            (1, "explicit path", "room (0.30,0.30)→(1.50,1.50)"),
+            (2, "fm2", "room A"),
+            (3, "fmm/pure_pursuit · tracker_noise_xy_m=0.003", "room (0.30,0.30)→(1.50,1.50)"),  # no heading: not A
+            (4, "prioritized", "room 2 robots")]
+    engine.dispose()
+    command.downgrade(cfg, before)
+    engine = make_engine(database_url)
+    assert not {"label", "problem"} & {c["name"] for c in inspect(engine).get_columns("experiments")}
+    with engine.begin() as c:
+        assert c.execute(text("select count(*) from experiments")).scalar() == 4
     engine.dispose()
     command.upgrade(cfg, "head")

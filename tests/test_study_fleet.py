@@ -265,6 +265,29 @@ def test_a_fleet_study_reports_the_fleet_metrics_with_intervals(fleet_dir):
     assert float(compared[("robot_distance_min_m", "twb")]["diff"]) > 0.05  # prioritized keeps them apart
 
 
+def test_the_server_compares_a_fleet_studys_experiments_as_the_study_does(testbed, fleet_dir):
+    """GET /api/v1/comparisons of the fleet study's experiments in study order: its comparisons.csv, byte for byte
+    (a fleet's runs flattened and compared as the study does: its metrics, the safety metrics over every measured
+    run, their directions)."""
+    import io
+
+    from client_sdk.study._data import write_csv_stream
+    from planners.comparisons import COLUMNS
+    from planners.compared import FLEET_COMPARED
+
+    ids = [e["experiment_id"] for e in json.loads((fleet_dir / "study.json").read_text())["experiments"]]
+    with testbed.client() as c:
+        r = c.get("/api/v1/comparisons", params={"experiments": ",".join(map(str, ids))})
+    assert r.status_code == 200, r.text
+    answer = r.json()
+    buf = io.StringIO(newline="")
+    write_csv_stream(buf, list(COLUMNS), answer["rows"])
+    with open(fleet_dir / "comparisons.csv", newline="") as f:
+        assert buf.getvalue() == f.read()
+    assert answer["problems"] == ["swap circle-2", "swap circle-4"] and answer["metrics"] == list(FLEET_COMPARED)
+    assert "every robot reached its goal" in answer["method"]
+
+
 def test_a_fleet_studys_poses_plans_and_figures(fleet_dir):
     data = load_study(fleet_dir)
     exp = next(e for e in data.experiments if (e["configuration"], e["plan"]) == ("prioritized", "circle-4"))

@@ -349,30 +349,168 @@ def metrics_json(m: Any) -> dict[str, Any]:
 
 
 def results(
-    experiment_id: Annotated[int, typer.Argument(help="Experiment id.")],
-    as_json: Annotated[bool, typer.Option("--json", help="Print the metrics JSON (server's shape).")] = False,
-    as_csv: Annotated[bool, typer.Option("--csv", help="Print CSV: one row per run, every metric.")] = False,
+    experiment_ids: Annotated[list[int], typer.Argument(help="Experiment id; several: compare them (configurations in this order).")],
+    fmt: Annotated[Optional[str], typer.Option("--format", help="table (default), csv or json. One experiment: its metrics per run (csv) or the server's metrics JSON; several: the comparisons' rows (csv, as a study's comparisons.csv) or GET /api/v1/comparisons (json).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="One experiment: print the metrics JSON (server's shape); same as --format json.")] = False,
+    as_csv: Annotated[bool, typer.Option("--csv", help="One experiment: print CSV, one row per run, every metric; same as --format csv.")] = False,
+    metrics: Annotated[Optional[str], typer.Option("--metrics", help="Several experiments: the metrics to compare after the success rate, comma-separated (default: a study's).")] = None,
     wide: Annotated[bool, typer.Option("--wide", help="Every column, however wide the terminal.")] = False,
     url: UrlOpt = None,
     token: TokenOpt = None,
 ) -> None:
-    """Metrics of an experiment: per run, mean ± std per mode, direct sim-vs-twb comparison.
+    """Results of an experiment (metrics per run, mean ± std per mode, direct sim-vs-twb comparison), or of
+    several compared (outcomes per configuration, then the comparisons: over problems first, then each
+    problem's; docs/study.md, "Comparisons").
 
-    The table fits the terminal: the less important metrics are left out (and named) when
-    it is narrow; --wide shows every one.
+    Each experiment is its label (the configuration) on its problem. The table fits the terminal: the less
+    important columns are left out (and named) when it is narrow; --wide shows every one.
     """
-    if as_json and as_csv:
-        fail("give --json or --csv, not both")
+    if sum([as_json, as_csv, fmt is not None]) > 1:
+        fail("give one of --format, --json or --csv")
+    fmt = "json" if as_json else "csv" if as_csv else (fmt or "table")
+    if fmt not in ("table", "csv", "json"):
+        fail(f"--format must be table, csv or json, got {fmt!r}")
+    if len(experiment_ids) > 1:
+        if metrics is not None and not metrics.strip():
+            fail("--metrics: give metric names such as length_m,execution_time_s")
+        with sdk_client(url, token) as client:
+            report = client.compare(experiment_ids, metrics=metrics.split(",") if metrics else None)
+        _print_comparison(report, fmt, wide)
+        return
+    if metrics is not None:
+        fail("--metrics compares several experiments: give two or more ids")
+    experiment_id = experiment_ids[0]
     with sdk_client(url, token) as client:
         m = client.get_metrics(experiment_id)
-        exp = None if as_json or as_csv else client.get_experiment(experiment_id)
-    if as_json:
+        exp = None if fmt != "table" else client.get_experiment(experiment_id)
+    if fmt == "json":
         typer.echo(json.dumps(metrics_json(m)))
         return
-    if as_csv:
+    if fmt == "csv":
         _print_results_csv(m)
         return
     _print_results(m, exp, wide)
+
+
+def _print_comparison(report: Any, fmt: str, wide: bool) -> None:
+    """Several experiments compared: CSV rows (a study's comparisons.csv), the report as JSON, or tables."""
+    if fmt == "csv":
+        from client_sdk.study._data import write_csv_stream
+
+        from client_sdk import ComparisonRow
+
+        write_csv_stream(sys.stdout, list(ComparisonRow.COLUMNS), report.table())
+        return
+    if fmt == "json":
+        import dataclasses
+
+        typer.echo(json.dumps(dataclasses.asdict(report)))
+        return
+    from .tables import console, print_fitted
+
+    con = console(wide)
+    names = ", ".join(f"#{e.id} {e.configuration} on {e.problem}" for e in report.experiments)
+    con.print(f"comparing {len(report.configurations)} configurations on {len(report.problems)} problem(s): {names}",
+              highlight=False)
+    _print_outcomes(con, report, wide)
+    pooled = report.pooled()
+    if pooled:
+        _print_rows(con, f"over {len(report.problems)} problems (each problem one observation)", pooled, wide,
+                    pooled=True)
+    else:
+        con.print(f"No verdict over problems: {len(report.problems)} problem(s), at least {report.min_problems} are "
+                  "needed; each problem's comparisons follow, and one problem's answer says nothing about others.",
+                  highlight=False)
+    for problem in report.problems:
+        rows = report.per_problem(problem)
+        if rows:
+            _print_rows(con, f"on {problem}", rows, wide, pooled=False)
+    con.print(report.method, highlight=False, style="dim")
+
+
+_OUTCOME_COLUMNS = ("configuration", "mode", "experiments", "runs", "success", "collision", "timeout", "other",
+                    "not counted", "success rate (95% CI)")
+
+
+def _rate_text(o: Any) -> str:
+    """``3/5 (95% CI 23–88 %)`` over the distinct counted runs; identical repetitions say so."""
+    s = o.success
+    if not o.counted:
+        return "no counted run"
+    if s.get("rate") is None:
+        return f"{s.get('k', 0)}/{s.get('n', 0)}"
+    ci = f"{100 * s['ci_low']:.0f}–{100 * s['ci_high']:.0f} %"
+    if o.identical:
+        return (f"{o.counts.get('success', 0)}/{o.counted} runs; identical repetitions counted once: "
+                f"{s['k']}/{s['n']} ({ci})")
+    return f"{s['k']}/{s['n']} ({ci})"
+
+
+def _print_outcomes(con: Any, report: Any, wide: bool) -> None:
+    from contract.vocabulary import NOT_COUNTED
+
+    from .tables import print_fitted
+
+    rows = []
+    for o in report.outcomes:
+        named = ("success", "collision", "timeout")
+        rows.append(dict(zip(_OUTCOME_COLUMNS, (
+            o.configuration, o.mode, " ".join(f"#{i}" for i in o.experiments), str(o.runs),
+            *(str(o.counts.get(k, 0)) for k in named),
+            str(sum(n for k, n in o.counts.items() if k not in named and k not in NOT_COUNTED)),
+            str(sum(n for k, n in o.counts.items() if k in NOT_COUNTED)), _rate_text(o)))))
+
+    def build(cols: list[str]) -> Any:
+        table = compact_table(cols, "outcomes per configuration (success rate over the distinct counted runs)",
+                              numeric=("runs", "success", "collision", "timeout", "other", "not counted"))
+        for row in rows:
+            table.add_row(*(row[c] for c in cols))
+        return table
+
+    print_fitted(con, build, list(_OUTCOME_COLUMNS), ("experiments", "not counted", "timeout"), wide)
+
+
+def _fmt(v: Any) -> str:
+    """A comparison's number: 4 significant digits; "–" for none."""
+    return "–" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def _p(v: Optional[float]) -> str:
+    return "–" if v is None else ("< 0.001" if v < 0.001 else f"{v:.3f}")
+
+
+def _print_rows(con: Any, title: str, rows: list[Any], wide: bool, *, pooled: bool) -> None:
+    from .tables import print_fitted
+
+    cols = ["metric", "mode", "a", "b", "mean a", "mean b", "a − b", "95% CI", "test", "p", "Holm p"]
+    cols += ["problems a:b", "I²"] if pooled else ["n a:b"]
+    cols += ["note"]
+    table_rows = []
+    for r in rows:
+        rate = r.metric == "success_rate"
+        val = (lambda v: "–" if v is None else f"{100 * v:+.0f} pt") if rate else _fmt
+        mean = (lambda v: "–" if v is None else f"{100 * v:.0f} %") if rate else _fmt
+        ci = "–" if r.ci_low is None else f"[{val(r.ci_low)}, {val(r.ci_high)}]"
+        cells = {"metric": r.metric, "mode": r.mode, "a": r.a, "b": r.b, "mean a": mean(r.mean_a),
+                 "mean b": mean(r.mean_b), "a − b": val(r.diff), "95% CI": ci, "test": r.test or "–", "p": _p(r.p),
+                 "Holm p": _p(r.p_holm), "note": r.note}
+        if pooled:
+            cells["problems a:b"] = f"{r.favour_a}:{r.favour_b} of {r.n_problems}"
+            cells["I²"] = "–" if r.heterogeneity_i2 is None else f"{100 * r.heterogeneity_i2:.0f} %"
+        else:
+            cells["n a:b"] = f"{r.n_a}:{r.n_b}"
+        table_rows.append(cells)
+
+    def build(kept: list[str]) -> Any:
+        table = compact_table(kept, title, numeric=("mean a", "mean b", "a − b", "95% CI", "p", "Holm p", "I²"))
+        if "note" in kept:  # the note wraps rather than widens the table: it says why a number is missing
+            table.columns[kept.index("note")].max_width = 44
+        for row in table_rows:
+            table.add_row(*(row[c] for c in kept))
+        return table
+
+    optional = [c for c in ("test", "mean b", "mean a", "I²", "Holm p", "note") if c in cols]
+    print_fitted(con, build, cols, optional, wide)
 
 
 def _print_results_csv(m: Any) -> None:

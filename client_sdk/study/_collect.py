@@ -11,6 +11,8 @@ from pathlib import Path
 from typing import Any, Optional
 
 from contract.vocabulary import JUDGED, Mode, TERMINAL
+from planners.compared import LABEL_LENGTH, PROBLEM_LENGTH, flat_metrics, shorten
+from planners.comparisons import problem_name
 
 from .._client import Client
 from .._exceptions import Conflict, NotFound, RateLimited, TwbError, ValidationError
@@ -29,11 +31,17 @@ class StudyJob(dict):
 
 
 def _body(name: str, problem: dict[str, Any], planner: PlannerSpec, controller: Optional[ControllerChoice],
-          spec: StudySpec, profile: Optional[ProfileSpec] = None) -> dict[str, Any]:
+          spec: StudySpec, profile: Optional[ProfileSpec] = None, *, label: str = "", plan: str = "") -> dict[str, Any]:
     """The job sent to the server for one problem (``{"start", "goal"}``, or a fleet's ``{"robots"}``; m, rad) and
     configuration (an explicit path: start, waypoints, goal), with the robots' ``controller`` and the field
-    robot's ``profile`` variant."""
+    robot's ``profile`` variant; named on the server as in runs.csv: the configuration's ``label`` and the
+    problem ``<environment> <plan>`` (so ``GET /api/v1/comparisons`` of the study's experiments groups them as
+    the study does)."""
     body: dict[str, Any] = {"environment": name, **problem}
+    if label:
+        body["label"] = shorten(label, LABEL_LENGTH)
+    if plan:
+        body["problem"] = shorten(problem_name((name, plan)), PROBLEM_LENGTH)
     if planner.waypoints is not None:
         body["path"] = [list(problem["start"]), *[list(w) for w in planner.waypoints], list(problem["goal"])]
     else:
@@ -75,12 +83,14 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
             problem = _problem(plan, env)
             for planner, controller, config in spec.configurations():
                 for profile in spec.profiles or [None]:
+                    label = configuration(config, profile)
                     job = StudyJob(environment=name, plan=plan.name,
                                    planner=planner.name if planner.waypoints is None else "path",
                                    controller=controller.name if controller is not None else "schema",
-                                   configuration=configuration(config, profile),
+                                   configuration=label,
                                    profile=profile.label if profile else "",
-                                   body=_body(name, problem, planner, controller, spec, profile))
+                                   body=_body(name, problem, planner, controller, spec, profile, label=label,
+                                              plan=plan.name))
                     if plan.fleet:
                         job["robots"] = plan.robot_count
                     jobs.append(job)
@@ -308,17 +318,6 @@ def _cancel(client: Client, submitted: dict[int, StudyJob], final: dict[int, Exp
                 pass
             except TwbError:
                 break
-
-
-def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
-    """A run's metrics as one flat row: the planned path's become ``planned_<name>``; settings are left out."""
-    out: dict[str, Any] = {}
-    for k, v in metrics.items():
-        if k == "planned" and isinstance(v, dict):
-            out.update({f"planned_{pk}": pv for pk, pv in v.items() if not isinstance(pv, (dict, list))})
-        elif not isinstance(v, (dict, list)):
-            out[k] = v
-    return out
 
 
 def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any]:

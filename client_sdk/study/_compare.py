@@ -2,9 +2,11 @@
 
 The statistics are :mod:`planners.comparisons`' — the one implementation the
 server's ``GET /api/v1/comparisons``, ``twb results`` and the dashboard use too
-(docs/study.md, "Comparisons"); this module adds what a study knows: its
-default metrics, a fleet's safety metrics compared over every measured run, and
-the fleet metrics' directions.
+(docs/study.md, "Comparisons"), called as every surface calls it
+(:func:`planners.compared.compare_runs`: the default metrics, a fleet's safety
+metrics compared over every measured run, the fleet metrics' directions); this
+module adds what a study knows: its configurations, modes and problems in study
+order.
 
 - **The problem is the unit**: per (metric, mode, pair) one comparison per
   problem (environment, plan), and a pooled one over problems when there are at
@@ -23,35 +25,17 @@ from __future__ import annotations
 from itertools import combinations
 from typing import Iterable, Optional
 
+from planners.compared import COMPARED_METRICS, CONTROLLER_METRICS, DIRECTION, compare_runs, compared_over
 from planners.comparisons import COLUMNS as COMPARISON_COLUMNS
-from planners.comparisons import DIRECTION as _BASE_DIRECTION
 from planners.comparisons import Comparison, Comparisons
-from planners.comparisons import compare as _compare
 
-from ._fleet_results import FLEET_COMPARED, FLEET_METRICS, measured
 from ._records import StudyRecords
 
 __all__ = ["COMPARISON_COLUMNS", "COMPARED_METRICS", "CONTROLLER_METRICS", "Comparison", "Comparisons", "DIRECTION",
            "compare", "compared_over"]
 
-#: metrics compared by default (the paper's Fig. 6), after the success rate
-COMPARED_METRICS = ("length_m", "execution_time_s", "average_speed_m_s", "deviation_mean_m", "smoothness_rad",
-                    "clearance_min_m")
-#: compared too when a study has controllers (docs/metrics.md, "Controller metrics")
-CONTROLLER_METRICS = ("cross_track_error_mean_m", "heading_error_rms_rad", "time_to_goal_s", "jerk_linear_rms_m_s3")
-#: +1: higher is better, -1: lower is better, 0: neither (reported, not judged)
-DIRECTION = {**_BASE_DIRECTION, **{m: spec.direction for m, spec in FLEET_METRICS.items()}}
-
-
-def compared_over(metric: str) -> str:
-    """The runs a metric is compared over: ``completed`` (a single robot's metrics, a fleet's times and lengths)
-    or ``measured`` (a fleet's safety metrics: failed runs included; :data:`FLEET_METRICS`)."""
-    spec = FLEET_METRICS.get(metric)
-    return spec.over if spec is not None else "completed"
-
-
-def _enters(row: dict, metric: str) -> bool:
-    return row.get("status") == "completed" if compared_over(metric) == "completed" else measured(row)
+# COMPARED_METRICS, CONTROLLER_METRICS, DIRECTION and compared_over live in planners.compared, with
+# compare_runs: GET /api/v1/comparisons compares a selection of experiments with the same defaults.
 
 
 def compare(
@@ -92,17 +76,17 @@ def compare(
         Mann-Whitney U, over problems Wilcoxon signed-rank).
     n_resamples, seed : int
         Bootstrap resamples and the seed of the first comparison (each
-        comparison has its own stream, so results do not depend on the order).
+        comparison has its own stream, numbered in the order of the metrics,
+        modes, pairs and problems, in study order: ``GET /api/v1/comparisons``
+        of the study's experiments in study order gives the same numbers).
 
     Returns
     -------
     Comparisons
         A list of :class:`Comparison`; differences are ``a - b``; ``problem`` None for the pooled ones.
     """
-    if metrics is None and data.spec.fleet:
-        metrics = FLEET_COMPARED
-    elif metrics is None:
-        metrics = COMPARED_METRICS + (CONTROLLER_METRICS if data.spec.controllers is not None else ())
-    return _compare(data.rows, metrics, modes=modes if modes is not None else data.modes,
-                    pairs=pairs if pairs is not None else list(combinations(data.configurations, 2)), enters=_enters, direction=DIRECTION, confidence=confidence, family=family,
-                    test=test, n_resamples=n_resamples, seed=seed)
+    return compare_runs(data.rows, metrics, fleet=data.spec.fleet, controllers=data.spec.controllers is not None,
+                        modes=modes if modes is not None else data.modes,
+                        pairs=pairs if pairs is not None else list(combinations(data.configurations, 2)),
+                        problems=data.problems, confidence=confidence, family=family, test=test,
+                        n_resamples=n_resamples, seed=seed)

@@ -30,7 +30,7 @@ import shutil
 from dataclasses import dataclass
 from dataclasses import field as _field
 from pathlib import Path
-from typing import Any, Iterable, Optional
+from typing import Any, Iterable, Optional, TextIO
 
 import numpy as np
 
@@ -42,7 +42,7 @@ from ._outcomes import outcome_table
 from ._spec import StudySpec
 
 __all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "load_study", "read_csv_rows", "run_outcome", "write_csv",
-           "write_csv_rows", "write_obstacles", "write_poses"]
+           "write_csv_rows", "write_csv_stream", "write_obstacles", "write_poses"]
 
 #: leading columns of runs.csv (the metrics follow)
 ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "controller", "configuration", "mode",
@@ -286,10 +286,16 @@ def write_csv_rows(path: Path, rows: Iterable[dict[str, Any]], first: Iterable[s
 def write_csv(path: Path, columns: list[str], rows: Iterable[dict[str, Any]]) -> None:
     """Write dict rows as CSV with these ``columns``, one row at a time (``rows`` may be a generator)."""
     with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(columns)
-        for r in rows:
-            w.writerow([_cell(r.get(c)) for c in columns])
+        write_csv_stream(f, columns, rows)
+
+
+def write_csv_stream(f: TextIO, columns: list[str], rows: Iterable[dict[str, Any]]) -> None:
+    """:func:`write_csv` to an open text stream (``sys.stdout``): the same cells (numbers at full precision,
+    None and NaN empty, booleans ``true``/``false``), the same line ends."""
+    w = csv.writer(f)
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([_cell(r.get(c)) for c in columns])
 
 
 def read_csv_rows(path: Path) -> list[dict[str, Any]]:

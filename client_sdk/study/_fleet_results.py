@@ -22,9 +22,10 @@ as everywhere in a study (:func:`~client_sdk.study._outcomes.distinct_runs`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping, NamedTuple, Optional
+from typing import Any, ClassVar
 
-from contract.vocabulary import JUDGED
+from planners.compared import (FLEET_COMPARED, FLEET_KINDS, FLEET_METRICS, FleetMetric, fleet_outcome, fleet_row,
+                               measured)
 
 from ._outcomes import OutcomeSummary, distinct_runs, outcome_table
 from ._records import StudyRecords
@@ -32,77 +33,8 @@ from ._records import StudyRecords
 __all__ = ["FLEET_COMPARED", "FLEET_KINDS", "FLEET_METRICS", "FleetGroup", "FleetMetric", "FleetOutcomes",
            "fleet_groups", "fleet_outcome", "fleet_outcomes", "fleet_row", "measured"]
 
-
-class FleetMetric(NamedTuple):
-    """How a fleet metric is named (``words``, ``unit``, ``decimals``), over which runs it is summarised
-    (``"completed"`` or ``"measured"``) and which way is better (+1 higher, -1 lower, 0 neither)."""
-
-    words: str
-    unit: str
-    decimals: int
-    over: str
-    direction: int
-
-
-#: the fleet metrics of a study's tables and comparisons, in the order they are shown
-FLEET_METRICS: dict[str, FleetMetric] = {
-    "makespan_s": FleetMetric("makespan", "s", 2, "completed", -1),
-    "time_sum_s": FleetMetric("flowtime (sum of arrival times)", "s", 2, "completed", -1),
-    "path_length_sum_m": FleetMetric("sum of path lengths", "m", 3, "completed", -1),
-    "robot_success_rate": FleetMetric("share of robots arrived", "", 3, "measured", 1),
-    "robot_distance_min_m": FleetMetric("closest approach of two robots", "m", 3, "measured", 1),
-    "safety_time_s": FleetMetric("time within the safety radius", "s", 2, "completed", -1),
-    "collisions_robot": FleetMetric("robots in robot-robot collisions", "", 2, "measured", -1),
-    "collisions_moving": FleetMetric("robots hitting a moving obstacle", "", 2, "measured", -1),
-    "collisions_static": FleetMetric("robots hitting a block or the wall", "", 2, "measured", -1),
-}
-#: compared between configurations by default in a fleet study (after the success rate)
-FLEET_COMPARED = ("makespan_s", "time_sum_s", "path_length_sum_m", "robot_distance_min_m", "safety_time_s")
-#: how a fleet's run ended, in the order of the tables (every other failure is "other")
-FLEET_KINDS = ("success", "robot-robot collision", "moving-obstacle collision", "block/wall collision", "deadlock",
-               "timeout")
-_COLLISIONS = (("collisions_robot", FLEET_KINDS[1]), ("collisions_moving", FLEET_KINDS[2]),
-               ("collisions_static", FLEET_KINDS[3]))
-_STUCK = ("timeout", "controller_timeout", "stalled")
-
-
-def fleet_outcome(outcome: Optional[str], metrics: Mapping[str, Any]) -> str:
-    """How a fleet's run ended: ``success``; a collision by the gravest kind present (robot-robot, a moving
-    obstacle, a block or the wall); ``deadlock`` for a timeout, stall or controller time-out while the fleet
-    was deadlocked; else the run's outcome (``timeout``, ``planning``, ``error``, ...)."""
-    if outcome == "collision":
-        return next((kind for key, kind in _COLLISIONS if (metrics.get(key) or 0) > 0), "collision")
-    if outcome in _STUCK and metrics.get("deadlock"):
-        return "deadlock"
-    return outcome or "pending"
-
-
-def _robot_end(r: Mapping[str, Any]) -> str:
-    """One robot's end: ``arrived``, ``hit-robot``, ``hit-moving``, ``hit-static``, or its outcome."""
-    if r.get("done"):
-        return "arrived"
-    if r.get("collision"):
-        return f"hit-{r['collision']}"
-    return str(r.get("outcome") or "unknown").lower()
-
-
-def fleet_row(robots: int, outcome: Optional[str], metrics: Mapping[str, Any]) -> dict[str, Any]:
-    """A fleet's run in ``runs.csv``: ``robots`` (how many), its scalar fleet metrics (the share of robots that
-    arrived as ``robot_success_rate``: ``success_rate`` is the study's run-level rate), ``robots_arrived``,
-    ``robot_ends`` (each robot's end, space-separated, robot 0 first) and ``fleet_outcome``."""
-    row: dict[str, Any] = {"robots": robots, "fleet_outcome": fleet_outcome(outcome, metrics)}
-    for k, v in metrics.items():
-        if not isinstance(v, (dict, list)):
-            row["robot_success_rate" if k == "success_rate" else k] = v
-    per_robot = metrics.get("robots") or []
-    row["robots_arrived"] = sum(bool(r.get("done")) for r in per_robot) if per_robot else None
-    row["robot_ends"] = " ".join(_robot_end(r) for r in per_robot) or None
-    return row
-
-
-def measured(row: Mapping[str, Any]) -> bool:
-    """A fleet's run that was driven and measured (completed, or failed after its robots set off)."""
-    return row.get("status") in JUDGED and row.get("robots_arrived") is not None
+# FleetMetric, FLEET_METRICS, FLEET_COMPARED, FLEET_KINDS, fleet_outcome, fleet_row and measured live in
+# planners.compared: the server's GET /api/v1/comparisons flattens and compares a fleet's runs with them too.
 
 
 def _runs_over(rows: list[dict[str, Any]], over: str) -> list[dict[str, Any]]:

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from contract.vocabulary import JUDGED
+from planners.compared import FLEET_METHOD, METHOD
 
 from ._compare import COMPARISON_COLUMNS, Comparisons
 from ._data import StudyData, write_csv_rows
@@ -193,23 +194,7 @@ def _failures(data: StudyData) -> list[str]:
     return out
 
 
-METHOD = ("How to read this: the problem (an environment with a start/goal plan) is the unit of inference — its "
-          "repetitions say how a configuration varies on that problem, not how it does on others. With 3 or more "
-          "problems the verdict is over problems: each problem contributes the difference of its means, and the "
-          "interval and test (one-sample t) are over those differences, with how many problems favour each side "
-          "and how much they disagree (I²); with fewer, each problem has its own answer. On a problem, success "
-          "rates are over the counted runs (completed or failed) with Wilson 95% intervals and Fisher's exact "
-          "test; metrics are over completed runs only (a planner that fails often is judged on its successes "
-          "there, so read them with its success rate), as the difference of means a − b with a studentized "
-          "bootstrap 95% interval and the paired t by repetition (the study gives every configuration the same "
-          "noise per repetition), else Welch's t. p-values are Holm-adjusted per metric and level; effect sizes "
-          "are Hedges' g, d_z paired, the risk difference, and d over problems. Identical repetitions (the "
-          "deterministic simulation without jitter) count once. Details: docs/study.md.")
-
-
-#: what a fleet study adds to :data:`METHOD`
-FLEET_METHOD = (" In a fleet study a run succeeds when every robot reached its goal; the closest approach of two "
-                "robots is compared over every measured run, failed ones included (docs/study.md, \"Fleets\").")
+# METHOD and FLEET_METHOD (how to read the comparisons) live in planners.compared: the API's comparisons say it too.
 
 
 def _method(data: StudyData) -> str:

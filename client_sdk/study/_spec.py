@@ -45,6 +45,7 @@ from typing import Any, Mapping, Optional
 
 from contract.overrides import OverrideError, check_overrides, overrides_label
 from contract.vocabulary import Mode
+from planners.compared import configuration_name
 
 from ._fleet import MAX_ROBOTS, MAX_ROBOTS_SUB, Circle, is_pose, parse_circle, parse_robots
 from ._fleet import finite as _finite
@@ -69,12 +70,9 @@ class StudySpecError(ValueError):
 
 
 def _configuration(name: str, params: Mapping[str, Any], label: Optional[str]) -> str:
-    """``label``, else ``name`` with its parameters (``fm2(saturation=0.1)``)."""
-    if label:
-        return label
-    if not params:
-        return name
-    return f"{name}({','.join(f'{k}={v}' for k, v in sorted(params.items()))})"
+    """``label``, else ``name`` with its parameters (``fm2(saturation=0.1)``): as the server names a job's
+    configuration (:func:`planners.compared.configuration_name`)."""
+    return configuration_name(name, params, label)
 
 
 @dataclass(frozen=True)

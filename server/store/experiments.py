@@ -37,9 +37,10 @@ def count_queued(session: Session, *, owner_id: int) -> int:
 
 def create_experiment(
     session: Session, *, owner: Principal, body: ExperimentCreate, checked: Preflight, robot_radius: float,
-    planning_margin: float = 0.0,
+    planning_margin: float = 0.0, label: Optional[str] = None, problem: Optional[str] = None,
 ) -> Experiment:
-    """Add the experiment and one queued run per repetition and mode (flushes, no commit)."""
+    """Add the experiment and one queued run per repetition and mode (flushes, no commit); ``label`` and
+    ``problem``: its configuration's and problem's names (default: the job's own)."""
     exp = Experiment(
         owner_id=owner.id,
         status=RunStatus.QUEUED,
@@ -63,6 +64,8 @@ def create_experiment(
         controller=body.controller,
         controller_params=checked.controller_params,
         controller_program_id=body.controller_program,
+        label=label or body.label,
+        problem=problem or body.problem,
     )
     session.add(exp)
     session.flush()

@@ -1,150 +1,90 @@
-// The compare page (#/compare?ids=1,2,...): two or more experiments side by side — how their runs ended
-// (outcomes, success rate with the server's Wilson interval), each metric's mean with its 95% interval and
-// over how many runs, and the differences of every pair: the success rate's risk difference with Fisher's
-// exact p, and each metric's difference of means with a studentized bootstrap 95% interval (paired by
-// repetition when both ran the same problem with the same seed). A study's tests with Holm's correction
-// are in `twb study` (summary.md, comparisons.csv) and StudyData.compare(); docs/study.md explains both.
+// The compare page (#/compare?ids=1,2,...): two or more experiments side by side, as the server compares them
+// (GET /api/v1/comparisons: the same numbers as a study's comparisons.csv, `twb results 1 2 3` and
+// Client.compare). Each experiment is its label (the configuration) on its problem. The page shows how each
+// configuration's runs ended (success rate with the server's Wilson interval over the distinct runs), each
+// experiment's metric means (the server's aggregates), the comparisons over problems (when there are three
+// or more: each problem one observation, how many problems favour each side, I²) and each problem's. It
+// computes no statistics itself: every interval and p-value is the server's. docs/dashboard.md.
 
 import { $, VOCABULARY, badge, h, num, pose, report } from "./dom.js";
 import { plannerName } from "./experiments.js";
-import { METRICS, allEqual, clipNote, intervalText, showIfClipped } from "./metrics.js";
+import { METRICS, allEqual, clipNote, intervalText, metricLabel, showIfClipped } from "./metrics.js";
 
-/** The compared metrics: [key, name, unit]. */
+/** The metrics of the means table: [key, name, unit]. */
 export const COMPARE_METRICS = ["length_m", "execution_time_s", "average_speed_m_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m"]
   .map((key) => [key, ...METRICS[key].slice(0, 2)]);
-const NOT_COUNTED = VOCABULARY.notCounted;
-const MIN_BOOTSTRAP = 5; // as planners.stats: fewer values a side get no interval
 const IDENTICAL = "identical repetitions (deterministic simulation)";
+/** The server's test names in words. */
+const TESTS = {
+  "paired-t": "paired t", "welch-t": "Welch's t", "mann-whitney-u": "Mann-Whitney U", wilcoxon: "Wilcoxon",
+  "fisher-exact": "Fisher's exact", "problem-t": "t over problems", "problem-wilcoxon": "Wilcoxon over problems",
+};
 
-/** Seeded uniform [0, 1) (mulberry32), so the intervals shown are the same on every load. */
-function random(seed) {
-  let a = seed >>> 0;
-  return () => {
-    a = (a + 0x6d2b79f5) >>> 0;
-    let t = a;
-    t = Math.imul(t ^ (t >>> 15), t | 1);
-    t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
-    return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
-  };
-}
-
-const mean = (xs) => xs.reduce((s, x) => s + x, 0) / xs.length;
-function variance(xs) {
-  const m = mean(xs);
-  return xs.reduce((s, x) => s + (x - m) ** 2, 0) / (xs.length - 1);
-}
-function constant(xs) {
-  if (!xs.length) return false;
-  const hi = Math.max(...xs.map(Math.abs));
-  return Math.max(...xs) - Math.min(...xs) <= 1e-9 * Math.max(1, hi);
-}
-
-/**
- * Studentized bootstrap interval of mean(a) - mean(b) (paired: of the mean difference), as planners.stats:
- * t* = (estimate* - estimate) / se*, interval estimate - q * se at the t* quantiles. Returns [low, high] or null.
- */
-export function bootstrapDifference(a, b, { paired = false, level = 0.95, resamples = 4000, seed = 1 } = {}) {
-  const rnd = random(seed);
-  const pick = (xs) => xs[Math.floor(rnd() * xs.length)];
-  const ts = new Float64Array(resamples);
-  let est;
-  let se;
-  if (paired) {
-    const d = a.map((x, i) => x - b[i]);
-    if (d.length < MIN_BOOTSTRAP) return null;
-    est = mean(d);
-    se = Math.sqrt(variance(d) / d.length);
-    for (let k = 0; k < resamples; k++) {
-      const r = d.map(() => pick(d));
-      ts[k] = (mean(r) - est) / Math.sqrt(variance(r) / r.length);
-    }
-  } else {
-    if (Math.min(a.length, b.length) < MIN_BOOTSTRAP) return null;
-    est = mean(a) - mean(b);
-    se = Math.sqrt(variance(a) / a.length + variance(b) / b.length);
-    for (let k = 0; k < resamples; k++) {
-      const ra = a.map(() => pick(a));
-      const rb = b.map(() => pick(b));
-      ts[k] = (mean(ra) - mean(rb) - est) / Math.sqrt(variance(ra) / ra.length + variance(rb) / rb.length);
-    }
-  }
-  for (let k = 0; k < resamples; k++) if (Number.isNaN(ts[k])) ts[k] = 0; // 0/0: no spread, mean = estimate
-  ts.sort();
-  const q = (p) => ts[Math.min(resamples - 1, Math.max(0, Math.ceil(p * resamples) - 1))];
-  return [est - q((1 + level) / 2) * se, est - q((1 - level) / 2) * se];
-}
-
-function logFactorial(n) {
-  let s = 0;
-  for (let i = 2; i <= n; i++) s += Math.log(i);
-  return s;
-}
-
-/** Fisher's exact test, two-sided, of k1/n1 against k2/n2 (as scipy.stats.fisher_exact). */
-export function fisherExact(k1, n1, k2, n2) {
-  const K = k1 + k2;
-  const N = n1 + n2;
-  const lp = (x) => logFactorial(K) + logFactorial(N - K) + logFactorial(n1) + logFactorial(n2)
-    - logFactorial(x) - logFactorial(K - x) - logFactorial(n1 - x) - logFactorial(n2 - K + x) - logFactorial(N);
-  const observed = lp(k1);
-  let p = 0;
-  for (let x = Math.max(0, K - n2); x <= Math.min(K, n1); x++) {
-    const v = lp(x);
-    if (v <= observed + 1e-7) p += Math.exp(v);
-  }
-  return Math.min(1, p);
-}
-
-/** Wilson score interval of k/n (as scipy.stats.binomtest(...).proportion_ci(method="wilson")). */
-export function wilson(k, n, z = 1.959963984540054) {
-  if (!n) return null;
-  const p = k / n;
-  const den = 1 + (z * z) / n;
-  const centre = (p + (z * z) / (2 * n)) / den;
-  const half = (z / den) * Math.sqrt((p * (1 - p)) / n + (z * z) / (4 * n * n));
-  return [Math.max(0, centre - half), Math.min(1, centre + half)];
-}
-
-/** Newcombe's hybrid score interval of k1/n1 - k2/n2 from the two Wilson intervals (as planners.stats). */
-export function newcombe(k1, n1, k2, n2) {
-  const a = wilson(k1, n1);
-  const b = wilson(k2, n2);
-  if (!a || !b) return null;
-  const p1 = k1 / n1;
-  const p2 = k2 / n2;
-  const d = p1 - p2;
-  return [Math.max(-1, d - Math.hypot(p1 - a[0], b[1] - p2)), Math.min(1, d + Math.hypot(a[1] - p1, p2 - b[0]))];
-}
-
-function pct(v) {
+/** A share as a whole percentage, "57 %"; "–" for none. */
+export function pct(v) {
   return v == null ? "–" : `${Math.round(100 * v)} %`;
 }
 
-function fmtP(p) {
-  if (!Number.isFinite(p)) return "–";
+/** A difference of rates in percentage points, signed: "+40". */
+export function points(v) {
+  return `${v > 0 ? "+" : ""}${Math.round(100 * v)}`;
+}
+
+/** A p-value: two significant digits, "< 0.001" below that; "–" for none. */
+export function fmtP(p) {
+  if (p == null || !Number.isFinite(p)) return "–";
   return p < 0.001 ? "< 0.001" : p.toPrecision(2);
 }
 
-/** One experiment's runs in one mode, with the values the comparisons use. */
-function modeRuns(d, m, mode) {
-  const outcome = new Map((m.runs || []).map((r) => [r.run_id, r.outcome]));
-  return d.runs.filter((r) => r.mode === mode).map((r) => ({
-    ...r,
-    outcome: outcome.get(r.id) ?? "pending", // the server's outcome rule (contract/vocabulary.py run_outcome)
-  }));
+/** The success rate of a configuration's runs: k/n distinct runs with the Wilson interval, saying when
+ * identical repetitions were counted once. */
+function rateText(o) {
+  const s = o.success || {};
+  if (!o.counted) return "no counted run";
+  if (s.rate == null) return `${s.k}/${s.n}`;
+  const ci = `(${pct(s.ci_low)}–${pct(s.ci_high)})`;
+  if (o.identical) return `${o.counts.success || 0}/${o.counted} runs; ${IDENTICAL} counted once: ${s.k}/${s.n} ${ci}`;
+  return `${s.k}/${s.n} ${ci}`;
 }
 
-/** The counted runs, identical repetitions kept once (the deterministic simulation repeats itself). */
-function distinct(runs) {
-  const counted = runs.filter((r) => !NOT_COUNTED.has(r.outcome));
-  if (counted.length < 2) return { runs: counted, merged: false };
-  const keys = ["length_m", "execution_time_s", "deviation_mean_m", "smoothness_rad", "clearance_min_m"];
-  const same = new Set(counted.map((r) => r.outcome)).size === 1 && keys.every((k) => {
-    const vs = counted.map((r) => (r.metrics || {})[k]);
-    if (vs.every((v) => v == null)) return true;
-    return vs.every((v) => typeof v === "number") && constant(vs);
-  });
-  return same ? { runs: [counted[0]], merged: true } : { runs: counted, merged: false };
+/** One comparison row's cells: [key, text, raw value or null, numeric?]. */
+function rowCells(r, pooled) {
+  const rate = r.metric === "success_rate";
+  const unit = rate ? "" : METRICS[r.metric]?.[1] ?? "";
+  const mean = (v) => (rate ? pct(v) : num(v));
+  const diff = r.diff == null ? "–" : rate ? `${points(r.diff)} points` : `${num(r.diff)}${unit ? ` ${unit}` : ""}`;
+  const ci = r.ci_low == null || r.ci_high == null ? "–"
+    : rate ? `[${points(r.ci_low)}, ${points(r.ci_high)}]` : `[${num(r.ci_low)}, ${num(r.ci_high)}]`;
+  const cells = [
+    ["mode", r.mode, null, false], ["metric", rate ? "success rate" : metricLabel(r.metric), null, false],
+    ["a", r.a, null, false], ["b", r.b, null, false],
+  ];
+  if (!pooled) cells.push(["n_a", String(r.n_a), r.n_a, true], ["n_b", String(r.n_b), r.n_b, true]);
+  cells.push(["mean_a", mean(r.mean_a), r.mean_a, true], ["mean_b", mean(r.mean_b), r.mean_b, true],
+    ["diff", diff, r.diff, true], ["ci", ci, null, true],
+    ["test", r.test ? TESTS[r.test] ?? r.test : "–", null, false],
+    ["p", fmtP(r.p), r.p, true], ["p_holm", fmtP(r.p_holm), r.p_holm, true]);
+  if (pooled) {
+    cells.push(["favour", r.favour_a == null ? "–" : `${r.favour_a} / ${r.favour_b} of ${r.n_problems}`, null, true],
+      ["i2", pct(r.heterogeneity_i2), r.heterogeneity_i2, true]);
+  }
+  cells.push(["note", r.note || "", null, false]);
+  return cells;
+}
+
+function comparisonTable(rows, pooled, attrs) {
+  const names = {
+    mode: "Mode", metric: "Metric", a: "a", b: "b", n_a: "n a", n_b: "n b", mean_a: "Mean a", mean_b: "Mean b",
+    diff: "a − b", ci: "95% CI", test: "Test", p: "p", p_holm: "Holm p", favour: "Problems favouring a / b", i2: "I²", note: "Note",
+  };
+  const template = rowCells(rows[0], pooled);
+  const head = h("thead", {}, h("tr", {}, template.map(([k, , , numeric]) => h("th", { scope: "col", class: numeric ? "num" : null }, names[k]))));
+  const body = h("tbody", {}, rows.map((r) => h("tr", { dataset: { metric: r.metric, mode: r.mode, a: r.a, b: r.b, problem: r.problem } },
+    rowCells(r, pooled).map(([k, text, raw, numeric]) => h("td", {
+      class: [numeric ? "num" : null, k === "note" ? "note" : null].filter(Boolean).join(" ") || null,
+      dataset: raw == null ? { k } : { k, v: String(raw) },
+    }, text)))));
+  return h("table", { class: "grid compact", ...attrs }, head, body);
 }
 
 export class ComparePage {
@@ -164,78 +104,82 @@ export class ComparePage {
     }
     try {
       const api = this.store.api;
-      const data = await Promise.all(ids.map(async (id) => {
-        const [d, m] = await Promise.all([this.store.detail(id, { fresh: true }), api.get(`/api/v1/experiments/${id}/metrics`)]);
-        return { d, m };
-      }));
+      const [cmp, data] = await Promise.all([
+        api.get(`/api/v1/comparisons?experiments=${ids.join(",")}`),
+        Promise.all(ids.map(async (id) => {
+          const [d, m] = await Promise.all([this.store.detail(id, { fresh: true }), api.get(`/api/v1/experiments/${id}/metrics`)]);
+          return { d, m };
+        })),
+      ]);
       if (ids !== this.ids) return;
-      this.render(data);
+      this.render(cmp, data);
     } catch (err) {
-      if (err.status === 404) {
+      if (ids !== this.ids) return;
+      if (err.status === 404 || err.status === 422) {
         this.root.replaceChildren(h("div", { class: "panel" }, h("h1", {}, "Compare"),
-          h("p", { class: "error" }, "One of these experiments was not found (it does not exist or is not yours)."),
+          h("p", { class: "error" }, err.status === 404
+            ? "One of these experiments was not found (it does not exist or is not yours)."
+            : `These experiments cannot be compared: ${err.detail}`),
           h("a", { href: "#/experiments" }, "All experiments")));
       } else report(err, "Compare");
     }
   }
 
-  render(data) {
+  render(cmp, data) {
+    const byId = new Map(cmp.experiments.map((e) => [e.id, e]));
     const modes = [...new Set(data.flatMap(({ d }) => d.modes))].sort((a, b) => (a === "twb" ? -1 : b === "twb" ? 1 : a.localeCompare(b)));
-    const label = ({ d }) => `#${d.id} ${plannerName(d, this.store.programs)}`;
+    const label = ({ d }) => `#${d.id} ${byId.get(d.id)?.configuration ?? plannerName(d, this.store.programs)}`;
     const means = this.means(data, modes, label);
     const note = clipNote("compare-means-note");
     showIfClipped(note, means);
     this.root.replaceChildren(
       h("div", { class: "exp-head" }, h("h1", { id: "compare-title" }, `Compare experiments ${data.map(({ d }) => `#${d.id}`).join(", ")}`),
         h("a", { href: "#/experiments" }, "All experiments")),
-      h("div", { class: "panel" }, h("h2", {}, "Experiments"), h("div", { class: "table-scroll" }, this.facts(data))),
+      h("div", { class: "panel" }, h("h2", {}, "Experiments"),
+        h("p", { class: "muted small" }, "Each experiment is its configuration (its label) on its problem; experiments with the same label are one configuration, pooled over their problems."),
+        h("div", { class: "table-scroll" }, this.facts(data, byId))),
       h("div", { class: "panel" }, h("h2", {}, "Outcomes"),
-        h("p", { class: "muted small" }, "Success rate over the runs that ended in the job's own outcome (completed or failed), with the server's Wilson 95% interval; a testbed error is not the planner's."),
-        h("div", { class: "table-scroll" }, this.outcomes(data, modes, label))),
+        h("p", { class: "muted small" }, "Per configuration and mode: how its runs ended, and the success rate over the runs that ended in the job's own outcome (completed or failed) with the server's Wilson 95% interval; identical repetitions of a problem count once, and a testbed error is not the planner's."),
+        h("div", { class: "table-scroll" }, this.outcomes(cmp))),
       h("div", { class: "panel" }, h("h2", {}, "Metric means"),
-        h("p", { class: "muted small" }, "Mean over the completed runs with its 95% interval (Student's t) and over how many of the runs; failed runs' metrics are on each experiment's page."),
+        h("p", { class: "muted small" }, "Each experiment's mean over its completed runs with its 95% interval (Student's t) and over how many of the runs; failed runs' metrics are on each experiment's page."),
         h("div", { class: "table-scroll" }, means), note),
-      h("div", { class: "panel" }, h("h2", {}, "Differences"),
-        h("p", { class: "muted small" }, "a − b per pair and mode: the success rate's risk difference with Fisher's exact p; each metric's difference of means over completed runs with a studentized bootstrap 95% interval (seeded), paired by repetition when both ran the same problem with the same seed. These p-values are not corrected for multiplicity; for a whole study's tests with Holm's correction use twb study (docs/study.md)."),
-        h("div", { class: "table-scroll" }, this.differences(data, modes))),
+      this.pooled(cmp),
+      this.perProblem(cmp),
+      h("p", { class: "muted small", id: "compare-method" }, cmp.method),
     );
   }
 
-  facts(data) {
-    const head = h("thead", {}, h("tr", {}, ["Experiment", "Status", "Environment", "Planner", "Start", "Goal", "Modes", "Reps", "Seed", "Jitter"]
+  facts(data, byId) {
+    const head = h("thead", {}, h("tr", {}, ["Experiment", "Status", "Configuration", "Problem", "Planner", "Start", "Goal", "Modes", "Reps", "Seed", "Jitter"]
       .map((t) => h("th", { scope: "col" }, t))));
     const body = h("tbody", {}, data.map(({ d }) => h("tr", { dataset: { experiment: d.id } },
       h("td", {}, h("a", { href: `#/experiments/${d.id}` }, `#${d.id}`)), h("td", {}, badge(d.status)),
-      h("td", {}, d.environment), h("td", {}, plannerName(d, this.store.programs)), h("td", {}, pose(d.start)), h("td", {}, pose(d.goal)),
+      h("td", {}, byId.get(d.id)?.configuration ?? ""), h("td", {}, byId.get(d.id)?.problem ?? ""),
+      h("td", {}, plannerName(d, this.store.programs)), h("td", {}, pose(d.start)), h("td", {}, pose(d.goal)),
       h("td", {}, d.modes.join(" + ")), h("td", { class: "num" }, d.repetitions), h("td", { class: "num" }, d.seed),
       h("td", {}, d.jitter ? `${num(d.jitter.xy_m, 3)} m, ${num(d.jitter.theta_rad, 3)} rad` : "none"))));
     return h("table", { class: "grid", id: "compare-facts" }, head, body);
   }
 
-  outcomes(data, modes, label) {
-    const head = h("thead", {}, h("tr", {}, ["Experiment", "Mode", "Runs", "Success", "Collision", "Timeout", "Other failure", "Not counted", "Success rate (95% CI)"]
-      .map((t, i) => h("th", { scope: "col", class: i > 1 && i < 8 ? "num" : null }, t))));
-    const rows = [];
-    for (const x of data) {
-      for (const mode of modes) {
-        if (!x.d.modes.includes(mode)) continue;
-        const o = x.m.outcomes?.[mode] || { counts: {}, success: {} };
-        const c = o.counts || {};
-        const other = Object.entries(c).filter(([k]) => !["success", "collision", "timeout"].includes(k) && !NOT_COUNTED.has(k));
-        const notCounted = Object.entries(c).filter(([k]) => NOT_COUNTED.has(k)).reduce((s, [, v]) => s + v, 0);
-        const s = o.success || {};
-        const rate = s.n ? `${s.k}/${s.n} (${pct(s.ci_low)}–${pct(s.ci_high)})` : "no counted run";
-        const { merged } = distinct(modeRuns(x.d, x.m, mode));
-        rows.push(h("tr", { dataset: { experiment: x.d.id, mode } }, h("td", {}, label(x)), h("td", {}, mode),
-          h("td", { class: "num" }, o.runs ?? x.d.runs.filter((r) => r.mode === mode).length),
-          h("td", { class: "num", dataset: { outcome: "success" } }, c.success || 0),
-          h("td", { class: "num", dataset: { outcome: "collision" } }, c.collision || 0),
-          h("td", { class: "num", dataset: { outcome: "timeout" } }, c.timeout || 0),
-          h("td", { class: "num" }, other.reduce((sum, [, v]) => sum + v, 0) || 0, other.length ? h("span", { class: "muted small" }, ` (${other.map(([k, v]) => `${k} ${v}`).join(", ")})`) : ""),
-          h("td", { class: "num" }, notCounted),
-          h("td", { dataset: { rate: s.rate ?? "" } }, rate, merged ? h("div", { class: "muted small" }, `${IDENTICAL}: one distinct run`) : "")));
-      }
-    }
+  outcomes(cmp) {
+    const notCounted = VOCABULARY.notCounted;
+    const head = h("thead", {}, h("tr", {}, ["Configuration", "Experiments", "Mode", "Runs", "Success", "Collision", "Timeout", "Other failure", "Not counted", "Success rate (95% CI)"]
+      .map((t, i) => h("th", { scope: "col", class: i > 2 && i < 9 ? "num" : null }, t))));
+    const rows = cmp.outcomes.map((o) => {
+      const c = o.counts || {};
+      const other = Object.entries(c).filter(([k]) => !["success", "collision", "timeout"].includes(k) && !notCounted.has(k));
+      const s = o.success || {};
+      return h("tr", { dataset: { configuration: o.configuration, mode: o.mode, experiments: o.experiments.join(",") } },
+        h("td", {}, o.configuration), h("td", {}, o.experiments.map((i) => `#${i}`).join(" ")), h("td", {}, o.mode),
+        h("td", { class: "num" }, o.runs),
+        h("td", { class: "num", dataset: { outcome: "success" } }, c.success || 0),
+        h("td", { class: "num", dataset: { outcome: "collision" } }, c.collision || 0),
+        h("td", { class: "num", dataset: { outcome: "timeout" } }, c.timeout || 0),
+        h("td", { class: "num" }, other.reduce((sum, [, v]) => sum + v, 0), other.length ? h("span", { class: "muted small" }, ` (${other.map(([k, v]) => `${k} ${v}`).join(", ")})`) : ""),
+        h("td", { class: "num" }, o.runs - o.counted),
+        h("td", { dataset: { rate: s.rate ?? "", k: s.k ?? "", n: s.n ?? "", ciLow: s.ci_low ?? "", ciHigh: s.ci_high ?? "" } }, rateText(o)));
+    });
     return h("table", { class: "grid", id: "compare-outcomes" }, head, h("tbody", {}, rows));
   }
 
@@ -259,87 +203,35 @@ export class ComparePage {
     return h("table", { class: "grid", id: "compare-means" }, head, body);
   }
 
-  differences(data, modes) {
-    const head = h("thead", {}, h("tr", {}, ["a", "b", "Mode", "Metric", "n a", "n b", "a − b", "95% CI", "Method", "p", "Note"]
-      .map((t, i) => h("th", { scope: "col", class: i >= 4 && i <= 9 ? "num" : null }, t))));
-    const rows = [];
-    let seed = 1;
-    for (let i = 0; i < data.length; i++) {
-      for (let j = i + 1; j < data.length; j++) {
-        const A = data[i];
-        const B = data[j];
-        const same = A.d.environment === B.d.environment && JSON.stringify(A.d.start) === JSON.stringify(B.d.start)
-          && JSON.stringify(A.d.goal) === JSON.stringify(B.d.goal) && A.d.seed === B.d.seed;
-        for (const mode of modes) {
-          if (!A.d.modes.includes(mode) || !B.d.modes.includes(mode)) continue;
-          const ra = modeRuns(A.d, A.m, mode);
-          const rb = modeRuns(B.d, B.m, mode);
-          const cell = (k, v, cls) => h("td", { class: cls || null, dataset: k ? { k } : null }, v);
-          const tag = (metric) => ({ dataset: { a: A.d.id, b: B.d.id, mode, metric } });
-          // success rate
-          const da = distinct(ra);
-          const db = distinct(rb);
-          const ka = da.runs.filter((r) => r.outcome === "success").length;
-          const kb = db.runs.filter((r) => r.outcome === "success").length;
-          const merged = da.merged || db.merged;
-          if (da.runs.length && db.runs.length) {
-            const p = fisherExact(ka, da.runs.length, kb, db.runs.length);
-            const iv = newcombe(ka, da.runs.length, kb, db.runs.length);
-            const points = (v) => `${v > 0 ? "+" : ""}${Math.round(100 * v)}`;
-            rows.push(h("tr", tag("success_rate"), cell(null, `#${A.d.id}`), cell(null, `#${B.d.id}`), cell(null, mode), cell(null, "success rate"),
-              cell(null, da.runs.length, "num"), cell(null, db.runs.length, "num"),
-              cell("diff", `${points(ka / da.runs.length - kb / db.runs.length)} points`, "num"),
-              cell("ci", iv ? `[${points(iv[0])}, ${points(iv[1])}]` : "–", "num"),
-              cell(null, "Fisher exact"), cell("p", fmtP(p), "num"), cell(null, `${ka}/${da.runs.length} vs ${kb}/${db.runs.length}${merged ? `; ${IDENTICAL}: counted once` : ""}`)));
-          }
-          for (const [key, title, unit] of COMPARE_METRICS) {
-            const doneA = ra.filter((r) => r.status === "completed");
-            const doneB = rb.filter((r) => r.status === "completed");
-            let xa;
-            let xb;
-            let paired = false;
-            let note = "";
-            if (!doneA.length || !doneB.length) {
-              note = `no completed run of ${!doneA.length ? `#${A.d.id}` : `#${B.d.id}`}`;
-              xa = [];
-              xb = [];
-            } else if (same && A.d.repetitions === B.d.repetitions) {
-              paired = true;
-              const byRep = new Map(doneB.map((r) => [r.repetition, r]));
-              const pairs = doneA.filter((r) => byRep.has(r.repetition)).map((r) => [r.metrics?.[key], byRep.get(r.repetition).metrics?.[key]])
-                .filter(([x, y]) => typeof x === "number" && typeof y === "number");
-              xa = pairs.map((p) => p[0]);
-              xb = pairs.map((p) => p[1]);
-              if (distinct(doneA).merged && distinct(doneB).merged && xa.length) {
-                xa = xa.slice(0, 1);
-                xb = xb.slice(0, 1);
-                note = IDENTICAL;
-              }
-            } else {
-              const ua = distinct(doneA);
-              const ub = distinct(doneB);
-              xa = ua.runs.map((r) => r.metrics?.[key]).filter((v) => typeof v === "number");
-              xb = ub.runs.map((r) => r.metrics?.[key]).filter((v) => typeof v === "number");
-              if (ua.merged || ub.merged) note = IDENTICAL;
-            }
-            let diff = "–";
-            let ci = "–";
-            if (xa.length && xb.length) {
-              const d = mean(xa) - mean(xb);
-              diff = `${num(d)} ${unit}`;
-              const noSpread = paired ? constant(xa.map((x, k) => x - xb[k])) : constant(xa) && constant(xb);
-              const iv = noSpread ? null : bootstrapDifference(xa, xb, { paired, seed: seed++ });
-              if (iv) ci = `[${num(iv[0])}, ${num(iv[1])}]`;
-              else if (!note) note = noSpread ? "no spread: no interval" : `fewer than ${MIN_BOOTSTRAP} values a side: no interval`;
-              else note += ": no interval";
-            }
-            rows.push(h("tr", tag(key), cell(null, `#${A.d.id}`), cell(null, `#${B.d.id}`), cell(null, mode), cell(null, title),
-              cell(null, xa.length, "num"), cell(null, xb.length, "num"), cell("diff", diff, "num"), cell("ci", ci, "num"),
-              cell(null, `bootstrap, ${paired ? "paired" : "unpaired"}`), cell(null, "–", "num"), cell("note", note)));
-          }
-        }
-      }
+  pooled(cmp) {
+    const rows = cmp.rows.filter((r) => r.problem === "");
+    const n = cmp.problems.length;
+    const panel = h("div", { class: "panel", id: "compare-pooled-panel" }, h("h2", {}, "Over problems"));
+    if (!rows.length) {
+      panel.append(h("p", { id: "compare-no-verdict" }, `No verdict over problems: these experiments are on ${n} problem${n === 1 ? "" : "s"}, `
+        + `and a verdict over problems needs at least ${cmp.min_problems} that both configurations ran. `
+        + `Each problem's comparisons below answer for that problem alone; they say nothing about other problems.`));
+      return panel;
     }
-    return h("table", { class: "grid", id: "compare-differences" }, head, h("tbody", {}, rows));
+    const most = Math.max(...rows.map((r) => r.n_problems));
+    panel.append(h("p", { class: "muted small" }, `Over ${most} problems: each problem is one observation — the difference of its means — `
+        + "and the interval and test are over those differences (each problem's repetitions say how a configuration varies on that problem, not on others). "
+        + "Problems favouring a / b count the problems whose difference favours each side; I² is how much the problems disagree beyond their own noise. "
+        + "p-values are Holm-adjusted within each metric (Holm p)."),
+    h("div", { class: "table-scroll" }, comparisonTable(rows, true, { id: "compare-pooled" })));
+    return panel;
+  }
+
+  perProblem(cmp) {
+    const panel = h("div", { class: "panel", id: "compare-differences" }, h("h2", {}, "Per problem"),
+      h("p", { class: "muted small" }, "On each problem, a − b per pair and mode: the success rate's difference with Fisher's exact test (over the counted runs), each metric's difference of means over the completed runs with a studentized bootstrap 95% interval, paired by repetition when both ran the same repetitions with the same seed (paired t), else Welch's t; identical repetitions count once. Holm p: adjusted within each metric's per-problem comparisons."));
+    for (const problem of cmp.problems) {
+      const rows = cmp.rows.filter((r) => r.problem === problem);
+      const section = h("section", { class: "compare-problem", dataset: { problem } }, h("h3", {}, `On ${problem}`));
+      section.append(rows.length ? h("div", { class: "table-scroll" }, comparisonTable(rows, false, { "data-problem": problem }))
+        : h("p", { class: "muted" }, "No two configurations both ran this problem: nothing to compare on it."));
+      panel.append(section);
+    }
+    return panel;
   }
 }

@@ -59,7 +59,7 @@ export class ExperimentsPage {
     const button = $("#compare-button");
     button.disabled = n < 2;
     button.textContent = n ? `Compare selected (${n})` : "Compare selected";
-    $("#compare-hint").textContent = n >= 2 ? "Outcomes, metric means and their differences side by side."
+    $("#compare-hint").textContent = n >= 2 ? "Outcomes, metric means and the comparisons, per problem and over problems."
       : "Tick two or more experiments to compare them side by side.";
   }
 
