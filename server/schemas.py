@@ -621,7 +621,7 @@ class MessagePublic(FromRow):
 # --------------------------------------------------------------------------- comparisons
 
 
-class ComparedExperiment(BaseModel):
+class ComparedExperiment(Public):
     """One experiment of a comparison: its label and problem, and the ``configuration`` its runs are compared
     as (the label, or ``#<id> <label>`` where two selected experiments share the label and the problem)."""
 
@@ -638,7 +638,7 @@ class ComparedExperiment(BaseModel):
     robots: int = Field(description="How many robots (1, or a multi-robot job's).")
 
 
-class SuccessRate(BaseModel):
+class SuccessRate(Public):
     """Successes ``k`` of ``n`` distinct counted runs, the ``rate`` and its Wilson interval (None without runs)."""
 
     n: int
@@ -649,7 +649,7 @@ class SuccessRate(BaseModel):
     confidence: float
 
 
-class ConfigurationOutcomes(BaseModel):
+class ConfigurationOutcomes(Public):
     """How the runs of one configuration in one mode ended, over its experiments (all problems)."""
 
     configuration: str
@@ -664,7 +664,7 @@ class ConfigurationOutcomes(BaseModel):
     identical: bool
 
 
-class ComparisonRow(BaseModel):
+class ComparisonRow(Public):
     """One comparison of configurations ``a`` and ``b`` on ``metric`` in ``mode``: on ``problem``, or pooled
     over ``n_problems`` problems (``problem`` empty).  The columns of a study's ``comparisons.csv``
     (``planners.comparisons.COLUMNS``); numbers that are undefined (no test, no interval) are null."""
@@ -701,7 +701,7 @@ class ComparisonRow(BaseModel):
     note: str
 
 
-class ComparisonsPublic(BaseModel):
+class ComparisonsPublic(Public):
     """``GET /api/v1/comparisons``: the experiments, how each configuration's runs ended, and the comparisons
     (pooled over problems first, then each problem's, per metric, mode and pair) with how to read them."""
 

@@ -50,6 +50,7 @@ ENDPOINTS: dict[str, tuple[Any, ...]] = {
     "_cancel": (1,),
     "_cancel_many": ([1, 2],),
     "_get_metrics": (1,),
+    "_compare": ([1, 2], None, "t", "metric", 0.95),
     "_get_run": (1,),
     "_get_poses": (1, "array"),
     "_get_obstacles": (1,),
