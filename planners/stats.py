@@ -225,35 +225,70 @@ MIN_BOOTSTRAP = 5
 
 def _studentized(samples: tuple[np.ndarray, ...]) -> tuple[float, float, Any]:
     """The estimate (difference of means, or mean of paired differences), its standard error and the statistic
-    ``t* = (estimate* - estimate) / se*`` of a resample, vectorised along ``axis``."""
+    ``t* = (estimate* - estimate) / se*`` of a resample, vectorised along ``axis``.  A resample whose values
+    are all equal up to rounding (the :func:`_constant` rule) has ``se* = 0`` exactly, not the rounding noise
+    of a few 1e-13 that would make ``t*`` a huge finite number (quantised metrics, such as times in control
+    steps, produce many such resamples); a numerator within rounding of 0 is 0."""
+    def flat(x: np.ndarray, axis: int) -> np.ndarray:
+        scale = np.maximum(1.0, np.abs(x).max(axis=axis))
+        return np.ptp(x, axis=axis) <= 1e-12 * scale
+
+    def ratio(num: np.ndarray, se: np.ndarray, scale: float) -> np.ndarray:
+        num = np.where(np.abs(num) <= 1e-12 * scale, 0.0, num)
+        return num / se
+
     if len(samples) == 1:
         (d,) = samples
         est, se = float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size))
+        scale_d = max(1.0, float(np.abs(d).max()))
 
         def t_one(x: np.ndarray, axis: int = -1) -> np.ndarray:
-            return (x.mean(axis) - est) / (x.std(axis=axis, ddof=1) / math.sqrt(x.shape[axis]))
+            s = np.where(flat(x, axis), 0.0, x.std(axis=axis, ddof=1) / math.sqrt(x.shape[axis]))
+            return ratio(x.mean(axis) - est, s, scale_d)
         return est, se, t_one
     a, b = samples
     est = float(a.mean() - b.mean())
     se = math.sqrt(a.var(ddof=1) / a.size + b.var(ddof=1) / b.size)
+    scale_ab = max(1.0, float(np.abs(a).max()), float(np.abs(b).max()))
 
     def t_two(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
-        v = x.var(axis=axis, ddof=1) / x.shape[axis] + y.var(axis=axis, ddof=1) / y.shape[axis]
-        return (x.mean(axis) - y.mean(axis) - est) / np.sqrt(v)
+        vx = np.where(flat(x, axis), 0.0, x.var(axis=axis, ddof=1))
+        vy = np.where(flat(y, axis), 0.0, y.var(axis=axis, ddof=1))
+        return ratio(x.mean(axis) - y.mean(axis) - est, np.sqrt(vx / x.shape[axis] + vy / y.shape[axis]), scale_ab)
     return est, se, t_two
 
 
+#: the note of an interval that is Student's t instead of the bootstrap's (see :func:`_bootstrap_ci`)
+COARSE = ("the values are too coarse (quantised: many resamples without spread) for a bootstrap interval: "
+          "Student's t interval")
+
+
+def _t_fallback(samples: tuple[np.ndarray, ...], confidence: float, alternative: str) -> ConfidenceInterval:
+    """Student's (paired) or Welch's t interval of the same difference."""
+    if len(samples) == 1:
+        r = _st.ttest_1samp(samples[0], 0.0, alternative=alternative)
+    else:
+        r = _st.ttest_ind(samples[0], samples[1], equal_var=False, alternative=alternative)
+    ci = r.confidence_interval(confidence_level=confidence)
+    return ConfidenceInterval(float(ci.low), float(ci.high))
+
+
 def _bootstrap_ci(samples: tuple[np.ndarray, ...], confidence: float, alternative: str, n_resamples: int,
-                  seed: Any) -> ConfidenceInterval:
-    """Studentized ("bootstrap-t") interval of mean(a) - mean(b), or of mean(d) for paired differences ``d``.
+                  seed: Any) -> tuple[ConfidenceInterval, bool]:
+    """Studentized ("bootstrap-t") interval of mean(a) - mean(b), or of mean(d) for paired differences ``d``;
+    and whether it fell back to Student's t.
 
     ``scipy.stats.bootstrap`` resamples (each sample on its own; the paired
     differences as one sample) and returns the distribution of ``t*``; the
     interval is ``estimate - q * se`` at the quantiles ``q`` of ``t*``
     (Efron & Tibshirani 1993, ch. 12.5).  A resample without spread (``se* =
     0``) counts as an infinite ``t*`` of its sign (0 when its mean is the
-    estimate), so tiny samples get wide — possibly unbounded — intervals, not
-    narrow ones.
+    estimate), so tiny samples get wide intervals, not narrow ones.  Where so
+    many resamples have no spread that a quantile the interval reads is
+    infinite (quantised values: a third of the resamples of ``[0.1, 0.05,
+    0.05, 0.05, 0.05]`` are all 0.05), the bootstrap has nothing to say about
+    that side; the interval is then Student's t (paired) or Welch's, the
+    interval of the test reported beside it.
     """
     import inspect
 
@@ -269,11 +304,15 @@ def _bootstrap_ci(samples: tuple[np.ndarray, ...], confidence: float, alternativ
     def q(level: float) -> float:  # an order statistic: no interpolation between infinite values
         return float(np.quantile(t, level, method="inverted_cdf"))
 
+    levels = {"two-sided": ((1 + confidence) / 2, (1 - confidence) / 2), "greater": (confidence,),
+              "less": (1 - confidence,)}[alternative]
+    if not all(math.isfinite(q(level)) for level in levels):
+        return _t_fallback(samples, confidence, alternative), True
     if alternative == "two-sided":
-        return ConfidenceInterval(est - q((1 + confidence) / 2) * se, est - q((1 - confidence) / 2) * se)
+        return ConfidenceInterval(est - q((1 + confidence) / 2) * se, est - q((1 - confidence) / 2) * se), False
     if alternative == "greater":  # a lower bound for the difference
-        return ConfidenceInterval(est - q(confidence) * se, math.inf)
-    return ConfidenceInterval(-math.inf, est - q(1 - confidence) * se)
+        return ConfidenceInterval(est - q(confidence) * se, math.inf), False
+    return ConfidenceInterval(-math.inf, est - q(1 - confidence) * se), False
 
 
 @dataclass(frozen=True)
@@ -315,7 +354,7 @@ class MeanComparison:
         if confidence_level is None or confidence_level == self.confidence_level or not self._samples:
             return self._ci
         c = _confidence_iv(confidence_level)
-        return _bootstrap_ci(self._samples, c, self.alternative, self._n_resamples, self._seed)
+        return _bootstrap_ci(self._samples, c, self.alternative, self._n_resamples, self._seed)[0]
 
 
 def compare_means(
@@ -447,8 +486,9 @@ def _compare_means(xa: np.ndarray, xb: np.ndarray, base: dict[str, Any], undefin
     if few:
         return MeanComparison(**base, **tested, note=f"fewer than {MIN_BOOTSTRAP} values a side: too few to "
                                                      "bootstrap an interval")
-    ci = _bootstrap_ci(samples, c, alt, n_resamples, seed)
-    return MeanComparison(**base, **tested, _ci=ci, _samples=samples, _seed=seed, _n_resamples=n_resamples)
+    ci, coarse = _bootstrap_ci(samples, c, alt, n_resamples, seed)
+    return MeanComparison(**base, **tested, note=COARSE if coarse else "", _ci=ci, _samples=samples, _seed=seed,
+                          _n_resamples=n_resamples)
 
 
 @dataclass(frozen=True)
