@@ -51,6 +51,8 @@ class Settings(BaseSettings):
     run_timeout_min_s: float = Field(default=30.0, gt=0, description="Shortest run timeout, experiment seconds.")
     resume_interrupted: bool = Field(
         default=True, description="At start, queue again the runs that a stop or a crash of the testbed interrupted.")
+    run_log_lines: int = Field(default=20_000, ge=100, description=(
+        "Protocol-log lines a run keeps (its first ones; then one line says how many were dropped)."))
     tracker_grace_s: float = Field(default=0.5, ge=0, description="Wall seconds to wait for late tracker poses.")
     run_slack_s: float = Field(
         default=10.0, gt=0, description="Wall seconds a run waits for a robot beyond the time an answer takes at the "
@@ -87,6 +89,9 @@ class Settings(BaseSettings):
                                   description="As root, each running program gets a uid/gid of its own from this one upwards.")
     sandbox_namespaces: Literal["auto", "required", "off"] = Field(
         default="auto", description="Linux namespaces for programs: use when available, require, or never.")
+    controller_max_backlog: int = Field(default=1000, ge=1, description=(
+        "Lines a controller program may have waiting for its robot (sent, not yet answered); more: the "
+        "program floods its robot port and the run fails (program)."))
     sandbox_interpreters: dict[str, str] = Field(
         default_factory=lambda: _interpreters(),
         description="Interpreters programs may name: name -> absolute path (JSON in the environment).")
