@@ -14,7 +14,18 @@ from ..responses import AUTHENTICATED
 router = APIRouter(tags=["events"], responses=AUTHENTICATED)
 
 
-@router.get("/events")
+class EventStream(StreamingResponse):
+    """A server-sent event stream (documented as ``text/event-stream``, not JSON)."""
+
+    media_type = "text/event-stream"
+
+
+STREAM_DOC = {200: {"description": "Server-sent events, never ending: `event: <kind>` and `data: <JSON object>` "
+                                   "lines, an event a blank line apart.",
+                    "content": {"text/event-stream": {"schema": {"type": "string"}}}}}
+
+
+@router.get("/events", response_class=EventStream, responses=STREAM_DOC)
 async def events(request: Request, user: CurrentUser, testbed: TestbedDep) -> StreamingResponse:
     """Server-sent events: ``experiment``, ``run``, ``subfield``, ``robot`` and ``pose`` (JSON data).
 
@@ -32,5 +43,5 @@ async def events(request: Request, user: CurrentUser, testbed: TestbedDep) -> St
                 break
             yield chunk
 
-    return StreamingResponse(stream(), media_type="text/event-stream",
+    return EventStream(stream(), media_type="text/event-stream",
                              headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
