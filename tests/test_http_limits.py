@@ -20,10 +20,13 @@ HEAD = b"GET /health HTTP/1.1\r\nHost: x\r\n"  # half a request: the blank line 
 
 
 async def app(scope, receive, send):  # type: ignore[no-untyped-def]
-    """``/stream``: 20 chunks 0.1 s apart; ``/upload``: reads the body, answers its size; else ``ok``."""
+    """``/stream``: 20 chunks 0.1 s apart; ``/upload``: reads the body, answers its size (``/slow-upload``
+    after 2 s); else ``ok``."""
     if scope["type"] != "http":
         return
-    if scope["path"] == "/upload":
+    if scope["path"] in ("/upload", "/slow-upload"):
+        if scope["path"] == "/slow-upload":
+            await asyncio.sleep(2.0)  # longer than the body timeout before it asks for the body
         size, more = 0, True
         while more:
             msg = await receive()
@@ -151,6 +154,14 @@ async def test_a_body_that_stops_is_closed_and_a_slow_one_is_not():
             writer.write(b"x")
         _, data = await answer(reader)
         assert data.startswith(b"HTTP/1.1 200") and data.endswith(b'{"size": 10}'), data
+        # a client that waits for 100 Continue the application has not asked for yet is not cut off
+        reader, writer = await connect(s.port)
+        writer.write(b"POST /slow-upload HTTP/1.1\r\nHost: x\r\nContent-Length: 3\r\nExpect: 100-continue\r\n"
+                     b"Connection: close\r\n\r\n")
+        assert await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), 30) == b"HTTP/1.1 100 Continue\r\n\r\n"
+        writer.write(b"abc")
+        _, data = await answer(reader)
+        assert data.startswith(b"HTTP/1.1 200") and data.endswith(b'{"size": 3}'), data
         # a large upload at full speed
         reader, writer = await connect(s.port)
         big = 8 << 20

@@ -226,7 +226,8 @@ class GuardedHttp(HttpToolsProtocol):
             waiting = "head"  # a request's head, or a new connection's first request
         elif self._body_open:
             waiting = "body"
-            if self.flow is not None and self.flow.read_paused:  # the application has not read it yet
+            if (self.flow is not None and self.flow.read_paused) or getattr(self.cycle, "waiting_for_100_continue", False):
+                # the application has not read it yet (or not asked for it: the client waits for 100 Continue)
                 self._deadline = max(self._deadline, now + self.book.limits.body_timeout_s)
         else:
             return  # between requests (uvicorn's keep-alive timeout), or the application answers
