@@ -67,7 +67,7 @@ class HttpLimits:
 
 class ConnectionBook:
     """The open connections of one server: counted per peer, the idle ones (no request in progress) in
-    order of idleness, and what was refused or closed by a deadline (for the log and the tests)."""
+    order of idleness, and how many were refused, evicted or closed by a deadline."""
 
     def __init__(self, limits: HttpLimits) -> None:
         self.limits = limits
@@ -100,10 +100,6 @@ class ConnectionBook:
         self.per_peer[conn.peer] -= 1
         if self.per_peer[conn.peer] <= 0:
             del self.per_peer[conn.peer]
-
-    def snapshot(self) -> dict[str, Any]:
-        return {"open": self.open, "peers": len(self.per_peer), "idle": len(self.idle), "refused": self.refused,
-                "evicted": self.evicted, "timed_out": self.timed_out}
 
 
 def guarded_protocol(limits: HttpLimits) -> type["GuardedHttp"]:
