@@ -316,7 +316,7 @@ def _number_error(field: str) -> str | None:
     if _is_decimal(s):
         return None
     shown = s or "(empty)"  # at most MAX_NUMBER_CHARS
-    kind = "finite" if shown.lower().lstrip("+-") in ("nan", "inf", "infinity") else "a decimal"
+    kind = "a finite" if shown.lower().lstrip("+-") in ("nan", "inf", "infinity") else "a decimal"
     return f"{shown!r} is not {kind} number"
 
 

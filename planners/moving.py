@@ -195,7 +195,7 @@ def _obstacle(obj: Any, i: int, size: tuple[float, float]) -> MovingObstacle:
         raise InvalidEnvironment(f"{where}.speed must be in (0, {MAX_OBSTACLE_SPEED_M_S}] m/s (an emulated "
                                  f"robot's top speed), got {speed}")
     repeat = obj.get("repeat", "once")
-    if repeat not in REPEAT_MODES:
+    if not isinstance(repeat, str) or repeat not in REPEAT_MODES:  # (a dict is unhashable: refuse it too)
         raise InvalidEnvironment(f"{where}.repeat must be one of {', '.join(REPEAT_MODES)}, got {repeat!r}")
     delay = _num(obj.get("delay_s", 0.0), f"{where}.delay_s")
     if not 0 <= delay <= MAX_DELAY_S:

@@ -99,7 +99,33 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
                    programs):
         app.include_router(module.router, prefix=API_PREFIX)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    generate = app.openapi
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            _integer_bounds(generate())
+        return app.openapi_schema  # type: ignore[return-value]
+
+    app.openapi = openapi  # type: ignore[method-assign]
     return app
+
+
+def _integer_bounds(node: object) -> None:
+    """Integer schemas' bounds as JSON integers: FastAPI's OpenAPI models hold every bound as a float
+    (``"maximum": 9.223372036854776e+18``), which a client's schema reads as another number.  Bounds are
+    chosen to be exact as floats (``lt=2**63``, not ``le=2**63 - 1``)."""
+    if isinstance(node, dict):
+        kind = node.get("type")
+        if kind == "integer" or (isinstance(kind, list) and "integer" in kind):
+            for key in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+                value = node.get(key)
+                if isinstance(value, float) and value.is_integer():
+                    node[key] = int(value)
+        for value in node.values():
+            _integer_bounds(value)
+    elif isinstance(node, list):
+        for value in node:
+            _integer_bounds(value)
 
 
 async def _token_first(request: Request) -> Optional[JSONResponse]:

@@ -66,6 +66,16 @@ class EmbeddedField:
         self._hosts: list["AgentHost"] = []
         self._host_of: dict[str, "AgentHost"] = {}
 
+    def descriptors(self) -> int:
+        """File descriptors the robots may hold at most: each robot port's own connection budget (its
+        regular connections and those on probation, :class:`robot_agent.host.connection.Limits`), the
+        testbed's side of its own connections to them, and the listening sockets."""
+        from robot_agent.host.connection import Limits
+
+        limits = Limits()
+        robots = 4 + self.sim_robots
+        return robots * (limits.max_connections + limits.max_probation + 2 + 1)
+
     async def start(self, field: FieldState, router: PoseRouter) -> None:
         """Start the robots and register them with ``field``; their poses go to ``router``."""
         from robot_agent.host import AgentHost  # the simulation core (numba) only where robots run

@@ -14,7 +14,10 @@ from typing import Annotated, Any, Generic, Literal, Optional, TypeVar, Union
 
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from contract.frames import FIELD_SIZE
 from contract.frames import MAX_ROBOTS  # robots a multi-robot job may have (docs/server.md, "Multi-robot jobs")
+from planners.moving import (MAX_DELAY_S, MAX_MOVING_OBSTACLES, MAX_OBSTACLE_RADIUS_M, MAX_OBSTACLE_SPEED_M_S,
+                             MAX_WAYPOINTS, REPEAT_MODES)
 
 from .status import RunStatus
 
@@ -148,18 +151,43 @@ class PlanIn(Strict):
     goal: list[float] = Field(min_length=2, max_length=3)
 
 
+_XY = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2}
+#: what the planners' model checks of a moving obstacle (planners/moving.py), as far as a schema can say it
+#: (its points must also lie inside the environment's `size`)
+MOVING_OBSTACLE_SCHEMA: dict[str, Any] = {
+    "type": "object", "additionalProperties": False, "required": ["radius", "speed"],
+    "properties": {
+        "radius": {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_OBSTACLE_RADIUS_M, "description": "m"},
+        "speed": {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_OBSTACLE_SPEED_M_S, "description": "m/s"},
+        "repeat": {"enum": list(REPEAT_MODES), "default": "once"},
+        "delay_s": {"type": "number", "minimum": 0, "maximum": MAX_DELAY_S, "default": 0},
+        "waypoints": {"type": "array", "items": _XY, "minItems": 1, "maxItems": MAX_WAYPOINTS,
+                      "description": "[x, y] points, m, inside the environment"},
+        "random_walk": {
+            "type": "object", "additionalProperties": False, "required": ["seed", "start", "steps", "step_m"],
+            "properties": {"seed": {"type": "integer", "minimum": 0, "exclusiveMaximum": 2**63},
+                           "start": _XY,
+                           "steps": {"type": "integer", "minimum": 1, "maximum": MAX_WAYPOINTS - 1},
+                           "step_m": {"type": "number", "exclusiveMinimum": 0,
+                                      "description": "m, at most the environment's larger side"}}},
+    },
+    "oneOf": [{"required": ["waypoints"]}, {"required": ["random_walk"]}],
+}
+
+
 class EnvironmentCreate(Strict):
     """An environment file (docs/design.md, "Environment file"); then checked by the planners' model
     (blocks inside the field, and the like)."""
 
     name: str = Field(min_length=1, max_length=100, pattern=NAME_PATTERN)
-    size: list[Annotated[float, Field(gt=0, le=100)]] = Field(min_length=2, max_length=2,
-                                                              description="[width, height], m.")
+    # at most the whole field (documented; the route says so in its own words for anything up to 100 m)
+    size: list[Annotated[float, Field(gt=0, le=100, json_schema_extra={"maximum": FIELD_SIZE[0]})]] = Field(
+        min_length=2, max_length=2, description="[width, height], m: at most the whole field.")
     blocks: list[BlockIn] = Field(default_factory=list, max_length=1000)
     plans: list[PlanIn] = Field(default_factory=list, max_length=100)
     description: str = Field(default="", max_length=10_000)
     moving_obstacles: list[dict[str, Any]] = Field(
-        default_factory=list, max_length=16,
+        default_factory=list, max_length=MAX_MOVING_OBSTACLES, json_schema_extra={"items": MOVING_OBSTACLE_SCHEMA},
         description="Discs moving in experiment time: radius (m), waypoints or random_walk, speed (m/s), repeat, "
                     "delay_s (s); see docs/planners.md.")
 
@@ -193,7 +221,11 @@ class EnvironmentPublic(Public):
 
 # --------------------------------------------------------------------------- experiments
 
-Pose = list[float]
+#: ``[x, y]`` or ``[x, y, theta]`` (m, rad); the length is checked by the models' validators (for their
+#: message), the schema says it too
+Pose = Annotated[list[float], Field(json_schema_extra={"minItems": 2, "maxItems": 3})]
+#: an explicit path: at least two poses
+PATH_SCHEMA = {"minItems": 2}
 
 
 class Jitter(Strict):
@@ -232,7 +264,7 @@ class RobotIn(Strict):
 
     start: Pose
     goal: Pose
-    path: Optional[list[Pose]] = Field(default=None, max_length=10_000)
+    path: Optional[list[Pose]] = Field(default=None, max_length=10_000, json_schema_extra=PATH_SCHEMA)
 
     _pose = field_validator("start", "goal")(_check_pose)
     _path = field_validator("path")(_check_path)
@@ -272,7 +304,7 @@ class ExperimentCreate(Strict):
         "`program` sends every robot's path, one T,T,P per robot port (docs/uploads.md)."))
     planner: Optional[str] = Field(default=None, max_length=64)
     planner_params: dict[str, Any] = Field(default_factory=dict)
-    path: Optional[list[Pose]] = Field(default=None, max_length=10_000)
+    path: Optional[list[Pose]] = Field(default=None, max_length=10_000, json_schema_extra=PATH_SCHEMA)
     program: Optional[int] = Field(default=None, ge=1, description="An uploaded program's id (docs/uploads.md).")
     modes: list[Mode] = Field(default_factory=lambda: ["sim", "twb"], min_length=1, max_length=2)
     repetitions: int = Field(default=1, ge=1)
@@ -487,7 +519,7 @@ class ExperimentPublic(ExperimentSummary):
 class CancelMany(Strict):
     """Experiments to cancel in one request."""
 
-    ids: list[Annotated[int, Field(ge=1, le=2**63 - 1)]] = Field(min_length=1, max_length=1000)
+    ids: list[Annotated[int, Field(ge=1, lt=2**63)]] = Field(min_length=1, max_length=1000)
 
 
 class NotCancelled(Public):
@@ -729,18 +761,23 @@ class ProgramCreate(Strict):
     model_config = ConfigDict(
         extra="forbid",
         json_schema_extra={"examples": [{"name": "my-planner", "kind": "python", "args": ["--fast"],
-                                         "content_base64": "aW1wb3J0IG9zCg=="}]},
+                                         "content_base64": "aW1wb3J0IG9zCg=="}],
+                           # a python program names no interpreter but python3 (_interpreter below)
+                           "anyOf": [{"required": ["kind"], "properties": {"kind": {"const": "executable"}}},
+                                     {"properties": {"interpreter": {"anyOf": [{"type": "null"},
+                                                                               {"const": "python3"}]}}}]},
     )
 
     name: str = Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.+-]+$")
     kind: Literal["python", "executable"] = Field(
         default="python", description="python: run by the testbed's python3; executable: a binary or a script.")
     interpreter: Optional[str] = Field(
-        default=None, max_length=32,
+        default=None, max_length=32, json_schema_extra={"minLength": 1},
         description="executable only: run the file with this interpreter (GET /programs/sandbox lists them); "
                     "none: the file itself is executed (an ELF binary or a script with #!).")
     args: list[str] = Field(default_factory=list, max_length=64, description="Command-line arguments.")
-    content_base64: str = Field(min_length=1, description="The file, base64-encoded.")
+    content_base64: str = Field(min_length=1, description="The file, base64-encoded.", json_schema_extra={
+        "pattern": r"^(?:[A-Za-z0-9+/]{4})*(?:[A-Za-z0-9+/]{2}==|[A-Za-z0-9+/]{3}=)?$"})  # checked by the route
 
     @field_validator("args")
     @classmethod
@@ -772,13 +809,21 @@ class ProgramPublic(FromRow):
 # --------------------------------------------------------------------------- robots, tracker
 
 
+_HOST_LABEL = r"(?:[A-Za-z0-9]|[^\x00-\x7F])(?:(?:[A-Za-z0-9-]|[^\x00-\x7F]){0,61}(?:[A-Za-z0-9]|[^\x00-\x7F]))?"
+#: what :func:`host_name` takes, as far as a pattern says it: dot-separated labels of 1 to 63 letters, digits
+#: (or non-ASCII: IDNA) and inner hyphens, a trailing dot allowed; or an IPv6 address (it has a colon)
+HOST_PATTERN = (rf"^(?:{_HOST_LABEL}\.)*{_HOST_LABEL}\.?$"
+                r"|^(?:[0-9A-Fa-f]{0,4}:){2,7}(?:[0-9A-Fa-f]{0,4}|[0-9]{1,3}(?:\.[0-9]{1,3}){3})(?:%[A-Za-z0-9_.-]+)?$")
+
+
 class RobotRegister(Strict):
     """What an agent sends to ``POST /api/v1/robots`` when it starts."""
 
     model_config = ConfigDict(allow_inf_nan=False, extra="ignore")
 
     robot_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")
-    host: str = Field(min_length=1, max_length=253, description="Host name (IDNA is converted) or IP address.")
+    host: str = Field(min_length=1, max_length=253, json_schema_extra={"pattern": HOST_PATTERN},
+                      description="Host name (IDNA is converted) or IP address.")  # checked by _host
     port: int = Field(ge=1, le=65535)
     platform: str = Field(default="", max_length=64, pattern=r"^[A-Za-z0-9_. ()+-]*$")
     backend: Literal["ideal", "field"]

@@ -126,8 +126,9 @@ async def test_with_a_control_key_only_authenticated_connections_move_the_robot(
 async def test_five_wrong_secrets_close_the_connection():
     async with running_agents(backend="ideal", control_key=KEY) as agents:
         c = await LineClient.connect(agents.ports[0])
-        for _ in range(4):
-            assert (await c.ask("T,T,A,not-the-control-key")).startswith(err(ErrorCode.AUTH))
+        for left in (4, 3, 2, 1):  # the count left, in words that agree with it
+            attempts = "attempt" if left == 1 else "attempts"
+            assert await c.ask("T,T,A,not-the-control-key") == f"{err(ErrorCode.AUTH)}wrong secret ({left} {attempts} left)"
         assert (await c.ask("T,T,A,malformed")).startswith(err(ErrorCode.SYNTAX))  # cannot be a secret: not counted
         assert await c.ask("T,T,A," + KEY) == OK_A  # the right key after four wrong ones
         assert (await c.ask("T,T,A,not-the-control-key")).startswith(err(ErrorCode.AUTH))

@@ -74,6 +74,20 @@ async def test_velocity_commands_during_a_path_are_refused_and_parsed_strictly()
         assert (await c.ask("T,T,V,50,0")).startswith("ERR,STATE,a path is in progress")
         assert (await c.ask("T,T,O,2")).startswith("ERR,SYNTAX")
         await c.close()
+
+
+async def test_the_gripper_refuses_a_robot_in_velocity_mode_saying_so():
+    async with running_agents(backend="ideal", time_scale=1.0) as agents:
+        c = await LineClient.connect(agents.ports[0])
+        await c.ask(encode_place((0.3, 0.3, 0.0)))
+        assert await c.ask("T,T,V,50,0") == "OK,V"
+        for line in (encode_place((0.5, 0.5, 0.0)), "T,T,B,900,900,100,100,0", "T,T,M"):
+            assert await c.ask(line) == "ERR,STATE,the robot is driving in velocity mode (send T,T,S first)", line
+        assert await c.ask("T,T,S") == "OK,S"
+        await c.until("EV,FAIL,STOPPED", timeout=10)
+        assert (await c.ask(encode_path([[0.3, 0.3, 0.0], [1.2, 0.3, 0.0]]))).startswith("OK,P")
+        assert (await c.ask("T,T,B,900,900,100,100,0")) == "ERR,STATE,the robot is following a path (send T,T,S first)"
+        await c.close()
     assert parse_command("T,T,V,100,90") == VelocityCommand(0.1, math.pi / 2)
     for bad in ("T,T,V", "T,T,V,1", "T,T,V,1,2,3", "T,T,V,1,x"):
         with pytest.raises(ProtocolError):

@@ -54,7 +54,8 @@ async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ig
 
     app = create_app(settings, testbed)
     config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="on",
-                            timeout_graceful_shutdown=1)
+                            timeout_graceful_shutdown=1, http=_guarded_http(settings, testbed), ws="none",
+                            timeout_keep_alive=settings.http_keep_alive_s)
     server = uvicorn.Server(config)
     # the signals are ours (below), not uvicorn's: it would hold them until its start-up ends, then raise them again
     server.capture_signals = contextlib.nullcontext  # type: ignore[method-assign]
@@ -98,6 +99,24 @@ async def _serve(settings, testbed, host: str, port: int, on_ready):  # type: ig
         # the lifespan stops the testbed in order: runs end interrupted, then the robots stop
         server.should_exit = True
         await asyncio.shield(serving)
+
+
+def _guarded_http(settings, testbed) -> type:  # type: ignore[no-untyped-def]
+    """uvicorn's HTTP protocol with the API's deadlines and connection caps (docs/security.md), the caps within
+    this process's open-file limit (raised toward its hard limit first) beside the embedded robots' budget."""
+    from server.api.connections import HttpLimits, connection_budget, guarded_protocol, raise_open_files_limit
+
+    open_files = raise_open_files_limit()
+    robots = testbed.embedded.descriptors() if testbed.embedded is not None else 0
+    budget = connection_budget(settings.http_max_connections, robots, open_files)
+    if budget < settings.http_max_connections:
+        print(f"twb: the open-file limit ({open_files}) leaves the API {budget} HTTP connections "
+              f"(TWB_HTTP_MAX_CONNECTIONS is {settings.http_max_connections}); raise it with `ulimit -n`",
+              file=sys.stderr, flush=True)
+    return guarded_protocol(HttpLimits(
+        header_timeout_s=settings.http_header_timeout_s, body_timeout_s=settings.http_body_timeout_s,
+        max_header_bytes=settings.http_max_header_bytes, max_connections=budget,
+        max_per_peer=min(settings.http_max_connections_per_peer, budget)))
 
 
 def _settings(data_dir: Path, token: Optional[str], time_scale: float, **extra):  # type: ignore[no-untyped-def]

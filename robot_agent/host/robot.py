@@ -178,7 +178,8 @@ class Robot:
             conn.auth_failures += 1
             log.info("%s: wrong secret from %s (%d)", self.robot_id, conn.peer, conn.auth_failures)
             left = MAX_AUTH_FAILURES - conn.auth_failures
-            why = f"wrong secret ({left} attempts left)" if left > 0 else "wrong secret; closing"
+            why = (f"wrong secret ({left} attempt{'s' if left != 1 else ''} left)" if left > 0
+                   else "wrong secret; closing")
             raise ProtocolError(ErrorCode.AUTH, why)
         conn.probation = False
         return [format_ok("A")]
@@ -271,7 +272,10 @@ class Robot:
         return [format_status(self.state(), self.services.core.belief(self.index), self.services.core.t)]
 
     def _check_gripper(self) -> None:
-        if self.services.core.moving(self.index):
+        core = self.services.core
+        if core.driving(self.index):
+            raise ProtocolError(ErrorCode.STATE, "the robot is driving in velocity mode (send T,T,S first)")
+        if core.moving(self.index):
             raise ProtocolError(ErrorCode.STATE, "the robot is following a path (send T,T,S first)")
         if self.gripper_busy:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")

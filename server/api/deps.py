@@ -19,7 +19,7 @@ __all__ = ["MAX_OFFSET", "AdminUser", "AgentToken", "CurrentUser", "IdPath", "Na
            "UserNamePath", "authenticate", "bearer_token"]
 
 #: row ids are 64-bit; larger numbers are refused (422), never passed to the database
-IdPath = Annotated[int, Path(ge=1, le=2**63 - 1, description="Row id.")]
+IdPath = Annotated[int, Path(ge=1, lt=2**63, description="Row id.")]  # lt: exact in OpenAPI (float bounds)
 NamePath = Annotated[str, Path(min_length=1, max_length=100)]
 UserNamePath = Annotated[str, Path(min_length=1, max_length=64)]
 #: the largest list offset (rows); far beyond any store, and safe for every database

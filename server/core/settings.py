@@ -28,6 +28,21 @@ class Settings(BaseSettings):
     time_scale: float = Field(default=1.0, gt=0, description="Experiment seconds per wall second.")
     max_body_bytes: int = Field(default=12 << 20, gt=0, description=(
         "Largest accepted request body (at least what an upload of the largest program takes, base64)."))
+    # the API's HTTP connections (docs/security.md, "HTTP connections")
+    http_header_timeout_s: float = Field(default=10.0, gt=0, description=(
+        "Wall seconds a request's line and headers may take to arrive: from a new connection's start, or a "
+        "following request's first byte (then 408 and the connection is closed)."))
+    http_body_timeout_s: float = Field(default=30.0, gt=0, description=(
+        "Longest pause, wall seconds, in a request body the server is reading (then the connection is closed)."))
+    http_keep_alive_s: float = Field(default=5.0, gt=0, description=(
+        "Wall seconds an idle connection is kept open after a response for the client's next request."))
+    http_max_header_bytes: int = Field(default=64 << 10, ge=1024, description=(
+        "Largest request line and headers, bytes (431 beyond)."))
+    http_max_connections: int = Field(default=2048, ge=16, description=(
+        "HTTP connections open at once (within the open-file limit, leaving the robots their own budget): when "
+        "all are taken, the one idle longest is closed for a newcomer, or with every one busy the newcomer gets 503."))
+    http_max_connections_per_peer: int = Field(default=256, ge=1, description=(
+        "HTTP connections open at once from one IP address (503 beyond)."))
     max_queued_per_user: int = Field(default=200, gt=0, description="Queued experiments per user (429 beyond).")
     auth_failures_per_minute: int = Field(
         default=30, gt=0, description="Unknown tokens a client may present per minute; then 429 until a minute passed.")
@@ -36,6 +51,8 @@ class Settings(BaseSettings):
     run_timeout_min_s: float = Field(default=30.0, gt=0, description="Shortest run timeout, experiment seconds.")
     resume_interrupted: bool = Field(
         default=True, description="At start, queue again the runs that a stop or a crash of the testbed interrupted.")
+    run_log_lines: int = Field(default=20_000, ge=100, description=(
+        "Protocol-log lines a run keeps (its first ones; then one line says how many were dropped)."))
     tracker_grace_s: float = Field(default=0.5, ge=0, description="Wall seconds to wait for late tracker poses.")
     run_slack_s: float = Field(
         default=10.0, gt=0, description="Wall seconds a run waits for a robot beyond the time an answer takes at the "
@@ -72,6 +89,9 @@ class Settings(BaseSettings):
                                   description="As root, each running program gets a uid/gid of its own from this one upwards.")
     sandbox_namespaces: Literal["auto", "required", "off"] = Field(
         default="auto", description="Linux namespaces for programs: use when available, require, or never.")
+    controller_max_backlog: int = Field(default=1000, ge=1, description=(
+        "Lines a controller program may have waiting for its robot (sent, not yet answered); more: the "
+        "program floods its robot port and the run fails (program)."))
     sandbox_interpreters: dict[str, str] = Field(
         default_factory=lambda: _interpreters(),
         description="Interpreters programs may name: name -> absolute path (JSON in the environment).")

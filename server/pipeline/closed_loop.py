@@ -41,7 +41,11 @@ from .context import RunContext, RunServices
 from .paths import Plan
 from .steps import collect_poses, fail_fields, failure_of, start_pose
 
-__all__ = ["ControllerRelay", "drive_program", "program_metrics"]
+__all__ = ["RELAY_LOGGED_LINES", "ControllerRelay", "drive_program", "program_metrics"]
+
+#: a controller program's relayed lines (to its robot and back) logged at most, per run; the rest are counted,
+#: so that the run's log keeps room for the program's own report (its robot port, stdout, stderr, its end)
+RELAY_LOGGED_LINES = 10_000
 
 
 class ControllerRelay:
@@ -70,7 +74,26 @@ class ControllerRelay:
         self._unanswered: Optional[float] = None
         #: the program connected and the robot is in velocity mode
         self.armed = False
+        #: why the program broke the relay's rules (it flooded its robot port): the run fails with it
+        self.fault: Optional[str] = None
+        self._relay_logged = 0
         link.on_pose = self._on_pose
+        link.on_line = self._log
+
+    def _log(self, direction: str, line: str, t: Optional[float], estimated: bool) -> None:
+        """The run's line between server and robot while the program drives: logged up to RELAY_LOGGED_LINES."""
+        if self._relay_logged < RELAY_LOGGED_LINES:
+            self._relay_logged += 1
+            self.ctx.on_line(direction, line, t, estimated)
+        else:
+            self.ctx.not_logged(f"relayed lines of the controller program beyond its first {RELAY_LOGGED_LINES}")
+
+    def abort(self, reason: str) -> None:
+        """The program broke the relay's rules (:meth:`server.sandbox.service.Relay.abort`): the run fails
+        with ``reason`` (program), whatever the robot does meanwhile; no more of its lines go to the robot."""
+        if self.fault is None:
+            self.fault = reason
+            self.ctx.on_line("s", f"relay: {reason}", None, False)
 
     def distance_m(self) -> float:
         """How far the last localised position is from the goal (m; inf before any)."""
@@ -98,7 +121,7 @@ class ControllerRelay:
         if line.startswith("T,T,O"):  # the server's own subscription stays; only what the program gets changes
             self._subscribed = line.endswith("1")
             return "OK,O"
-        if self.ended.done():
+        if self.ended.done() or self.fault is not None:
             return "ERR,STATE,the run has ended"
         if line.startswith("T,T,V"):
             self.steps += 1
@@ -157,6 +180,7 @@ async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job:
         await svc.field.set_subfield(k, state=SubfieldState.RUNNING, run_id=ctx.run_id, owner_id=job.owner_id)
     svc.tracker.open(robot_id, ctx.run_id, job.owner_id)
     await rec.add_messages(ctx.take_messages())
+    line_log = link.on_line  # the relay logs its lines itself while the program drives
     relay = ControllerRelay(link, ctx, (job.goal[0], job.goal[1]), DEFAULT_GOAL_TOLERANCE,
                             seed=lambda: svc.hooks.seed_next_path(robot_id, job.seed))
     s = svc.settings
@@ -179,6 +203,7 @@ async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job:
         events.cancel()
         program.cancel()
         link.on_pose = None
+        link.on_line = line_log
     for direction, line in outcome.log:
         ctx.on_line(direction, line, None, False)
     ctx.end_metrics.update(program_metrics(relay.steps, relay.responses_s, outcome.info))
@@ -209,6 +234,8 @@ def program_metrics(steps: int, responses_s: list[float], info: dict[str, Any]) 
 def _verdict(relay: ControllerRelay, program_reason: Optional[str]) -> None:
     """Raise why the run failed, if it did: the robot's ending first, then the program's (``program_reason``:
     None when the run had ended before the program), then where it stopped."""
+    if relay.fault is not None:  # the program flooded its robot port: whatever the robot did after is its doing
+        raise RunFailed(relay.fault, FailureKind.PROGRAM)
     fields = relay.ended.result() if relay.ended.done() else ()
     reason = fields[1] if len(fields) > 1 else ""
     if reason == "WATCHDOG":

@@ -60,7 +60,8 @@ class RunServices:
 class RunContext:
     """One execution: its assignment, robot, time scale and protocol log."""
 
-    def __init__(self, assignment: Assignment, robot: RobotSlot, time_scale: float, slack_s: float = 10.0) -> None:
+    def __init__(self, assignment: Assignment, robot: RobotSlot, time_scale: float, slack_s: float = 10.0,
+                 log_lines: int = 20_000) -> None:
         self.assignment = assignment
         self.run_id = assignment.run_id
         self.robot = robot
@@ -69,6 +70,12 @@ class RunContext:
         #: the run is carried out as a task (an engine slot's, or a field-robot variant's), not by the robot
         self.as_task = bool(robot.engine)
         self.messages: list[dict[str, Any]] = []
+        #: the log keeps its first ``log_lines`` lines; the rest are counted (``dropped``), and so are lines a
+        #: step chose not to log (``dropped_by``: why -> how many), and said in one last line (:meth:`finish_log`)
+        self.log_lines = log_lines
+        self.logged = 0
+        self.dropped = 0
+        self.dropped_by: dict[str, int] = {}
         self._taken_at = time.monotonic()
         #: what is stored with the run's end, in its one transaction: run fields (metrics, t_start …) and the
         #: poses a compute engine's task returned (s, m, m, rad)
@@ -87,9 +94,32 @@ class RunContext:
         return self.assignment.subfields
 
     def on_line(self, direction: str, line: str, t: Optional[float], estimated: bool) -> None:
-        """Log one protocol line (``>`` sent, ``<`` received; program lines ``o``/``e``/``s``)."""
+        """Log one protocol line (``>`` sent, ``<`` received; program lines ``o``/``e``/``s``), if the log has
+        room (``log_lines``); else count it."""
+        if self.logged >= self.log_lines:
+            self.dropped += 1
+            return
+        self.logged += 1
         self.messages.append({"run_id": self.run_id, "t": t, "t_estimated": estimated, "direction": direction,
                               "line": line[:10_000]})
+
+    def not_logged(self, why: str, count: int = 1) -> None:
+        """``count`` lines a step did not log (``why``: what they were, e.g. ``relayed lines of the controller
+        program beyond its first 10000``), for the log's last line."""
+        self.dropped_by[why] = self.dropped_by.get(why, 0) + count
+
+    def finish_log(self) -> None:
+        """End the log with one line saying how many lines were dropped and why (nothing when none was);
+        that line is kept whatever the cap."""
+        total = self.dropped + sum(self.dropped_by.values())
+        if not total:
+            return
+        parts = [f"{n} {why}" for why, n in self.dropped_by.items()]
+        if self.dropped:
+            parts.append(f"{self.dropped} lines beyond the {self.log_lines} a run's log keeps")
+        self.messages.append({"run_id": self.run_id, "t": None, "t_estimated": False, "direction": "s",
+                              "line": f"{total} lines dropped: {'; '.join(parts)}"})
+        self.dropped, self.dropped_by = 0, {}
 
     def take_messages(self) -> list[dict[str, Any]]:
         batch, self.messages = self.messages, []

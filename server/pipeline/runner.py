@@ -99,7 +99,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
     (``cancelled``) when the run's task is cancelled.
     """
     ctx = RunContext(assignment, svc.field.robots[assignment.robot_id], svc.settings.time_scale,
-                     svc.settings.run_slack_s)
+                     svc.settings.run_slack_s, log_lines=svc.settings.run_log_lines)
     robot = ctx.robot.robot_id
     try:
         await _carry_out(ctx, svc)
@@ -132,6 +132,7 @@ async def execute_run(assignment: Assignment, svc: RunServices, *, stopping: Cal
         end = RunEnd(RunStatus.ERROR, f"internal error: {type(exc).__name__}: {exc}", robot_fault=_blame(ctx))
     finally:
         svc.tracker.close(robot)
+    ctx.finish_log()
     return replace(end, fields=ctx.end_fields, poses=ctx.end_poses, messages=ctx.take_messages(),
                    obstacles=ctx.end_obstacles)
 

@@ -20,6 +20,7 @@ import os
 import signal
 import sys
 import tempfile
+from collections import deque
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional, Protocol
 
@@ -96,6 +97,10 @@ class Relay(Protocol):
 
     async def from_robot(self) -> Optional[str]:
         """The next unsolicited line for the program (``PO``, ``EV``), or None: the run has ended."""
+
+    def abort(self, reason: str) -> None:
+        """The program broke the relay's rules (it flooded its robot port): the run fails with ``reason``,
+        the program's fault; the sandbox ends it."""
 
 
 class Sandbox:
@@ -252,6 +257,11 @@ class Sandbox:
         result: Optional[dict[str, Any]] = None
         pushing: Optional[asyncio.Task[None]] = None
         writing = asyncio.Lock()
+        backlog = self.settings.controller_max_backlog
+        waiting: deque[str] = deque()  # the program's lines for the robot, not sent yet
+        arrived = asyncio.Event()
+        in_flight = 0  # a line sent to the robot, its reply not back yet
+        flooded: Optional[str] = None
 
         async def write(data: bytes) -> None:
             async with writing:
@@ -267,8 +277,22 @@ class Sandbox:
                 await write(encode(LinkKind.ROBOT, line))
             await write(encode(LinkKind.END, RUN_ENDED))
 
+        async def forward() -> None:
+            """The program's lines to the robot one at a time, in order, each reply back to the program."""
+            nonlocal in_flight
+            while True:
+                while not waiting:
+                    arrived.clear()
+                    await arrived.wait()
+                line, in_flight = waiting.popleft(), 1
+                reply = await relay.to_robot(line)
+                in_flight = 0
+                await write(encode(LinkKind.ROBOT, reply))
+
         async def converse() -> None:
-            nonlocal result, pushing
+            """Read the launcher's lines as they come (the robot's pace is :func:`forward`'s): a program that
+            has more than ``backlog`` lines waiting for its robot floods it, and its run ends (its fault)."""
+            nonlocal result, pushing, flooded
             await write(encode(LinkKind.JSON, job))
             while raw := await proc.stdout.readline():  # type: ignore[union-attr]
                 msg = parse(raw)
@@ -278,18 +302,38 @@ class Sandbox:
                     await relay.connected()
                     pushing = asyncio.create_task(push(), name="twb-controller-push")
                 elif msg.kind is LinkKind.ROBOT:
-                    await write(encode(LinkKind.ROBOT, await relay.to_robot(msg.text)))
+                    if flooded is not None:
+                        continue  # the run is over: the rest is read and dropped until the launcher ends
+                    waiting.append(msg.text)
+                    arrived.set()
+                    if len(waiting) + in_flight > backlog:
+                        flooded = (f"program flooded its robot port: more than {backlog} of its lines were waiting "
+                                   "for the robot's answers (a robot answers one line after the other; send one "
+                                   "T,T,V per PO line)")
+                        waiting.clear()
+                        relay.abort(flooded)
+                        await write(encode(LinkKind.END, flooded))
                 elif msg.kind is LinkKind.JSON:
                     result = msg.data
 
         err_task = asyncio.create_task(proc.stderr.read())
+        forwarding = asyncio.create_task(forward(), name="twb-controller-forward")
+        conversation = asyncio.create_task(converse(), name="twb-controller-converse")
         try:
-            await asyncio.wait_for(converse(), timeout_s)
+            done, _ = await asyncio.wait({conversation, forwarding}, timeout=timeout_s,
+                                         return_when=asyncio.FIRST_COMPLETED)
+            if not done:
+                raise asyncio.TimeoutError
+            if forwarding in done:  # it never returns: the robot's link failed (a testbed fault: it raises)
+                forwarding.result()
+            conversation.result()
             await asyncio.wait_for(proc.wait(), 5)
         except BaseException:
             await _stop(proc)
             raise
         finally:
+            conversation.cancel()
+            forwarding.cancel()
             if pushing is not None:
                 pushing.cancel()
         err = await err_task

@@ -15,14 +15,17 @@ router = APIRouter(tags=["events"], responses=AUTHENTICATED)
 
 
 class EventStream(StreamingResponse):
-    """A ``text/event-stream`` response (so the OpenAPI document names that media type, not JSON)."""
+    """A server-sent event stream (documented as ``text/event-stream``, not JSON)."""
 
     media_type = "text/event-stream"
 
 
-@router.get("/events", response_class=EventStream, responses={200: {
-    "description": "Server-sent events: `event: <kind>` and `data: <JSON>` lines, a blank line after each.",
-    "content": {"text/event-stream": {"schema": {"type": "string"}}}}})
+STREAM_DOC = {200: {"description": "Server-sent events, never ending: `event: <kind>` and `data: <JSON object>` "
+                                   "lines, an event a blank line apart.",
+                    "content": {"text/event-stream": {"schema": {"type": "string"}}}}}
+
+
+@router.get("/events", response_class=EventStream, responses=STREAM_DOC)
 async def events(request: Request, user: CurrentUser, testbed: TestbedDep) -> EventStream:
     """Server-sent events: ``experiment``, ``run``, ``subfield``, ``robot`` and ``pose`` (JSON data).
 
