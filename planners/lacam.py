@@ -442,45 +442,53 @@ def lacam_schedule(plan: LacamPlan, goal_headings: Sequence[float | None] | None
     size = np.array([len(w) for w in wps])
     d = plan.conflict_m
     xy = [w[:, :2] for w in wps]
-    app = [(xy[i][0], xy[i][1]) if plan.approach[i] else None for i in range(n)]
-    off = [(xy[i][-2], xy[i][-1]) if plan.leave[i] else None for i in range(n)]
 
     def need(j: int, h: int, k: int, index: int) -> None:
         dep[j][h, k] = max(dep[j][h, k], min(index, size[h] - 1))
 
     # grid edges of every robot: (robot, index of the edge's end)
-    edges = []
+    e_rob, e_end = [], []
     for j in range(n):
         lo = 1 if plan.approach[j] else 0
         hi = size[j] - (2 if plan.leave[j] else 1)
-        for m in range(lo + 1, hi + 1):
-            edges.append((j, m))
-    e_rob = np.array([e[0] for e in edges], dtype=int)
-    e_end = np.array([e[1] for e in edges], dtype=int)
-    e0 = np.array([xy[j][m - 1] for j, m in edges]).reshape(-1, 2)
-    e1 = np.array([xy[j][m] for j, m in edges]).reshape(-1, 2)
-    for k in range(n):
-        if app[k] is not None:
-            a0, a1 = app[k]
-            for i in range(n):  # approaches in order of their rounds
-                if i != k and app[i] is not None and plan.approach_round[i] < plan.approach_round[k] \
-                        and segment_distances(app[i][0], app[i][1], a0, a1) < d:
-                    need(k, i, 0, 1)
-            near = (segment_distances(e0, e1, a0, a1) < d) & (e_rob != k)
-            for j, m in zip(e_rob[near], e_end[near]):  # grid moves after every approach near them
-                need(int(j), k, int(m) - 1, 1)
-            for i in range(n):  # final moves after every approach near them
-                if i != k and off[i] is not None and segment_distances(off[i][0], off[i][1], a0, a1) < d:
-                    need(i, k, size[i] - 2, 1)
-        if off[k] is not None:
-            b0, b1 = off[k]
-            near = (segment_distances(e0, e1, b0, b1) < d) & (e_rob != k)
-            for j, m in zip(e_rob[near], e_end[near]):  # the final move after the grid moves near it
-                need(k, int(j), size[k] - 2, int(m))
-            for i in range(n):  # final moves in order of their rounds
-                if i != k and off[i] is not None and plan.leave_round[i] < plan.leave_round[k] \
-                        and segment_distances(off[i][0], off[i][1], b0, b1) < d:
-                    need(k, i, size[k] - 2, size[i] - 1)
+        e_rob += [j] * max(0, hi - lo)
+        e_end += list(range(lo + 1, hi + 1))
+    er, ee = np.array(e_rob, dtype=int), np.array(e_end, dtype=int)
+    e0 = np.array([xy[j][m - 1] for j, m in zip(er, ee)]).reshape(-1, 2)
+    e1 = np.array([xy[j][m] for j, m in zip(er, ee)]).reshape(-1, 2)
+    # the moves off the grid: onto the start point (A) and off the goal point (L); a robot without one has a
+    # point far away instead, and is left out by its flag
+    far = np.full(2, 1e9)
+    a0 = np.array([xy[i][0] if plan.approach[i] else far for i in range(n)])
+    a1 = np.array([xy[i][1] if plan.approach[i] else far for i in range(n)])
+    b0 = np.array([xy[i][-2] if plan.leave[i] else far for i in range(n)])
+    b1 = np.array([xy[i][-1] if plan.leave[i] else far for i in range(n)])
+    app, off = plan.approach.astype(bool), plan.leave.astype(bool)
+    other = ~np.eye(n, dtype=bool)
+    # approaches in the order of their rounds: k waits at its start for i to reach its grid point
+    near = (segment_distances(a0[:, None], a1[:, None], a0[None], a1[None]) < d) & other
+    near &= app[:, None] & app[None] & (plan.approach_round[:, None] < plan.approach_round[None])
+    for i, k in zip(*np.nonzero(near)):
+        need(int(k), int(i), 0, 1)
+    # grid moves after every approach near them: j leaves waypoint m - 1 once k reached its grid point
+    near = (segment_distances(e0[:, None], e1[:, None], a0[None], a1[None]) < d) & app[None]
+    near &= er[:, None] != np.arange(n)[None]
+    for e, k in zip(*np.nonzero(near)):
+        need(int(er[e]), int(k), int(ee[e]) - 1, 1)
+    # final moves after every approach near them
+    near = (segment_distances(b0[:, None], b1[:, None], a0[None], a1[None]) < d) & other & off[:, None] & app[None]
+    for i, k in zip(*np.nonzero(near)):
+        need(int(i), int(k), int(size[i]) - 2, 1)
+    # the final move after the grid moves near it: k leaves its goal point once j passed
+    near = (segment_distances(e0[:, None], e1[:, None], b0[None], b1[None]) < d) & off[None]
+    near &= er[:, None] != np.arange(n)[None]
+    for e, k in zip(*np.nonzero(near)):
+        need(int(k), int(er[e]), int(size[k]) - 2, int(ee[e]))
+    # final moves in the order of their rounds
+    near = (segment_distances(b0[:, None], b1[:, None], b0[None], b1[None]) < d) & other
+    near &= off[:, None] & off[None] & (plan.leave_round[:, None] < plan.leave_round[None])
+    for i, k in zip(*np.nonzero(near)):
+        need(int(k), int(i), int(size[k]) - 2, int(size[i]) - 1)
     dep = [np.maximum.accumulate(t, axis=1) for t in dep]
     _check_completes(dep, size)
     return wps, [a for _, a, _ in sched], [lv for _, _, lv in sched], dep

@@ -33,6 +33,8 @@ from planners.control_metrics import ControlSettings, control_metrics
 from planners.dependencies import fleet_dependencies
 from planners.fleet_metrics import FleetSettings, fleet_metrics
 from planners.geometry import distance_to_obstacles
+from planners.lacam import NAME as LACAM
+from planners.lacam import lacam_schedule, plan_lacam
 from planners.metrics import MetricSettings, obstacle_gaps, run_metrics
 from planners.prioritized import EXECUTIONS, plan_prioritized, timed_waypoints
 
@@ -211,7 +213,9 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     on one clock (:func:`robot_agent.engine.fleet.simulate_fleet`), measure them
     (:func:`planners.fleet_metrics.fleet_metrics`).
 
-    ``robots``: per robot ``{"start", "goal", "path"?}`` (m, rad).  ``planner`` ``prioritized`` plans them
+    ``robots``: per robot ``{"start", "goal", "path"?}`` (m, rad).  ``planner`` ``lacam`` plans them together
+    on a grid (:mod:`planners.lacam`), executed by the plan's order of passage alone (no clock: ``execution``
+    must be ``dependencies``); ``prioritized`` plans them
     together (timed paths) and ``execution`` says how the robots keep to it: ``dependencies`` (a robot
     leaves a waypoint once the robots planned to pass there before it have passed, and not before the
     plan's wait there ends: :mod:`planners.dependencies`) or ``timed`` (by the clock alone: robots hold
@@ -252,6 +256,15 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
             if dense:
                 depends = fleet_dependencies([w for w, _, _ in schedule], [a for _, a, _ in schedule],
                                              [lv for _, _, lv in schedule], plan.conflict_m)
+        elif planner == LACAM:  # together on the grid, executed by the plan's order of passage only
+            if execution != "dependencies":
+                raise ValueError("a lacam plan is executed by its order of passage (execution 'dependencies')")
+            lacam = plan_lacam(env, [r["start"] for r in robots], [r["goal"] for r in robots],
+                               robot_radius=robot_radius, params=params, seed=seed if plan_seed is None else plan_seed)
+            wps, _, _, depends = lacam_schedule(lacam, [r["goal"][2] if len(r["goal"]) > 2 else None for r in robots])
+            for w in wps:
+                paths.append(np.round(w, 6).tolist())
+                depart.append(None)  # no clock: the order of passage alone releases the robots
         else:
             for i, r in enumerate(robots):
                 if r.get("headings") == "sent":  # an uploaded program's path: headings as it sent them
