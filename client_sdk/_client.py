@@ -239,7 +239,7 @@ class Client(BaseClient):
         itself instead (docs/controllers.md, "Your own controller program").
         ``robots`` makes it a multi-robot job instead of ``start``/``goal``:
         2 to 16 ``{"start", "goal", "path"?}`` in one world on one clock;
-        ``planner="prioritized"`` plans them together, any other planner each
+        ``planner="prioritized"`` or ``"lacam"`` plans them together, any other planner each
         robot alone, an uploaded ``program`` sends each robot's path on its own
         robot port (docs/server.md, "Multi-robot jobs"; docs/uploads.md).
         ``label`` names the job's configuration and ``problem`` its problem

@@ -237,6 +237,9 @@ class Jitter(Strict):
 
 #: the planner that plans a multi-robot job's robots together (timed paths, robots hold where it waits)
 FLEET_PLANNER = "prioritized"
+#: every planner that plans a multi-robot job's robots together (and only such jobs): prioritized planning and
+#: LaCAM* on a grid (planners.lacam)
+FLEET_PLANNERS = (FLEET_PLANNER, "lacam")
 
 
 def _check_pose(v: Optional[Pose]) -> Optional[Pose]:
@@ -299,7 +302,7 @@ class ExperimentCreate(Strict):
     robots: Optional[list[RobotIn]] = Field(default=None, min_length=2, max_length=MAX_ROBOTS, description=(
         "A multi-robot job instead of `start`/`goal`: 2 to 16 robots on a sub-field, to 64 on the whole field "
         "(`field: \"full\"`), in one world on one clock, each "
-        "{\"start\", \"goal\", \"path\"?} (m, rad). Planner `prioritized` plans them together; any other "
+        "{\"start\", \"goal\", \"path\"?} (m, rad). Planners `prioritized` and `lacam` plan them together; any other "
         "planner plans each robot alone (uncoordinated); a robot's `path` is driven as given; an uploaded "
         "`program` sends every robot's path, one T,T,P per robot port (docs/uploads.md)."))
     planner: Optional[str] = Field(default=None, max_length=64)
@@ -364,8 +367,8 @@ class ExperimentCreate(Strict):
             raise ValueError("profile_overrides change the emulated field robot: they need mode \"twb\"")
         if self.robots is not None:
             return self._fleet()
-        if self.planner == FLEET_PLANNER:
-            raise ValueError(f"planner: `{FLEET_PLANNER}` plans several robots together; give `robots` (a "
+        if self.planner in FLEET_PLANNERS:
+            raise ValueError(f"planner: `{self.planner}` plans several robots together; give `robots` (a "
                              "multi-robot job) instead of `start`/`goal`, or a single-robot planner")
         if self.path is not None and self.planner is not None:
             raise ValueError("give either `planner` or `path`, not both")
@@ -418,9 +421,9 @@ class ExperimentCreate(Strict):
                 raise ValueError(f"robots[{explicit.index(True)}].path: the program sends every robot's path; "
                                  "give no `path`")
             return self
-        if self.planner == FLEET_PLANNER and any(explicit):
+        if self.planner in FLEET_PLANNERS and any(explicit):
             i = explicit.index(True)
-            raise ValueError(f"robots[{i}].path: `{FLEET_PLANNER}` plans every robot together; it cannot keep "
+            raise ValueError(f"robots[{i}].path: `{self.planner}` plans every robot together; it cannot keep "
                              "a robot's explicit path (give no planner, or a single-robot one, to mix them)")
         if all(explicit):
             if self.planner is not None:

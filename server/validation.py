@@ -22,7 +22,7 @@ from planners import Environment, PlanningError, check_query, get_planner, parse
 from planners.moving import obstacle_at
 
 from .errors import PreflightError
-from .schemas import FLEET_PLANNER, MAX_ROBOTS, ExperimentCreate
+from .schemas import FLEET_PLANNER, FLEET_PLANNERS, MAX_ROBOTS, ExperimentCreate
 
 __all__ = ["FIELD_SIZE", "MAX_ROBOTS", "SUBFIELD_SIZE", "Preflight", "PreflightError", "check_program_path",
            "check_program_paths", "preflight", "preflight_fleet"]
@@ -59,9 +59,12 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
     params = _planner_params(body)
     _tracked_robots(body, env)
     if body.robots is not None:
-        if body.planner == FLEET_PLANNER and controller.replans:
-            raise PreflightError("controller_params.replan: the robots of a prioritized plan keep to its "
+        if body.planner in FLEET_PLANNERS and controller.replans:
+            raise PreflightError(f"controller_params.replan: the robots of a {body.planner} plan keep to its "
                                  "coordination and cannot replan (replan with an uncoordinated planner, e.g. fmm)")
+        if body.planner == "lacam" and env.moving_obstacles:
+            raise PreflightError(f"planner: lacam plans among the blocks only; environment {env.name!r} has "
+                                 f"{len(env.moving_obstacles)} moving obstacle(s): plan with prioritized, which avoids them")
         robots = _fleet_robots(body, env, robot_radius, planning_margin)
         return Preflight(env, robots[0]["start"], robots[0]["goal"], params, None, controller.params, robots)
     radius = robot_radius + (planning_margin if body.planner is not None else 0.0)
@@ -133,9 +136,13 @@ def _planner_params(body: ExperimentCreate) -> dict[str, Any]:
                 raise PreflightError(f"planner_params.execution: {' or '.join(map(repr, EXECUTIONS))} (how the robots "
                                      f"keep to the plan: in its order of passing, or by the clock), got {execution!r}")
             return {**check_fleet_params(params), "execution": execution}
+        if body.planner == "lacam":
+            from planners.lacam import check_lacam_params
+
+            return check_lacam_params(body.planner_params)
         return get_planner(body.planner).validate_params(body.planner_params)
     except (PlanningError, ValueError) as exc:
-        raise PreflightError(f"planner_params: {exc}" if body.planner == FLEET_PLANNER else str(exc)) from None
+        raise PreflightError(f"planner_params: {exc}" if body.planner in FLEET_PLANNERS else str(exc)) from None
 
 
 def _fleet_robots(body: ExperimentCreate, env: Environment, robot_radius: float,

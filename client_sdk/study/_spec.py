@@ -19,8 +19,8 @@ or fleets of 2 to 16 robots (64 with ``"field": "full"``; :mod:`._fleet`; docs/s
 ``{"name": "swap4", "robots": [{"start": [...], "goal": [...]}, ...]}`` or
 ``{"name": "circle-8", "circle": {"robots": 8, "radius_m": 0.6}}`` (robots on a
 circle around the environment's centre, each bound for the antipodal point).  A
-study's plans are all single robots or all fleets; planner ``prioritized``
-plans a fleet together, any other planner each robot alone.
+study's plans are all single robots or all fleets; planners ``prioritized`` and
+``lacam`` plan a fleet together, any other planner each robot alone.
 A planner entry may carry a ``"label"`` (the configuration's name in tables;
 default: the name, with the parameters if any) or, instead of a planner,
 ``"waypoints"``: ``{"name": "corner", "waypoints": [[x, y], ...]}`` sends the
@@ -50,7 +50,7 @@ from planners.compared import configuration_name
 from ._fleet import MAX_ROBOTS, MAX_ROBOTS_SUB, Circle, is_pose, parse_circle, parse_robots
 from ._fleet import finite as _finite
 
-__all__ = ["CONTROLLERS", "DISCS", "FLEET", "FLEET_PLANNER", "JITTER_LIMITS", "NOISE", "PAPER", "READY", "ControllerChoice",
+__all__ = ["CONTROLLERS", "DISCS", "FLEET", "FLEET_PLANNER", "FLEET_PLANNERS", "JITTER_LIMITS", "NOISE", "PAPER", "READY", "ControllerChoice",
            "PlannerSpec", "PlanSpec", "ProfileSpec", "StudySpec", "StudySpecError", "controllers_spec", "fleet_spec",
            "load_spec", "noise_spec", "paper_spec"]
 
@@ -63,6 +63,8 @@ JITTER_LIMITS = {"xy_m": 0.05, "theta_rad": 0.5}
 _MAX_WAYPOINTS = 1000
 #: the planner that plans a fleet's robots together (docs/server.md, "Multi-robot jobs")
 FLEET_PLANNER = "prioritized"
+#: every planner that plans a fleet's robots together, fleets only: prioritized planning and LaCAM* on a grid
+FLEET_PLANNERS = (FLEET_PLANNER, "lacam")
 
 
 class StudySpecError(ValueError):
@@ -331,8 +333,8 @@ def _check_fleet(plans: Optional[list[PlanSpec]], planners: list[PlannerSpec], j
         raise bad(f"plans[{twin}] repeats the name of plans[{names.index(names[twin])}] ({names[twin]}): give "
                   "each problem its own name")
     for i, p in enumerate(planners):
-        if p.name == FLEET_PLANNER and not fleets:
-            raise bad(f"planners[{i}]: `{FLEET_PLANNER}` plans several robots together: it needs fleet problems "
+        if p.name in FLEET_PLANNERS and not fleets:
+            raise bad(f"planners[{i}]: `{p.name}` plans several robots together: it needs fleet problems "
                       "in `plans` ({\"name\", \"robots\"} or {\"name\", \"circle\"})")
         if p.waypoints is not None and fleets:
             raise bad(f"planners[{i}]: `waypoints` is an explicit path for one robot; a fleet study's "

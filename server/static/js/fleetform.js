@@ -6,13 +6,14 @@
 import { $$, h } from "./dom.js";
 import { robotColor, swatch } from "./fleet.js";
 
-/** The planner that plans a fleet together (server/schemas.py FLEET_PLANNER). */
+/** The planner a fleet is planned with by default (server/schemas.py FLEET_PLANNER); `lacam` plans fleets too
+ * (server/schemas.py FLEET_PLANNERS): both are listed with `fleet_only`. */
 export const FLEET_PLANNER = "prioritized";
 /** The most robots of a job, on the whole field (contract/frames.py MAX_ROBOTS). */
 export const MAX_ROBOTS = 64;
 
 /** The planners to offer, from the server's list (`GET /api/v1/planners`): for several robots the ones that plan
- * fleets only (`prioritized`) first, then every other (each plans each robot alone); for one robot the others. */
+ * fleets only (`prioritized`, `lacam`) first, then every other (each plans each robot alone); for one robot the others. */
 export function plannerChoices(planners, multi) {
   const others = planners.filter((p) => !p.fleet_only);
   return multi ? [...planners.filter((p) => p.fleet_only), ...others] : others;
