@@ -709,3 +709,123 @@ def lacam(nbr: np.ndarray, deg: np.ndarray, starts: np.ndarray, goals: np.ndarra
     if no == 0:
         status = UNSOLVABLE
     return status, np.empty((0, n), dtype=np.int32), stats
+
+
+@njit(cache=True)
+def _heap_push(key: np.ndarray, val: np.ndarray, size: int, k: int, v: int) -> int:
+    i = size
+    key[i] = k
+    val[i] = v
+    while i > 0:
+        p = (i - 1) // 2
+        if key[p] <= key[i]:
+            break
+        key[p], key[i] = key[i], key[p]
+        val[p], val[i] = val[i], val[p]
+        i = p
+    return size + 1
+
+
+@njit(cache=True)
+def _heap_pop(key: np.ndarray, val: np.ndarray, size: int) -> int:
+    size -= 1
+    key[0] = key[size]
+    val[0] = val[size]
+    i = 0
+    while True:
+        a, b, m = 2 * i + 1, 2 * i + 2, i
+        if a < size and key[a] < key[m]:
+            m = a
+        if b < size and key[b] < key[m]:
+            m = b
+        if m == i:
+            break
+        key[m], key[i] = key[i], key[m]
+        val[m], val[i] = val[i], val[m]
+        i = m
+    return size
+
+
+@njit(cache=True)
+def prioritized_grid(nbr: np.ndarray, deg: np.ndarray, starts: np.ndarray, goals: np.ndarray, dist: np.ndarray,
+                     horizon: int, time_limit_s: float) -> tuple:
+    """Prioritized planning on the graph, the baseline of ``bench/mapf.py``: agents in index order, each the
+    earliest path (space-time A* with waits, the goal distance as heuristic) that avoids the vertices and edges
+    of the agents before it, which then stand at their goals for good (an agent may arrive only once no
+    earlier agent passes its goal later).  ``horizon``: the last time step searched.  Returns ``(status,
+    configs (T + 1, n), agent)``: :data:`SOLVED`, or :data:`UNSOLVABLE` with the first agent that found no
+    path (prioritized planning is incomplete: another order may work), or :data:`BUDGET` past
+    ``time_limit_s`` (s)."""
+    t0 = _now()
+    n = starts.shape[0]
+    nv = nbr.shape[0]
+    occ = np.full((horizon + 1, nv), -1, dtype=np.int32)
+    park = np.full(nv, horizon + 1, dtype=np.int64)
+    last = np.full(nv, -1, dtype=np.int64)
+    closed = np.zeros((horizon + 1, nv), dtype=np.int32)
+    seen = np.zeros((horizon + 1, nv), dtype=np.int32)
+    back = np.empty((horizon + 1, nv), dtype=np.int32)
+    cap = 1 << 16
+    hkey = np.empty(cap, dtype=np.int64)
+    hval = np.empty(cap, dtype=np.int64)
+    arrive = np.zeros(n, dtype=np.int64)
+    route = np.empty(horizon + 1, dtype=np.int32)
+    pops = 0
+    for a in range(n):
+        gen = a + 1
+        size = _heap_push(hkey, hval, 0, dist[a, starts[a]] * (horizon + 2), starts[a])
+        seen[0, starts[a]] = gen
+        found = -1
+        while size > 0:
+            pops += 1
+            if (pops & 1023) == 0 and _now() - t0 > time_limit_s:
+                return BUDGET, np.empty((0, n), dtype=np.int32), a
+            state = hval[0]
+            size = _heap_pop(hkey, hval, size)
+            t, v = state // nv, state % nv
+            if closed[t, v] == gen:
+                continue
+            closed[t, v] = gen
+            if v == goals[a] and t > last[v]:
+                found = t
+                break
+            if t == horizon:
+                continue
+            tn = t + 1
+            for k in range(deg[v] + 1):
+                u = nbr[v, k] if k < deg[v] else v
+                if occ[tn, u] >= 0 or park[u] <= tn or closed[tn, u] == gen or seen[tn, u] == gen:
+                    continue
+                b = occ[t, u]
+                if b >= 0 and u != v and occ[tn, v] == b:
+                    continue  # b moves u -> v while we move v -> u
+                seen[tn, u] = gen
+                back[tn, u] = v
+                if size + 1 > hkey.shape[0]:
+                    hkey = _grow1(hkey, 2 * hkey.shape[0])
+                    hval = _grow1(hval, 2 * hval.shape[0])
+                size = _heap_push(hkey, hval, size, (tn + dist[a, u]) * (horizon + 2) - tn, tn * nv + u)
+        if found < 0:
+            return UNSOLVABLE, np.empty((0, n), dtype=np.int32), a
+        v = goals[a]
+        for t in range(found, -1, -1):
+            route[t] = v
+            if t > 0:
+                v = back[t, v]
+        for t in range(found + 1):
+            occ[t, route[t]] = a
+            if route[t] != goals[a] or t < found:
+                last[route[t]] = max(last[route[t]], t)
+        park[goals[a]] = found
+        arrive[a] = found
+    span = int(arrive.max()) if n else 0
+    out = np.empty((span + 1, n), dtype=np.int32)
+    for t in range(span + 1):
+        for a in range(n):
+            out[t, a] = goals[a] if t >= arrive[a] else -1
+    for t in range(span + 1):
+        for v in range(nv):
+            a = occ[t, v]
+            if a >= 0 and t <= arrive[a]:
+                out[t, a] = v
+    return SOLVED, out, -1
