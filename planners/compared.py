@@ -71,9 +71,11 @@ FLEET_METRICS: dict[str, FleetMetric] = {
     "collisions_robot": FleetMetric("robots in robot-robot collisions", "", 2, "measured", -1),
     "collisions_moving": FleetMetric("robots hitting a moving obstacle", "", 2, "measured", -1),
     "collisions_static": FleetMetric("robots hitting a block or the wall", "", 2, "measured", -1),
+    "planning_time_s": FleetMetric("planning time", "s", 3, "measured", -1),
 }
 #: compared between configurations by default on fleets (after the success rate)
-FLEET_COMPARED = ("makespan_s", "time_sum_s", "path_length_sum_m", "robot_distance_min_m", "safety_time_s")
+FLEET_COMPARED = ("makespan_s", "time_sum_s", "path_length_sum_m", "robot_distance_min_m", "safety_time_s",
+                  "planning_time_s")
 #: +1: higher is better, -1: lower is better, 0: neither (reported, not judged); a fleet's metrics included
 DIRECTION: dict[str, int] = {**_BASE_DIRECTION, **{m: spec.direction for m, spec in FLEET_METRICS.items()}}
 

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from client_sdk import Client, Environment
-from client_sdk.study import (DISCS, FLEET, StudySpec, StudySpecError, export_ompl, figure_fleet_paths, load_spec,
+from client_sdk.study import (ARENA, DISCS, FLEET, FLEET_DISCS, StudySpec, StudySpecError, export_ompl,
+                              figure_fleet_paths, load_spec,
                               load_study, make_figures, plan_jobs, run_study)
 from client_sdk.study._fleet import SEPARATION_M, circle_robots
 from client_sdk.study._report import report_html
@@ -111,9 +112,19 @@ def test_the_example_fleet_study_has_explicit_and_generated_fleets():
     assert [r["start"] for r in jobs[0]["body"]["robots"]] == [p["start"] for p in SWAP["plans"]]
 
 
-def test_the_ready_fleet_study_crosses_robot_counts_and_obstacle_scenarios():
+def test_the_ready_fleet_study_compares_lacam_and_prioritized_up_to_64_robots_on_the_whole_field():
     spec = load_spec("fleet")
-    assert spec == StudySpec.from_json(FLEET) and spec.fleet
+    assert spec == StudySpec.from_json(FLEET) and spec.fleet and spec.field == "full"
+    jobs = plan_jobs(spec, {"arena": Environment.from_json(ARENA)})
+    assert len(jobs) == 15 and len(jobs) * spec.runs_per_experiment == 60
+    assert {(j["robots"], j["configuration"]) for j in jobs} == {
+        (n, c) for n in (4, 8, 16, 32, 64) for c in ("lacam", "prioritized", "fmm")}
+    assert all(j["body"]["field"] == "full" for j in jobs)
+
+
+def test_the_ready_fleet_study_among_discs_crosses_robot_counts_and_obstacle_scenarios():
+    spec = load_spec("fleet-discs")
+    assert spec == StudySpec.from_json(FLEET_DISCS) and spec.fleet
     jobs = plan_jobs(spec, {"swap": Environment.from_json(SWAP), "discs": Environment.from_json(DISCS)})
     assert len(jobs) == 12 and len(jobs) * spec.runs_per_experiment == 72
     assert {(j["environment"], j["robots"], j["configuration"]) for j in jobs} == {

@@ -32,22 +32,26 @@ from ._report import summary_markdown, write_report
 from ._fleet import Circle, circle_robots
 from ._fleet_figures import figure_fleet_metrics, figure_fleet_paths
 from ._fleet_results import FLEET_METRICS, FleetGroup, fleet_groups
-from ._spec import (CONTROLLERS, DISCS, FLEET, NOISE, PAPER, ControllerChoice, PlannerSpec, PlanSpec, ProfileSpec,
-                    StudySpec, StudySpecError, controllers_spec, fleet_spec, load_spec, noise_spec, paper_spec)
+from ._spec import (ARENA, CONTROLLERS, DISCS, FLEET, FLEET_DISCS, NOISE, PAPER, ControllerChoice, PlannerSpec, PlanSpec,
+                    ProfileSpec, StudySpec, StudySpecError, controllers_spec, fleet_discs_spec, fleet_spec, load_spec,
+                    noise_spec, paper_spec)
 from ._verdict import Answer, which_is_better
 
 __all__ = sorted(
     [
         "Answer",
         "Circle",
+        "ARENA",
         "DISCS",
         "FLEET",
+        "FLEET_DISCS",
         "FLEET_METRICS",
         "FleetGroup",
         "circle_robots",
         "figure_fleet_metrics",
         "figure_fleet_paths",
         "fleet_groups",
+        "fleet_discs_spec",
         "fleet_spec",
         "COMPARED_METRICS",
         "CONTROLLER_METRICS",

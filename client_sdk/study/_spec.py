@@ -50,8 +50,8 @@ from planners.compared import configuration_name
 from ._fleet import MAX_ROBOTS, MAX_ROBOTS_SUB, Circle, is_pose, parse_circle, parse_robots
 from ._fleet import finite as _finite
 
-__all__ = ["CONTROLLERS", "DISCS", "FLEET", "FLEET_PLANNER", "FLEET_PLANNERS", "JITTER_LIMITS", "NOISE", "PAPER", "READY", "ControllerChoice",
-           "PlannerSpec", "PlanSpec", "ProfileSpec", "StudySpec", "StudySpecError", "controllers_spec", "fleet_spec",
+__all__ = ["ARENA", "CONTROLLERS", "DISCS", "FLEET", "FLEET_DISCS", "FLEET_PLANNER", "FLEET_PLANNERS", "JITTER_LIMITS", "NOISE", "PAPER", "READY", "ControllerChoice",
+           "PlannerSpec", "PlanSpec", "ProfileSpec", "StudySpec", "StudySpecError", "controllers_spec", "fleet_discs_spec", "fleet_spec",
            "load_spec", "noise_spec", "paper_spec"]
 
 _KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter",
@@ -527,11 +527,12 @@ DISCS: dict[str, Any] = {
     ],
 }
 
-#: The ready fleet study (docs/study.md, "The fleet study"): prioritized planning against FMM per robot
-#: (uncoordinated) on the circle benchmark with 2, 4 and 8 robots, in the empty sub-field and with two moving discs, 3
-#: repetitions x sim and field (72 runs; `twb study fleet --embedded`).
-FLEET: dict[str, Any] = {
-    "name": "fleet",
+#: The fleet study among moving discs (docs/study.md, "Moving discs: prioritized against FMM"; until the
+#: scale study took its name, `twb study fleet`): prioritized planning against FMM per robot (uncoordinated) on the
+#: circle benchmark with 2, 4 and 8 robots, in the empty sub-field and with two moving discs, 3 repetitions x sim and
+#: field (72 runs; `twb study fleet-discs --embedded`).
+FLEET_DISCS: dict[str, Any] = {
+    "name": "fleet-discs",
     "description": "Robot counts x obstacle scenarios: prioritized (space-time, coordinated) against FMM per robot "
                    "(uncoordinated) on the circle benchmark with 2, 4 and 8 robots (radius 0.6 m, each bound for "
                    "the antipodal point), in the empty sub-field `swap` and in `discs` (two moving discs), "
@@ -544,18 +545,52 @@ FLEET: dict[str, Any] = {
     "seed": 0,
 }
 
+#: The whole field, empty: the fleet study's arena (3.6 m x 3.6 m, no blocks)
+ARENA: dict[str, Any] = {
+    "name": "arena",
+    "size": [3.6, 3.6],
+    "description": "The whole field, empty: the fleet study's arena for up to 64 robots",
+    "blocks": [],
+}
+
+#: The ready fleet study (docs/study.md, "The fleet study"): LaCAM against prioritized planning and FMM per robot
+#: (uncoordinated) on the circle benchmark with 4 to 64 robots on the whole field, 2 repetitions x sim and field
+#: (60 runs; `twb study fleet --embedded`).
+FLEET: dict[str, Any] = {
+    "name": "fleet",
+    "description": "Robot counts up to 64 on the whole field: LaCAM (complete, on a grid of robot-sized cells) "
+                   "against prioritized planning (space-time, robot by robot) and FMM per robot (uncoordinated) on "
+                   "the circle benchmark with 4, 8, 16, 32 and 64 robots (radius 1.5 m round the field's centre, "
+                   "each bound for the antipodal point) in the empty arena, 2 repetitions, simulation and emulated "
+                   "field (60 runs)",
+    "environments": [ARENA],
+    "plans": [{"name": f"circle-{n}", "circle": {"robots": n, "radius_m": 1.5}} for n in (4, 8, 16, 32, 64)],
+    "planners": ["lacam", "prioritized", "fmm"],
+    "repetitions": 2,
+    "modes": ["sim", "twb"],
+    "seed": 0,
+    "field": "full",
+}
+
 
 def fleet_spec() -> StudySpec:
-    """The ready fleet study (72 runs; docs/study.md, "The fleet study")."""
+    """The ready fleet study (60 runs; docs/study.md, "The fleet study")."""
     return StudySpec.from_json(FLEET, "fleet")
 
 
+def fleet_discs_spec() -> StudySpec:
+    """The fleet study among moving discs (72 runs; docs/study.md, "Moving discs")."""
+    return StudySpec.from_json(FLEET_DISCS, "fleet-discs")
+
+
 #: the ready studies by name (``twb study NAME``)
-READY = {"paper": paper_spec, "noise": noise_spec, "controllers": controllers_spec, "fleet": fleet_spec}
+READY = {"paper": paper_spec, "noise": noise_spec, "controllers": controllers_spec, "fleet": fleet_spec,
+         "fleet-discs": fleet_discs_spec}
 
 
 def load_spec(source: str | Path) -> StudySpec:
-    """A ready study by name (:data:`READY`: ``"paper"``, ``"noise"``, ``"controllers"``, ``"fleet"``) or a study
+    """A ready study by name (:data:`READY`: ``"paper"``, ``"noise"``, ``"controllers"``, ``"fleet"``,
+    ``"fleet-discs"``) or a study
     file (``.json``; ``.yaml``/``.yml`` if PyYAML is installed)."""
     if str(source) in READY:
         return READY[str(source)]()
