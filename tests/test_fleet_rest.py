@@ -110,7 +110,9 @@ def test_the_planner_list_offers_prioritized_with_the_parameters_a_fleet_job_tak
     exp, _ = prioritized
     listed = {p["name"]: p for p in client.get("/api/v1/planners").json()["data"]}
     assert listed["prioritized"]["fleet_only"] is True and listed["prioritized"]["description"]
-    assert not any(p["fleet_only"] for name, p in listed.items() if name != "prioritized")
+    assert {name for name, p in listed.items() if p["fleet_only"]} == {"prioritized", "lacam"}
+    assert listed["lacam"]["defaults"] == {"cell": 0.15, "speed": 0.18, "time_limit_s": 5.0, "refine": 2000,
+                                           "swap": True}
     assert listed["prioritized"]["defaults"] == exp["planner_params"]
     spec = StudySpec.from_json({"name": "timed", "environments": ["swap"], "modes": ["sim"],
                                 "plans": [{"name": "circle-2", "circle": {"robots": 2, "radius_m": 0.6}}],
@@ -135,6 +137,16 @@ def test_a_job_can_have_its_prioritized_plan_executed_by_the_clock(client, prior
     for k, r in enumerate(out["robots"]):
         assert np.array_equal(poses(client, run["id"], robot=k)[:, :4], r["poses"]), k
     assert not np.array_equal(poses(client, run["id"]), by_deps)
+
+
+def test_a_lacam_fleet_job_plans_together_and_completes(client):
+    """`"planner": "lacam"`: the swap's four robots planned on the grid and driven by the order of passage."""
+    body = {**JOBS["prioritized"], "planner": "lacam"}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=body).json()["id"], timeout=180)
+    assert exp["status"] == "completed", exp
+    assert exp["planner_params"] == {"cell": 0.15, "speed": 0.18, "time_limit_s": 5.0, "refine": 2000, "swap": True}
+    m = client.get(f"/api/v1/runs/{exp['runs'][0]['id']}").json()["metrics"]
+    assert m["success_rate"] == 1.0 and m["collisions_robot"] == 0 and m["planning_time_s"] > 0
 
 
 def test_the_uncoordinated_swap_fails_with_its_collisions_counted_and_measured(client):
@@ -193,6 +205,11 @@ def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(cl
      "planner_params.execution: 'dependencies' or 'timed' (how the robots keep to the plan"),
     ({"robots": TWO, "planner": "prioritized", "controller": "regulated_pure_pursuit",
       "controller_params": {"replan": 1}}, "controller_params.replan: the robots of a prioritized plan"),
+    ({"start": [0.3, 0.3], "goal": [1.5, 1.5], "planner": "lacam"}, "planner: `lacam` plans several robots"),
+    ({"robots": TWO, "planner": "lacam", "planner_params": {"cell": 0.01}}, "planner_params: parameter lacam.cell"),
+    ({"robots": TWO, "planner": "lacam", "planner_params": {"execution": "timed"}},
+     "planner_params: planner 'lacam' has no parameter"),
+    ({"robots": TWO, "planner": "lacam", "environment": "crossing"}, "planner: lacam plans among the blocks only"),
 ])
 def test_bad_multi_robot_jobs_are_refused_naming_the_field(client, job, detail):
     body = {"environment": "swap", "planner": "prioritized", "modes": ["sim"], **job}
