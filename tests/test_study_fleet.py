@@ -271,7 +271,7 @@ def test_a_fleet_study_reports_the_fleet_metrics_with_intervals(fleet_dir):
     with open(fleet_dir / "comparisons.csv") as f:
         compared = {(row["metric"], row["mode"]): row for row in csv.DictReader(f)}
     assert {m for m, _ in compared} == {"success_rate", "makespan_s", "time_sum_s", "path_length_sum_m",
-                                        "robot_distance_min_m", "safety_time_s"}
+                                        "robot_distance_min_m", "safety_time_s", "planning_time_s"}
     assert compared[("makespan_s", "twb")]["note"] == "no completed run of fmm"
     assert float(compared[("robot_distance_min_m", "twb")]["diff"]) > 0.05  # prioritized keeps them apart
 
