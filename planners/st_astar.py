@@ -45,17 +45,24 @@ from scipy.sparse.csgraph import dijkstra
 
 from .astar import grid_graph
 from .base import Param, Planner
-from .errors import NoPathFound
+from .errors import NoPathFound, PlanningError
 from .grid import ConfigSpace
 from .moving import MovingObstacle, positions
 
-__all__ = ["SpaceTimeAStar", "TimedPath", "conflict_table", "mover_positions", "movers_table", "plan_timed",
+__all__ = ["MAX_STATES", "PlanTooLarge", "SpaceTimeAStar", "TimedPath", "conflict_table", "mover_positions", "movers_table", "plan_timed",
            "without_waits"]
+
+class PlanTooLarge(PlanningError):
+    """The search the parameters ask for would not fit a planning worker's memory (:data:`MAX_STATES`)."""
+
 
 _MOVES = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
 #: samples of each mover per time bucket
 SAMPLES_PER_BUCKET = 4
 MAX_BUCKETS = 20_000
+#: most (lattice point, time bucket) states a search may hold: its conflict table and closed set are a byte per
+#: state each (100 MB at this bound), its open set a fraction; the 2 mm lattice of a probe asked for 17 GB
+MAX_STATES = 50_000_000
 
 
 @dataclass(frozen=True)
@@ -158,14 +165,16 @@ class SpaceTimeAStar(Planner):
     name = "st_astar"
     description = "space-time A* on an 8-connected lattice, avoiding moving obstacles at the robot's speed"
     parameters = (
-        Param("cell", "m", 0.05, 0.0, None, "spacing of the lattice", low_exclusive=True),
-        Param("speed", "m/s", 0.18, 0.0, None, "the speed the robot is modelled to drive the path at",
+        # bounded by what a planning worker can hold: a lattice finer than the configuration space's 1 cm grid
+        # resolves nothing more, and the search's state budget (MAX_STATES) bounds the rest at planning time
+        Param("cell", "m", 0.05, 0.01, 0.5, "spacing of the lattice (at least the 1 cm of the occupancy grid)"),
+        Param("speed", "m/s", 0.18, 0.0, 2.0, "the speed the robot is modelled to drive the path at",
               low_exclusive=True),
-        Param("time_margin_s", "s", 1.0, 0.0, None, "each conflict with a moving obstacle widened by this, both ways"),
-        Param("clearance", "m", 0.02, 0.0, None, "extra distance kept from moving obstacles"),
+        Param("time_margin_s", "s", 1.0, 0.0, 60.0, "each conflict with a moving obstacle widened by this, both ways"),
+        Param("clearance", "m", 0.02, 0.0, 0.5, "extra distance kept from moving obstacles"),
         Param("wait", default=False, type="boolean", doc="whether the plan may stand still"),
-        Param("arrive_s", "s", 2.0, 0.0, None, "how long the goal must stay clear after the arrival"),
-        Param("horizon_s", "s", 0.0, 0.0, None, "how far ahead the search looks (0: automatic)"),
+        Param("arrive_s", "s", 2.0, 0.0, 60.0, "how long the goal must stay clear after the arrival"),
+        Param("horizon_s", "s", 0.0, 0.0, 3600.0, "how far ahead the search looks (0: automatic)"),
     )
 
     def solve(self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any],
@@ -241,6 +250,11 @@ def movers_table(space: ConfigSpace, params: dict[str, Any], horizon_s: float,
     cell, dt = float(params["cell"]), float(params["cell"]) / float(params["speed"])
     buckets = min(int(math.ceil(horizon_s / dt)) + 1, MAX_BUCKETS)
     free, _ = _lattice(space, cell)
+    if buckets * free.size > MAX_STATES:
+        raise PlanTooLarge(
+            f"the space-time search would hold {buckets * free.size:.3g} states ({free.shape[1]} x {free.shape[0]} "
+            f"lattice points x {buckets} time steps of {dt:.3g} s over {horizon_s:.0f} s); the testbed plans at most "
+            f"{MAX_STATES:.3g}: choose a larger `cell` or a shorter `horizon_s`")
     centres, radii = mover_positions(obstacles, others, np.arange(buckets * SAMPLES_PER_BUCKET + 1)
                                      * (dt / SAMPLES_PER_BUCKET), obstacle_time_s)
     inflate = space.radius + cell * math.sqrt(0.5) + float(params["clearance"])

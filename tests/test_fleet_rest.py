@@ -210,6 +210,10 @@ def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(cl
     ({"robots": TWO, "planner": "lacam", "planner_params": {"execution": "timed"}},
      "planner_params: planner 'lacam' has no parameter"),
     ({"robots": TWO, "planner": "lacam", "environment": "crossing"}, "planner: lacam plans among the blocks only"),
+    # a probe's job whose 2 mm lattice grew its worker to 17.7 GB (the hardening issue, item 2)
+    ({"robots": [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 1.5], "goal": [0.3, 0.3]}],
+      "planner_params": {"cell": 0.002}}, "parameter prioritized.cell must be a number in [0.01, 0.5] (m), got 0.002"),
+    ({"robots": TWO, "planner_params": {"horizon_s": 1e6}}, "parameter prioritized.horizon_s must be a number in"),
 ])
 def test_bad_multi_robot_jobs_are_refused_naming_the_field(client, job, detail):
     body = {"environment": "swap", "planner": "prioritized", "modes": ["sim"], **job}

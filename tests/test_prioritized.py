@@ -67,3 +67,22 @@ def test_bad_fleets_are_refused_naming_the_robots():
     with pytest.raises(NoPathFound, match=r"robot 1 \(of 2, planned in order\)"):
         plan_prioritized(DOOR, [[0.75, 0.5], [0.3, 0.5]], [[0.9, 0.5], [1.5, 0.5]])
     assert len(plan_prioritized(DOOR, [[0.3, 0.5], [0.75, 0.5]], [[1.5, 0.5], [0.9, 0.5]]).paths) == 2
+
+
+def test_a_search_too_large_for_a_worker_is_refused_before_it_allocates():
+    """Within the parameters' bounds a long horizon on a fine lattice can still ask for more states than a
+    planning worker holds: refused at once, naming the sizes and what to change (a planning failure, the job's)."""
+    import tracemalloc
+
+    from planners import plan_path
+    from planners.st_astar import PlanTooLarge
+
+    tracemalloc.start()
+    try:
+        with pytest.raises(PlanTooLarge, match=r"would hold 6\.55e\+08 states \(181 x 181 lattice points x 20000 "
+                                               r"time steps .* at most 5e\+07: choose a larger `cell`"):
+            plan_path("room", [0.3, 0.3], [1.5, 1.5], "st_astar", params={"cell": 0.01, "horizon_s": 3000})
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 50e6, peak  # nothing of the 655 MB table was built (numpy reports its buffers to tracemalloc)
