@@ -88,9 +88,14 @@ class PRMPlanner(Planner):
     name = "prm"
     description = "Probabilistic RoadMap: seeded samples, k-nearest edges, Dijkstra query"
     defaults = {"samples": 500, "k": 10}
+    stochastic = True  # the roadmap is a random sample: each seed gives its own path
 
     def __init__(self) -> None:
         self._cache: weakref.WeakKeyDictionary[ConfigSpace, dict[tuple[int, int, int], Roadmap]]
+        self._cache = weakref.WeakKeyDictionary()
+
+    def forget(self) -> None:
+        """Drop the cached roadmaps: the next query builds its roadmap, as a single-query PRM does."""
         self._cache = weakref.WeakKeyDictionary()
 
     def roadmap(self, space: ConfigSpace, samples: int, k: int, seed: int) -> tuple[Roadmap, bool]:

@@ -60,7 +60,7 @@ CREATE TABLE progress
 #: OMPL's conventional run attributes, from the planned path's metrics
 _OMPL_ALIASES = {"time": "planning_time_s", "solution_length": "planned_length_m",
                  "solution_smoothness": "planned_smoothness_rad", "solution_clearance": "planned_clearance_min_m"}
-_SKIP = set(ID_COLUMNS) - {"repetition", "seed", "subfield"}
+_SKIP = set(ID_COLUMNS) - {"repetition", "seed", "planner_seed", "subfield"}
 
 
 def _sql_type(values: list[Any]) -> str:
