@@ -351,8 +351,14 @@ def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any
         "status": exp.status if exp else "rejected", "error": exp.error if exp else job.get("rejected", ""),
         "planned_path": exp.planned_path.tolist() if exp is not None and exp.planned_path is not None else None,
         "planning_time_s": exp.planning_time_s if exp else None,
+        "planner_seed": body.get("planner_seed"),
+        "planner_stochastic": bool(exp.planner_stochastic) if exp else False,
         "runs": [r.id for r in exp.runs] if exp else [],
     }
+    if exp is not None and exp.planner_stochastic and not robots:
+        # a randomised planner: every repetition's own plan (``planned_path`` is repetition 1's)
+        entry["repetition_paths"] = {str(r.repetition): r.planned_path.tolist() for r in exp.runs
+                                     if r.planned_path is not None and len(r.planned_path)}
     if robots:
         # a fleet: every robot's start and goal, and the path planned for each (None where planning failed)
         entry["robots"] = robots
