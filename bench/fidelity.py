@@ -334,12 +334,13 @@ CORNER_RAD = math.radians(20)
 
 
 def corners(data: StudyData) -> dict[str, dict[str, float]]:
-    """Per planner, pooled over its computed paths: vertices and corners (turns over :data:`CORNER_RAD`)
-    per metre, the mean corner and the sharpest (degrees)."""
+    """Per planner, pooled over its computed paths (a randomised planner's: every repetition's): vertices and
+    corners (turns over :data:`CORNER_RAD`) per metre, the mean corner and the sharpest (degrees)."""
     out: dict[str, dict[str, float]] = {}
     for p in dict.fromkeys(e["planner"] for e in data.experiments):
-        paths = [np.asarray(e["planned_path"], dtype=float)[:, :2] for e in data.experiments
-                 if e["planner"] == p and e.get("planned_path")]
+        paths = [np.asarray(path, dtype=float)[:, :2] for e in data.experiments if e["planner"] == p
+                 for path in (list((e.get("repetition_paths") or {}).values())
+                              or ([e["planned_path"]] if e.get("planned_path") else []))]
         if not paths:
             continue
         length = sum(path_length(xy) for xy in paths)
