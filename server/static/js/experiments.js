@@ -401,17 +401,18 @@ export class ExperimentPage {
   renderRuns(d, m) {
     const columns = d.robots ? FLEET_COLUMNS : RUN_COLUMNS;
     const head = h("thead", {}, h("tr", {}, ["Run", "Mode #", "Status", "Robot", "Sub-field", ...columns.map(([, t]) => t),
-      "Plan (ms)", "Poses, messages"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 6 + columns.length ? "num" : null }, t))));
+      "Poses, messages"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + columns.length ? "num" : null }, t))));
     const rows = this.runs().map((r) => {
       const mt = r.metrics || {};
       return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
         h("td", {}, r.id), h("td", {}, `${r.mode} #${r.repetition}`), h("td", {}, badge(r.status),
           r.error ? h("div", { class: "muted small run-error" }, r.error) : "",
-          r.stopped_at ? h("div", { class: "muted small stopped" }, `✕ stopped at ${pose(r.stopped_at)}`) : ""),
+          r.stopped_at ? h("div", { class: "muted small stopped" }, `✕ stopped at ${pose(r.stopped_at)}`) : "",
+          // its repetition's planning time (the tooltip: wall and CPU, median of k, load, planner seed)
+          r.planning_time_s == null ? "" : h("div", { class: "muted small planning", title: planningTitle(r),
+            dataset: { metric: "planning_time_s" } }, `plan ${num(r.planning_time_s * 1000, 1)} ms`)),
         h("td", {}, r.robot_id || "–"), h("td", {}, r.subfield ?? "–"),
         ...columns.map(([k]) => h("td", { class: "num", dataset: { metric: k } }, num(mt[k]))),
-        h("td", { class: "num planning", dataset: { metric: "planning_time_s" }, title: planningTitle(r) },
-          r.planning_time_s == null ? "–" : num(r.planning_time_s * 1000, 1)),
         h("td", {}, r.t_start == null ? "–" : h("span", { class: "downloads" },
           this.dl(`/api/v1/runs/${r.id}/poses?format=csv`, `run-${r.id}-poses.csv`, "CSV", `Download poses of run ${r.id} as CSV`),
           this.dl(`/api/v1/runs/${r.id}/poses?format=json`, `run-${r.id}-poses.json`, "JSON", `Download poses of run ${r.id} as JSON`),
@@ -419,7 +420,7 @@ export class ExperimentPage {
     });
     if (m.planned) {
       rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, d.planner_stochastic ? "planned (rep. 1)" : "planned"), h("td", {}, ""),
-        h("td", {}, ""), h("td", {}, ""), ...columns.map(([k]) => h("td", { class: "num" }, num(m.planned[k]))), h("td", {}, ""), h("td", {}, "")));
+        h("td", {}, ""), h("td", {}, ""), ...columns.map(([k]) => h("td", { class: "num" }, num(m.planned[k]))), h("td", {}, "")));
     }
     this.els.runs.replaceChildren(head, h("tbody", {}, rows));
     this.els.robotsPanel.hidden = !d.robots;
