@@ -1,8 +1,9 @@
 """Field fidelity: the paper's findings over many seeds and environments, what causes them, and figures.
 
 A study is run in this process exactly as the testbed runs it (the same planning
-call with the robot radius plus the planning margin, the same path on the wire,
-the same per-run seeds, the same metrics), without a server: the simulation core
+call with the robot radius plus the planning margin and the same planner seeds:
+a randomised planner plans each repetition with its own; the same path on the
+wire, the same per-run seeds, the same metrics), without a server: the simulation core
 (:class:`robot_agent.engine.sim.SimCore`) drives one robot per run.  The result is a
 :class:`client_sdk.study.StudyData`, so :func:`client_sdk.study.paper_findings`
 checks it as it checks a study the testbed ran (and the numbers are the same:
@@ -34,13 +35,14 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 
 import numpy as np  # noqa: E402
 
-from client_sdk.study import PlanSpec, StudyData, StudySpec, paper_findings, paper_spec  # noqa: E402
+from client_sdk.study import PlanSpec, StudyData, StudySpec, paper_findings, paper_spec, study_planner_seed  # noqa: E402
 from client_sdk.study._collect import flat_metrics  # noqa: E402
 from contract.frames import field_layout  # noqa: E402
 from contract.params import robot_params  # noqa: E402
 from contract.protocol import decode_path, encode_path  # noqa: E402
 from contract.robot_profile import load_profile  # noqa: E402
-from planners import PlanningError, distance_to_obstacles, load_environment, parse_environment, plan_path  # noqa: E402
+from planners import (PlanningError, distance_to_obstacles, get_planner, load_environment,  # noqa: E402
+                      parse_environment, plan_path)
 from planners.metrics import path_length, smoothness, turning_angles  # noqa: E402
 from robot_agent.engine.backends import make_backend  # noqa: E402
 from robot_agent.engine.noise import path_key  # noqa: E402
@@ -48,7 +50,7 @@ from robot_agent.engine.sim import SimCore, State  # noqa: E402
 from robot_agent.engine.world import World  # noqa: E402
 from robot_agent.engine.jobs import measure_run  # noqa: E402
 from robot_agent.engine.run_data import compare_runs  # noqa: E402
-from server.store.experiments import run_seed  # noqa: E402
+from server.store.experiments import planner_seed, run_seed  # noqa: E402
 
 ROBOT_RADIUS, PLANNING_MARGIN = 0.045, 0.02  # the testbed's defaults (server/core/settings.py)
 BACKEND = {"sim": "ideal", "twb": "field"}
@@ -173,20 +175,41 @@ def study_data(spec: StudySpec, overrides: Optional[dict[str, float]] = None, tr
                 eid = len(data.experiments) + 1
                 ident = {"study": spec.name, "experiment_id": eid, "environment": name, "plan": plan_name,
                          "planner": planner.name}
-                try:
-                    r = plan_path(env, start, goal, planner.name, robot_radius=ROBOT_RADIUS + PLANNING_MARGIN,
-                                  params=planner.params, seed=spec.seed)
-                except PlanningError as exc:  # the testbed fails the whole experiment, every run of it
-                    _planning_failed(data, spec, ident, planner.params, start, goal, rid, f"planning failed: {exc}")
+                # the study's planner seed of this experiment, and each repetition's from it (as the testbed
+                # derives them): a randomised planner plans every repetition with its own; a deterministic one's
+                # path is the same for every seed, planned once here
+                base = study_planner_seed(spec.seed, planner.configuration, name, plan_name)
+                stochastic = get_planner(planner.name).stochastic
+                plans: dict[int, Any] = {}
+                failed: dict[int, str] = {}
+                for rep in range(1, spec.repetitions + 1):
+                    if not stochastic and rep > 1:
+                        plans[rep] = plans.get(1)
+                        if 1 in failed:
+                            failed[rep] = failed[1]
+                        continue
+                    try:
+                        plans[rep] = plan_path(env, start, goal, planner.name,
+                                               robot_radius=ROBOT_RADIUS + PLANNING_MARGIN, params=planner.params,
+                                               seed=planner_seed(base, rep))
+                    except PlanningError as exc:
+                        failed[rep] = f"planning failed: {exc}"
+                if not stochastic and 1 in failed:  # the testbed fails the whole experiment, every run of it
+                    _planning_failed(data, spec, ident, planner.params, start, goal, rid, failed[1])
                     rid += spec.repetitions * len(spec.modes)
                     continue
-                planned = np.round(r.path, 6)
-                wire = decode_path(encode_path(planned))
                 rows, logged = [], {}
                 for rep in range(1, spec.repetitions + 1):
+                    r = plans.get(rep)
+                    planned = None if r is None else np.round(r.path, 6)
+                    wire = None if planned is None else decode_path(encode_path(planned))
                     for mode in spec.modes:
                         rid += 1
                         seed = run_seed(spec.seed, mode, rep)
+                        if r is None:  # a randomised planner found no path with this repetition's seed
+                            rows.append({**ident, "run_id": rid, "mode": mode, "repetition": rep, "seed": seed,
+                                         "status": "failed", "error": failed[rep], "t_start": None, "t_end": None})
+                            continue
                         poses, t0, t1, end, true = drive(env_data, wire, start, BACKEND[mode], seed, params, truth)
                         row = {**ident, "run_id": rid, "mode": mode, "repetition": rep, "seed": seed,
                                "status": "completed" if end == "DONE" else "failed",
@@ -209,9 +232,16 @@ def study_data(spec: StudySpec, overrides: Optional[dict[str, float]] = None, tr
                             if row["repetition"] == rep:
                                 row.update({f"st_{k}": v for k, v in st.items()})
                 data.rows += rows
+                first = plans.get(1)
                 data.experiments.append({**ident, "planner_params": planner.params, "start": start, "goal": goal,
-                                         "status": "completed", "error": "", "planned_path": planned.tolist(),
-                                         "planning_time_s": r.planning_time_s, "runs": [x["run_id"] for x in rows]})
+                                         "status": "failed" if failed else "completed",
+                                         "error": next(iter(failed.values()), ""),
+                                         "planned_path": None if first is None else np.round(first.path, 6).tolist(),
+                                         "planning_time_s": None if first is None else first.planning_time_s,
+                                         "runs": [x["run_id"] for x in rows]})
+                if stochastic:  # every repetition's own plan, as the study's collector keeps them
+                    data.experiments[-1]["repetition_paths"] = {str(k): np.round(v.path, 6).tolist()
+                                                                for k, v in plans.items() if v is not None}
     return data
 
 
@@ -304,12 +334,13 @@ CORNER_RAD = math.radians(20)
 
 
 def corners(data: StudyData) -> dict[str, dict[str, float]]:
-    """Per planner, pooled over its computed paths: vertices and corners (turns over :data:`CORNER_RAD`)
-    per metre, the mean corner and the sharpest (degrees)."""
+    """Per planner, pooled over its computed paths (a randomised planner's: every repetition's): vertices and
+    corners (turns over :data:`CORNER_RAD`) per metre, the mean corner and the sharpest (degrees)."""
     out: dict[str, dict[str, float]] = {}
     for p in dict.fromkeys(e["planner"] for e in data.experiments):
-        paths = [np.asarray(e["planned_path"], dtype=float)[:, :2] for e in data.experiments
-                 if e["planner"] == p and e.get("planned_path")]
+        paths = [np.asarray(path, dtype=float)[:, :2] for e in data.experiments if e["planner"] == p
+                 for path in (list((e.get("repetition_paths") or {}).values())
+                              or ([e["planned_path"]] if e.get("planned_path") else []))]
         if not paths:
             continue
         length = sum(path_length(xy) for xy in paths)

@@ -54,18 +54,18 @@ def sweep(runs: int) -> list[dict[str, Any]]:
 def in_process(jobs: list[dict[str, Any]]) -> dict[str, Any]:
     """The limit: plan each experiment, simulate and measure each run, in this process."""
     from planners import load_environment  # noqa: F401 - import cost outside the timing
-    from robot_agent.engine import jobs
+    from robot_agent.engine import jobs as engine
 
     envs = {n: json.loads((ROOT / "planners" / "data" / f"{n}.json").read_text()) for n in ("room", "blocks")}
-    jobs.simulate_job(envs["room"], [[0.3, 0.3, 0.0], [0.6, 0.3, 0.0]], [[0.3, 0.3, 0.0]], 0, 60,
+    engine.simulate_job(envs["room"], [[0.3, 0.3, 0.0], [0.6, 0.3, 0.0]], [[0.3, 0.3, 0.0]], 0, 60,
                          [0.6, 0.3, 0.0], 0.045, 0.0)  # compile the simulation core first
     t0, c0 = time.perf_counter(), time.process_time()
     n = 0
     for job in jobs:
         env = envs[job["environment"]]
-        plan = jobs.plan_job(env, job["start"], job["goal"], job["planner"], {}, job["seed"], 0.065)
+        plan = engine.plan_job(env, job["start"], job["goal"], job["planner"], {}, job["seed"], 0.065)
         for rep in range(job["repetitions"]):
-            jobs.simulate_job(env, plan["path"], [job["start"]], job["seed"] + rep, 600, job["goal"], 0.045,
+            engine.simulate_job(env, plan["path"], [job["start"]], job["seed"] + rep, 600, job["goal"], 0.045,
                                  plan["planning_time_s"])
             n += 1
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0

@@ -175,11 +175,12 @@ def _plain(value: Any) -> Any:
 
 
 def program_body(program: str | os.PathLike[str] | bytes, name: Optional[str], kind: Optional[str],
-                 interpreter: Optional[str], args: Sequence[str]) -> dict[str, Any]:
+                 interpreter: Optional[str], args: Sequence[str], stochastic: bool = False) -> dict[str, Any]:
     """The upload body of ``POST /api/v1/programs`` from a file (or its bytes) and how to run it.
 
     ``name`` defaults to the file's name; ``kind`` to ``python`` for a
-    ``.py`` file and ``executable`` otherwise.
+    ``.py`` file and ``executable`` otherwise; ``stochastic`` is sent only when set (older testbeds refuse
+    the key).
     """
     if isinstance(program, bytes):
         if not name:
@@ -198,6 +199,8 @@ def program_body(program: str | os.PathLike[str] | bytes, name: Optional[str], k
                             "content_base64": base64.b64encode(content).decode()}
     if interpreter is not None:
         body["interpreter"] = interpreter
+    if stochastic:
+        body["stochastic"] = True
     return body
 
 

@@ -166,17 +166,20 @@ class Client(BaseClient):
 
     def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
                        kind: Optional[str] = None, interpreter: Optional[str] = None,
-                       args: Sequence[str] = ()) -> Program:
+                       args: Sequence[str] = (), stochastic: bool = False) -> Program:
         """Upload a planner program (docs/uploads.md); returns it with its ``id`` for ``submit(program=)``.
 
         ``program`` is a file (``name`` defaults to its name; ``kind`` to
         ``python`` for ``.py``, else ``executable``) or its bytes (give
         ``name``).  ``interpreter`` runs an executable with ``sh``, ``bash``
         or ``python3``; ``args`` may name inputs such as ``{robot_port}``.
+        ``stochastic``: its path depends on the seed it gets (``TWB_SEED``),
+        so it runs once per repetition with that repetition's planner seed
+        (else once per experiment, its path and time reused by every run).
         :class:`Forbidden` when the testbed has uploads disabled,
         :class:`TooLarge` over its size limit.
         """
-        return self._send(self._upload_program(program_body(program, name, kind, interpreter, args)))
+        return self._send(self._upload_program(program_body(program, name, kind, interpreter, args, stochastic)))
 
     def list_programs(self, *, offset: int = 0, limit: int = 50) -> Page[Program]:
         """Your uploaded programs, newest first."""
@@ -212,6 +215,7 @@ class Client(BaseClient):
                planner: Optional[str] = None, *, path: Optional[Sequence[Pose] | np.ndarray] = None,
                planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                repetitions: Optional[int] = None, seed: Optional[int] = None,
+               planner_seed: Optional[int] = None,
                field: Optional[str] = None, program: Optional[int] = None,
                jitter: Optional[Mapping[str, float]] = None,
                profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
@@ -227,7 +231,10 @@ class Client(BaseClient):
         ``fmm`` on the server), an explicit ``path`` or an uploaded
         ``program``'s id (:meth:`upload_program`).  Omitted fields take
         the server's defaults (modes sim and twb, 1 repetition, seed 0,
-        ``field="sub"``).  ``jitter`` (``{"xy_m", "theta_rad"}``, standard
+        ``field="sub"``).  ``seed`` seeds every run's noise (its own per
+        mode and repetition); ``planner_seed`` (default ``seed``) each
+        repetition's planner seed, which a randomised planner (PRM) plans
+        that repetition with: both modes of a repetition drive the same plan.  ``jitter`` (``{"xy_m", "theta_rad"}``, standard
         deviations) starts every run a seeded little way off the start;
         ``profile_overrides`` (``{"tracker_noise_xy_m": 0.003}``, SI units)
         gives the job's field runs other field parameters of the robot
@@ -250,7 +257,8 @@ class Client(BaseClient):
         """
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
-                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
+                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed,
+                      planner_seed=planner_seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
                       controller_params=controller_params, controller_program=controller_program, robots=robots,
                       label=label, problem=problem)
@@ -436,6 +444,7 @@ class AsyncClient(BaseClient):
                      path: Optional[Sequence[Pose] | np.ndarray] = None,
                      planner_params: Optional[Mapping[str, Any]] = None, modes: Optional[Sequence[str]] = None,
                      repetitions: Optional[int] = None, seed: Optional[int] = None,
+                     planner_seed: Optional[int] = None,
                      field: Optional[str] = None, program: Optional[int] = None,
                      jitter: Optional[Mapping[str, float]] = None,
                      profile_overrides: Optional[Mapping[str, float]] = None, controller: Optional[str] = None,
@@ -446,7 +455,8 @@ class AsyncClient(BaseClient):
         """See :meth:`Client.submit`."""
         job = environment if isinstance(environment, Mapping) else None
         fields = dict(environment=None if job else environment, start=start, goal=goal, planner=planner, path=path,
-                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed, field=field,
+                      planner_params=planner_params, modes=modes, repetitions=repetitions, seed=seed,
+                      planner_seed=planner_seed, field=field,
                       program=program, jitter=jitter, profile_overrides=profile_overrides, controller=controller,
                       controller_params=controller_params, controller_program=controller_program, robots=robots,
                       label=label, problem=problem)
@@ -454,9 +464,10 @@ class AsyncClient(BaseClient):
 
     async def upload_program(self, program: str | os.PathLike[str] | bytes, *, name: Optional[str] = None,
                              kind: Optional[str] = None, interpreter: Optional[str] = None,
-                             args: Sequence[str] = ()) -> Program:
+                             args: Sequence[str] = (), stochastic: bool = False) -> Program:
         """See :meth:`Client.upload_program`."""
-        return await self._send(self._upload_program(program_body(program, name, kind, interpreter, args)))
+        return await self._send(self._upload_program(program_body(program, name, kind, interpreter, args,
+                                                                  stochastic)))
 
     async def list_programs(self, *, offset: int = 0, limit: int = 50) -> Page[Program]:
         """See :meth:`Client.list_programs`."""

@@ -191,6 +191,7 @@ class Run(_FromJson):
     mode: str
     repetition: int
     status: str
+    #: the seed of the run's noise, dropouts and start jitter (its own per mode)
     seed: int = 0
     attempt: int = 1
     subfield: Optional[int] = None
@@ -204,8 +205,19 @@ class Run(_FromJson):
     created_at: Optional[datetime] = None
     started_at: Optional[datetime] = None
     finished_at: Optional[datetime] = None
+    #: the seed its repetition's planner planned with (the same for both modes of the repetition)
+    planner_seed: Optional[int] = None
+    #: the path it drove, ``(N, 3)`` (m, rad): its repetition's plan (None until planned)
+    planned_path: Optional[np.ndarray] = None
+    #: its repetition's planning: median wall and CPU seconds of ``planning_repeats`` planner calls in a warmed
+    #: worker, and the machine's 1-minute load average per CPU then (docs/study.md, "Planning time")
+    planning_time_s: Optional[float] = None
+    planning_cpu_s: Optional[float] = None
+    planning_repeats: Optional[int] = None
+    planning_load: Optional[float] = None
 
-    _conv = {"created_at": _dt, "started_at": _dt, "finished_at": _dt}
+    _conv = {"created_at": _dt, "started_at": _dt, "finished_at": _dt,
+             "planned_path": lambda p: np.asarray(p, dtype=float).reshape(-1, 3)}
 
     @property
     def finished(self) -> bool:
@@ -253,7 +265,8 @@ class ExperimentSummary(_FromJson):
 
 @dataclass
 class Experiment(ExperimentSummary):
-    """An experiment with its job, planned path (``(N, 3)`` array, m/rad) and runs."""
+    """An experiment with its job, planned path (``(N, 3)`` array, m/rad: repetition 1's; each run has its
+    own) and runs."""
 
     start: list[float] = _field(default_factory=list)
     goal: list[float] = _field(default_factory=list)
@@ -261,6 +274,10 @@ class Experiment(ExperimentSummary):
     robots: Optional[list[dict[str, Any]]] = None
     planner_params: dict[str, Any] = _field(default_factory=dict)
     seed: int = 0
+    #: the job's planner seed (None: ``seed`` is the base of every repetition's planner seed)
+    planner_seed: Optional[int] = None
+    #: its planner is randomised: planned once per repetition (each run's ``planned_path``), else one path for all
+    planner_stochastic: bool = False
     robot_radius: Optional[float] = None
     planning_margin: Optional[float] = None
     planned_path: Optional[np.ndarray] = None
@@ -608,6 +625,8 @@ class Program(_FromJson):
     args: list[str] = _field(default_factory=list)
     size: int = 0
     sha256: str = ""
+    #: declared at upload: runs once per repetition with its planner seed (else once per experiment)
+    stochastic: bool = False
     created_at: Optional[datetime] = None
 
     _conv = {"created_at": _dt}

@@ -68,6 +68,18 @@ class Planner(Plugin):
 
     parameters: Optional[Sequence[Param]] = ()
     defaults = _Defaults()
+    #: whether the path depends on the seed (a randomised planner such as PRM).  The testbed plans a
+    #: stochastic planner once per repetition, with that repetition's planner seed, so that its randomness is
+    #: a result (every run drives its own draw); a deterministic planner's one path is reused by every run and
+    #: only timed again per repetition (docs/planners.md, "Randomised planners").
+    stochastic: bool = False
+
+    def forget(self) -> None:
+        """Drop whatever the planner keeps from earlier calls (a cache), so that the next call plans from scratch.
+
+        A run's planning time is the time of a first call (docs/study.md, "Planning time"): the testbed calls
+        this before every timed call.  Default: nothing is kept.
+        """
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -89,9 +89,14 @@ class PRMPlanner(Planner):
     description = "Probabilistic RoadMap: seeded samples, k-nearest edges, Dijkstra query"
     parameters = (Param("samples", "", 500, 2, 200_000, "free samples of the roadmap", type="integer"),
                   Param("k", "", 10, 1, 100, "nearest neighbours each sample is joined to", type="integer"))
+    stochastic = True  # the roadmap is a random sample: each seed gives its own path
 
     def __init__(self) -> None:
         self._cache: weakref.WeakKeyDictionary[ConfigSpace, dict[tuple[int, int, int], Roadmap]]
+        self._cache = weakref.WeakKeyDictionary()
+
+    def forget(self) -> None:
+        """Drop the cached roadmaps: the next query builds its roadmap, as a single-query PRM does."""
         self._cache = weakref.WeakKeyDictionary()
 
     def roadmap(self, space: ConfigSpace, samples: int, k: int, seed: int) -> tuple[Roadmap, bool]:

@@ -49,6 +49,7 @@ class FunctionPlanner(Planner):
     def __init__(self, name: str, fn: Callable[..., Any]) -> None:
         self.name = name
         self.description = (inspect.getdoc(fn) or "").split("\n")[0]
+        self.stochastic = bool(getattr(fn, "stochastic", False))  # a function declares it as an attribute
         self._fn = fn
 
     def solve(self, space, start, goal, params, seed):  # type: ignore[no-untyped-def]

@@ -82,7 +82,8 @@ class Environment(Base):
 
 
 class Program(Base):
-    """An uploaded planner program (docs/uploads.md); run sandboxed once per experiment that names it."""
+    """An uploaded planner program (docs/uploads.md); run sandboxed once per experiment that names it (a
+    stochastic one: once per repetition)."""
 
     __tablename__ = "programs"
 
@@ -96,6 +97,9 @@ class Program(Base):
     content: Mapped[bytes] = mapped_column(LargeBinary)
     size: Mapped[int] = mapped_column(Integer)
     sha256: Mapped[str] = mapped_column(String(64))
+    #: declared at upload: its path depends on the seed it gets, so it runs once per repetition (with that
+    #: repetition's planner seed) instead of once per experiment
+    stochastic: Mapped[bool] = mapped_column(Boolean, default=False, server_default="0")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
     owner: Mapped[User] = relationship(lazy="joined", innerjoin=True)
@@ -106,7 +110,8 @@ class Program(Base):
 
 
 class Experiment(Base):
-    """A planning job: one planned path, run ``repetitions`` times in each of ``modes``."""
+    """A planning job: its path planned (once, or once per repetition for a randomised planner) and run
+    ``repetitions`` times in each of ``modes``."""
 
     __tablename__ = "experiments"
 
@@ -129,10 +134,15 @@ class Experiment(Base):
     modes: Mapped[list[Any]] = mapped_column(JSON)
     repetitions: Mapped[int] = mapped_column(Integer, default=1)
     seed: Mapped[int] = mapped_column(BigInteger, default=0)
+    #: the job's planner seed, from which each repetition's derives (None: the job's ``seed``)
+    planner_seed: Mapped[Optional[int]] = mapped_column(BigInteger, nullable=True)
+    #: its planner (or program) is randomised: planned once per repetition, with that repetition's planner seed
+    planner_stochastic: Mapped[bool] = mapped_column(Boolean, default=False, server_default="0")
     field: Mapped[str] = mapped_column(String(8), default="sub")
     robot_radius: Mapped[float] = mapped_column(Float)
     #: clearance kept beyond the robot radius when planning (m)
     planning_margin: Mapped[float] = mapped_column(Float, default=0.0, server_default="0")
+    #: repetition 1's plan (every run has its own: :attr:`Run.planned_path`)
     planned_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
     planning_time_s: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
     planning_info: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
@@ -175,7 +185,18 @@ class Run(Base):
     mode: Mapped[str] = mapped_column(String(8))
     repetition: Mapped[int] = mapped_column(Integer)
     status: Mapped[str] = mapped_column(String(16), default=RunStatus.QUEUED, index=True)
+    #: the seed of the run's random elements (noise, dropouts, start jitter): its own per mode
     seed: Mapped[int] = mapped_column(BigInteger, default=0)
+    #: the seed its repetition's planner plans with (both modes of a repetition share it, and the plan)
+    planner_seed: Mapped[Optional[int]] = mapped_column(BigInteger, nullable=True)
+    #: the path the run drove (m, m, rad): its repetition's plan
+    planned_path: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
+    #: its planning: the median wall and CPU seconds of ``planning_repeats`` planner calls in a warmed worker,
+    #: and the machine's load per CPU then (docs/study.md, "Planning time"); None: no planner (an explicit path)
+    planning_time_s: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    planning_cpu_s: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    planning_repeats: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
+    planning_load: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
     attempt: Mapped[int] = mapped_column(Integer, default=1)
     subfield: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
     robot_id: Mapped[Optional[str]] = mapped_column(String(64), nullable=True)

@@ -311,7 +311,13 @@ class ExperimentCreate(Strict):
     program: Optional[int] = Field(default=None, ge=1, description="An uploaded program's id (docs/uploads.md).")
     modes: list[Mode] = Field(default_factory=lambda: ["sim", "twb"], min_length=1, max_length=2)
     repetitions: int = Field(default=1, ge=1)
-    seed: int = Field(default=0, ge=0, lt=2**63)
+    seed: int = Field(default=0, ge=0, lt=2**63, description=(
+        "The seed every run's noise derives from (its own per mode and repetition), and, without "
+        "`planner_seed`, its repetition's planner seed."))
+    planner_seed: Optional[int] = Field(default=None, ge=0, lt=2**63, description=(
+        "The seed each repetition's planner seed derives from (default: `seed`): a randomised planner (PRM, a "
+        "stochastic program) plans once per repetition with it; the simulated and the field run of a repetition "
+        "share that plan."))
     field: Literal["sub", "full"] = "sub"
     jitter: Optional[Jitter] = Field(default=None, description=(
         "Seeded start-pose jitter for every run, both modes: repetitions then start a little apart, as on a "
@@ -441,7 +447,18 @@ class RunPublic(FromRow):
     mode: str
     repetition: int
     status: RunStatus
-    seed: int
+    seed: int = Field(description="The seed of the run's noise, dropouts and start jitter (its own per mode).")
+    planner_seed: Optional[int] = Field(default=None, description=(
+        "The seed its repetition's planner planned with (the same for both modes of a repetition)."))
+    planned_path: Optional[list[list[float]]] = Field(default=None, description=(
+        "The path the run drove, [[x, y, theta], ...] (m, rad): its repetition's plan (null until planned)."))
+    planning_time_s: Optional[float] = Field(default=None, description=(
+        "Wall seconds of its repetition's planner call in a warmed worker (the median of `planning_repeats` "
+        "calls for a fast planner); an uploaded program's own time; null for an explicit path."))
+    planning_cpu_s: Optional[float] = Field(default=None, description="CPU seconds of the same call (median).")
+    planning_repeats: Optional[int] = Field(default=None, description="How many calls the planning times are the median of.")
+    planning_load: Optional[float] = Field(default=None, description=(
+        "The machine's 1-minute load average per CPU when the planning was timed."))
     attempt: int
     subfield: Optional[int]
     robot_id: Optional[str]
@@ -500,10 +517,16 @@ class ExperimentPublic(ExperimentSummary):
         "A multi-robot job's robots, {\"start\", \"goal\", \"path\"?} each (m, rad); null for one robot."))
     planner_params: dict[str, Any]
     seed: int
+    planner_seed: Optional[int] = Field(default=None, description=(
+        "The job's planner seed (null: its `seed` is the base of every repetition's planner seed)."))
+    planner_stochastic: bool = Field(default=False, description=(
+        "Its planner (or program) is randomised: planned once per repetition, each run driving its repetition's "
+        "plan; else one path for every run."))
     robot_radius: float
     planning_margin: float = Field(description="Clearance kept beyond the robot radius when planning (m).")
-    planned_path: Optional[list[list[float]]]
-    planning_time_s: Optional[float]
+    planned_path: Optional[list[list[float]]] = Field(description=(
+        "Repetition 1's planned path (every run has its own: `runs[].planned_path`)."))
+    planning_time_s: Optional[float] = Field(description="Repetition 1's planning time (s).")
     planning_info: dict[str, Any]
     jitter: Optional[dict[str, float]] = None
     profile_overrides: Optional[dict[str, float]] = Field(default=None, description=(
@@ -781,6 +804,9 @@ class ProgramCreate(Strict):
     args: list[str] = Field(default_factory=list, max_length=64, description="Command-line arguments.")
     content_base64: str = Field(min_length=1, description="The file, base64-encoded.", json_schema_extra={
         "pattern": r"^(?:[A-Za-z0-9+/]{4})*(?:[A-Za-z0-9+/]{2}==|[A-Za-z0-9+/]{3}=)?$"})  # checked by the route
+    stochastic: bool = Field(default=False, description=(
+        "Its path depends on the seed it gets (TWB_SEED): it then runs once per repetition with that "
+        "repetition's planner seed; else once per experiment, its one path and time reused by every run."))
 
     @field_validator("args")
     @classmethod
@@ -806,6 +832,7 @@ class ProgramPublic(FromRow):
     args: list[str]
     size: int = Field(description="Bytes.")
     sha256: str
+    stochastic: bool = Field(default=False, description="Runs once per repetition, with its planner seed.")
     created_at: UTCDateTime
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 from typing import Any
@@ -51,8 +52,9 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
     """
     if body.repetitions > settings.max_repetitions:
         raise Invalid(f"repetitions must be at most {settings.max_repetitions}")
+    stochastic = False
     if body.program is not None:
-        _check_program(session, user, body.program, settings)
+        stochastic = _check_program(session, user, body.program, settings)
     if body.controller_program is not None:
         if math.isinf(settings.time_scale):
             raise Invalid("controller_program: a controller program closes the loop against the robot's 0.5 s "
@@ -67,6 +69,8 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
     if queued >= settings.max_queued_per_user:
         raise QuotaExceeded(f"you already have {queued} queued experiments (limit {settings.max_queued_per_user})")
     checked = preflight(body, env_row.data, settings.robot_radius_m, settings.planning_margin_m)
+    if body.program is not None:  # the program declared at its upload whether it is randomised
+        checked = dataclasses.replace(checked, stochastic=stochastic)
     label, problem = job_names(body, checked, env_row.data)
     return create_experiment(session, owner=user, body=body, checked=checked, robot_radius=settings.robot_radius_m,
                              planning_margin=settings.planning_margin_m, label=label, problem=problem)
@@ -86,11 +90,13 @@ def job_names(body: ExperimentCreate, checked: Preflight, env_data: dict[str, An
 
 
 def _check_program(session: Session, user: Principal, program_id: int, settings: Settings,
-                   field: str = "program") -> None:
-    """A job naming a program (in ``field``): uploads enabled (403) and the program the user's (422)."""
+                   field: str = "program") -> bool:
+    """A job naming a program (in ``field``): uploads enabled (403) and the program the user's (422); whether
+    the program declared itself stochastic."""
     if not settings.uploads_enabled:
         raise Forbidden(UPLOADS_DISABLED)
-    owner = session.scalar(select(Program.owner_id).where(Program.id == program_id))
-    if owner is None or (owner != user.id and not user.is_admin):
+    row = session.execute(select(Program.owner_id, Program.stochastic).where(Program.id == program_id)).first()
+    if row is None or (row.owner_id != user.id and not user.is_admin):
         raise Invalid(f"unknown program {program_id}" if field == "program"
                       else f"{field}: unknown program {program_id}")
+    return bool(row.stochastic)

@@ -40,6 +40,8 @@ class Preflight:
     controller_params: dict[str, float] = field(default_factory=dict)
     #: a multi-robot job's robots, ``{"start", "goal", "path"?}`` (m, rad); ``start``/``goal`` are robot 0's
     robots: list[dict[str, Any]] | None = None
+    #: its planner is randomised (:attr:`planners.Planner.stochastic`): planned once per repetition
+    stochastic: bool = False
 
 
 def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: float,
@@ -66,7 +68,8 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
             raise PreflightError(f"planner: lacam plans among the blocks only; environment {env.name!r} has "
                                  f"{len(env.moving_obstacles)} moving obstacle(s): plan with prioritized, which avoids them")
         robots = _fleet_robots(body, env, robot_radius, planning_margin)
-        return Preflight(env, robots[0]["start"], robots[0]["goal"], params, None, controller.params, robots)
+        return Preflight(env, robots[0]["start"], robots[0]["goal"], params, None, controller.params, robots,
+                         _stochastic(body))
     radius = robot_radius + (planning_margin if body.planner is not None else 0.0)
     try:
         space, s, g = check_query(env, body.start, body.goal, robot_radius=radius)
@@ -85,7 +88,14 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
             raise PreflightError("`path` must begin at `start` and end at `goal` (within 1 mm)")
         _check_clear(space, pts, robot_radius)
         path = [list(map(float, p)) for p in body.path]
-    return Preflight(env, _pose(s), _pose(g), params, path, controller.params)
+    return Preflight(env, _pose(s), _pose(g), params, path, controller.params, stochastic=_stochastic(body))
+
+
+def _stochastic(body: ExperimentCreate) -> bool:
+    """Whether the job's planner is randomised (a program's declaration is read where the program is)."""
+    if body.planner is None or body.planner == FLEET_PLANNER:
+        return False
+    return bool(get_planner(body.planner).stochastic)
 
 
 def _tracked_robots(body: ExperimentCreate, env: Environment) -> None:

@@ -264,6 +264,9 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     lengths = [float(t) for t in page.locator('#runs-table tr[data-run] td[data-metric="length_m"]').all_inner_texts()]
     by_api = sorted(r["metrics"]["length_m"] for r in exp["runs"])
     assert sorted(lengths) == pytest.approx(by_api, abs=1e-3)
+    # each run's planning time under its status (its repetition's own timing), as the API has it
+    shown = page.locator('#runs-table tr[data-run] .planning').all_inner_texts()
+    assert sorted(shown) == sorted(f"plan {1000 * r['planning_time_s']:.1f} ms" for r in exp["runs"]), shown
     expect(page.locator('#aggregates-table tr[data-metric="length_m"] td')).to_have_count(6)
     expect(page.locator("#direct-table tbody tr")).to_have_count(2)
     expect(page.locator("#experiment-charts figure svg")).to_have_count(6)

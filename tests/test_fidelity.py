@@ -78,14 +78,44 @@ def _bench():
 
 
 def test_offline_a_planning_failure_fails_the_experiment_as_the_testbed_does():
-    spec = StudySpec.from_json({**REDUCED, "plans": ["A"], "planners": [{"name": "prm", "params": {"samples": 2}}]},
-                               "tiny")
+    """A deterministic planner that finds no path fails the whole experiment, every run of it."""
+    wall = {"name": "wall", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.06, "h": 1.8}]}
+    spec = StudySpec.from_json({**REDUCED, "environments": [wall], "repetitions": 2, "planners": ["fmm"],
+                                "plans": [{"name": "across", "start": [0.3, 0.9], "goal": [1.5, 0.9]}]}, "tiny")
     data = _bench().study_data(spec)
     (exp,) = data.experiments
     assert exp["status"] == "failed" and exp["error"].startswith("planning failed: ") and exp["planned_path"] is None
     assert [(r["mode"], r["status"], r["error"]) for r in data.rows] == [("sim", "failed", exp["error"]),
-                                                                         ("twb", "failed", exp["error"])]
+                                                                         ("twb", "failed", exp["error"])] * 2
     assert [f.held for f in paper_findings(data)] == [None] * 9
+
+
+def test_offline_a_randomised_planner_fails_the_repetitions_its_seeds_find_no_path_for():
+    """PRM with ten samples plans each repetition with its own planner seed, as the testbed does: the
+    repetitions whose seed finds no path fail (both modes), the others are driven."""
+    from planners import PlanningError, load_environment, plan_path
+    from server.store.experiments import planner_seed
+
+    fid = _bench()
+    spec = StudySpec.from_json({**REDUCED, "plans": ["A"], "repetitions": 6,
+                                "planners": [{"name": "prm", "params": {"samples": 10}}]}, "tiny")
+    data = fid.study_data(spec)
+    (exp,) = data.experiments
+    start, goal = load_environment("room").plan("A").start, load_environment("room").plan("A").goal
+    base = fid.study_planner_seed(0, spec.planners[0].configuration, "room", "A")
+    found = {}
+    for rep in range(1, 7):
+        try:
+            plan_path("room", start, goal, "prm", robot_radius=fid.ROBOT_RADIUS + fid.PLANNING_MARGIN,
+                      params={"samples": 10}, seed=planner_seed(base, rep))
+            found[rep] = True
+        except PlanningError:
+            found[rep] = False
+    assert set(found.values()) == {True, False}, found  # both kinds (a fixed property of this study)
+    for r in data.rows:
+        assert (r["error"].startswith("planning failed: PRM found no path") and r["status"] == "failed") \
+            is not found[r["repetition"]], r
+    assert exp["status"] == "failed" and set(exp["repetition_paths"]) == {str(k) for k, v in found.items() if v}
 
 
 def test_offline_varied_environments_and_their_random_problems():

@@ -85,13 +85,13 @@ def test_the_prioritized_swap_completes_with_the_robots_apart_and_poses_per_robo
 
 def direct(client, exp: dict, run: dict) -> dict:
     """jobs.fleet_job called here with the run's arguments."""
-    env = client.get("/api/v1/environments/swap").json()
+    env = client.get(f"/api/v1/environments/{exp['environment']}").json()
     platform = next(r["platform"] for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])
     timeout_s = fleet_timeout_s(SimpleNamespace(settings=Settings()), exp["robots"])
     return jobs.fleet_job({k: env[k] for k in ("name", "size", "blocks", "plans", "description")}, exp["robots"],
                              exp["planner"], exp["planner_params"], run["seed"], timeout_s,
                              exp["robot_radius"] + exp["planning_margin"], "ideal", exp["controller"],
-                             exp["controller_params"], platform or "BeBot", None, exp["seed"])
+                             exp["controller_params"], platform or "BeBot", None, run["planner_seed"])
 
 
 def test_the_same_seed_gives_the_same_poses_as_the_task_run_directly(client, prioritized):
@@ -176,6 +176,29 @@ def test_a_robot_the_planner_finds_no_way_for_fails_the_experiment_as_a_whole(cl
     assert exp["status"] == "failed" and exp["error"].startswith("planning failed: robot 1 (of 2, planned in order)"), exp
     assert [r["failure"] for r in exp["runs"]] == ["planning"] * 4 and exp["planned_path"] is None
     assert all(r["metrics"] == {} for r in exp["runs"])
+
+
+def test_a_randomised_planner_plans_each_repetitions_fleet_with_its_planner_seed(client):
+    """PRM plans each robot alone with the run's planner seed: both modes of a repetition drive the same paths,
+    the repetitions their own draws, as fleet_job plans them with that seed; a fleet's planning is timed."""
+    from server.store.experiments import planner_seed
+
+    pillars = {"name": "pillars", "size": [1.8, 1.8], "blocks": [{"x": 0.4, "y": 0.9, "w": 0.3, "h": 0.3},
+                                                                 {"x": 1.4, "y": 0.9, "w": 0.3, "h": 0.3}]}
+    assert client.post("/api/v1/environments", json=pillars).status_code == 201
+    apart = [{"start": [0.4, 0.3], "goal": [0.4, 1.5]}, {"start": [1.4, 0.3], "goal": [1.4, 1.5]}]  # around them
+    job = {"environment": "pillars", "planner": "prm", "modes": ["sim", "twb"], "repetitions": 2, "seed": 5,
+           "robots": apart}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=180)
+    assert exp["planner_stochastic"] is True and all(r["planned_path"] for r in exp["runs"]), exp
+    reps = {}
+    for r in exp["runs"]:
+        assert r["planner_seed"] == planner_seed(5, r["repetition"])
+        assert r["planning_time_s"] > 0 and r["planning_cpu_s"] > 0 and r["planning_repeats"] == 1
+        reps.setdefault(r["repetition"], []).append(r["planned_path"])
+    assert reps[1][0] == reps[1][1] and reps[2][0] == reps[2][1] and reps[1][0] != reps[2][0]
+    sim1 = next(r for r in exp["runs"] if r["mode"] == "sim" and r["repetition"] == 1)
+    assert direct(client, exp, sim1)["robots"][0]["path"] == sim1["planned_path"]
 
 
 @pytest.mark.parametrize("job, detail", [

@@ -207,7 +207,8 @@ def test_label_and_problem_migration_names_old_experiments(database_url):
     from sqlalchemy import inspect, text
 
     cfg = config(database_url)
-    before = ScriptDirectory.from_config(cfg).get_revision("0014").down_revision  # 0013 once merged, else 0012
+    before = ScriptDirectory.from_config(cfg).get_revision("0014").down_revision
+    assert before == "0013"
     command.upgrade(cfg, before)
     engine = make_engine(database_url)
     env = '{"name": "room", "plans": [{"name": "A", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708]}]}'
@@ -241,5 +242,43 @@ def test_label_and_problem_migration_names_old_experiments(database_url):
     assert not {"label", "problem"} & {c["name"] for c in inspect(engine).get_columns("experiments")}
     with engine.begin() as c:
         assert c.execute(text("select count(*) from experiments")).scalar() == 4
+
+
+def test_per_run_plans_migration_up_and_down(database_url):
+    """0013 on both databases: old runs get no plan of their own (NULL: their experiment's was theirs), old
+    experiments and programs are deterministic; a run's planner seed (63 bits), plan and planning are written
+    and read; the downgrade drops them and keeps every other column's data."""
+    from sqlalchemy import inspect, text
+
+    cfg = config(database_url)
+    command.upgrade(cfg, "0012")
+    engine = make_engine(database_url)
+    with engine.begin() as c:
+        _old_run(c, "sim")
+        c.execute(text("insert into programs (id, owner_id, name, kind, args, content, size, sha256, created_at) "
+                       "values (1, 1, 'p', 'python', '[]', :content, 1, 'x', '2026-01-01')"), {"content": b"x"})
+    command.upgrade(cfg, "0013")
+    with engine.begin() as c:
+        assert c.execute(text("select planner_seed, planned_path, planning_time_s, planning_cpu_s, planning_repeats,"
+                              " planning_load from runs")).all() == [(None,) * 6]
+        assert c.execute(text("select planner_seed, planner_stochastic from experiments")).all() == [(None, False)]
+        assert c.execute(text("select stochastic from programs")).all() == [(False,)]
+        c.execute(text("update runs set planner_seed = :s, planned_path = :p, planning_time_s = 0.0125, "
+                       "planning_cpu_s = 0.011, planning_repeats = 4, planning_load = 0.5"),
+                  {"s": 2**63 - 1, "p": "[[0.3, 0.3, 0.0], [1.5, 1.5, 1.5708]]"})
+        c.execute(text("update experiments set planner_seed = 7, planner_stochastic = true"))
+        assert c.execute(text("select planner_seed, planning_repeats, planning_load from runs")).all() == \
+            [(2**63 - 1, 4, 0.5)]
+    engine.dispose()
+    command.downgrade(cfg, "0012")
+    engine = make_engine(database_url)
+    cols = {t: {c["name"] for c in inspect(engine).get_columns(t)} for t in ("runs", "experiments", "programs")}
+    assert not cols["runs"] & {"planner_seed", "planned_path", "planning_time_s", "planning_cpu_s",
+                               "planning_repeats", "planning_load"}
+    assert not cols["experiments"] & {"planner_seed", "planner_stochastic"} and "stochastic" not in cols["programs"]
+    with engine.begin() as c:
+        assert c.execute(text("select id, mode, seed, status from runs")).all() == [(7, "sim", 0, "completed")]
+        assert c.execute(text("select t, x from poses")).all() == [(0.5, 0.3)]
+        assert c.execute(text("select name from programs")).all() == [("p",)]
     engine.dispose()
     command.upgrade(cfg, "head")

@@ -25,7 +25,7 @@ from server.store.experiments import create_experiment
 from server.testbed import Testbed
 from server.validation import Preflight
 
-from planners import parse_environment
+from planners import get_planner, parse_environment
 from contract.controller_specs import select as select_controller
 
 ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
@@ -56,7 +56,8 @@ def add_experiment(tb: Testbed, *, env: dict = ONE_BLOCK, start=(0.3, 0.3, 0.0),
                                 planner_params=params or {}, modes=[mode], repetitions=1, seed=seed, jitter=jitter,
                                 controller=controller)
         checked = Preflight(parse_environment(env), list(start), list(goal), params or {}, None,
-                            select_controller(controller, controller_params).params)
+                            select_controller(controller, controller_params).params,
+                            stochastic=planner is not None and get_planner(planner).stochastic)
         exp = create_experiment(s, owner=admin, body=body, checked=checked, robot_radius=0.045,
                                 planning_margin=0.02)
         exp.planned_path = planned_path
@@ -92,7 +93,8 @@ async def test_a_run_goes_through_every_step_to_completed(tmp_path, database_url
         assert run.status == "completed" and run.finished_at is not None
         assert run.robot_id == "field-2" and run.subfield == 2 and run.t_end > run.t_start
         assert run.metrics["goal_reached"] is True and run.metrics["collided"] is False
-        assert run.metrics["planning_time_s"] > 0  # the experiment's, on every run
+        assert run.metrics["planning_time_s"] == run.planning_time_s > 0  # its own planning, timed
+        assert run.planning_cpu_s > 0 and run.planning_repeats >= 1 and run.planned_path[0][:2] == [0.3, 0.3]
         assert poses > 50 and messages > 5
         assert tb.field.built["field-2"] == "one-block"
         with tb.sessions() as s:
@@ -112,15 +114,37 @@ async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path, data
         assert 0.6 < x < 0.76 and 0.8 < y < 1.0, run.stopped_at
 
 
-async def test_no_path_fails_the_whole_experiment_and_is_not_planned_twice(tmp_path):
+#: a wall across the whole field: nothing gets from its left half to its right
+WALL = {"name": "wall", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.06, "h": 1.8}]}
+
+
+async def test_no_path_of_a_deterministic_planner_fails_the_whole_experiment_and_is_not_planned_twice(tmp_path):
     async with running(tmp_path) as tb:
-        exp_id, run_id = add_experiment(tb, planner="prm", params={"samples": 2, "k": 1}, mode="sim")
+        exp_id, run_id = add_experiment(tb, env=WALL, goal=(1.5, 0.3, 0.0), mode="sim")
         end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
         assert end.status is RunStatus.FAILED and end.whole_experiment
+        assert end.error.startswith("planning failed: the goal (1.5, 0.3) cannot be reached")
+        for rep in (1, 2):  # the remembered failure, for every repetition: not a second planning
+            with pytest.raises(RunFailed) as exc:
+                await tb.services.paths.path_for(exp_id, rep)
+            assert str(exc.value) == end.error and exc.value.whole_experiment
+
+
+async def test_no_path_of_a_randomised_planner_fails_its_repetition_only(tmp_path):
+    """PRM with two samples finds no path around the block with repetition 1's planner seed: that repetition
+    fails (remembered for it), the experiment does not; other seeds are tried (docs/study.md, "Seeds")."""
+    async with running(tmp_path) as tb:
+        exp_id, run_id = add_experiment(tb, planner="prm", params={"samples": 2, "k": 1}, mode="sim", seed=1)
+        with tb.sessions() as s:
+            assert s.get(Experiment, exp_id).planner_stochastic
+        end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)
+        assert end.status is RunStatus.FAILED and not end.whole_experiment and end.failure is FailureKind.PLANNING
         assert end.error.startswith("planning failed: PRM found no path")
-        with pytest.raises(RunFailed) as exc:  # the remembered failure, not a second planning
-            await tb.services.paths.path_for(exp_id)
-        assert str(exc.value) == end.error and exc.value.whole_experiment
+        with pytest.raises(RunFailed) as exc:  # the sibling of the repetition gets the remembered failure
+            await tb.services.paths.path_for(exp_id, 1)
+        assert str(exc.value) == end.error and not exc.value.whole_experiment
+        plan = await tb.services.paths.path_for(exp_id, 2)  # repetition 2's seed finds one
+        assert plan.path[0][:2] == [0.3, 0.3] and plan.planning_time_s > 0 and plan.planning_repeats >= 1
 
 
 async def test_a_robot_that_dies_mid_run_is_the_testbeds_fault(tmp_path):

@@ -246,6 +246,27 @@ def test_paper_spec_is_48_runs():
     assert load_spec("paper") == StudySpec.from_json(PAPER)
 
 
+def test_every_experiment_keeps_the_study_seed_and_gets_its_own_planner_seed():
+    """Common random numbers for the noise (every experiment the study's seed: repetition k of every
+    configuration and problem drives with the same noise and start jitter), a planner seed of its own per
+    configuration x problem (docs/study.md, "Seeds"), stable."""
+    from client_sdk.study import study_planner_seed
+
+    spec = paper_spec()
+    envs = {n: Environment(n, [1.8, 1.8], [], [Plan("A", [0.1, 0.1], [1, 1]), Plan("B", [0.2, 0.2], [1, 1])])
+            for n in ("room", "blocks")}
+    jobs = plan_jobs(spec, envs)
+    assert {j["body"]["seed"] for j in jobs} == {spec.seed}
+    seeds = [j["body"]["planner_seed"] for j in jobs]
+    assert len(set(seeds)) == len(jobs) and all(0 <= s < 2**63 for s in seeds)
+    for j in jobs:
+        assert j["body"]["planner_seed"] == study_planner_seed(spec.seed, j["configuration"], j["environment"],
+                                                               j["plan"])
+    assert seeds == [j["body"]["planner_seed"] for j in plan_jobs(spec, envs)]
+    other = plan_jobs(StudySpec.from_json({**spec.to_json(), "seed": 1}), envs)
+    assert not set(seeds) & {j["body"]["planner_seed"] for j in other}
+
+
 def test_the_controller_study_crosses_every_builtin_with_one_planner():
     spec = load_spec("controllers")
     envs = {n: Environment(n, [1.8, 1.8], [], [Plan("A", [0.1, 0.1], [1, 1]), Plan("B", [0.2, 0.2], [1, 1])])
@@ -381,9 +402,11 @@ def test_failed_field_runs_are_in_runs_csv_with_outcome_and_where_they_stopped(o
     assert any(r["stopped_at_x"] is not None for r in crashed)
     assert all(r["outcome"] == "success" for r in data.rows if r not in crashed)
     header = (overshoot_dir / "runs.csv").read_text().splitlines()[0].split(",")
-    assert header[:17] == ["study", "experiment_id", "run_id", "environment", "plan", "planner", "controller",
-                           "configuration", "mode", "repetition", "seed", "status", "outcome", "failure", "error",
-                           "stopped_at_x", "stopped_at_y"]
+    assert header[:18] == ["study", "experiment_id", "run_id", "environment", "plan", "planner", "controller",
+                           "configuration", "mode", "repetition", "seed", "planner_seed", "status", "outcome",
+                           "failure", "error", "stopped_at_x", "stopped_at_y"]
+    for k in ("planning_time_s", "planning_cpu_s", "planning_repeats", "planning_load", "planned_length_m"):
+        assert k in header, k
 
 
 def test_summary_says_which_planner_is_better_and_keeps_the_failures(overshoot_dir):

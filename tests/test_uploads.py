@@ -319,6 +319,48 @@ def test_cancelling_a_running_program_kills_it(client):
         time.sleep(0.05)
 
 
+#: a planner whose path depends on its seed: the detour by the lower-right corner for an even TWB_SEED, by the
+#: upper-left for an odd one
+BY_SEED = """
+import os
+seed = int(os.environ["TWB_SEED"])
+print("SEED", seed)
+""" + SEND.format(line="PLACEHOLDER").replace("'PLACEHOLDER'", """("T,T,P,300,300,0;1500,300,90;1500,1500,90" if seed % 2 == 0
+         else "T,T,P,300,300,90;300,1500,0;1500,1500,90")""")
+
+
+@pytest.mark.parametrize("stochastic", [True, False])
+def test_a_stochastic_program_runs_once_per_repetition_with_its_planner_seed(client, stochastic):
+    """Declared stochastic at upload: it runs once per repetition with the repetition's planner seed (the
+    simulated and the field run of a repetition drive what it sent then); undeclared, once per experiment, its
+    one path and timing reused by every run."""
+    from server.store.experiments import planner_seed
+
+    pid = upload(client, f"by-seed-{stochastic}", BY_SEED, **({"stochastic": True} if stochastic else {}))
+    assert client.get(f"/api/v1/programs/{pid}").json()["stochastic"] is stochastic
+    job = {"environment": "detour", "start": START, "goal": GOAL, "program": pid, "modes": ["sim", "twb"],
+           "repetitions": 3, "seed": 3}
+    exp = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=120)
+    assert exp["status"] == "completed" and exp["planner_stochastic"] is stochastic, exp
+    seeds = {r["id"]: [int(m["line"].split()[1]) for m in messages(client, r["id"])
+                       if m["direction"] == "o" and m["line"].startswith("SEED")] for r in exp["runs"]}
+    ran = [r for r in exp["runs"] if seeds[r["id"]]]
+    if not stochastic:  # once, with the job's seed, for every run
+        assert len(ran) == 1 and seeds[ran[0]["id"]] == [3]
+        assert all(r["planned_path"] == exp["planned_path"] and r["planning_time_s"] == exp["planning_time_s"]
+                   for r in exp["runs"])
+        return
+    assert sorted(r["repetition"] for r in ran) == [1, 2, 3]  # once per repetition, in one of its runs
+    for r in ran:
+        seed = planner_seed(3, r["repetition"])
+        assert seeds[r["id"]] == [seed] and r["planner_seed"] == seed
+        corner = [1.5, 0.3] if seed % 2 == 0 else [0.3, 1.5]
+        for mine in (x for x in exp["runs"] if x["repetition"] == r["repetition"]):
+            assert mine["planned_path"] == r["planned_path"] and mine["planned_path"][1][:2] == corner
+            assert mine["planning_time_s"] == r["planning_time_s"] > 0 and mine["planning_repeats"] == 1
+    assert len({repr(r["planned_path"]) for r in ran}) == 2  # the seeds of repetitions 1-3 are even, even, odd
+
+
 def test_uploads_are_refused_unless_enabled(tmp_path, twb):
     p = Process(["server"], tmp_path)
     try:

@@ -326,7 +326,7 @@ RESULT_COLUMNS = (
     ("length_m", "length (m)"), ("smoothness_rad", "κ' (rad)"), ("clearance_min_m", "min clear. (m)"),
     ("execution_time_s", "time (s)"), ("average_speed_m_s", "speed (m/s)"), ("deviation_mean_m", "mean dev. (m)"),
     ("deviation_max_m", "max dev. (m)"), ("length_ratio", "length ratio"), ("goal_reached", "goal"),
-    ("collided", "collided"),
+    ("collided", "collided"), ("planning_time_s", "plan time (s)"),
 )
 #: the fleet's metrics of a multi-robot job's runs (docs/metrics.md, "Several robots")
 FLEET_RESULT_COLUMNS = (
@@ -528,7 +528,7 @@ def _print_results_csv(m: Any) -> None:
 
 #: metrics left out first when the terminal is narrow (the last ones here go first)
 _RESULT_PRIORITY = ("length_m", "execution_time_s", "deviation_mean_m", "goal_reached", "collided", "length_ratio",
-                    "average_speed_m_s", "clearance_min_m", "deviation_max_m", "smoothness_rad")
+                    "average_speed_m_s", "clearance_min_m", "deviation_max_m", "smoothness_rad", "planning_time_s")
 _FLEET_PRIORITY = tuple(k for k, _ in FLEET_RESULT_COLUMNS)
 
 
@@ -560,17 +560,43 @@ def _result_rows(m: Any, metrics: tuple[tuple[str, str], ...] = RESULT_COLUMNS) 
     rows: list[tuple[dict[str, str], Optional[str]]] = []
     for r in m.runs:
         rows.append(({"run": str(r.run_id), "mode": r.mode, "rep": str(r.repetition), "status": r.status,
-                      **{_header(h): _num(r.metrics.get(k)) for k, h in metrics}}, None))
+                      **{_header(h): _num(r.metrics.get(k), 4 if k == "planning_time_s" else 3)
+                         for k, h in metrics}}, None))
     for mode, agg in m.aggregates.items():
         for label, field in (("mean", "mean"), ("± std", "std")):
             cells = {}
             for k, h in metrics:
                 s = agg.metrics.get(k)
                 v = None if s is None else getattr(s, field)
-                cells[_header(h)] = "–" if v is None else f"{v:.3f}"
+                cells[_header(h)] = "–" if v is None else f"{v:.{4 if k == 'planning_time_s' else 3}f}"
             rows.append(({"run": label, "mode": mode, "rep": str(agg.runs) if field == "mean" else "", "status": "",
                           **cells}, "bold"))
     return rows
+
+
+def _print_plans(con: Any, exp: Any) -> None:
+    """A randomised planner's plans, one per repetition (both modes drove it): planner seed, planned length,
+    planning wall and CPU time (the median of k calls) and the machine's load then."""
+    import math
+
+    seen: dict[int, Any] = {}
+    for r in exp.runs:
+        if r.repetition not in seen or (seen[r.repetition].planned_path is None and r.planned_path is not None):
+            seen[r.repetition] = r
+    con.print(f"{exp.planner or 'the program'} is randomised: each repetition planned its own path with its planner "
+              "seed (both modes drove it)", highlight=False)
+    for rep, r in sorted(seen.items()):
+        if r.planned_path is None or not len(r.planned_path):
+            con.print(f"  repetition {rep}: seed {r.planner_seed}, no path ({r.error or r.status})", highlight=False)
+            continue
+        p = r.planned_path
+        length = sum(math.dist(a[:2], b[:2]) for a, b in zip(p[:-1], p[1:]))
+        timing = "" if r.planning_time_s is None else (
+            f", planned in {1000 * r.planning_time_s:.1f} ms"
+            + (f" (CPU {1000 * r.planning_cpu_s:.1f} ms)" if r.planning_cpu_s is not None else "")
+            + (f", median of {r.planning_repeats}" if (r.planning_repeats or 1) > 1 else "")
+            + (f", load {r.planning_load:.2f}" if r.planning_load is not None else ""))
+        con.print(f"  repetition {rep}: seed {r.planner_seed}, length {length:.3f} m{timing}", highlight=False)
 
 
 def _print_results(m: Any, exp: Any, wide: bool) -> None:
@@ -591,9 +617,12 @@ def _print_results(m: Any, exp: Any, wide: bool) -> None:
     columns = ["run", "mode", "rep", "status", *headers.values()]
     optional = [headers[k] for k in reversed(priority)]
     print_fitted(con, build, columns, optional, wide)
+    stochastic = exp is not None and exp.planner_stochastic
     if m.planned:
-        con.print("planned path: " + "  ".join(f"{h} {_num(m.planned.get(k))}" for k, h in RESULT_COLUMNS[:3]),
-                  highlight=False)
+        con.print(("planned path (repetition 1): " if stochastic else "planned path: ")
+                  + "  ".join(f"{h} {_num(m.planned.get(k))}" for k, h in RESULT_COLUMNS[:3]), highlight=False)
+    if stochastic:
+        _print_plans(con, exp)
     if m.direct:
         _print_direct(con, m.direct, wide)
 

@@ -27,6 +27,9 @@ def upload(
         help="Run an executable with sh, bash or python3 (default: the file itself, a binary or #! script).")] = None,
     arg: Annotated[Optional[list[str]], typer.Option(
         "--arg", "-a", help="A command-line argument (repeatable); {robot_port}, {env_file}, {start}, ... are filled in.")] = None,
+    stochastic: Annotated[bool, typer.Option(
+        "--stochastic", help="Its path depends on the seed it gets (TWB_SEED): run it once per repetition with "
+                             "that repetition's planner seed (default: once per experiment).")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the uploaded program as JSON.")] = False,
     url: UrlOpt = None,
     token: TokenOpt = None,
@@ -39,12 +42,14 @@ def upload(
     if not file.is_file():
         fail(f"no such file: {file}")
     with sdk_client(url, token) as client:
-        prog = client.upload_program(file, name=name, kind=kind, interpreter=interpreter, args=arg or [])
+        prog = client.upload_program(file, name=name, kind=kind, interpreter=interpreter, args=arg or [],
+                                     stochastic=stochastic)
     if as_json:
         d = dataclasses.asdict(prog)
         d["created_at"] = prog.created_at.isoformat() if prog.created_at else None
         typer.echo(json.dumps(d, indent=2))
         return
-    how = prog.kind + (f" ({prog.interpreter})" if prog.interpreter else "")
+    how = prog.kind + (f" ({prog.interpreter})" if prog.interpreter else "") + (", stochastic" if prog.stochastic
+                                                                                  else "")
     typer.echo(f"Uploaded program {prog.id}: {prog.name}, {how}, {prog.size} bytes. "
                f'Use it in a job as "program": {prog.id}.')

@@ -8,8 +8,7 @@ goal are a plan of the environment, else the start and goal rounded to cm, ``<en
 for a multi-robot job.  The derivation is written out here, as of this revision, so the migration never
 changes with the code.
 
-Independent of revision 0013 (per-run plans, another branch) and of its columns: it follows 0013 when
-that revision is present, else 0012.
+Independent of revision 0013's columns (per-run plans).
 
 Revision ID: 0014
 Revises: 0013
@@ -19,7 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 from typing import Any, Optional
 
 import sqlalchemy as sa
@@ -27,8 +25,7 @@ from alembic import op
 
 
 revision = '0014'
-# 0013 (per-run plans) is on another branch; until it is merged this revision follows 0012
-down_revision = '0013' if any(Path(__file__).parent.glob('0013_*.py')) else '0012'
+down_revision = '0013'
 branch_labels = None
 depends_on = None
 

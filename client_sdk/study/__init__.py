@@ -18,7 +18,7 @@ robots per problem: ``robots`` or ``circle`` plans) gets fleet tables
 ``twb study``; see ``docs/study.md``.  Needs matplotlib for the figures.
 """
 
-from ._collect import StudyJob, flat_metrics, plan_jobs, run_study
+from ._collect import StudyJob, flat_metrics, plan_jobs, run_study, study_planner_seed
 from ._compare import COMPARED_METRICS, CONTROLLER_METRICS, Comparison, Comparisons, compare
 from ._replay import replay_animation
 from ._data import StudyData, load_study
@@ -97,6 +97,7 @@ __all__ = sorted(
         "replay_animation",
         "run_study",
         "save_figures",
+        "study_planner_seed",
         "summary_markdown",
         "which_is_better",
         "write_findings",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import sys
 import tempfile
 import time
@@ -23,11 +24,22 @@ from ._limits import StudyRefused, check_study, refusal
 from ._spec import ControllerChoice, PlannerSpec, PlanSpec, ProfileSpec, StudySpec, StudySpecError
 from ._stream import StudySink
 
-__all__ = ["StudyJob", "StudyRefused", "configuration", "flat_metrics", "plan_jobs", "run_study"]
+__all__ = ["StudyJob", "StudyRefused", "configuration", "flat_metrics", "plan_jobs", "run_study", "study_planner_seed"]
 
 
 class StudyJob(dict):
     """One experiment of a study: environment, plan, planner, configuration and the job body sent to the server."""
+
+
+def study_planner_seed(seed: int, configuration: str, environment: str, plan: str) -> int:
+    """The planner seed of a study's experiment: a stable hash of the study's ``seed``, the ``configuration`` (its
+    full name, controller and profile variant included), the ``environment`` and the ``plan`` (docs/study.md,
+    "Seeds").  Every experiment keeps the study's ``seed`` for its noise (common random numbers: repetition k
+    of every configuration and problem gets the same noise stream and start jitter), while a randomised
+    planner's draws are distinct per configuration, problem and repetition (the testbed derives each
+    repetition's planner seed from this one, the same for both modes)."""
+    digest = hashlib.sha256(f"study-planner:{seed}:{configuration}:{environment}:{plan}".encode()).digest()
+    return int.from_bytes(digest[:8], "big") >> 1
 
 
 def _body(name: str, problem: dict[str, Any], planner: PlannerSpec, controller: Optional[ControllerChoice],
@@ -84,13 +96,13 @@ def plan_jobs(spec: StudySpec, environments: dict[str, Environment]) -> list[Stu
             for planner, controller, config in spec.configurations():
                 for profile in spec.profiles or [None]:
                     label = configuration(config, profile)
+                    body = _body(name, problem, planner, controller, spec, profile, label=label, plan=plan.name)
+                    if planner.waypoints is None:  # its planner's own seed: distinct per configuration and problem
+                        body["planner_seed"] = study_planner_seed(spec.seed, label, name, plan.name)
                     job = StudyJob(environment=name, plan=plan.name,
                                    planner=planner.name if planner.waypoints is None else "path",
                                    controller=controller.name if controller is not None else "schema",
-                                   configuration=label,
-                                   profile=profile.label if profile else "",
-                                   body=_body(name, problem, planner, controller, spec, profile, label=label,
-                                              plan=plan.name))
+                                   configuration=label, profile=profile.label if profile else "", body=body)
                     if plan.fleet:
                         job["robots"] = plan.robot_count
                     jobs.append(job)
@@ -336,8 +348,14 @@ def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any
         "status": exp.status if exp else "rejected", "error": exp.error if exp else job.get("rejected", ""),
         "planned_path": exp.planned_path.tolist() if exp is not None and exp.planned_path is not None else None,
         "planning_time_s": exp.planning_time_s if exp else None,
+        "planner_seed": body.get("planner_seed"),
+        "planner_stochastic": bool(exp.planner_stochastic) if exp else False,
         "runs": [r.id for r in exp.runs] if exp else [],
     }
+    if exp is not None and exp.planner_stochastic and not robots:
+        # a randomised planner: every repetition's own plan (``planned_path`` is repetition 1's)
+        entry["repetition_paths"] = {str(r.repetition): r.planned_path.tolist() for r in exp.runs
+                                     if r.planned_path is not None and len(r.planned_path)}
     if robots:
         # a fleet: every robot's start and goal, and the path planned for each (None where planning failed)
         entry["robots"] = robots
@@ -357,6 +375,7 @@ def _rows(spec: StudySpec, job: StudyJob, exp: Experiment,
     for run in exp.runs:
         stop = run.stopped_at or [None, None]
         row = {**ident, "run_id": run.id, "mode": run.mode, "repetition": run.repetition, "seed": run.seed,
+               "planner_seed": run.planner_seed,
                "status": run.status, "outcome": run.outcome, "failure": run.failure, "error": run.error,
                "stopped_at_x": stop[0], "stopped_at_y": stop[1], "subfield": run.subfield,
                "robot_id": run.robot_id, "t_start": run.t_start, "t_end": run.t_end}
@@ -364,6 +383,10 @@ def _rows(spec: StudySpec, job: StudyJob, exp: Experiment,
             row.update(fleet_row(job["robots"], run.outcome, run.metrics))
         else:
             row.update(flat_metrics(run.metrics))
+        # the run's own planning (its repetition's); planned_* above are its own planned path's
+        row.update(planning_time_s=run.planning_time_s if run.planning_time_s is not None
+                   else row.get("planning_time_s"), planning_cpu_s=run.planning_cpu_s,
+                   planning_repeats=run.planning_repeats, planning_load=run.planning_load)
         d = st.get(run.repetition)
         if d is not None:
             row.update({f"st_{k}": v for k, v in d.metrics.items()})

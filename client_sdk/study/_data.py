@@ -8,8 +8,8 @@ The collector writes, in the output directory:
   ``success``, ``collision``, ``timeout``, ...; ``failure``; ``stopped_at_x``,
   ``stopped_at_y`` where a failed run stopped) and every metric (docs/design.md,
   "Metrics"; a failed run's too, flagged by its outcome; ``planned_*`` are the
-  planned path's, ``st_*`` the direct sim-vs-twb comparison of the run's
-  repetition);
+  run's own planned path's, ``planning_*`` its repetition's planning, ``st_*``
+  the direct sim-vs-twb comparison of the run's repetition);
 - ``direct.csv``: one row per experiment and repetition with both modes;
 - ``poses/run-<id>.csv``: the logged poses ``t,x,y,theta`` of each run (a fleet's run:
   ``t,x,y,theta,robot``, robot by robot);
@@ -46,7 +46,7 @@ __all__ = ["DIRECT_COLUMNS", "ID_COLUMNS", "StudyData", "load_study", "read_csv_
 
 #: leading columns of runs.csv (the metrics follow)
 ID_COLUMNS = ("study", "experiment_id", "run_id", "environment", "plan", "planner", "controller", "configuration", "mode",
-              "repetition", "seed", "status", "outcome", "failure", "error", "stopped_at_x", "stopped_at_y", "subfield",
+              "repetition", "seed", "planner_seed", "status", "outcome", "failure", "error", "stopped_at_x", "stopped_at_y", "subfield",
               "robot_id", "t_start", "t_end", "profile")
 DIRECT_COLUMNS = ("study", "experiment_id", "environment", "plan", "planner", "controller", "configuration", "repetition",
                   "sim_run_id", "twb_run_id", "profile")

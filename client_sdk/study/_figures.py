@@ -240,9 +240,11 @@ def figure_paths(data: StudyData, *, max_rows: int = MAX_PATH_ROWS):  # type: ig
             drawn = [runs[rid] for rid in exp["runs"] if rid in runs and runs[rid].get("status") in JUDGED]
             draw_obstacles(ax, data.environments[env_name], _longest(drawn), None)
             _draw_runs(ax, data, drawn)
-            if exp.get("planned_path"):
-                pp = np.asarray(exp["planned_path"])
-                ax.plot(pp[:, 0], pp[:, 1], color="k", ls="--", lw=1.0, label=LABELS["computed"])
+            plans = list((exp.get("repetition_paths") or {}).values()) or \
+                ([exp["planned_path"]] if exp.get("planned_path") else [])
+            for pp in map(np.asarray, plans):  # a randomised planner's: every repetition's own
+                ax.plot(pp[:, 0], pp[:, 1], color="k", ls="--", lw=1.0 if len(plans) == 1 else 0.8,
+                        label=LABELS["computed"])
             ax.plot(*exp["start"][:2], "o", color="g", ms=5, label="start")
             ax.plot(*exp["goal"][:2], "*", color="g", ms=9, label="goal")
             _outcome_note(ax, exp, runs)

@@ -107,7 +107,7 @@ _OMPL_PROPERTIES = {"time": "REAL", "solved": "BOOLEAN", "status": "ENUM", "appr
                     "solution_length": "REAL", "solution_smoothness": "REAL", "solution_clearance": "REAL",
                     "solution_segments": "INTEGER", "correct_solution": "BOOLEAN"}
 #: runs.csv's columns that are text, or twb's own bookkeeping of the row, not a run property
-_NOT_PROPERTIES = set(ID_COLUMNS) - {"experiment_id", "run_id", "repetition", "seed", "subfield"}
+_NOT_PROPERTIES = set(ID_COLUMNS) - {"experiment_id", "run_id", "repetition", "seed", "planner_seed", "subfield"}
 #: the relative agreement of a run's planned length with the stored path's for that path to be the run's
 _SAME_PATH = 1e-5
 

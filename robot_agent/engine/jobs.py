@@ -29,6 +29,7 @@ from contract.protocol import (
 )
 from contract.robot_profile import load_profile, profile_for_platform
 from planners import PlanningError, parse_environment, plan_path
+from planners.api import machine_load
 from planners.control_metrics import ControlSettings, control_metrics
 from planners.dependencies import fleet_dependencies
 from planners.fleet_metrics import FleetSettings, fleet_metrics
@@ -58,14 +59,22 @@ def warm_up() -> bool:
 
 def plan_job(env_data: dict[str, Any], start: list[float], goal: list[float], planner: str,
              params: dict[str, Any], seed: int, robot_radius: float) -> dict[str, Any]:
-    """Plan one experiment's path; returns ``{"path", "length_m", "planning_time_s", "info"}``.
+    """Plan one repetition's path with its planner ``seed``, timed (docs/study.md, "Planning time"); returns
+    ``{"path", "length_m", "planning_time_s", "planning_cpu_s", "planning_repeats", "planning_load", "info"}``.
+
+    The times are the wall (``time.perf_counter``) and CPU (``time.process_time``) seconds of the planner call
+    and its post-processing in this (warmed) worker, without building the cached grid; each call plans from
+    scratch (the planner forgets its caches), and a fast planner is called again while its calls together
+    took less than 50 ms, at most 5 times (``planning_repeats``), the times then being the medians;
+    ``planning_load`` is the machine's 1-minute load average per CPU when it was measured.
 
     Raises :class:`planners.PlanningError` (no path, bad plug-in output, ...).
     """
     env = parse_environment(env_data)
-    r = plan_path(env, start, goal, planner, robot_radius=robot_radius, params=params, seed=seed)
+    r = plan_path(env, start, goal, planner, robot_radius=robot_radius, params=params, seed=seed, timed=True)
     return {"path": np.round(r.path, 6).tolist(), "length_m": r.length_m,
-            "planning_time_s": r.planning_time_s, "info": r.info}
+            "planning_time_s": r.planning_time_s, "planning_cpu_s": r.planning_cpu_s,
+            "planning_repeats": r.planning_repeats, "planning_load": r.planning_load, "info": r.info}
 
 
 def measure_run(env_data: dict[str, Any], planned: list[list[float]], poses: list[list[float]],
@@ -227,13 +236,14 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     profile with the field parameters ``overrides``) following with ``controller`` for at most ``max_s``
     experiment seconds.  Returns ``{"robots": [per robot {"path", "depart", "poses" (N, 4) t s, x m, y m,
     theta rad, "lines", "t_start", "t_end", "outcome", "obstacle", "holds" [[waypoint, s held], ...],
-    "waited_for" [[robot, ...] per hold]}], "planning_time_s", "metrics", "obstacles"}`` (``"obstacles"``: on
+    "waited_for" [[robot, ...] per hold]}], "planning_time_s", "planning_cpu_s" (wall and CPU seconds of planning
+    every robot, once), "planning_load" (the machine's load per CPU), "metrics", "obstacles"}`` (``"obstacles"``: on
     the field the tracker's poses of the obstacle robots, per moving obstacle ``(T, 4)`` on the fleet's clock;
     else None),
     or ``{"planning_error": why}`` / ``{"placement_error": why}``."""
 
     env = parse_environment(env_data)
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     paths: list[list[list[float]]] = []
     depart: list[Optional[list[float]]] = []
     depends = None
@@ -282,6 +292,7 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     except PlanningError as exc:
         return {"planning_error": str(exc)}
     planning_time_s = time.perf_counter() - t0
+    planning_cpu_s = time.process_time() - c0
     starts = []
     for r, p in zip(robots, paths):
         s = list(r["start"])
@@ -319,7 +330,8 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
                     "t_start": run.t_start, "t_end": run.t_end, "outcome": run.outcome, "obstacle": run.obstacle,
                     "holds": [[int(k), float(s)] for k, s in fleet.holds[i]],
                     "waited_for": [[int(h) for h in w] for w in fleet.waited_for[i]]})
-    return {"robots": out, "planning_time_s": planning_time_s, "metrics": json_safe(metrics), "obstacles": fleet.obstacles}
+    return {"robots": out, "planning_time_s": planning_time_s, "planning_cpu_s": planning_cpu_s,
+            "planning_load": machine_load(), "metrics": json_safe(metrics), "obstacles": fleet.obstacles}
 
 
 def _fleet_obstacle_distances(env: Any, fleet: Any, obstacle_radius: Optional[float], metrics: dict[str, Any]) -> None:

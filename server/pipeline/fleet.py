@@ -170,13 +170,21 @@ async def run_fleet(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
     out: dict[str, Any] = await svc.pool.run(
         tasks.FLEET, job.environment_data, robots, job.planner, job.planner_params, job.seed, timeout_s,
         job.robot_radius + job.planning_margin, "field" if on_field else "ideal", job.controller,
-        job.controller_params, platform, job.profile_overrides if on_field else None, job.experiment_seed)
-    if "planning_error" in out:
-        raise RunFailed(f"planning failed: {out['planning_error']}", FailureKind.PLANNING, whole_experiment=True)
+        job.controller_params, platform, job.profile_overrides if on_field else None,
+        job.experiment_seed if job.planner_seed is None else job.planner_seed)
+    if "planning_error" in out:  # a randomised planner's other repetitions plan with other seeds
+        raise RunFailed(f"planning failed: {out['planning_error']}", FailureKind.PLANNING,
+                        whole_experiment=not job.planner_stochastic)
     if "placement_error" in out:
         raise TestbedFault(f"the gripper could not place the robots: {out['placement_error']}")
     robots = out["robots"]
     await _keep_plan(svc, job, robots, out["planning_time_s"])
+    if program_plan is not None:
+        ctx.end_fields.update(program_plan.run_fields())
+    else:  # the run's own plan: robot 0's path (every robot's is in the run's log), the fleet's planning
+        ctx.end_fields.update(planned_path=robots[0]["path"], planning_time_s=out["planning_time_s"],
+                              planning_cpu_s=out.get("planning_cpu_s"), planning_repeats=1,
+                              planning_load=out.get("planning_load"))
     for k, r in enumerate(robots):
         for (w, held), why in zip(r["holds"], r.get("waited_for") or [[] for _ in r["holds"]]):
             ctx.on_line("s", f"robot {k}: held at waypoint {w} for {held:.2f} s, {_held_for(why)}", None, False)
@@ -217,8 +225,8 @@ async def _program_paths(ctx: RunContext, svc: RunServices, job: RunJob,
     in this run's log: :meth:`~server.pipeline.paths.PathService.path_for`; the run is ``planning`` until
     then), placed as the program was told; raises :class:`~server.errors.ProgramFailed` naming the robots without a usable path."""
     assert job.robots is not None
-    plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
-                                    platform=platform, on_line=ctx.on_line)
+    plan = await svc.paths.path_for(job.experiment_id, job.repetition, run_id=ctx.run_id,
+                                    robot_id=ctx.robot.robot_id, platform=platform, on_line=ctx.on_line)
     assert plan.robots is not None and len(plan.robots) == len(job.robots)
     await svc.recorder.update(ctx.run_id, status=RunStatus.RUNNING)
     robots = [{"start": placed(r["start"], r["goal"]), "goal": r["goal"], "path": path, "headings": "sent"}
@@ -235,8 +243,11 @@ def _held_for(robots: list[int]) -> str:
 
 async def _keep_plan(svc: RunServices, job: RunJob, robots: list[dict[str, Any]],
                      planning_time_s: Optional[float]) -> None:
-    """The experiment's plan, kept by its first run: robot 0's path as ``planned_path`` (m, m, rad), every
-    robot's path and departure times (s, None: no hold) in ``planning_info["robots"]``."""
+    """The experiment's plan, kept by a run of repetition 1 (both of its modes plan the same: the same planner
+    seed): robot 0's path as ``planned_path`` (m, m, rad), every robot's path and departure times (s, None: no
+    hold) in ``planning_info["robots"]``."""
+    if job.repetition != 1:
+        return
     stored, _ = await svc.recorder.planned_path(job.experiment_id)
     if stored is not None:
         return

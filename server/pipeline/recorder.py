@@ -187,8 +187,10 @@ class RunRecorder:
 
     @staticmethod
     def _run_event(run: Run | dict[str, Any], owner_id: int) -> dict[str, Any]:
-        """A run's live event, from its ORM row or its columns by name."""
-        return {"type": "run", "owner_id": owner_id, "run": RunPublic.model_validate(run).model_dump(mode="json")}
+        """A run's live event, from its ORM row or its columns by name (without its planned path: the run's JSON
+        has it)."""
+        view = RunPublic.model_validate(run).model_dump(mode="json", exclude={"planned_path"})
+        return {"type": "run", "owner_id": owner_id, "run": view}
 
     @staticmethod
     def _experiment_event(exp: Experiment) -> dict[str, Any]:

@@ -9,8 +9,8 @@ The steps of :mod:`server.pipeline.runner` collapse into one task
 (:func:`robot_agent.engine.jobs.simulate_job`): the gripper's build and
 placement (the jittered start when it is free, else the start), the path
 through the wire codec, the ideal robot's simulation core stepped to the
-end, the metrics.  The path itself is the experiment's, had once
-(:mod:`server.pipeline.paths`).  Back on the server the poses go through
+end, the metrics.  The path itself is the run's repetition's, had once
+for both its modes (:mod:`server.pipeline.paths`).  Back on the server the poses go through
 the tracker (stored, shown live), the protocol lines an agent would have
 exchanged go to the run's log, and the end is classified as a robot's
 ``EV,FAIL`` is (:func:`server.pipeline.steps.failure_of`).
@@ -39,7 +39,7 @@ __all__ = ["run_on_engine", "start_status"]
 
 def start_status(svc: RunServices, job: RunJob) -> RunStatus:
     """The state a task's run starts in: ``running``, or ``planning`` when its experiment has no path yet."""
-    return RunStatus.RUNNING if svc.paths.known(job.experiment_id) else RunStatus.PLANNING
+    return RunStatus.RUNNING if svc.paths.known(job.experiment_id, job.repetition) else RunStatus.PLANNING
 
 
 async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
@@ -54,11 +54,13 @@ async def run_on_engine(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
                         FailureKind.OTHER)
     if on_field:
         svc.field.claim(ctx.subfields, job.owner_id)
-    plan = svc.paths.known(job.experiment_id)  # most runs of an experiment: planned already, one write less
+    plan = svc.paths.known(job.experiment_id, job.repetition)  # a repetition's second run: one write less
     if plan is None:
-        plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
-                                        platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
+        plan = await svc.paths.path_for(job.experiment_id, job.repetition, run_id=ctx.run_id,
+                                        robot_id=ctx.robot.robot_id, platform=ctx.robot.platform or "BeBot",
+                                        on_line=ctx.on_line)
         await rec.update(ctx.run_id, status=RunStatus.RUNNING)
+    ctx.end_fields.update(plan.run_fields())  # the run's plan, stored with its end
     start = steps.start_pose(job)
     jittered = run_data.jittered(start, job.jitter, job.seed)
     starts = [jittered, start] if jittered != start else [start]

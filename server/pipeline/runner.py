@@ -4,7 +4,8 @@ The steps, in order (each in :mod:`server.pipeline.steps`)::
 
     building   the gripper builds the environment (unless the robot has it built)
     placing    the gripper puts the robot at the start
-    planning   the experiment's path, had once (server.pipeline.paths)
+    planning   the repetition's path: its own for a randomised planner, else the experiment's one,
+               timed again per repetition (server.pipeline.paths)
     running    the T,T,P line is sent, events followed, tracker poses stored (or the job's
                controller program drives the robot: server.pipeline.closed_loop)
     analyzing  metrics, in a worker process
@@ -197,9 +198,10 @@ async def _steps(ctx: RunContext, svc: RunServices, job: RunJob) -> None:
         await rec.update(ctx.run_id, status=RunStatus.PLACING)
         await steps.place(ctx, link, job)
         await rec.update(ctx.run_id, status=RunStatus.PLANNING)
-        plan = await svc.paths.path_for(job.experiment_id, run_id=ctx.run_id, robot_id=ctx.robot.robot_id,
-                                        platform=ctx.robot.platform or "BeBot", on_line=ctx.on_line)
-        await rec.update(ctx.run_id, status=RunStatus.RUNNING)
+        plan = await svc.paths.path_for(job.experiment_id, job.repetition, run_id=ctx.run_id,
+                                        robot_id=ctx.robot.robot_id, platform=ctx.robot.platform or "BeBot",
+                                        on_line=ctx.on_line)
+        await rec.update(ctx.run_id, status=RunStatus.RUNNING, **plan.run_fields())  # the run's plan, kept
         try:
             if job.controller_program is not None:
                 await closed_loop.drive_program(ctx, svc, link, job, plan)

@@ -16,7 +16,7 @@ from ..status import ACTIVE, TERMINAL, RunStatus, roll_up
 from ..validation import Preflight
 
 __all__ = ["count_queued", "create_experiment", "finish_if_done", "lock_experiments", "lock_run", "lock_run_row",
-           "outcome_text", "run_seed", "set_error", "store_plan", "store_planning_info"]
+           "outcome_text", "planner_seed", "run_seed", "set_error", "store_plan", "store_planning_info"]
 
 
 def run_seed(experiment_seed: int, mode: str, repetition: int) -> int:
@@ -26,6 +26,14 @@ def run_seed(experiment_seed: int, mode: str, repetition: int) -> int:
     and replaying a job with the same seed replays every run exactly.
     """
     digest = hashlib.sha256(f"{experiment_seed}:{mode}:{repetition}".encode()).digest()
+    return int.from_bytes(digest[:8], "big") >> 1
+
+
+def planner_seed(base: int, repetition: int) -> int:
+    """Seed a repetition's planner plans with, derived stably from the job's planner seed (``planner_seed``, else
+    its ``seed``): the same for both modes, so that the simulated and the field run of a repetition drive the
+    same plan, and its own per repetition, so that a randomised planner's repetitions are independent draws."""
+    digest = hashlib.sha256(f"planner:{base}:{repetition}".encode()).digest()
     return int.from_bytes(digest[:8], "big") >> 1
 
 
@@ -56,6 +64,8 @@ def create_experiment(
         modes=list(body.modes),
         repetitions=body.repetitions,
         seed=body.seed,
+        planner_seed=body.planner_seed,
+        planner_stochastic=checked.stochastic,
         field=body.field,
         robot_radius=robot_radius,
         planning_margin=planning_margin if body.path is None else 0.0,
@@ -69,9 +79,12 @@ def create_experiment(
     )
     session.add(exp)
     session.flush()
+    base = body.seed if body.planner_seed is None else body.planner_seed
     for rep in range(1, body.repetitions + 1):
+        plan_seed = planner_seed(base, rep)
         for mode in body.modes:
-            session.add(Run(experiment_id=exp.id, mode=mode, repetition=rep, seed=run_seed(body.seed, mode, rep)))
+            session.add(Run(experiment_id=exp.id, mode=mode, repetition=rep, seed=run_seed(body.seed, mode, rep),
+                            planner_seed=plan_seed))
     session.flush()
     return exp
 

@@ -49,6 +49,11 @@ class RunJob:
     planning_margin: float = 0.0
     #: the uploaded planner program of the experiment (a multi-robot job's sends every robot's path), or None
     program: Optional[int] = None
+    repetition: int = 1
+    #: the seed the run's repetition plans with (None: a run from before planner seeds, planned with the job's seed)
+    planner_seed: Optional[int] = None
+    #: the experiment's planner is randomised: planned once per repetition (a failure fails that repetition only)
+    planner_stochastic: bool = False
 
 
 def _job(run: dict[str, Any], e: dict[str, Any]) -> RunJob:
@@ -57,7 +62,7 @@ def _job(run: dict[str, Any], e: dict[str, Any]) -> RunJob:
                   list(e["start"]), list(e["goal"]), e["field"], e["robot_radius"], e["jitter"], e["profile_overrides"],
                   e["controller"] or "schema", dict(e["controller_params"] or {}), e["controller_program_id"],
                   e["robots"], e["planner"], dict(e["planner_params"] or {}), e["seed"], e["planning_margin"] or 0.0,
-                  e["program_id"])
+                  e["program_id"], run["repetition"], run["planner_seed"], bool(e["planner_stochastic"]))
 
 
 @dataclass(frozen=True)

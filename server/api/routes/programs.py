@@ -61,7 +61,8 @@ def upload_program(body: ProgramCreate, session: SessionDep, user: CurrentUser, 
         raise Invalid("this testbed has no python3 for programs; upload an executable")
     prog = Program(owner_id=user.id, name=body.name, kind=body.kind,
                    interpreter=body.interpreter if body.kind == "executable" else None, args=list(body.args),
-                   content=content, size=len(content), sha256=hashlib.sha256(content).hexdigest())
+                   content=content, size=len(content), sha256=hashlib.sha256(content).hexdigest(),
+                   stochastic=body.stochastic)
     session.add(prog)
     session.commit()
     session.refresh(prog)

@@ -140,6 +140,25 @@ const FLEET_COLUMNS = [
   ["deadlock", "Deadlock"],
 ];
 
+/** A run's planning in words (the runs table's tooltip): wall and CPU time, the median of k calls, the load, the seed. */
+function planningTitle(r) {
+  if (r.planning_time_s == null) return r.planner_seed == null ? "" : `planner seed ${r.planner_seed}`;
+  const parts = [`wall ${num(r.planning_time_s * 1000, 2)} ms`];
+  if (r.planning_cpu_s != null) parts.push(`CPU ${num(r.planning_cpu_s * 1000, 2)} ms`);
+  if ((r.planning_repeats || 1) > 1) parts.push(`median of ${r.planning_repeats} calls`);
+  if (r.planning_load != null) parts.push(`load ${num(r.planning_load, 2)} per CPU`);
+  if (r.planner_seed != null) parts.push(`planner seed ${r.planner_seed}`);
+  return `Planning of its repetition: ${parts.join(", ")}`;
+}
+
+/** The experiment's planning time: its runs' range (each repetition is timed), else repetition 1's. */
+function planningRange(d) {
+  const ts = d.runs.map((r) => r.planning_time_s).filter((t) => t != null);
+  if (!ts.length) return d.planning_time_s == null ? "–" : `${num(d.planning_time_s * 1000, 1)} ms`;
+  const lo = Math.min(...ts), hi = Math.max(...ts);
+  return lo === hi ? `${num(lo * 1000, 1)} ms` : `${num(lo * 1000, 1)}–${num(hi * 1000, 1)} ms (per repetition, see the runs)`;
+}
+
 /** The charted metrics: [key, whether the planned path's value is drawn as a reference]. */
 const CHARTS = [["length_m", true], ["execution_time_s", false], ["average_speed_m_s", false], ["deviation_mean_m", false],
   ["smoothness_rad", true], ["clearance_min_m", true]];
@@ -265,9 +284,13 @@ export class ExperimentPage {
       ...(d.robots ? [["Robots", `${d.robots.length}, each its colour on the map`]]
         : [["Start (x, y, θ)", pose(d.start)], ["Goal (x, y, θ)", pose(d.goal)]]),
       ["Modes", d.modes.join(" + ")],
-      ["Repetitions", d.repetitions], ["Seed", d.seed], ["Owner", d.owner],
+      ["Repetitions", d.repetitions], ["Seed", d.seed],
+      ["Planner seed", d.planner_seed == null ? "the seed (each repetition's derives from it)" : `${d.planner_seed} (each repetition's derives from it)`],
+      ["Plans", d.planner_stochastic ? "one per repetition: a randomised planner, each repetition its own draw (both modes drive it)"
+        : "one path for every run (timed again per repetition)"],
+      ["Owner", d.owner],
       ["Submitted", when(d.created_at)], ["Finished", when(d.finished_at)],
-      ["Planning time", d.planning_time_s == null ? "–" : `${num(d.planning_time_s * 1000, 1)} ms`],
+      ["Planning time", planningRange(d)],
       ["Robot radius + margin", `${num(d.robot_radius, 3)} + ${num(d.planning_margin, 3)} m`],
     ];
     if (d.status === "queued") facts.push(["Estimated start", duration(d.estimated_start_s)]);
@@ -328,8 +351,16 @@ export class ExperimentPage {
       const at = r.stopped_at || (logged && logged.length ? [logged[logged.length - 1][1], logged[logged.length - 1][2]] : null);
       return at ? crossPaths(at[0], at[1]) : [];
     });
-    if (d.planned_path && !this.hidden.has("planned")) {
-      paths.push({ points: d.planned_path.map((p) => [p[0], p[1]]), color: COLORS.planned, width: 2.2, dash: [7, 5] });
+    if (!this.hidden.has("planned")) {
+      // each shown run's own planned path (its repetition's; a deterministic planner's are one path, drawn once)
+      const plans = new Map();
+      for (const r of runs) {
+        if (r.planned_path && !this.hidden.has(`run-${r.id}`)) plans.set(JSON.stringify(r.planned_path), r.planned_path);
+      }
+      if (!plans.size && d.planned_path) plans.set("", d.planned_path);
+      for (const pp of plans.values()) {
+        paths.push({ points: pp.map((p) => [p[0], p[1]]), color: COLORS.planned, width: plans.size > 1 ? 1.6 : 2.2, dash: [7, 5] });
+      }
     }
     paths.push(...crashes);
     this.map.update({
@@ -376,7 +407,10 @@ export class ExperimentPage {
       return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
         h("td", {}, r.id), h("td", {}, `${r.mode} #${r.repetition}`), h("td", {}, badge(r.status),
           r.error ? h("div", { class: "muted small run-error" }, r.error) : "",
-          r.stopped_at ? h("div", { class: "muted small stopped" }, `✕ stopped at ${pose(r.stopped_at)}`) : ""),
+          r.stopped_at ? h("div", { class: "muted small stopped" }, `✕ stopped at ${pose(r.stopped_at)}`) : "",
+          // its repetition's planning time (the tooltip: wall and CPU, median of k, load, planner seed)
+          r.planning_time_s == null ? "" : h("div", { class: "muted small planning", title: planningTitle(r),
+            dataset: { metric: "planning_time_s" } }, `plan ${num(r.planning_time_s * 1000, 1)} ms`)),
         h("td", {}, r.robot_id || "–"), h("td", {}, r.subfield ?? "–"),
         ...columns.map(([k]) => h("td", { class: "num", dataset: { metric: k } }, num(mt[k]))),
         h("td", {}, r.t_start == null ? "–" : h("span", { class: "downloads" },
@@ -385,7 +419,7 @@ export class ExperimentPage {
           this.dl(`/api/v1/runs/${r.id}/messages?limit=10000`, `run-${r.id}-messages.json`, "messages", `Download protocol messages of run ${r.id}`))));
     });
     if (m.planned) {
-      rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, "planned"), h("td", {}, ""),
+      rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, d.planner_stochastic ? "planned (rep. 1)" : "planned"), h("td", {}, ""),
         h("td", {}, ""), h("td", {}, ""), ...columns.map(([k]) => h("td", { class: "num" }, num(m.planned[k]))), h("td", {}, "")));
     }
     this.els.runs.replaceChildren(head, h("tbody", {}, rows));
