@@ -204,6 +204,7 @@ def plan_path(
     tolerance: float = 0.005,
     planning_margin: float = 0.0,
     timed: bool = False,
+    timing_budget_s: float = TIMING_BUDGET_S,
 ) -> PlanResult:
     """Plan a collision-free path from ``start`` to ``goal`` with the planner called ``planner``.
 
@@ -218,7 +219,8 @@ def plan_path(
     "Planning time"): before every call the planner forgets what it kept from
     earlier ones (:meth:`~planners.base.Planner.forget`: each call plans from
     scratch), and a fast planner is called again while its calls together
-    took less than :data:`TIMING_BUDGET_S`, at most :data:`TIMING_MAX_REPEATS`
+    took less than ``timing_budget_s`` (s; default :data:`TIMING_BUDGET_S`; 0: one call), at most
+    :data:`TIMING_MAX_REPEATS`
     times; the times are the medians and the path the first call's (the
     same seed gives the same path).  Otherwise the planner is called once.
 
@@ -252,7 +254,7 @@ def plan_path(
         walls.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
         first = first or got
-        if not timed or len(walls) >= TIMING_MAX_REPEATS or sum(walls) >= TIMING_BUDGET_S:
+        if not timed or len(walls) >= TIMING_MAX_REPEATS or sum(walls) >= timing_budget_s:
             break
     raw, info, path = first
     if not space.path_free(path):  # postprocess keeps chords free; this is a safety net

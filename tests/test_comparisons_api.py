@@ -14,7 +14,7 @@ import re
 import pytest
 
 from client_sdk import AsyncClient, Client
-from client_sdk.study import load_study, plan_jobs, StudySpec
+from client_sdk.study import plan_jobs, StudySpec
 from client_sdk.study._data import write_csv_stream
 from contract.vocabulary import run_outcome
 from planners.comparisons import COLUMNS, compare

@@ -14,7 +14,6 @@ import random
 import re
 import time
 from datetime import datetime
-from pathlib import Path
 
 from servers import serve, wait_for
 from test_controller_programs import CONNECT, EXAMPLES, GOAL, START, b64

@@ -406,7 +406,7 @@ def _print_comparison(report: Any, fmt: str, wide: bool) -> None:
 
         typer.echo(json.dumps(dataclasses.asdict(report)))
         return
-    from .tables import console, print_fitted
+    from .tables import console
 
     con = console(wide)
     names = ", ".join(f"#{e.id} {e.configuration} on {e.problem}" for e in report.experiments)

@@ -71,6 +71,10 @@ class Settings(BaseSettings):
         description="Extra clearance the testbed's planners keep beyond the robot radius: field robots "
                     "track a path only to within a few centimetres, and a path grazing a block at exactly "
                     "the radius would make collisions, not comparisons.")
+    planning_timing_budget_s: float = Field(default=0.05, ge=0, le=10, description=(
+        "A fast plan is timed again while its calls together took less than this (s; at most 5 calls), its "
+        "planning time the median: steadier times for about 25 ms of CPU per repetition; 0: one call, for "
+        "sweeps of many cheap runs where that CPU counts (docs/study.md, \"Planning time\")."))
     uploads_enabled: bool = Field(default=False, description="Accept uploaded planner programs (`--enable-uploads`).")
     max_program_bytes: int = Field(default=8 << 20, gt=0, description=(
         "Largest uploaded program (413 beyond); static binaries of a C planner are a megabyte or two."))

@@ -206,7 +206,8 @@ class PathService:
             return await self._experiment_plan(exp, run_id, robot_id, platform, on_line)
         try:
             r = await self._pool.run(tasks.PLAN, exp.environment_data, exp.start, exp.goal, exp.planner,
-                                     exp.planner_params or {}, seed, exp.robot_radius + exp.planning_margin)
+                                     exp.planner_params or {}, seed, exp.robot_radius + exp.planning_margin,
+                                     self._settings.planning_timing_budget_s)
         except PlanningError as exc:
             raise RunFailed(f"planning failed: {exc}", FailureKind.PLANNING, whole_experiment=not stochastic) from None
         plan = Plan(r["path"], r["planning_time_s"], None, r.get("planning_cpu_s"), r.get("planning_repeats"),
