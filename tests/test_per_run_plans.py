@@ -200,3 +200,43 @@ def test_the_same_randomised_job_gives_the_same_paths_on_sqlite_and_postgresql(p
         assert a[0] == b[0] and a[1] == b[1] and a[3] == b[3]  # planner seed, plan, where it drove: bit for bit
         close(a[2], b[2])
     assert not math.isclose(length(found["sqlite"][0][1]), length(found["sqlite"][2][1]), rel_tol=1e-9)
+
+
+#: a wall with a narrow gap (0.20 m, near the straight line) and a wider one far to the right: PRM with 60 samples
+#: finds the narrow one with some seeds (about 1.25 m) and goes round with others (about 3.2 m); A* always
+#: takes the narrow gap (1.296 m)
+NARROW = {"name": "narrow", "size": [1.8, 1.8],
+          "blocks": [{"x": 0.175, "y": 0.9, "w": 0.35, "h": 0.06}, {"x": 1.0, "y": 0.9, "w": 0.9, "h": 0.06},
+                     {"x": 1.75, "y": 0.9, "w": 0.1, "h": 0.06}],
+          "plans": [{"name": "A", "start": [0.3, 0.3, 0.0], "goal": [0.3, 1.5, 0.0]}]}
+
+
+def test_a_verdict_on_a_randomised_planner_does_not_flip_with_the_study_seed(testbed, tmp_path):
+    """The "sound verdicts" issue's case: PRM with 60 samples against A* on a narrow passage, 8 repetitions.
+    When PRM planned once per experiment, seed 0 said "A* shorter by 1.9 m" and seed 1 "PRM shorter by 0.05 m",
+    each with a zero-width interval (one roadmap copied into every row). Now every repetition samples its own
+    roadmap: each seed's interval shows PRM's spread between its draws, and the two seeds do not contradict
+    each other — they agree, or their intervals cover each other's estimate."""
+    from client_sdk import Client
+    from client_sdk.study import StudySpec, run_study
+
+    found = {}
+    with Client(testbed.url, testbed.token) as c:
+        for seed in (0, 1):
+            spec = StudySpec.from_json({"name": f"narrow-{seed}", "environments": [NARROW], "plans": ["A"],
+                                        "planners": [{"name": "prm", "params": {"samples": 60}, "label": "prm-60"},
+                                                     "astar"],
+                                        "repetitions": 8, "modes": ["sim"], "seed": seed})
+            data = run_study(c, spec, progress=False, out=tmp_path / f"narrow-{seed}")
+            prm = [r for r in data.rows if r["configuration"] == "prm-60"]
+            assert len({r["planner_seed"] for r in prm}) == 8  # a draw of its own per repetition
+            done = [r["planned_length_m"] for r in prm if r["status"] == "completed"]
+            assert max(done) - min(done) > 1.0, done  # both ways round the wall among the draws
+            found[seed] = data.compare(["length_m"], n_resamples=2000).get("length_m", "sim", "prm-60", "astar")
+    a, b = found[0], found[1]
+    (la, ha), (lb, hb) = a.confidence_interval(), b.confidence_interval()
+    contradict = a.significant() and b.significant() and (a.difference > 0) != (b.difference > 0)
+    assert not contradict, (a.row(), b.row())
+    assert la <= b.difference <= ha or lb <= a.difference <= hb or \
+        (a.significant() and b.significant()), (a.row(), b.row())
+    assert min(ha - la, hb - lb) > 0.1  # the draws' spread is in the interval, not a zero-width certainty
