@@ -69,7 +69,9 @@ class Testbed:
         #: planning and metrics, off the loop: worker processes, or Ray tasks (then simulation runs too)
         self.pool: WorkerPool | RayPool = (
             RayPool(address=settings.ray_address, cpus=settings.ray_cpus, slots=settings.ray_slots,
-                    log_dir=settings.data_dir) if settings.sim_engine == "ray" else WorkerPool(settings.planning_workers))
+                    log_dir=settings.data_dir) if settings.sim_engine == "ray" else WorkerPool(
+                        settings.planning_workers, memory_mb=settings.planning_memory_mb,
+                        deadline_s=settings.planning_timeout_s))
         #: runs uploaded planner programs (docs/uploads.md)
         self.sandbox = Sandbox(settings)
         self.recorder = RunRecorder(self.sessions, self.broker, self.views)

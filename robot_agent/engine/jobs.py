@@ -42,6 +42,7 @@ from planners.prioritized import EXECUTIONS, plan_prioritized, timed_waypoints
 
 from .fleet import simulate_fleet
 from .headless import PlacementRefused, simulate_run
+from .limits import planning_limits
 from .movers import mover_tracks
 from .noise import path_key
 from .run_data import TooFewPoses, block_tuples, explicit_path, json_safe, moving_tuples, replan_metrics, replanning
@@ -74,8 +75,9 @@ def plan_job(env_data: dict[str, Any], start: list[float], goal: list[float], pl
     Raises :class:`planners.PlanningError` (no path, bad plug-in output, ...).
     """
     env = parse_environment(env_data)
-    r = plan_path(env, start, goal, planner, robot_radius=robot_radius, params=params, seed=seed, timed=True,
-                  timing_budget_s=timing_budget_s)
+    with planning_limits():
+        r = plan_path(env, start, goal, planner, robot_radius=robot_radius, params=params, seed=seed, timed=True,
+                      timing_budget_s=timing_budget_s)
     return {"path": np.round(r.path, 6).tolist(), "length_m": r.length_m,
             "planning_time_s": r.planning_time_s, "planning_cpu_s": r.planning_cpu_s,
             "planning_repeats": r.planning_repeats, "planning_load": r.planning_load, "info": r.info}
@@ -257,42 +259,45 @@ def fleet_job(env_data: dict[str, Any], robots: list[dict[str, Any]], planner: O
     if execution not in EXECUTIONS:
         raise ValueError(f"execution is 'dependencies' or 'timed', got {execution!r}")
     try:
-        if planner == "prioritized":
-            plan = plan_prioritized(env, [r["start"] for r in robots], [r["goal"] for r in robots],
-                                    robot_radius=robot_radius, params=params)
-            dense = execution == "dependencies"
-            schedule = [timed_waypoints(t, r["goal"][2] if len(r["goal"]) > 2 else None, dense)
-                        for r, t in zip(robots, plan.paths)]
-            for pts, arrive, leave in schedule:
-                paths.append(np.round(pts, 6).tolist())
-                depart.append([float(b) if b > a + 1e-9 and k < len(pts) - 1 else None
-                               for k, (a, b) in enumerate(zip(arrive, leave))])
-            if dense:
-                depends = fleet_dependencies([w for w, _, _ in schedule], [a for _, a, _ in schedule],
-                                             [lv for _, _, lv in schedule], plan.conflict_m)
-        elif planner == LACAM:  # together on the grid, executed by the plan's order of passage only
-            if execution != "dependencies":
-                raise ValueError("a lacam plan is executed by its order of passage (execution 'dependencies')")
-            lacam = plan_lacam(env, [r["start"] for r in robots], [r["goal"] for r in robots],
-                               robot_radius=robot_radius, params=params, seed=seed if plan_seed is None else plan_seed)
-            wps, _, _, depends = lacam_schedule(lacam, [r["goal"][2] if len(r["goal"]) > 2 else None for r in robots])
-            for w in wps:
-                paths.append(np.round(w, 6).tolist())
-                depart.append(None)  # no clock: the order of passage alone releases the robots
-        else:
-            for i, r in enumerate(robots):
-                if r.get("headings") == "sent":  # an uploaded program's path: headings as it sent them
-                    paths.append(np.round(np.asarray(r["path"], dtype=float), 6).tolist())
-                elif r.get("path") is not None:
-                    paths.append(explicit_path(r["path"], r["goal"]))
-                else:
-                    try:
-                        got = plan_path(env, r["start"], r["goal"], planner or "fmm", robot_radius=robot_radius,
-                                        params=params, seed=seed if plan_seed is None else plan_seed)
-                    except PlanningError as exc:
-                        raise PlanningError(f"robot {i}: {exc}") from None
-                    paths.append(np.round(got.path, 6).tolist())
-                depart.append(None)
+        with planning_limits():  # the worker's memory cap and the planning deadline
+            if planner == "prioritized":
+                plan = plan_prioritized(env, [r["start"] for r in robots], [r["goal"] for r in robots],
+                                        robot_radius=robot_radius, params=params)
+                dense = execution == "dependencies"
+                schedule = [timed_waypoints(t, r["goal"][2] if len(r["goal"]) > 2 else None, dense)
+                            for r, t in zip(robots, plan.paths)]
+                for pts, arrive, leave in schedule:
+                    paths.append(np.round(pts, 6).tolist())
+                    depart.append([float(b) if b > a + 1e-9 and k < len(pts) - 1 else None
+                                   for k, (a, b) in enumerate(zip(arrive, leave))])
+                if dense:
+                    depends = fleet_dependencies([w for w, _, _ in schedule], [a for _, a, _ in schedule],
+                                                 [lv for _, _, lv in schedule], plan.conflict_m)
+            elif planner == LACAM:  # together on the grid, executed by the plan's order of passage only
+                if execution != "dependencies":
+                    raise ValueError("a lacam plan is executed by its order of passage (execution 'dependencies')")
+                lacam = plan_lacam(env, [r["start"] for r in robots], [r["goal"] for r in robots],
+                                   robot_radius=robot_radius, params=params,
+                                   seed=seed if plan_seed is None else plan_seed)
+                headings = [r["goal"][2] if len(r["goal"]) > 2 else None for r in robots]
+                wps, _, _, depends = lacam_schedule(lacam, headings)
+                for w in wps:
+                    paths.append(np.round(w, 6).tolist())
+                    depart.append(None)  # no clock: the order of passage alone releases the robots
+            else:
+                for i, r in enumerate(robots):
+                    if r.get("headings") == "sent":  # an uploaded program's path: headings as it sent them
+                        paths.append(np.round(np.asarray(r["path"], dtype=float), 6).tolist())
+                    elif r.get("path") is not None:
+                        paths.append(explicit_path(r["path"], r["goal"]))
+                    else:
+                        try:
+                            got = plan_path(env, r["start"], r["goal"], planner or "fmm", robot_radius=robot_radius,
+                                            params=params, seed=seed if plan_seed is None else plan_seed)
+                        except PlanningError as exc:
+                            raise PlanningError(f"robot {i}: {exc}") from None
+                        paths.append(np.round(got.path, 6).tolist())
+                    depart.append(None)
     except PlanningError as exc:
         return {"planning_error": str(exc)}
     planning_time_s = time.perf_counter() - t0

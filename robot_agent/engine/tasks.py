@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 from typing import Any, Callable
 
-__all__ = ["COMPARE", "FIELD_OBSTACLE_TRACKS", "FLEET", "MEASURE", "MOVING", "OBSTACLE_NOTE", "PLAN", "SIMULATE",
+__all__ = ["COMPARE", "CONFIGURE_WORKER", "FIELD_OBSTACLE_TRACKS", "FLEET", "MEASURE", "MOVING", "OBSTACLE_NOTE", "PLAN", "SIMULATE",
            "Task", "WARM_UP", "run_task"]
 
 _JOBS = "robot_agent.engine.jobs"
@@ -56,4 +56,5 @@ MEASURE = Task("measure_run")  #: a run's metrics from its planned path and logg
 COMPARE = Task("compare_runs", "robot_agent.engine.run_data")  #: the paper's direct sim-vs-field comparison
 FIELD_OBSTACLE_TRACKS = Task("field_obstacle_tracks")  #: a field run's obstacle robots, replayed
 OBSTACLE_NOTE = Task("obstacle_robots_note")  #: the run log's line on a field run's obstacle robots
-MOVING = Task("moving_tuples", "robot_agent.engine.run_data")  #: moving obstacles as ``T,T,M`` takes them
+MOVING = Task("moving_tuples", "robot_agent.engine.run_data")
+CONFIGURE_WORKER = Task("configure_worker", "robot_agent.engine.limits")  #: a worker's planning limits  #: moving obstacles as ``T,T,M`` takes them

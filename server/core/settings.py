@@ -71,6 +71,13 @@ class Settings(BaseSettings):
         description="Extra clearance the testbed's planners keep beyond the robot radius: field robots "
                     "track a path only to within a few centimetres, and a path grazing a block at exactly "
                     "the radius would make collisions, not comparisons.")
+    planning_memory_mb: int = Field(default=2048, ge=0, description=(
+        "Memory of each planning worker process, MiB (its data segment, RLIMIT_DATA; 0: no cap): a job asking for "
+        "more fails `planning` with the reason instead of taking the machine's memory (docs/security.md)."))
+    planning_timeout_s: float = Field(default=120.0, ge=0, description=(
+        "Wall seconds a plan may take in a worker (0: no limit): beyond it the run fails `planning` with the reason "
+        "(a plan stuck in compiled code ends when it returns to Python; the server's own watchdog ends the workers "
+        "30 s later)."))
     planning_timing_budget_s: float = Field(default=0.05, ge=0, le=10, description=(
         "A fast plan is timed again while its calls together took less than this (s; at most 5 calls), its "
         "planning time the median: steadier times for about 25 ms of CPU per repetition; 0: one call, for "

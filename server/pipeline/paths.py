@@ -66,6 +66,9 @@ from .recorder import RunRecorder
 
 __all__ = ["LineLog", "PathService", "Plan", "placed"]
 
+#: seconds past the planning deadline before the server ends a worker that did not stop the plan itself
+_WATCHDOG_GRACE_S = 30.0
+
 #: ``on_line(direction, line, t, t_estimated)``: one line for the run's protocol log
 LineLog = Callable[[str, str, Optional[float], bool], None]
 
@@ -205,9 +208,9 @@ class PathService:
                 return plan
             return await self._experiment_plan(exp, run_id, robot_id, platform, on_line)
         try:
-            r = await self._pool.run(tasks.PLAN, exp.environment_data, exp.start, exp.goal, exp.planner,
-                                     exp.planner_params or {}, seed, exp.robot_radius + exp.planning_margin,
-                                     self._settings.planning_timing_budget_s)
+            r = await self._planned(tasks.PLAN, exp.environment_data, exp.start, exp.goal, exp.planner,
+                                    exp.planner_params or {}, seed, exp.robot_radius + exp.planning_margin,
+                                    self._settings.planning_timing_budget_s)
         except PlanningError as exc:
             raise RunFailed(f"planning failed: {exc}", FailureKind.PLANNING, whole_experiment=not stochastic) from None
         plan = Plan(r["path"], r["planning_time_s"], None, r.get("planning_cpu_s"), r.get("planning_repeats"),
@@ -228,6 +231,20 @@ class PathService:
             await self._recorder.store_plan(exp.id, plan.path, plan.planning_time_s,
                                             r.get("info", {}) if plan.note is None else exp.planning_info or {})
         return plan
+
+    async def _planned(self, task: Any, *args: Any) -> Any:
+        """``task(*args)`` on the pool, watched: the worker ends a plan past the planning deadline itself
+        (:mod:`robot_agent.engine.limits`) unless it is stuck in compiled code; 30 s after the deadline the
+        workers are ended (the pool replaces them) and the plan fails as having run out of time."""
+        deadline = float(getattr(self._pool, "deadline_s", 0.0) or 0.0)
+        if deadline <= 0:
+            return await self._pool.run(task, *args)
+        try:
+            return await asyncio.wait_for(self._pool.run(task, *args), deadline + _WATCHDOG_GRACE_S)
+        except TimeoutError:
+            self._pool.kill()
+            raise PlanningError(f"the planning time limit of {deadline:g} s was reached and the plan did not stop: "
+                                "its worker was ended") from None
 
     async def _experiment_plan(self, exp: Experiment, run_id: Optional[int], robot_id: str, platform: str,
                                on_line: Optional[LineLog]) -> Plan:

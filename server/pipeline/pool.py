@@ -42,17 +42,22 @@ class ComputePool(Protocol):
     async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)`` off the event loop; its result, or its exception."""
 
+    def kill(self) -> None:
+        """End the workers now, whatever they are doing (a job stuck past every limit)."""
 
-def _worker_init(server_pid: int) -> None:
+
+def _worker_init(server_pid: int, memory_mb: int, deadline_s: float) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     exit_with_parent(server_pid)
+    tasks.CONFIGURE_WORKER(memory_mb, deadline_s)  # the planning limits (robot_agent.engine.limits)
 
 
 class WorkerPool:
     """``workers`` processes running the engine's jobs (:mod:`robot_agent.engine.tasks`) and the like."""
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, *, memory_mb: int = 0, deadline_s: float = 0.0) -> None:
         self.workers = workers
+        self.memory_mb, self.deadline_s = memory_mb, deadline_s  #: each worker's planning limits (0: none)
         self._executor: Optional[ProcessPoolExecutor] = None
         self._lock = threading.Lock()  # replacing the executor (jobs fail on the loop, warm-ups in threads)
         self.restarts = 0  #: broken executors replaced since start
@@ -66,7 +71,8 @@ class WorkerPool:
 
     def _spawn(self) -> ProcessPoolExecutor:
         executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                       initializer=_worker_init, initargs=(os.getpid(),))
+                                       initializer=_worker_init,
+                                       initargs=(os.getpid(), self.memory_mb, self.deadline_s))
         self.ready = False
         for _ in range(self.workers):
             executor.submit(tasks.WARM_UP).add_done_callback(lambda f, ex=executor: self._warmed(ex, f))
