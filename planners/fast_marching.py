@@ -25,7 +25,7 @@ import skfmm
 from .errors import NoPathFound
 from .grid import ConfigSpace
 
-__all__ = ["descend", "travel_time"]
+__all__ = ["FrontMarch", "descend", "plan", "travel_time"]
 
 _CIRCLE = [complex(math.cos(a), math.sin(a)) for a in np.linspace(0, 2 * math.pi, 32, endpoint=False)]
 _RIDGE_WATCH = 8  # steps checked for a ridge after the start, a fallback or a ridge step
@@ -79,14 +79,18 @@ class _Descent:
     on large grids is far cheaper than computing it everywhere.
     """
 
-    def __init__(self, space: ConfigSpace, t: np.ndarray) -> None:
+    def __init__(self, space: ConfigSpace, t: np.ndarray, *, padded: bool = False) -> None:
+        """``t``: the ``(ny, nx)`` arrival times, or (``padded``) the flat padded array itself."""
         h = space.resolution
         self.h, self.inv_h = h, 1.0 / h
-        ny, nx = self.ny, self.nx = t.shape
+        ny, nx = self.ny, self.nx = space.free.shape
         self.W = nx + 4
-        tp = np.full((ny + 4, nx + 4), _BIG)
-        np.minimum(t, _BIG, out=tp[2:-2, 2:-2])
-        self.t = tp.ravel().item
+        if padded:
+            self.t = t.item
+        else:
+            tp = np.full((ny + 4, nx + 4), _BIG)
+            np.minimum(t, _BIG, out=tp[2:-2, 2:-2])
+            self.t = tp.ravel().item
 
     def cell(self, x: float, y: float) -> int:
         """Padded flat index of the cell containing (x, y) (m), inside the field."""
@@ -184,12 +188,27 @@ def descend(
     """
     if not 0 < step <= 1:
         raise ValueError("`step` must be in (0, 1] cells")
-    h = space.resolution
     iy, ix = space.grid.cell_of(start[None, :])
     t_start = float(t[iy[0], ix[0]])
     if not math.isfinite(t_start):
         raise NoPathFound("the goal cannot be reached from the start")
-    d = _Descent(space, t)
+    pts, counters, failure = _trace(_Descent(space, t), t_start, start, goal, step)
+    if failure:
+        raise NoPathFound(failure)
+    return np.array(pts), counters
+
+
+def _trace(
+    d: _Descent, t_start: float, start: np.ndarray, goal: np.ndarray, step: float
+) -> tuple[list[tuple[float, float]], dict[str, int], str | None]:
+    """The descent of :func:`descend` from ``start`` (arrival time ``t_start``, finite) to ``goal``.
+
+    Returns the points (the positions visited, then the goal), the counters,
+    and None; or, when it fails, the positions visited, the counters and
+    why.  Every value it reads lies within 3 cells (Chebyshev) of the cell
+    of a visited position (column ``int(x * inv_h)``, row ``int(y * inv_h)``).
+    """
+    h = d.h
     tv, W, inv_h = d.t, d.W, d.inv_h
     goal_x, goal_y = float(goal[0]), float(goal[1])
     x, y = float(start[0]), float(start[1])
@@ -278,7 +297,172 @@ def descend(
         x, y, t_cur = ((bk % W) - 1.5) * h, ((bk // W) - 1.5) * h, best
         pts.append((x, y))
     else:
-        raise NoPathFound(f"fast-marching descent did not reach the goal within {max_steps} steps")
+        counters = {"descent_steps": len(pts) - 1, "descent_fallbacks": fallbacks, "descent_ridge_steps": ridge_steps}
+        return pts, counters, f"fast-marching descent did not reach the goal within {max_steps} steps"
     pts.append((goal_x, goal_y))
     counters = {"descent_steps": len(pts) - 2, "descent_fallbacks": fallbacks, "descent_ridge_steps": ridge_steps}
-    return np.array(pts), counters
+    return pts, counters, None
+
+
+#: How far (Chebyshev, cells) from the cell of each of its positions the descent reads arrival times (see _trace)
+_READ_RADIUS = 3
+
+
+class FrontMarch:
+    """The front of :func:`travel_time` from ``goal``, marched only as far as the queries need.
+
+    A heap-based fast marching (compiled, :mod:`planners._marching`) with
+    scikit-fmm's second-order scheme: every arrival time it computes equals
+    ``skfmm.travel_time``'s (the same floating-point operations in the same
+    order), so a descent that reads only computed values follows exactly the
+    path it follows on the full field.  The march stops as soon as the cells
+    asked for are accepted and resumes from there when asked for more;
+    :meth:`path` asks for the start, the band the descent reads around it and,
+    after each descent, the band around the path, and descends again if that
+    band was not complete.  One ``FrontMarch`` answers many starts of the same
+    goal (each extends the front only as far as it needs); :meth:`field` is
+    the whole field, as :func:`travel_time`.
+
+    The cost is the number of cells accepted, :attr:`accepted`: the cells
+    whose arrival time is below about the start's, plus the band.
+    """
+
+    def __init__(self, space: ConfigSpace, goal: np.ndarray, speed: np.ndarray | None = None) -> None:
+        from . import _marching as km  # numba loads here, not when the planners are imported
+
+        self._km = km
+        self.space = space
+        h = self.h = space.resolution
+        ny, nx = space.free.shape
+        H, W = self.H, self.W = ny + 4, nx + 4
+        self.flag = np.empty(H * W, dtype=np.int8)
+        self.t = np.empty(H * W)
+        km.init_grid(space.free, self.flag, self.t)
+        if speed is None:
+            self.unit, self.speed = True, np.ones(1)
+        else:
+            self.unit = False
+            self.speed = np.ones((H, W))
+            self.speed[2:-2, 2:-2] = speed
+            self.speed = self.speed.ravel()
+            # scikit-fmm masks speeds below the machine epsilon
+            self.flag[self.speed < np.finfo(float).eps] = km.MASK
+        self.sgn = np.zeros(H * W, dtype=np.uint8)
+        cap = H * W
+        self.hkey = np.empty(cap)
+        self.hcell = np.empty(cap, dtype=np.int32)
+        self.pos = np.empty(cap, dtype=np.int32)
+        self.batch = np.empty(cap, dtype=np.int32)
+        self.want = np.zeros(cap, dtype=np.uint8)
+        self.state = np.zeros(3, dtype=np.int64)  # heap size, wanted cells left, cells accepted
+        # phi (as travel_time's) on a window around the goal, which holds every cell with phi <= 0 and their
+        # neighbours; the cells inside the one-cell circle get -distance to it for the descent
+        gx, gy = float(goal[0]), float(goal[1])
+        ci = min(max(math.floor(gy / h), 0), ny - 1)
+        cj = min(max(math.floor(gx / h), 0), nx - 1)
+        i0, i1, j0, j1 = max(ci - 3, 0), min(ci + 4, ny), max(cj - 3, 0), min(cj + 4, nx)
+        xs = (np.arange(j0, j1) + 0.5) * h - gx
+        ys = (np.arange(i0, i1) + 0.5) * h - gy
+        level = np.hypot(xs[None, :], ys[:, None]) - h
+        k0 = (i0 + 2) * W + j0 + 2
+        n = km.start_front(W, self.flag, self.t, self.sgn, self.speed, self.unit, 1.0 / h / h, h, level, k0,
+                           self.hkey, self.hcell, self.pos)
+        if n < 0:
+            raise ValueError("the array phi contains no zero contour (no zero level set)")
+        self.state[0] = n
+        ii, jj = np.nonzero((level < 0) & space.free[i0:i1, j0:j1])
+        self._inside = ((ii + i0 + 2) * W + jj + j0 + 2, level[ii, jj])
+
+    @property
+    def accepted(self) -> int:
+        """Cells accepted (frozen) by the march so far, the initial front excluded."""
+        return int(self.state[2])
+
+    @property
+    def complete(self) -> bool:
+        """Whether the front has stopped: every reachable cell is accepted."""
+        return self.state[0] == 0
+
+    def _march(self) -> None:
+        self._km.march(self.W, self.flag, self.t, self.sgn, self.speed, self.unit, 1.0 / self.h / self.h,
+                       self.hkey, self.hcell, self.pos, self.state, self.want, self.batch)
+
+    def _reach(self, cells: np.ndarray, radius: int) -> bool:
+        """March until every free cell within ``radius`` (Chebyshev) of the padded ``cells`` is accepted.
+
+        Returns False when there was nothing to march for: each of those cells
+        was accepted, blocked, or is unreachable (the front has stopped).
+        """
+        if self.complete:
+            return False
+        wanted = self._km.want_band(self.flag, self.W, self.H, cells, radius, self.want)
+        if not wanted:
+            return False
+        self.state[1] += wanted
+        self._march()
+        return True
+
+    def field(self) -> np.ndarray:
+        """The whole field, ``(ny, nx)``: :func:`travel_time`'s array (marches what is left)."""
+        if not self.complete:
+            self.state[1] = 2**62  # more wanted cells than there are: march until the front stops
+            self._march()
+        t = self.t.reshape(self.H, self.W)[2:-2, 2:-2].copy()
+        t[self.flag.reshape(self.H, self.W)[2:-2, 2:-2] != self._km.FROZEN] = np.inf
+        k, level = self._inside
+        t.ravel()[self._unpad(k)] = level
+        return t
+
+    def _unpad(self, k: np.ndarray) -> np.ndarray:
+        i, j = np.divmod(k, self.W)
+        return (i - 2) * (self.W - 4) + (j - 2)
+
+    def _cells(self, pts: np.ndarray) -> np.ndarray:
+        """Padded cells of positions (m), as the descent computes them."""
+        inv_h = 1.0 / self.h
+        j = np.clip((pts[:, 0] * inv_h).astype(np.int64), -2, self.W - 3)
+        i = np.clip((pts[:, 1] * inv_h).astype(np.int64), -2, self.H - 3)
+        return (i + 2) * self.W + j + 2
+
+    def path(self, start: np.ndarray, goal: np.ndarray, *, step: float = 1.0) -> tuple[np.ndarray, dict[str, int]]:
+        """:func:`descend` from ``start`` on the field, computing only what the descent reads.
+
+        The same path and counters as ``descend(space, travel_time(...), start, goal)``,
+        plus ``cells_accepted`` (so far, for this goal) and ``descents``.
+        """
+        if not 0 < step <= 1:
+            raise ValueError("`step` must be in (0, 1] cells")
+        ks = self._cells(np.asarray(start, dtype=float)[None, :2])
+        # the start cell as travel_time's t[cell_of(start)]: clipped to the grid
+        iy, ix = self.space.grid.cell_of(np.asarray(start, dtype=float)[None, :2])
+        ks_t = (iy[0] + 2) * self.W + ix[0] + 2
+        self._reach(np.array([ks_t]), 0)
+        if self.flag[ks_t] != self._km.FROZEN:
+            raise NoPathFound("the goal cannot be reached from the start")
+        self._reach(ks, _READ_RADIUS)
+        descents = 0
+        k_in, level = self._inside
+        while True:
+            descents += 1
+            marched = self.t[k_in]
+            self.t[k_in] = level
+            try:
+                d = _Descent(self.space, self.t, padded=True)
+                pts, counters, failure = _trace(d, float(self.t[ks_t]), start, goal, step)
+            finally:
+                self.t[k_in] = marched
+            visited = np.array(pts[: len(pts) - (failure is None)])
+            if not self._reach(self._cells(visited), _READ_RADIUS):
+                break  # every value the descent read was final: it is the descent of the full field
+        if failure:
+            raise NoPathFound(failure)
+        counters["cells_accepted"] = self.accepted
+        counters["descents"] = descents
+        return np.array(pts), counters
+
+
+def plan(
+    space: ConfigSpace, start: np.ndarray, goal: np.ndarray, speed: np.ndarray | None = None, *, step: float = 1.0
+) -> tuple[np.ndarray, dict[str, int]]:
+    """``descend(space, travel_time(space, goal, speed), start, goal, step=step)``, marching only what it needs."""
+    return FrontMarch(space, goal, speed).path(start, goal, step=step)
