@@ -56,175 +56,7 @@ BIG = 1e30  # arrival time standing for "blocked" in the descent's array (see fa
 THIRD = 1.0 / 3.0
 
 _jit = njit(cache=True, error_model="numpy", nogil=True)
-
-
-@_jit
-def _axis(p, s, flag, t, sgn):
-    """One axis' term of the update of cell ``p`` (stride ``s``): (order 0/1/2, value u)."""
-    v1 = MAXD
-    v2 = MAXD
-    n = p - s
-    if flag[n] == FROZEN:
-        tn = t[n]
-        if abs(v1) > abs(tn):
-            v1 = tn
-            n2 = p - 2 * s
-            if flag[n2] == FROZEN:
-                d2 = t[n2]
-                if (d2 <= v1 and v1 >= 0.0) or (d2 >= v1 and v1 <= 0.0):
-                    v2 = d2
-                    if sgn[n2] | sgn[n] | sgn[p]:
-                        if _opposite(sgn[n2], sgn[n]) or _opposite(sgn[n2], sgn[p]):
-                            v2 = -v2
-    n = p + s
-    if flag[n] == FROZEN:
-        tn = t[n]
-        if abs(v1) > abs(tn):
-            v1 = tn
-            n2 = p + 2 * s
-            if flag[n2] == FROZEN:
-                d2 = t[n2]
-                if (d2 <= v1 and v1 >= 0.0) or (d2 >= v1 and v1 <= 0.0):
-                    v2 = d2
-                    if sgn[n2] | sgn[n] | sgn[p]:
-                        if _opposite(sgn[n2], sgn[n]) or _opposite(sgn[n2], sgn[p]):
-                            v2 = -v2
-    if v2 < MAXD:
-        return 2, (4.0 * v1 - v2) * THIRD
-    if v1 < MAXD:
-        return 1, v1
-    return 0, 0.0
-
-
-@_jit
-def _opposite(a, b):
-    """Whether phi's signs coded ``a`` and ``b`` (0 positive, 1 negative, 2 zero) have a negative product."""
-    return (a == 1 and b == 0) or (a == 0 and b == 1)
-
-
-@_jit
-def _solve(o0, u0, o1, u1, inv_s2, idx2):
-    """(solved, larger root) of the update's quadratic over the axes with ``o > 0`` (NaN for none, as scikit-fmm)."""
-    a = 0.0
-    b = 0.0
-    c = 0.0
-    if o0 == 2:
-        a += idx2 * 2.25
-        b -= (idx2 + idx2) * 2.25 * u0
-        c += (u0 * u0) * (idx2 * 2.25)
-    elif o0 == 1:
-        a += idx2
-        b -= (idx2 + idx2) * u0
-        c += idx2 * (u0 * u0)
-    if o1 == 2:
-        a += idx2 * 2.25
-        b -= (idx2 + idx2) * 2.25 * u1
-        c += (u1 * u1) * (idx2 * 2.25)
-    elif o1 == 1:
-        a += idx2
-        b -= (idx2 + idx2) * u1
-        c += idx2 * (u1 * u1)
-    c -= inv_s2
-    det = b * b - (4.0 * a) * c
-    if det >= 0.0:
-        return True, ((math.sqrt(det) - b) * 0.5) / a
-    return False, 0.0  # a negative (or NaN) discriminant
-
-
-@_jit
-def _update(p, W, flag, t, sgn, speed, unit, idx2):
-    """scikit-fmm's second-order travel-time update of cell ``p``."""
-    o0, u0 = _axis(p, W, flag, t, sgn)
-    o1, u1 = _axis(p, 1, flag, t, sgn)
-    if unit:
-        inv_s2 = 1.0
-    else:
-        s = speed[p]
-        inv_s2 = 1.0 / (s * s)
-    ok, r = _solve(o0, u0, o1, u1, inv_s2, idx2)
-    if not ok:
-        # the smaller of the solutions leaving one axis out, axis 0 left out first; one that fails too is
-        # +inf (one axis' discriminant is 4 a / speed^2 > 0, so it does not; scikit-fmm would raise on +inf)
-        ok1, r1 = _solve(0, 0.0, o1, u1, inv_s2, idx2)
-        ok0, r0 = _solve(o0, u0, 0, 0.0, inv_s2, idx2)
-        if not ok1:
-            r1 = math.inf
-        if not ok0:
-            r0 = math.inf
-        r = r0 if r1 > r0 else r1
-    return r
-
-
-# --- the priority queue: a binary min-heap of (key, cell) with each cell's position ---------------------------
-
-
-@_jit
-def _sift_up(hkey, hcell, pos, i):
-    """Move entry ``i`` towards the root while its key is smaller than its parent's."""
-    key = hkey[i]
-    cell = hcell[i]
-    while i > 0:
-        parent = (i - 1) >> 1
-        if key < hkey[parent]:
-            hkey[i] = hkey[parent]
-            hcell[i] = hcell[parent]
-            pos[hcell[i]] = i
-            i = parent
-        else:
-            break
-    hkey[i] = key
-    hcell[i] = cell
-    pos[cell] = i
-
-
-@_jit
-def _sift_down(hkey, hcell, pos, i, n):
-    """Move entry ``i`` towards the leaves while a child's key is smaller."""
-    key = hkey[i]
-    cell = hcell[i]
-    while True:
-        child = 2 * i + 1
-        if child >= n:
-            break
-        right = child + 1
-        if right < n and hkey[right] < hkey[child]:
-            child = right
-        if hkey[child] < key:
-            hkey[i] = hkey[child]
-            hcell[i] = hcell[child]
-            pos[hcell[i]] = i
-            i = child
-        else:
-            break
-    hkey[i] = key
-    hcell[i] = cell
-    pos[cell] = i
-
-
-@_jit
-def _set(hkey, hcell, pos, n, cell, key):
-    i = pos[cell]
-    old = hkey[i]
-    hkey[i] = key
-    if key > old:
-        _sift_down(hkey, hcell, pos, i, n)
-    elif key < old:
-        _sift_up(hkey, hcell, pos, i)
-
-
-@_jit
-def _pop(hkey, hcell, pos, n):
-    """Remove the root of a heap of ``n`` entries; returns its cell (the caller reads ``hkey[0]`` before)."""
-    cell = hcell[0]
-    last = n - 1
-    if last > 0:
-        hkey[0] = hkey[last]
-        hcell[0] = hcell[last]
-        _sift_down(hkey, hcell, pos, 0, last)
-    return cell
-
-
-# --- set-up and marching ----------------------------------------------------------------------------------------
+U = np.uint64  # an array index that numba need not check for wrapping around
 
 
 @_jit
@@ -242,34 +74,33 @@ def init_grid(free, flag, t):
 
 
 @_jit
-def start_front(W, flag, t, sgn, speed, unit, idx2, h, phi_win, k0, hkey, hcell, pos):
-    """The initial front from the zero level set of ``phi`` (given on a window around the goal).
+def start_front(W, flag, t, sgn, h, phi_win, speed_win, k0, seeds):
+    """The initial front from the zero level set of ``phi``, given on a window around the goal.
 
-    ``phi_win`` is ``phi`` on the ``(r, c)`` window whose top-left cell has
-    padded index ``k0``; outside the window ``phi > 0`` and no cell borders the
-    level set.  Freezes the bordering cells, codes ``phi``'s sign of the window's
-    cells in ``sgn``, and pushes every far cell next to a frozen one (raster
-    order, as scikit-fmm).  Returns the heap's size, or -1 when nothing was
-    frozen (scikit-fmm: "no zero level set").
+    ``phi_win`` (and ``speed_win``) are ``phi`` (the speed) on the window whose
+    top-left cell has padded index ``k0``; outside the window ``phi > 0``, so no
+    cell there borders the level set.  Freezes the bordering cells with
+    ``|d / speed|``, codes the sign of ``phi`` in ``sgn`` (0 positive, 1
+    negative, 2 zero), and writes the far cells next to a frozen one to
+    ``seeds`` in raster order (scikit-fmm's narrow band, which :func:`march`
+    computes first).  Returns how many, or -1 when no cell borders the level
+    set (scikit-fmm: "no zero level set").
     """
     r, c = phi_win.shape
     dist = np.zeros((r, c))
     frozen = np.zeros((r, c), dtype=np.bool_)
     for i in range(r):
         for j in range(c):
-            k = k0 + i * W + j
             ph = phi_win[i, j]
-            sgn[k] = 1 if ph < 0.0 else (2 if ph == 0.0 else 0)
+            sgn[k0 + i * W + j] = 1 if ph < 0.0 else (2 if ph == 0.0 else 0)
     nfrozen = 0
     for i in range(r):
         for j in range(c):
-            k = k0 + i * W + j
-            if flag[k] == MASK:
+            if flag[k0 + i * W + j] == MASK:
                 continue
             ph = phi_win[i, j]
             if ph == 0.0:
                 frozen[i, j] = True
-                dist[i, j] = 0.0
                 nfrozen += 1
                 continue
             l0 = 0.0
@@ -279,9 +110,7 @@ def start_front(W, flag, t, sgn, speed, unit, idx2, h, phi_win, k0, hkey, hcell,
                 for d in (-1, 1):
                     ii = i + d if axis == 0 else i
                     jj = j if axis == 0 else j + d
-                    if ii < 0 or ii >= r or jj < 0 or jj >= c:
-                        continue  # outside the window: phi > 0 there, and phi > 0 here (see the caller)
-                    if flag[k0 + ii * W + jj] == MASK:
+                    if ii < 0 or ii >= r or jj < 0 or jj >= c or flag[k0 + ii * W + jj] == MASK:
                         continue
                     pn = phi_win[ii, jj]
                     if ph * pn < 0.0:
@@ -290,9 +119,8 @@ def start_front(W, flag, t, sgn, speed, unit, idx2, h, phi_win, k0, hkey, hcell,
                         if axis == 0:
                             if l0 == 0.0 or l0 > dd:
                                 l0 = dd
-                        else:
-                            if l1 == 0.0 or l1 > dd:
-                                l1 = dd
+                        elif l1 == 0.0 or l1 > dd:
+                            l1 = dd
             if borders:
                 dsum = 0.0
                 if l0 > 0.0:
@@ -309,88 +137,300 @@ def start_front(W, flag, t, sgn, speed, unit, idx2, h, phi_win, k0, hkey, hcell,
             if frozen[i, j]:
                 k = k0 + i * W + j
                 flag[k] = FROZEN
-                s = 1.0 if unit else speed[k]
-                t[k] = abs(dist[i, j] / s)
-    # the narrow band: far cells next to a frozen one, in raster order (all lie in the window grown by one)
+                t[k] = abs(dist[i, j] / speed_win[i, j])
     n = 0
-    for i in range(-1, r + 1):
+    for i in range(-1, r + 1):  # frozen cells lie in the window, so their neighbours in the window grown by one
         for j in range(-1, c + 1):
             k = k0 + i * W + j
-            if flag[k] != FAR:
-                continue
-            if flag[k - W] == FROZEN or flag[k + W] == FROZEN or flag[k - 1] == FROZEN or flag[k + 1] == FROZEN:
-                u = _update(k, W, flag, t, sgn, speed, unit, idx2)
-                flag[k] = NARROW
-                t[k] = u
-                hkey[n] = abs(u)
-                hcell[n] = k
-                pos[k] = n
-                _sift_up(hkey, hcell, pos, n)
+            if flag[k] == FAR and (flag[k - W] == FROZEN or flag[k + W] == FROZEN or flag[k - 1] == FROZEN
+                                   or flag[k + 1] == FROZEN):
+                seeds[n] = k
                 n += 1
     return n
 
 
 @_jit
-def march(W, flag, t, sgn, speed, unit, idx2, hkey, hcell, pos, state, want, batch):
-    """Accept cells until every wanted cell is frozen or the front has stopped.
+def march(W, flag, t, sgn, sgn_lo, sgn_hi, inv_s2, unit, idx2, hkey, hcell, pos, state, want, batch, seeds):
+    """Accept cells until every wanted cell is frozen (or the front has stopped); resumable.
 
-    ``state`` = [heap size, wanted cells not yet frozen, cells accepted so far];
-    ``want[k]`` is 1 for a wanted cell (cleared when it is accepted).
+    ``t`` holds the arrival times of the frozen cells, ``BIG`` elsewhere (the
+    updates read only those; tentative values live in the heap, as keys: every
+    arrival time is >= 0).  ``state`` = [heap size, wanted cells not yet
+    accepted, cells accepted, seeds computed];
+    ``want[k]`` is 1 for a wanted cell and is cleared when it is accepted.
+    ``inv_s2`` is ``1 / speed^2`` (unused when ``unit``); the cells with a
+    non-zero ``sgn`` lie in padded indices ``sgn_lo..sgn_hi``.  The heap holds
+    ``(hkey, hcell)[0..n)``, ``hkey[n] = inf`` as a sentinel, ``pos`` each
+    queued cell's place; ``hkey[n..n+3)`` are ``inf`` (a 4-ary heap).
+
+    Written as one loop with one copy of the update and of each heap operation
+    (helper functions taking arrays would cost reference counting on every
+    call), arrays indexed with unsigned integers (no negative-index
+    wraparound), and the updates of an accepted cell's neighbours computed
+    before any of them is queued, so that their square roots and divisions
+    overlap.
     """
     n = state[0]
     remaining = state[1]
     accepted = state[2]
-    while n > 0 and remaining > 0:
-        value = hkey[0]
-        nb = 0
-        while n > 0 and hkey[0] == value:
-            k = _pop(hkey, hcell, pos, n)
-            n -= 1
-            flag[k] = FROZEN
-            batch[nb] = k
-            nb += 1
-            if want[k]:
-                want[k] = 0
-                remaining -= 1
-        accepted += nb
-        for b in range(nb):
-            c = batch[b]
-            tc = t[c]
-            for s in (W, 1):
-                for d in (-1, 1):
-                    m = c + d * s
-                    fm = flag[m]
-                    if fm == NARROW:
-                        # c is m's +1 side when d == -1: not an input when m's -1 side is frozen and no larger
-                        if d == -1 and flag[m - s] == FROZEN and abs(t[m - s]) <= abs(tc):
-                            continue
-                        u = _update(m, W, flag, t, sgn, speed, unit, idx2)
-                        if u != 0.0:
-                            t[m] = u
-                            _set(hkey, hcell, pos, n, m, abs(u))
-                    elif fm == FAR:
-                        u = _update(m, W, flag, t, sgn, speed, unit, idx2)
-                        if u != 0.0:
-                            t[m] = u
-                            flag[m] = NARROW
-                            hkey[n] = abs(u)
-                            hcell[n] = m
-                            pos[m] = n
-                            _sift_up(hkey, hcell, pos, n)
-                            n += 1
-                    elif fm == FROZEN:
-                        m2 = m + d * s
-                        if flag[m2] == NARROW:
-                            # c enters m2's update only as its second-order neighbour behind m, if no larger than m
-                            tm = t[m]
-                            if (tc <= tm and tm >= 0.0) or (tc >= tm and tm <= 0.0):
-                                u = _update(m2, W, flag, t, sgn, speed, unit, idx2)
-                                if u != 0.0:
-                                    t[m2] = u
-                                    _set(hkey, hcell, pos, n, m2, abs(u))
+    si = state[3]
+    nseeds = seeds.shape[0]
+    A2 = idx2 * 2.25
+    B2 = (idx2 + idx2) * 2.25
+    B1 = idx2 + idx2
+    near_lo = sgn_lo - 2 * W - 2
+    near_hi = sgn_hi + 2 * W + 2
+    tgt = np.empty(4, dtype=np.int64)  # the cells to update, their mode (0 seed, 1 far, 2 tentative), value
+    tmode = np.empty(4, dtype=np.int64)
+    tval = np.empty(4)
+    b = 0
+    nb = 0
+    while True:
+        # ---- the cells to update: a seed, or the neighbours of the next accepted cell ----
+        nt = 0
+        if si < nseeds:
+            tgt[0] = seeds[U(si)]
+            tmode[0] = 0  # pushed whatever the update gives
+            nt = 1
+            si += 1
+        else:
+            if b == nb:
+                if n == 0 or remaining <= 0:
+                    break
+                # accept the smallest value and every other cell with exactly that value
+                value = hkey[0]
+                nb = 0
+                while n > 0 and hkey[0] == value:
+                    k = hcell[0]
+                    flag[U(k)] = FROZEN
+                    t[U(k)] = value
+                    batch[U(nb)] = k
+                    nb += 1
+                    if want[U(k)]:
+                        want[U(k)] = 0
+                        remaining -= 1
+                    n -= 1
+                    lk = hkey[U(n)]
+                    lc = hcell[U(n)]
+                    hkey[U(n)] = np.inf
+                    if n > 0:
+                        i = 0
+                        ch = 1
+                        while ch < n:  # the hole down to a leaf along the smaller children
+                            k0 = hkey[U(ch)]
+                            k1 = hkey[U(ch + 1)]
+                            k2 = hkey[U(ch + 2)]
+                            k3 = hkey[U(ch + 3)]
+                            l1 = k1 < k0
+                            ca = ch + np.int64(l1)
+                            ka = min(k0, k1)
+                            l3 = k3 < k2
+                            cb = ch + 2 + np.int64(l3)
+                            kb = min(k2, k3)
+                            lb = kb < ka
+                            ch = ca + np.int64(lb) * (cb - ca)
+                            hkey[U(i)] = min(ka, kb)
+                            hcell[U(i)] = hcell[U(ch)]
+                            pos[U(hcell[U(i)])] = i
+                            i = ch
+                            ch = 4 * i + 1
+                        while i > 0:  # then the last entry up from there
+                            par = (i - 1) >> 2
+                            if lk < hkey[U(par)]:
+                                hkey[U(i)] = hkey[U(par)]
+                                hcell[U(i)] = hcell[U(par)]
+                                pos[U(hcell[U(i)])] = i
+                                i = par
+                            else:
+                                break
+                        hkey[U(i)] = lk
+                        hcell[U(i)] = lc
+                        pos[U(lc)] = i
+                accepted += nb
+                b = 0
+            c = batch[U(b)]
+            b += 1
+            tc = t[U(c)]
+            for d in range(4):
+                s = W if d < 2 else 1  # axis 0 then 1, each side -1 then +1
+                if d == 0 or d == 2:
+                    s = -s
+                m = c + s
+                fm = flag[U(m)]
+                if fm == FROZEN:
+                    # c enters the update of the tentative cell beyond m only as its second-order neighbour,
+                    # when no larger than m (otherwise that update returns its stored value: skipped)
+                    p = m + s
+                    if flag[U(p)] != NARROW:
+                        continue
+                    tm = t[U(m)]
+                    if not ((tc <= tm and tm >= 0.0) or (tc >= tm and tm <= 0.0)):
+                        continue
+                    tmode[nt] = 2
+                elif fm == NARROW:
+                    # c is m's +1 side when s < 0: no input when m's -1 side is frozen and no larger
+                    if s < 0 and flag[U(m + s)] == FROZEN and abs(t[U(m + s)]) <= abs(tc):
+                        continue
+                    p = m
+                    tmode[nt] = 2
+                elif fm == FAR:
+                    p = m
+                    tmode[nt] = 1
+                else:
+                    continue
+                tgt[nt] = p
+                nt += 1
+        # ---- scikit-fmm's second-order update of each ----
+        # (every arrival time is >= 0, so its comparisons of absolute values and its two-sided test for
+        # the second neighbour reduce to the plain ones below)
+        for e in range(nt):
+            p = tgt[e]
+            o0 = 0
+            o1 = 0
+            u0 = 0.0
+            u1 = 0.0
+            for ax in range(2):
+                s = W if ax == 0 else 1
+                tl = t[U(p - s)]  # BIG when not frozen
+                tr = t[U(p + s)]
+                tl2 = t[U(p - 2 * s)]
+                okl = tl < BIG and tl2 < BIG and (tl2 <= tl or tl == 0.0)
+                if tl <= tr:  # the -1 side (or none): scikit-fmm looks at it first and keeps it on a tie
+                    v1 = tl if tl < BIG else MAXD
+                    v2 = tl2 if okl else MAXD
+                    side = -1
+                else:
+                    v1 = tr
+                    tr2 = t[U(p + 2 * s)]
+                    if tr2 < BIG and (tr2 <= tr or tr == 0.0):
+                        v2 = tr2
+                        side = 1
+                    else:  # the -1 side's second neighbour stays (scikit-fmm does not reset it)
+                        v2 = tl2 if okl else MAXD
+                        side = -1
+                if v2 < MAXD:
+                    if near_lo <= p <= near_hi:  # phi changes sign: scikit-fmm negates v2
+                        a2 = sgn[U(p + 2 * side * s)]
+                        a1 = sgn[U(p + side * s)]
+                        a0 = sgn[U(p)]
+                        if ((a2 == 1 and a1 == 0) or (a2 == 0 and a1 == 1)
+                                or (a2 == 1 and a0 == 0) or (a2 == 0 and a0 == 1)):
+                            v2 = -v2
+                    o = 2
+                    u = (4.0 * v1 - v2) * THIRD
+                elif v1 < MAXD:
+                    o = 1
+                    u = v1
+                else:
+                    o = 0
+                    u = 0.0
+                if ax == 0:
+                    o0 = o
+                    u0 = u
+                else:
+                    o1 = o
+                    u1 = u
+            inv = 1.0 if unit else inv_s2[U(p)]
+            # the quadratic over both axes, in scikit-fmm's order of operations (an axis without a term adds
+            # exact zeros: the same roundings)
+            if o0 == 2:
+                a0 = A2
+                b0 = B2 * u0
+                c0 = (u0 * u0) * A2
+            elif o0 == 1:
+                a0 = idx2
+                b0 = B1 * u0
+                c0 = idx2 * (u0 * u0)
+            else:
+                a0 = 0.0
+                b0 = 0.0
+                c0 = 0.0
+            if o1 == 2:
+                a1 = A2
+                b1 = B2 * u1
+                c1 = (u1 * u1) * A2
+            elif o1 == 1:
+                a1 = idx2
+                b1 = B1 * u1
+                c1 = idx2 * (u1 * u1)
+            else:
+                a1 = 0.0
+                b1 = 0.0
+                c1 = 0.0
+            a = a0 + a1
+            bb = (0.0 - b0) - b1
+            cq = (c0 + c1) - inv
+            det = bb * bb - (4.0 * a) * cq
+            if det >= 0.0:
+                r = ((math.sqrt(det) - bb) * 0.5) / a
+            else:
+                # the smaller of the solutions leaving one axis out (axis 0 first; one that fails too is
+                # +inf, on which scikit-fmm would raise: a one-axis discriminant is 4 a / speed^2 > 0)
+                bb = 0.0 - b1
+                cq = c1 - inv
+                det = bb * bb - (4.0 * a1) * cq
+                r1 = ((math.sqrt(det) - bb) * 0.5) / a1 if det >= 0.0 else np.inf
+                bb = 0.0 - b0
+                cq = c0 - inv
+                det = bb * bb - (4.0 * a0) * cq
+                r0 = ((math.sqrt(det) - bb) * 0.5) / a0 if det >= 0.0 else np.inf
+                r = r0 if r1 > r0 else r1
+            tval[e] = r
+        # ---- store and queue them ----
+        for e in range(nt):
+            p = tgt[e]
+            r = tval[e]
+            mode = tmode[e]
+            if mode != 0 and r == 0.0:
+                continue  # scikit-fmm: an update of exactly 0 changes nothing
+            key = r
+            if mode == 2:
+                i = pos[U(p)]
+                old = hkey[U(i)]
+                if key > old:
+                    while True:
+                        ch = 4 * i + 1
+                        if ch >= n:
+                            break
+                        cm = ch
+                        for e2 in range(1, 4):
+                            if hkey[U(ch + e2)] < hkey[U(cm)]:
+                                cm = ch + e2
+                        ch = cm
+                        if hkey[U(ch)] < key:
+                            hkey[U(i)] = hkey[U(ch)]
+                            hcell[U(i)] = hcell[U(ch)]
+                            pos[U(hcell[U(i)])] = i
+                            i = ch
+                        else:
+                            break
+                    hkey[U(i)] = key
+                    hcell[U(i)] = p
+                    pos[U(p)] = i
+                    continue
+                if not key < old:
+                    continue
+            else:
+                flag[U(p)] = NARROW
+                i = n
+                hkey[U(n + 3)] = np.inf
+                n += 1
+            while i > 0:
+                par = (i - 1) >> 2
+                if key < hkey[U(par)]:
+                    hkey[U(i)] = hkey[U(par)]
+                    hcell[U(i)] = hcell[U(par)]
+                    pos[U(hcell[U(i)])] = i
+                    i = par
+                else:
+                    break
+            hkey[U(i)] = key
+            hcell[U(i)] = p
+            pos[U(p)] = i
     state[0] = n
     state[1] = remaining
     state[2] = accepted
+    state[3] = si
 
 
 @_jit

@@ -338,23 +338,27 @@ class FrontMarch:
         self.flag = np.empty(H * W, dtype=np.int8)
         self.t = np.empty(H * W)
         km.init_grid(space.free, self.flag, self.t)
-        if speed is None:
-            self.unit, self.speed = True, np.ones(1)
+        self.unit = speed is None
+        if self.unit:
+            self.inv_s2 = np.ones(1)
         else:
-            self.unit = False
-            self.speed = np.ones((H, W))
-            self.speed[2:-2, 2:-2] = speed
-            self.speed = self.speed.ravel()
-            # scikit-fmm masks speeds below the machine epsilon
-            self.flag[self.speed < np.finfo(float).eps] = km.MASK
+            speed = np.asarray(speed, dtype=float)
+            inv_s2 = np.ones((H, W))
+            np.multiply(speed, speed, out=inv_s2[2:-2, 2:-2])
+            np.divide(1.0, inv_s2[2:-2, 2:-2], out=inv_s2[2:-2, 2:-2])  # as scikit-fmm's 1 / pow(speed, 2)
+            self.inv_s2 = inv_s2.ravel()
+            slow = np.zeros((H, W), dtype=bool)
+            slow[2:-2, 2:-2] = speed < np.finfo(float).eps  # scikit-fmm masks speeds below the machine epsilon
+            self.flag[slow.ravel()] = km.MASK
         self.sgn = np.zeros(H * W, dtype=np.uint8)
         cap = H * W
-        self.hkey = np.empty(cap)
+        self.hkey = np.empty(cap + 4)
+        self.hkey[:4] = np.inf
         self.hcell = np.empty(cap, dtype=np.int32)
         self.pos = np.empty(cap, dtype=np.int32)
         self.batch = np.empty(cap, dtype=np.int32)
         self.want = np.zeros(cap, dtype=np.uint8)
-        self.state = np.zeros(3, dtype=np.int64)  # heap size, wanted cells left, cells accepted
+        self.state = np.zeros(4, dtype=np.int64)  # heap size, wanted cells left, cells accepted, seeds done
         # phi (as travel_time's) on a window around the goal, which holds every cell with phi <= 0 and their
         # neighbours; the cells inside the one-cell circle get -distance to it for the descent
         gx, gy = float(goal[0]), float(goal[1])
@@ -364,12 +368,14 @@ class FrontMarch:
         xs = (np.arange(j0, j1) + 0.5) * h - gx
         ys = (np.arange(i0, i1) + 0.5) * h - gy
         level = np.hypot(xs[None, :], ys[:, None]) - h
+        speed_win = np.ones_like(level) if speed is None else np.array(speed[i0:i1, j0:j1], dtype=float)
         k0 = (i0 + 2) * W + j0 + 2
-        n = km.start_front(W, self.flag, self.t, self.sgn, self.speed, self.unit, 1.0 / h / h, h, level, k0,
-                           self.hkey, self.hcell, self.pos)
+        seeds = np.empty((i1 - i0 + 2) * (j1 - j0 + 2), dtype=np.int64)
+        n = km.start_front(W, self.flag, self.t, self.sgn, h, level, speed_win, k0, seeds)
         if n < 0:
             raise ValueError("the array phi contains no zero contour (no zero level set)")
-        self.state[0] = n
+        self.seeds = seeds[:n]
+        self.sgn_range = (k0, k0 + (i1 - i0 - 1) * W + (j1 - j0 - 1))
         ii, jj = np.nonzero((level < 0) & space.free[i0:i1, j0:j1])
         self._inside = ((ii + i0 + 2) * W + jj + j0 + 2, level[ii, jj])
 
@@ -381,11 +387,12 @@ class FrontMarch:
     @property
     def complete(self) -> bool:
         """Whether the front has stopped: every reachable cell is accepted."""
-        return self.state[0] == 0
+        return self.state[0] == 0 and self.state[3] == len(self.seeds)
 
     def _march(self) -> None:
-        self._km.march(self.W, self.flag, self.t, self.sgn, self.speed, self.unit, 1.0 / self.h / self.h,
-                       self.hkey, self.hcell, self.pos, self.state, self.want, self.batch)
+        self._km.march(self.W, self.flag, self.t, self.sgn, *self.sgn_range, self.inv_s2, self.unit,
+                       1.0 / self.h / self.h, self.hkey, self.hcell, self.pos, self.state, self.want, self.batch,
+                       self.seeds)
 
     def _reach(self, cells: np.ndarray, radius: int) -> bool:
         """March until every free cell within ``radius`` (Chebyshev) of the padded ``cells`` is accepted.
