@@ -159,9 +159,11 @@ def march(W, flag, t, sgn, sgn_lo, sgn_hi, inv_s2, unit, idx2, hkey, hcell, pos,
     accepted, cells accepted, seeds computed];
     ``want[k]`` is 1 for a wanted cell and is cleared when it is accepted.
     ``inv_s2`` is ``1 / speed^2`` (unused when ``unit``); the cells with a
-    non-zero ``sgn`` lie in padded indices ``sgn_lo..sgn_hi``.  The heap holds
-    ``(hkey, hcell)[0..n)``, ``hkey[n] = inf`` as a sentinel, ``pos`` each
-    queued cell's place; ``hkey[n..n+3)`` are ``inf`` (a 4-ary heap).
+    non-zero ``sgn`` lie in padded indices ``sgn_lo..sgn_hi``.  The heap is
+    4-ary, its root at index 3 so that each node's four children (from index
+    ``4 i - 8``) share a 32-byte block: ``(hkey, hcell)[3..n+3)``, with
+    ``hkey[n+3..n+6)`` = ``inf`` as sentinels, and ``pos`` each queued cell's
+    index.
 
     Written as one loop with one copy of the update and of each heap operation
     (helper functions taking arrays would cost reference counting on every
@@ -198,10 +200,10 @@ def march(W, flag, t, sgn, sgn_lo, sgn_hi, inv_s2, unit, idx2, hkey, hcell, pos,
                 if n == 0 or remaining <= 0:
                     break
                 # accept the smallest value and every other cell with exactly that value
-                value = hkey[0]
+                value = hkey[3]
                 nb = 0
-                while n > 0 and hkey[0] == value:
-                    k = hcell[0]
+                while n > 0 and hkey[3] == value:
+                    k = hcell[3]
                     flag[U(k)] = FROZEN
                     t[U(k)] = value
                     batch[U(nb)] = k
@@ -210,13 +212,13 @@ def march(W, flag, t, sgn, sgn_lo, sgn_hi, inv_s2, unit, idx2, hkey, hcell, pos,
                         want[U(k)] = 0
                         remaining -= 1
                     n -= 1
-                    lk = hkey[U(n)]
-                    lc = hcell[U(n)]
-                    hkey[U(n)] = np.inf
+                    lk = hkey[U(n + 3)]
+                    lc = hcell[U(n + 3)]
+                    hkey[U(n + 3)] = np.inf
                     if n > 0:
-                        i = 0
-                        ch = 1
-                        while ch < n:  # the hole down to a leaf along the smaller children
+                        i = 3
+                        ch = 4
+                        while ch < n + 3:  # the hole down to a leaf along the smaller children
                             k0 = hkey[U(ch)]
                             k1 = hkey[U(ch + 1)]
                             k2 = hkey[U(ch + 2)]
@@ -233,9 +235,9 @@ def march(W, flag, t, sgn, sgn_lo, sgn_hi, inv_s2, unit, idx2, hkey, hcell, pos,
                             hcell[U(i)] = hcell[U(ch)]
                             pos[U(hcell[U(i)])] = i
                             i = ch
-                            ch = 4 * i + 1
-                        while i > 0:  # then the last entry up from there
-                            par = (i - 1) >> 2
+                            ch = 4 * i - 8
+                        while i > 3:  # then the last entry up from there
+                            par = (i + 8) >> 2
                             if lk < hkey[U(par)]:
                                 hkey[U(i)] = hkey[U(par)]
                                 hcell[U(i)] = hcell[U(par)]
@@ -389,8 +391,8 @@ def march(W, flag, t, sgn, sgn_lo, sgn_hi, inv_s2, unit, idx2, hkey, hcell, pos,
                 old = hkey[U(i)]
                 if key > old:
                     while True:
-                        ch = 4 * i + 1
-                        if ch >= n:
+                        ch = 4 * i - 8
+                        if ch >= n + 3:
                             break
                         cm = ch
                         for e2 in range(1, 4):
@@ -412,11 +414,11 @@ def march(W, flag, t, sgn, sgn_lo, sgn_hi, inv_s2, unit, idx2, hkey, hcell, pos,
                     continue
             else:
                 flag[U(p)] = NARROW
-                i = n
-                hkey[U(n + 3)] = np.inf
+                i = n + 3
+                hkey[U(n + 6)] = np.inf
                 n += 1
-            while i > 0:
-                par = (i - 1) >> 2
+            while i > 3:
+                par = (i + 8) >> 2
                 if key < hkey[U(par)]:
                     hkey[U(i)] = hkey[U(par)]
                     hcell[U(i)] = hcell[U(par)]
