@@ -231,6 +231,10 @@ class FrontMarch:
         if not self.complete:
             self.state[1] = 2**62  # more wanted cells than there are: march until the front stops
             self._march()
+        return self.arrival()
+
+    def arrival(self) -> np.ndarray:
+        """The arrival times computed so far, ``(ny, nx)``, as :func:`travel_time`'s; ``+inf`` elsewhere."""
         t = self.t.reshape(self.H, self.W)[2:-2, 2:-2].copy()
         t[self.flag.reshape(self.H, self.W)[2:-2, 2:-2] != self._km.FROZEN] = np.inf
         k, level = self._inside
