@@ -62,6 +62,7 @@ def travel_time(space: ConfigSpace, goal: np.ndarray, speed: np.ndarray | None =
 _BIG = 1e30  # arrival time standing for "blocked" in the descent's padded grid (finite: bilinear weights of 0 stay 0)
 #: How far (Chebyshev, cells) from the cell of each of its positions the descent reads arrival times
 _READ_RADIUS = 3
+_FROZEN, _MASK = 2, 3  # cell states of planners._marching (checked by tests/test_fast_marching.py)
 
 
 def descend(
@@ -145,16 +146,17 @@ class FrontMarch:
     """
 
     def __init__(self, space: ConfigSpace, goal: np.ndarray, speed: np.ndarray | None = None) -> None:
-        from . import _marching as km  # numba loads here, not when the planners are imported
+        # numba loads here, not when the planners are imported
+        from ._marching import init_grid, march, start_front, want_band
 
-        self._km = km
+        self._kernels = march, want_band
         self.space = space
         h = self.h = space.resolution
         ny, nx = space.free.shape
         H, W = self.H, self.W = ny + 4, nx + 4
         self.flag = np.empty(H * W, dtype=np.int8)
         self.t = np.empty(H * W)
-        km.init_grid(space.free, self.flag, self.t)
+        init_grid(space.free, self.flag, self.t)
         self.unit = speed is None
         if self.unit:
             self.inv_s2 = np.ones(1)
@@ -166,7 +168,7 @@ class FrontMarch:
             self.inv_s2 = inv_s2.ravel()
             slow = np.zeros((H, W), dtype=bool)
             slow[2:-2, 2:-2] = speed < np.finfo(float).eps  # scikit-fmm masks speeds below the machine epsilon
-            self.flag[slow.ravel()] = km.MASK
+            self.flag[slow.ravel()] = _MASK
         self.sgn = np.zeros(H * W, dtype=np.uint8)
         cap = H * W
         self.hkey = np.empty(cap + 8)
@@ -188,7 +190,7 @@ class FrontMarch:
         speed_win = np.ones_like(level) if speed is None else np.array(speed[i0:i1, j0:j1], dtype=float)
         k0 = (i0 + 2) * W + j0 + 2
         seeds = np.empty((i1 - i0 + 2) * (j1 - j0 + 2), dtype=np.int64)
-        n = km.start_front(W, self.flag, self.t, self.sgn, h, level, speed_win, k0, seeds)
+        n = start_front(W, self.flag, self.t, self.sgn, h, level, speed_win, k0, seeds)
         if n < 0:
             raise ValueError("the array phi contains no zero contour (no zero level set)")
         self.seeds = seeds[:n]
@@ -207,7 +209,7 @@ class FrontMarch:
         return self.state[0] == 0 and self.state[3] == len(self.seeds)
 
     def _march(self) -> None:
-        self._km.march(self.W, self.flag, self.t, self.sgn, *self.sgn_range, self.inv_s2, self.unit,
+        self._kernels[0](self.W, self.flag, self.t, self.sgn, *self.sgn_range, self.inv_s2, self.unit,
                        1.0 / self.h / self.h, self.hkey, self.hcell, self.pos, self.state, self.want, self.batch,
                        self.seeds)
 
@@ -219,7 +221,7 @@ class FrontMarch:
         """
         if self.complete:
             return False
-        wanted = self._km.want_band(self.flag, self.W, self.H, cells, radius, self.want)
+        wanted = self._kernels[1](self.flag, self.W, self.H, cells, radius, self.want)
         if not wanted:
             return False
         self.state[1] += wanted
@@ -236,7 +238,7 @@ class FrontMarch:
     def arrival(self) -> np.ndarray:
         """The arrival times computed so far, ``(ny, nx)``, as :func:`travel_time`'s; ``+inf`` elsewhere."""
         t = self.t.reshape(self.H, self.W)[2:-2, 2:-2].copy()
-        t[self.flag.reshape(self.H, self.W)[2:-2, 2:-2] != self._km.FROZEN] = np.inf
+        t[self.flag.reshape(self.H, self.W)[2:-2, 2:-2] != _FROZEN] = np.inf
         k, level = self._inside
         t.ravel()[self._unpad(k)] = level
         return t
@@ -265,7 +267,7 @@ class FrontMarch:
         iy, ix = self.space.grid.cell_of(np.asarray(start, dtype=float)[None, :2])
         ks_t = (iy[0] + 2) * self.W + ix[0] + 2
         self._reach(np.array([ks_t]), 0)
-        if self.flag[ks_t] != self._km.FROZEN:
+        if self.flag[ks_t] != _FROZEN:
             raise NoPathFound("the goal cannot be reached from the start")
         self._reach(ks, _READ_RADIUS)
         descents = 0

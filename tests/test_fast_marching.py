@@ -253,3 +253,9 @@ def test_a_start_in_a_blocked_cell_is_unreachable():
     space = config_space(WALLED, DEFAULT_ROBOT_RADIUS, 0.01)
     with pytest.raises(NoPathFound, match="cannot be reached from the start"):
         plan(space, np.array([0.5, 0.5]), np.array([0.8, 0.5]))
+
+
+def test_the_cell_states_agree_with_the_kernels():
+    from planners import _marching, fast_marching
+
+    assert (fast_marching._FROZEN, fast_marching._MASK) == (_marching.FROZEN, _marching.MASK)
