@@ -33,7 +33,7 @@ import skfmm
 from .errors import NoPathFound
 from .grid import ConfigSpace
 
-__all__ = ["FrontMarch", "descend", "plan", "travel_time"]
+__all__ = ["FrontMarch", "descend", "plan", "travel_time", "warm_up"]
 
 def travel_time(space: ConfigSpace, goal: np.ndarray, speed: np.ndarray | None = None) -> np.ndarray:
     """Arrival time (s, or m at unit speed) of a front started at ``goal`` (m), ``(ny, nx)``.
@@ -295,3 +295,16 @@ def plan(
 ) -> tuple[np.ndarray, dict[str, int]]:
     """``descend(space, travel_time(space, goal, speed), start, goal, step=step)``, marching only what it needs."""
     return FrontMarch(space, goal, speed).path(start, goal, step=step)
+
+
+def warm_up() -> None:
+    """Load the compiled kernels (compiling them the first time, a few seconds) with a tiny query.
+
+    Worker processes call it before their first job, so that a plan's time is
+    the planning alone.
+    """
+    from .environment import load_environment
+    from .grid import config_space
+
+    space = config_space(load_environment({"name": "warm-up", "size": [0.2, 0.2], "blocks": []}), 0.0, 0.02)
+    plan(space, np.array([0.03, 0.03]), np.array([0.17, 0.15]))
