@@ -173,6 +173,28 @@ def test_paths_equal_the_full_solve_on_random_problems(seed):
             assert {k: info[k] for k in counters} == counters
 
 
+def test_a_descent_that_reads_beyond_the_first_band_marches_on_and_descends_again():
+    """The first march covers the band around the start; a path that leaves it (slow cells near walls,
+    a start in a corner) reads values not yet final: the march goes on and the descent is done again."""
+    again = 0
+    for seed in range(1000, 1012):
+        rng = np.random.default_rng(seed)
+        env, radius, resolution = random_environment(rng)
+        space = config_space(env, radius, resolution)
+        pts = free_points(space, rng, 6)
+        for s, g in zip(pts[0::2], pts[1::2]):
+            for kind in ("unit", "fm2"):
+                speed = speeds(space, kind, rng)
+                try:
+                    want, _ = full_path(space, s, g, speed)
+                except NoPathFound:
+                    continue
+                got, info = plan(space, s, g, speed)
+                assert np.array_equal(got, want)
+                again += info["descents"] > 1
+    assert again >= 3
+
+
 def test_one_march_answers_many_starts_as_the_full_field_does():
     """Studies that reuse one field: each start extends the front only as far as it needs."""
     env = load_environment("room")
