@@ -142,7 +142,8 @@ class FrontMarch:
     the whole field, as :func:`travel_time`.
 
     The cost is the number of cells accepted, :attr:`accepted`: the cells
-    whose arrival time is below about the start's, plus the band.
+    whose arrival time is below about the start's, plus the band.  One
+    instance is for one thread at a time.
     """
 
     def __init__(self, space: ConfigSpace, goal: np.ndarray, speed: np.ndarray | None = None) -> None:
