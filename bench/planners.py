@@ -1,26 +1,47 @@
-"""Planner benchmark: every planner on 180², 360² and 1800² grids of a 3.6 m field.
+"""Planner benchmark: every planner on a 3.6 m field, and FMM / FM² per problem against scikit-fmm.
 
 Baseline, measured in the same run on the same grid: one raw
-``skfmm.travel_time`` call (unit speed, obstacles masked).  Two figures per
-planner, each the median of ``--runs`` (default 5) calls with the grid
-already built (grids are cached per environment and resolution):
+``skfmm.travel_time`` call (unit speed, obstacles masked, phi built as the
+planners build it).  Timings are interleaved (one call of every task per
+round), medians of ``--runs`` rounds after a warm-up round; ``ratio`` is the
+median over rounds of task / baseline.  Grids are built once per environment
+and resolution (neither figure includes rasterisation).
 
-- ``solve``: the planner proper (``Planner.solve``: FMM = travel time +
-  descent; FM² = speed map + travel time + descent; PRM = roadmap + query);
-  the issue's targets apply to this figure;
+Part 1 (``field``), every planner on the 3.6 m field (room and blocks tiled)
+from (0.3, 0.3) to (3.3, 3.3) on ``--sizes`` grids:
+
+- ``solve``: the planner proper (``Planner.solve``: FMM = march + descent;
+  FM² = speed map + march + descent; PRM = roadmap + query);
 - ``plan_path``: what a user waits for, end to end: validation, ``solve``,
   the collision check of the raw path, post-processing and the final check.
 
 PRM is timed with its roadmap rebuilt every call (``prm``) and reused
-(``prm_query``).  Prints JSON; ``ratio`` = time / baseline.
+(``prm_query``).
 
-    python bench/planners.py [--runs 5] [--sizes 180,360,1800]
+Part 2 (``problems``), FMM and FM² per problem on ``--problem-sizes`` cells a
+side: the paper's four (``room`` and ``blocks``, plans A and B) and harder
+generated ones (``maze``: a serpentine through the whole field; ``clutter``:
+40 seeded random blocks, corner to corner; ``field``: the tiled 3.6 m field
+corner to corner; ``near``: a short query inside one room).  ``fmm`` and
+``fm2`` are ``Planner.solve`` (the march stops once the start and the band the
+descent reads are accepted); ``fmm_full`` / ``fm2_full`` are the same
+planners on the whole field (``skfmm.travel_time`` + the same descent), as
+before early termination; ``accepted`` is the fraction of the free cells the
+march accepted (its cost: docs/performance.md).  The issue's targets: median
+over the paper's four problems on 360 cells a side, FMM <= 0.25x and FM² <=
+0.5x the baseline.
+
+Prints JSON.
+
+    python bench/planners.py [--runs 5] [--sizes 180,360,1800] [--problem-sizes 360,1800] [--only field|problems]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import statistics
 import sys
 
 if __package__ in (None, ""):  # run as a script: bench/ must not shadow the planners package
@@ -30,10 +51,17 @@ import numpy as np  # noqa: E402
 import skfmm  # noqa: E402
 
 from bench._common import interleaved, report  # noqa: E402
-from planners import Environment, config_space, get_planner, load_environment, plan_path  # noqa: E402
+from planners import (  # noqa: E402
+    Environment, PlanningError, check_query, config_space, get_planner, load_environment, plan_path,
+)
+from planners.fast_marching import descend, travel_time  # noqa: E402
+from planners.fm2 import speed_map  # noqa: E402
 
 TARGETS = {"fmm": 1.3, "fm2": 1.5}
 PRM_TARGET_OF_360 = 0.6
+#: issue 35: median over the paper's four problems on 360 cells a side, as a fraction of the baseline
+EARLY_TARGETS = {"fmm": 0.25, "fm2": 0.5}
+PAPER = [("room", "A"), ("room", "B"), ("blocks", "A"), ("blocks", "B")]
 
 
 def full_field() -> Environment:
@@ -55,16 +83,118 @@ def baseline(space, goal) -> None:  # type: ignore[no-untyped-def]
     skfmm.travel_time(phi, np.ones((ny, nx)), dx=h)
 
 
+def maze() -> Environment:
+    """A serpentine: five walls from alternate sides, the path winds through the whole 1.8 m field."""
+    blocks = []
+    for n, x in enumerate((0.3, 0.6, 0.9, 1.2, 1.5)):
+        blocks.append({"x": x, "y": 0.75 if n % 2 == 0 else 1.05, "w": 0.06, "h": 1.5, "angle": 0.0})
+    return load_environment({"name": "maze", "size": [1.8, 1.8], "blocks": blocks})
+
+
+def clutter(seed: int = 0) -> Environment:
+    """40 random blocks (seeded) on the 1.8 m field, with (0.1, 0.1) and (1.7, 1.7) free and connected."""
+    while True:
+        rng = np.random.default_rng(seed)
+        blocks = []
+        for _ in range(40):
+            w, h = rng.uniform(0.04, 0.2, 2)
+            r = math.hypot(w, h) / 2 + 0.002
+            blocks.append({"x": rng.uniform(r, 1.8 - r), "y": rng.uniform(r, 1.8 - r), "w": w, "h": h,
+                           "angle": rng.uniform(0, math.pi)})
+        env = load_environment({"name": f"clutter-{seed}", "size": [1.8, 1.8], "blocks": blocks})
+        try:
+            check_query(env, (0.1, 0.1), (1.7, 1.7), robot_radius=0.045, resolution=0.01)
+            return env
+        except PlanningError:  # blocked or separated: the next seed
+            seed += 1
+
+
+def problems() -> list[tuple[str, bool, Environment, tuple[float, float], tuple[float, float]]]:
+    """(name, one of the paper's, environment, start, goal): the paper's four, then harder generated ones."""
+    out = []
+    for env_name, plan_name in PAPER:
+        env = load_environment(env_name)
+        p = env.plan(plan_name)
+        out.append((f"{env_name} {plan_name}", True, env, tuple(p.start[:2]), tuple(p.goal[:2])))
+    out.append(("maze", False, maze(), (0.15, 0.15), (1.65, 1.65)))
+    out.append(("clutter", False, clutter(), (0.1, 0.1), (1.7, 1.7)))
+    out.append(("field", False, full_field(), (0.3, 0.3), (3.3, 3.3)))
+    out.append(("near", False, load_environment("room"), (1.2, 1.3), (1.5, 1.5)))
+    return out
+
+
+def run_problems(sizes: list[int], runs: int) -> tuple[list[dict], dict[str, dict], dict[str, bool]]:
+    """Part 2: FMM and FM² per problem, early-terminated and on the whole field, against the baseline.
+
+    Returns the rows, the medians over the paper's four per grid, and the issue's targets (360 cells).
+    """
+    rows, medians, checks = [], {}, {}
+    fmm, fm2 = get_planner("fmm"), get_planner("fm2")
+    p_fmm, p_fm2 = fmm.validate_params({}), fm2.validate_params({})
+    for n in sizes:
+        ratios: dict[str, list[float]] = {"fmm": [], "fm2": []}
+        for name, paper, env, start, goal in problems():
+            space = config_space(env, 0.045, env.width / n)
+            s, g = np.array(start), np.array(goal)
+            info: dict[str, dict] = {}
+
+            def early(impl, params, key):  # type: ignore[no-untyped-def]
+                def run() -> None:
+                    info[key] = impl.solve(space, s.copy(), g.copy(), params, 0)[1]
+                return run
+
+            def full_fmm() -> None:
+                descend(space, travel_time(space, g), s, g)
+
+            def full_fm2() -> None:
+                descend(space, travel_time(space, g, speed_map(space, p_fm2["saturation"], p_fm2["min_speed"])), s, g)
+
+            tasks = {"baseline": lambda: baseline(space, g), "fmm": early(fmm, p_fmm, "fmm"),
+                     "fm2": early(fm2, p_fm2, "fm2"), "fmm_full": full_fmm, "fm2_full": full_fm2}
+            timed = interleaved(tasks, "baseline", runs)
+            free = int(space.free.sum())
+            row = {"problem": name, "paper": paper, "grid": f"{space.free.shape[1]}x{space.free.shape[0]}",
+                   "resolution_m": space.resolution, "free_cells": free,
+                   "baseline_travel_time_s": timed["baseline"]["median_s"]}
+            for key in ("fmm", "fm2", "fmm_full", "fm2_full"):
+                row[key] = {"s": timed[key]["median_s"], "ratio": timed[key]["ratio"]}
+            for key in ("fmm", "fm2"):
+                row[key]["cells_accepted"] = info[key]["cells_accepted"]
+                row[key]["accepted"] = info[key]["cells_accepted"] / free
+                row[key]["descents"] = info[key]["descents"]
+            rows.append(row)
+            print(f"{name} {row['grid']}: baseline {row['baseline_travel_time_s'] * 1e3:.1f} ms, "
+                  + ", ".join(f"{k} {row[k]['ratio']:.3f}x" for k in ("fmm", "fm2", "fmm_full", "fm2_full")),
+                  file=sys.stderr)
+            if paper:
+                for key in ratios:
+                    ratios[key].append(row[key]["ratio"])
+        medians[f"{n}x{n}"] = {key: statistics.median(r) for key, r in ratios.items()}
+        if n == 360:
+            for key, limit in EARLY_TARGETS.items():
+                checks[f"{key}: median over the paper's four at 360x360 <= {limit}x baseline"] = \
+                    medians["360x360"][key] <= limit
+    return rows, medians, checks
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--sizes", default="180,360,1800")
+    ap.add_argument("--sizes", default="180,360,1800", help="part 1: cells a side of the 3.6 m field")
+    ap.add_argument("--problem-sizes", default="360,1800", help="part 2: cells a side of each problem's field")
+    ap.add_argument("--only", choices=("field", "problems"), help="run one part")
     args = ap.parse_args()
+    results, checks, rows, medians = [], {}, [], {}
+    if args.only != "field":
+        rows, medians, checks = run_problems([int(n) for n in args.problem_sizes.split(",")], args.runs)
+    if args.only == "problems":
+        report("planners", [], robot_radius_m=0.045, runs=args.runs, targets_met=checks,
+               paper_medians=medians, problems=rows)
+        return
     env = full_field()
     start, goal = (0.3, 0.3, 0.0), (3.3, 3.3, 0.0)
     s_arr, g_arr = np.array(start[:2]), np.array(goal[:2])
     prm = get_planner("prm")
-    results, checks = [], {}
     for n in (int(s) for s in args.sizes.split(",")):
         res = 3.6 / n
         space = config_space(env, 0.045, res)
@@ -107,7 +237,7 @@ def main() -> None:
             ratio = row["planners"]["prm"]["solve_ratio"]
             checks[f"prm(500)@360x360 solve <= {PRM_TARGET_OF_360}x baseline"] = ratio <= PRM_TARGET_OF_360
     report("planners", results, environment="field 3.6 m (room/blocks tiled)", start=start, goal=goal,
-           robot_radius_m=0.045, runs=args.runs, targets_met=checks)
+           robot_radius_m=0.045, runs=args.runs, targets_met=checks, paper_medians=medians, problems=rows)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """Path planning for the Teleworkbench: environments, occupancy grids, planners, post-processing.
 
-Pure numpy/scipy/scikit-fmm; imports nothing else of the project.  Units are
+numpy/scipy/scikit-fmm, and numba for the fast-marching kernels (loaded with
+the first FMM or FM² plan); imports nothing else of the project.  Units are
 metres and radians throughout.
 
 >>> from planners import plan_path

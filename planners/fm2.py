@@ -3,7 +3,9 @@
 The speed at a free cell is its clearance beyond the robot radius divided by
 ``saturation`` (metres), clipped to ``[min_speed, 1]``: the front is slow near
 obstacles and at full speed beyond the saturation distance, so the descent
-keeps away from obstacles where there is room and stays smooth.
+keeps away from obstacles where there is room and stays smooth.  As for FMM,
+the front is marched only as far as the query needs
+(:func:`planners.fast_marching.plan`).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .base import Param, Planner
-from .fast_marching import descend, travel_time
+from .fast_marching import plan
 from .grid import ConfigSpace
 
 __all__ = ["FM2Planner", "speed_map"]
@@ -41,5 +43,4 @@ class FM2Planner(Planner):
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
     ) -> tuple[np.ndarray, dict[str, Any]]:
         speed = speed_map(space, params["saturation"], params["min_speed"])
-        t = travel_time(space, goal, speed)
-        return descend(space, t, start, goal, step=params["step"])
+        return plan(space, start, goal, speed, step=params["step"])

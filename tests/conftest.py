@@ -13,8 +13,8 @@ TWB = Path(sys.executable).with_name("twb")
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
-    """Compile the simulation kernels once, before any test starts agent processes: on a fresh
-    checkout every process would otherwise compile them at the same time (numba's cache).
+    """Compile the simulation kernels (and the fast-marching planners') once, before any test starts agent
+    processes: on a fresh checkout every process would otherwise compile them at the same time (numba's cache).
 
     Also: a test run started as a background job of a script inherits SIGINT ignored, and every
     process a test starts would inherit that too and never stop on the Ctrl-C the tests send it;
@@ -23,9 +23,11 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    from planners.fast_marching import warm_up as warm_up_planners
     from robot_agent.engine.sim import warm_up
 
     warm_up()
+    warm_up_planners()
 
 
 @pytest.fixture

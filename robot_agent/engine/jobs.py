@@ -33,6 +33,7 @@ from planners.api import TIMING_BUDGET_S
 from planners.api import machine_load
 from planners.control_metrics import ControlSettings, control_metrics
 from planners.dependencies import fleet_dependencies
+from planners.fast_marching import warm_up as warm_up_planners
 from planners.fleet_metrics import FleetSettings, fleet_metrics
 from planners.geometry import distance_to_obstacles
 from planners.lacam import NAME as LACAM
@@ -53,9 +54,11 @@ __all__ = ["field_obstacle_tracks", "fleet_job", "measure_run",
 
 def warm_up() -> bool:
     """Ready a fresh worker: import the numerical stack and load the compiled simulation core with one short
-    run (about 1.4 s of CPU on this machine's cores), so its first real run starts at once."""
+    run (about 1.4 s of CPU on this machine's cores), and the fast-marching planners' kernels with a tiny
+    query, so its first real run and plan start at once."""
     simulate_job({"name": "warm-up", "size": [1.0, 1.0], "blocks": []}, [[0.3, 0.3, 0.0], [0.6, 0.3, 0.0]],
                  [[0.3, 0.3, 0.0]], 0, 60.0, [0.6, 0.3, 0.0], 0.045, 0.0)
+    warm_up_planners()
     return True
 
 
