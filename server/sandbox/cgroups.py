@@ -74,6 +74,11 @@ class ProgramCgroup:
         for node in self.nodes:
             _write(node.fd, "cgroup.procs", "0")
 
+    def limit_processes(self, processes: int) -> None:
+        """Set the process limit (``pids.max``), where the pids controller is there."""
+        if self.pids is not None:
+            _write(self.pids.fd, "pids.max", str(processes))
+
     def oom_kills(self) -> int:
         """Processes the kernel killed because the program used all its memory."""
         return _key(self.memory.fd, *self.OOM_EVENTS)

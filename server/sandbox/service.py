@@ -157,18 +157,24 @@ class Sandbox:
         return result, err.decode("utf-8", "replace")
 
     async def probe(self) -> dict[str, Any]:
-        """What isolation this machine gives programs (cached)."""
+        """What isolation this machine gives programs (cached): bwrap's sandbox tried as a program's user."""
         if self._probe is None:
-            result, err = await self._launch({"probe": True, "namespaces": self.settings.sandbox_namespaces}, 30)
+            uid, lock = await _take_uid_off_loop(self.settings.sandbox_uid_base)
+            try:
+                result, err = await self._launch({"probe": True, "namespaces": self.settings.sandbox_namespaces,
+                                                  "uid": uid, "gid": uid}, 30)
+            finally:
+                os.close(lock)
             iso = result or {"namespaces": [], "user_namespace": False, "uid_switch": False,
                              "reason": f"the sandbox launcher failed: {err.strip()[-300:]}"}
             self._probe = {
                 "namespaces": iso.get("namespaces", []),
                 "user_namespace": iso.get("user_namespace", False),
+                "sandbox": iso.get("sandbox") or "none",
                 "network": "loopback only" if "net" in iso.get("namespaces", []) else "not isolated",
                 "seccomp": iso.get("seccomp", False),
                 "runs_as": ("a uid of its own" if iso.get("uid_switch")
-                            else "root of a user namespace (the server's uid outside)" if iso.get("user_namespace")
+                            else "the server's uid, in a user namespace" if iso.get("user_namespace")
                             else "the server's uid"),
                 "memory_limit": iso.get("memory_limit", "per-process"),
                 "cgroup": iso.get("cgroup"),
