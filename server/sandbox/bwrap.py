@@ -186,9 +186,11 @@ def start(bwrap: str, job: dict[str, Any], argv: list[str], env: dict[str, str],
         proc = subprocess.Popen(args, cwd="/", env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, close_fds=True, pass_fds=fds, start_new_session=True,
                                 preexec_fn=preexec)
-    except BaseException:
+    except BaseException as exc:
         for fd in fds + [status_r, block_w]:
             os.close(fd)
+        if isinstance(exc, OSError):  # bwrap itself cannot run
+            raise SetupFailed(f"cannot run {bwrap}: {exc.strerror or exc}") from None
         raise
     for fd in fds:
         os.close(fd)

@@ -2,7 +2,7 @@
 
 Allowed (:data:`ALLOWED`): what programs of any language need to compute and
 talk to their robot port — files, memory, threads and processes, signals,
-time, waiting, sockets, System V and POSIX IPC — some of it only with certain
+time, waiting, randomness, sockets, System V and POSIX IPC — some of it only with certain
 arguments (:func:`build`): ``clone`` without namespace flags, ``socket`` of
 the families ``AF_UNIX``, ``AF_INET``, ``AF_INET6`` and route netlink (C
 libraries ask it which addresses exist), ``socketpair`` of ``AF_UNIX``,
@@ -84,6 +84,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "sockets": (
         "connect", "bind", "listen", "accept", "accept4", "getsockname", "getpeername", "sendto", "recvfrom",
         "sendmsg", "recvmsg", "sendmmsg", "recvmmsg", "shutdown", "setsockopt", "getsockopt"),
+    "randomness": ("getrandom",),
     "ipc": (
         "shmget", "shmat", "shmdt", "shmctl", "semget", "semop", "semtimedop", "semctl", "msgget", "msgsnd",
         "msgrcv", "msgctl", "mq_open", "mq_unlink", "mq_timedsend", "mq_timedreceive", "mq_notify",

@@ -15,6 +15,8 @@ one connection and keeps the first valid path sent on it.
 
 from __future__ import annotations
 
+import base64
+import errno
 import os
 import resource
 import selectors
@@ -156,6 +158,35 @@ def _bwrap_said(prog: Program) -> str:
     return last[len("bwrap: "):] if last.startswith("bwrap: ") else last
 
 
+#: ELF ``e_machine`` of the machines ``os.uname().machine`` names
+ELF_MACHINES = {"x86_64": 62, "aarch64": 183, "i686": 3, "armv7l": 40, "riscv64": 243, "ppc64le": 21, "s390x": 22}
+
+
+def _exec_format_error(job: dict[str, Any], path: str) -> Optional[str]:
+    """Why the kernel would refuse to execute the job's file ``path`` (None: it would, or it is not the job's).
+
+    bwrap starts the program with ``execvp``, which hands a file the kernel
+    refuses (ENOEXEC) to ``/bin/sh``; a file that is neither a script with a
+    ``#!`` line nor an ELF binary for this machine is refused here instead,
+    as the kernel would (and as a program without bwrap is).
+    """
+    spec = job["files"].get(os.path.basename(path)) if os.path.dirname(path) == bwrap.WORKDIR else None
+    if spec is None:
+        return None
+    head = base64.b64decode(spec["base64"][:32])
+    if head.startswith(b"#!"):
+        return None
+    if not head.startswith(b"\x7fELF"):
+        return "Exec format error"
+    machine = ELF_MACHINES.get(os.uname().machine)
+    if machine is not None and len(head) >= 20 and head[18] | head[19] << 8 != machine \
+            and head[18] << 8 | head[19] != machine:
+        return f"Exec format error (an ELF binary for another machine than {os.uname().machine})"
+    if len(head) < 20:
+        return "Exec format error"
+    return None
+
+
 def program_user(job: dict[str, Any]) -> tuple[Optional[int], Optional[int]]:
     """(uid, gid) of the program: the job's when this process may switch to it (root), else (None, None)."""
     if job.get("uid") is not None and has_cap(CAP_SETUID) and has_cap(CAP_SETGID):
@@ -189,6 +220,9 @@ def spawn(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[ProgramC
     if bwrap_path is not None:
         numbers = bwrap.choose_ports(len(poses))
         argv, env = program_command(job, bwrap.WORKDIR, numbers)
+        not_runnable = _exec_format_error(job, argv[0])
+        if not_runnable:
+            raise OSError(errno.ENOEXEC, f"execvp {argv[0]}: {not_runnable}")
         program = seccomp.program() if want_seccomp and not seccomp.UNAVAILABLE else None
         preexec = confinement(limits, cgroup=cgroup, uid=uid, gid=gid, nproc=None, file_bytes=file_bytes)
         t0 = time.monotonic()
