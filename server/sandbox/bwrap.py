@@ -49,7 +49,7 @@ import signal
 import socket
 import subprocess
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Optional
 
 from .isolation import enter_network_namespace
@@ -124,14 +124,21 @@ class Bubble:
 
     proc: subprocess.Popen  # type: ignore[type-arg]
     pid1: int  # the sandbox's first process (pid 1 inside), as this process sees it
+    pidfd: int  # a pidfd of it: signals reach it, never a process that later gets its pid
     namespaces: list[str]
     listeners: list[socket.socket]
     status_fd: int  # the rest of bwrap's JSON status: the program's exit code, once it started
     status: bytes = b""
-    started_at: float = field(default_factory=time.monotonic)
+
+    def alive(self) -> bool:
+        """Whether the sandbox's first process still runs (while it does, the sandbox exists)."""
+        return self.pidfd >= 0 and not select.select([self.pidfd], [], [], 0)[0]
 
     def finish(self) -> None:
-        """Read the rest of bwrap's status (call once bwrap has exited)."""
+        """Read the rest of bwrap's status and let go of the first process (call once bwrap has exited)."""
+        if self.pidfd >= 0:
+            os.close(self.pidfd)
+            self.pidfd = -1
         if self.status_fd < 0:
             return
         os.set_blocking(self.status_fd, False)
@@ -148,10 +155,15 @@ class Bubble:
         return b'"exit-code"' in self.status
 
     def kill(self) -> None:
-        """End the sandbox: its first process, and with it every process in its pid namespace."""
-        for pid in (self.pid1, self.proc.pid):
+        """End the sandbox: its first process, and with it every process in its pid namespace; and bwrap."""
+        try:
+            if self.pidfd >= 0:
+                signal.pidfd_send_signal(self.pidfd, signal.SIGKILL)
+        except OSError:
+            pass
+        if self.proc.returncode is None:  # not reaped yet: the pid is still bwrap's
             try:
-                os.kill(pid, signal.SIGKILL)
+                os.kill(self.proc.pid, signal.SIGKILL)
             except OSError:
                 pass
 
@@ -198,7 +210,11 @@ def start(bwrap: str, job: dict[str, Any], argv: list[str], env: dict[str, str],
         first = _first_status(status_r, proc)
         pid1 = int(first["child-pid"])
         namespaces = NAMESPACES + (["cgroup"] if "cgroup-namespace" in first else [])
-        bubble = Bubble(proc, pid1, namespaces, [], status_r)
+        try:  # bwrap, its parent, reaps it only once it died, and exits then: the pid is still its
+            pidfd = os.pidfd_open(pid1)
+        except OSError:
+            raise SetupFailed(_why(proc)) from None
+        bubble = Bubble(proc, pid1, pidfd, namespaces, [], status_r)
         try:
             bubble.listeners = inside(pid1, ports, nproc=nproc, uid=uid)
         except OSError as exc:
@@ -214,6 +230,8 @@ def start(bwrap: str, job: dict[str, Any], argv: list[str], env: dict[str, str],
         if proc.returncode is None:
             _wait_out(proc)
         os.close(status_r)
+        if "bubble" in locals():
+            os.close(bubble.pidfd)
         raise SetupFailed(str(exc).removeprefix("bwrap: ")) from None
     finally:
         os.close(block_w)

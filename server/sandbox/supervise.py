@@ -131,8 +131,8 @@ def _run(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[ProgramCg
     except (OSError, subprocess.SubprocessError) as exc:
         return {**blank_result(), "launch_error": f"{type(exc).__name__}: {exc}"}
     if prog.bubble is not None:
-        pid1 = prog.bubble.pid1
-        count: Callable[[], int] = lambda: count_descendants(pid1)  # noqa: E731
+        bubble = prog.bubble
+        count: Callable[[], int] = lambda: count_descendants(bubble.pid1) if bubble.alive() else 0  # noqa: E731
     else:
         me = os.getpid()
         count = (lambda: -1) if uid is None else (lambda: count_uid(uid, me))
@@ -225,11 +225,11 @@ def spawn(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[ProgramC
             raise OSError(errno.ENOEXEC, f"execvp {argv[0]}: {not_runnable}")
         program = seccomp.program() if want_seccomp and not seccomp.UNAVAILABLE else None
         preexec = confinement(limits, cgroup=cgroup, uid=uid, gid=gid, nproc=None, file_bytes=file_bytes)
-        t0 = time.monotonic()
         bubble, hidden = bwrap.start(
             bwrap_path, job, argv, env, ports=numbers, tmpfs_bytes=int(limits["tmpfs_bytes"]),
             hide=job.get("hide", []), seccomp=program, preexec=preexec, uid=uid,
             nproc=int(limits["processes"]) + 1)  # + the sandbox's first process (bwrap's)
+        t0 = time.monotonic()  # the sandbox is made: the program starts now (planning time, wall limit)
         proc, listeners = bubble.proc, bubble.listeners
         iso.update({"namespaces": bubble.namespaces, "user_namespace": True, "sandbox": "bubblewrap",
                     "proc": "private", "hidden": hidden, "seccomp": program is not None})
@@ -444,7 +444,7 @@ def reap(prog: Program, *, cgroup: Optional[ProgramCgroup]) -> bool:
         except ChildProcessError:
             break
         if pid == 0:
-            if prog.bubble is None or not os.path.exists(f"/proc/{prog.bubble.pid1}") or time.monotonic() > deadline:
+            if prog.bubble is None or not prog.bubble.alive() or time.monotonic() > deadline:
                 break
             time.sleep(0.005)
     if prog.bubble is not None:
