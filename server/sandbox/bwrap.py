@@ -206,6 +206,7 @@ def start(bwrap: str, job: dict[str, Any], argv: list[str], env: dict[str, str],
         raise
     for fd in fds:
         os.close(fd)
+    bubble: Optional[Bubble] = None
     try:
         first = _first_status(status_r, proc)
         pid1 = int(first["child-pid"])
@@ -230,7 +231,7 @@ def start(bwrap: str, job: dict[str, Any], argv: list[str], env: dict[str, str],
         if proc.returncode is None:
             _wait_out(proc)
         os.close(status_r)
-        if "bubble" in locals():
+        if bubble is not None:
             os.close(bubble.pidfd)
         raise SetupFailed(str(exc).removeprefix("bwrap: ")) from None
     finally:

@@ -15,7 +15,8 @@ In order:
    limit, the end of every process, the result.
 3. The launcher removes the cgroup.
 
-The launcher itself stays outside every namespace; it is single-threaded
+The launcher itself stays outside every namespace (a helper process enters
+the sandbox's network namespace for the robot ports); it is single-threaded
 (it forks helpers and runs Python between fork and exec).
 """
 
@@ -141,8 +142,8 @@ def _check_single_threaded() -> None:
     The codec imports numpy; the server starts the launcher with
     ``OPENBLAS_NUM_THREADS=1`` (and the OpenMP/MKL equivalents) so that
     numpy starts no thread: the launcher runs Python between ``fork`` and
-    ``exec``, and its helper enters a user namespace, which needs a single
-    thread.
+    ``exec`` (the confinement) and in forked helpers, which is safe only in
+    a single-threaded process.
     """
     threads = len(os.listdir("/proc/self/task")) if os.path.isdir("/proc/self/task") else 1
     if threads != 1:

@@ -44,8 +44,8 @@ UID_RANGE = 4096
 def launcher_env() -> dict[str, str]:
     """The launcher's environment: a few of ours, and one thread for numpy's BLAS/OpenMP.
 
-    One thread matters: the launcher imports the codec (numpy) before it
-    unshares namespaces and forks, which must happen single-threaded.
+    One thread matters: the launcher imports the codec (numpy), then forks
+    and runs Python between fork and exec, which must happen single-threaded.
     """
     env = {k: v for k, v in os.environ.items() if k in ("PATH", "PYTHONPATH", "LANG", "VIRTUAL_ENV")}
     env.update({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
