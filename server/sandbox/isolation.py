@@ -8,6 +8,7 @@ helper processes.  Linux only.
 from __future__ import annotations
 
 import ctypes
+import fcntl
 import os
 
 __all__ = ["CAP_SETGID", "CAP_SETUID", "PR_SET_CHILD_SUBREAPER", "PR_SET_NO_NEW_PRIVS", "PR_SET_PDEATHSIG",
@@ -15,6 +16,8 @@ __all__ = ["CAP_SETGID", "CAP_SETUID", "PR_SET_CHILD_SUBREAPER", "PR_SET_NO_NEW_
 
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWNET = 0x40000000
+#: ioctl on a namespace's file: a file of the user namespace that owns it
+NS_GET_USERNS = 0xB701
 
 PR_SET_PDEATHSIG = 1
 PR_SET_CHILD_SUBREAPER = 36
@@ -52,8 +55,10 @@ def enter_network_namespace(pid: int) -> None:
 
     Root may enter it at once; the server's own user (not root) first joins
     the user namespace that owns it (bubblewrap made it as that user, who thus
-    has the capabilities in it).  Irreversible for the user namespace: call it
-    in a child that exits afterwards.
+    has the capabilities in it) — asked of the network namespace itself
+    (``NS_GET_USERNS``): ``pid`` may since have moved on into a nested user
+    namespace.  Irreversible for the user namespace: call it in a child that
+    exits afterwards.
     """
     net = os.open(f"/proc/{pid}/ns/net", os.O_RDONLY | os.O_CLOEXEC)
     try:
@@ -62,7 +67,7 @@ def enter_network_namespace(pid: int) -> None:
             return
         except PermissionError:
             pass
-        user = os.open(f"/proc/{pid}/ns/user", os.O_RDONLY | os.O_CLOEXEC)
+        user = fcntl.ioctl(net, NS_GET_USERNS)
         try:
             _setns(user, CLONE_NEWUSER, "user")
         finally:
