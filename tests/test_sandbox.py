@@ -217,6 +217,39 @@ async def test_sandbox_uids_are_locked_off_the_event_loop_and_freed_when_cancell
         await asyncio.sleep(0.05)
 
 
+async def test_the_server_decides_auto_once_by_its_probe(monkeypatch, tmp_path):
+    """Where the probe found bwrap's namespaces, every program must have them (a failure to set its sandbox
+    up is the testbed's error, never an unisolated run); where it found none, programs run without, saying why."""
+    from server.core.settings import Settings
+    from server.sandbox import ProgramSpec
+
+    box = service.Sandbox(Settings(data_dir=tmp_path, sandbox_uid_base=3_980_000 + random.randrange(0, 900) * 10))
+    jobs, results = [], []
+
+    async def fake_launch(spec: dict, timeout_s: float):
+        jobs.append(spec)
+        return results.pop(0), ""
+
+    monkeypatch.setattr(box, "_launch", fake_launch)
+    program = ProgramSpec(1, "p", "python", None, [], b"print(1)")
+    kw = dict(env_data={"size": [1.8, 1.8], "blocks": []}, start=[0.3, 0.3, 0.0], goal=[1.5, 0.3],
+              field_size=(1.8, 1.8), seed=1, robot_radius=0.045, planning_margin=0.02, robot_id="sim-1",
+              platform="BeBot")
+    box._probe = {"namespaces": NAMESPACES, "note": ""}
+    results.append({"exit_code": 0, "path": None, "stdout": "", "stderr": ""})
+    await box.run(program, **kw)
+    assert jobs[-1]["namespaces"] == "required"
+    results.append({"sandbox_error": True, "launch_error": "the sandbox needs Linux namespaces and cannot create "
+                                                          "them: the robot ports: no"})
+    with pytest.raises(RuntimeError, match="the sandbox could not be set up: the sandbox needs"):
+        await box.run(program, **kw)
+    box._probe = {"namespaces": [], "note": "no namespaces available (bubblewrap (bwrap) is not installed)"}
+    results.append({"exit_code": 0, "path": None, "stdout": "", "stderr": ""})
+    await box.run(program, **kw)
+    assert jobs[-1]["namespaces"] == "off"
+    assert jobs[-1]["no_namespaces"] == "no namespaces available (bubblewrap (bwrap) is not installed)"
+
+
 # --------------------------------------------------------------------------- as root
 
 

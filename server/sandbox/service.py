@@ -183,6 +183,22 @@ class Sandbox:
             }
         return self._probe
 
+    async def _namespaces(self) -> dict[str, Any]:
+        """The job's ``namespaces``: ``auto`` is decided once, by the probe.
+
+        Where bwrap makes its sandbox here, every program runs in it
+        (``required``: a program whose sandbox cannot be set up does not run,
+        it never runs unisolated because of a passing failure); where it does
+        not, programs run without (``off``, with the probe's reason).
+        """
+        mode = self.settings.sandbox_namespaces
+        if mode != "auto":
+            return {"namespaces": mode}
+        iso = await self.probe()
+        if "net" in iso["namespaces"]:
+            return {"namespaces": "required"}
+        return {"namespaces": "off", "no_namespaces": iso["note"] or "the probe found none"}
+
     async def run(self, spec: ProgramSpec, *, env_data: dict[str, Any], start: list[float], goal: list[float],
                   field_size: tuple[float, float], seed: int, robot_radius: float, planning_margin: float,
                   robot_id: str, platform: str) -> ProgramOutcome:
@@ -229,7 +245,7 @@ class Sandbox:
                           planning_margin=planning_margin, robot_id=robot_id, wall_s=s.sandbox_wall_s,
                           path=path, fleet=fleet)
         job = {"files": program_files(spec, env_data, path), "argv": argv, "env": env,
-               "namespaces": s.sandbox_namespaces, "hide": self.hidden_paths(), "limits": self._job_limits(),
+               **await self._namespaces(), "hide": self.hidden_paths(), "limits": self._job_limits(),
                "field_size": list(field_size), "robot_id": robot_id, "platform": platform,
                "start_pose": list(start[:3]), "grace_s": 1.0, "relay": relay is not None}
         if fleet is not None:
@@ -247,6 +263,8 @@ class Sandbox:
                 os.close(lock)
         if result is None:
             raise RuntimeError(f"the sandbox launcher failed: {err.strip()[-500:] or 'no result'}")
+        if result.get("sandbox_error") and s.sandbox_namespaces == "auto":  # it works here, but not this time
+            raise RuntimeError(f"the sandbox could not be set up: {result.get('launch_error')}")
         if relay is not None:
             return to_controller_outcome(spec, argv, result, self._job_limits())
         return to_outcome(spec, argv, result, self._job_limits())

@@ -102,8 +102,8 @@ def supervise(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[Prog
     iso.update({"uid": uid, "namespaces": [], "user_namespace": False, "sandbox": None, "proc": "host",
                 "hidden": [], "reason": ""})
     mode = job.get("namespaces", "auto")
-    if mode == "off":
-        iso["reason"] = "namespaces switched off (TWB_SANDBOX_NAMESPACES=off)"
+    if mode == "off":  # switched off, or none here (the server's probe found none: why)
+        iso["reason"] = job.get("no_namespaces") or "namespaces switched off (TWB_SANDBOX_NAMESPACES=off)"
     else:
         path = bwrap.find(job)
         why = "bubblewrap (bwrap) is not installed"
@@ -115,8 +115,8 @@ def supervise(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[Prog
         iso.update({"namespaces": [], "user_namespace": False, "sandbox": None, "proc": "host", "hidden": [],
                     "reason": f"no namespaces available ({why})"})
         if mode == "required":
-            return {**blank_result(), "launch_error": f"the sandbox needs Linux namespaces and cannot create them: "
-                                                      f"{why}"}
+            return {**blank_result(), "sandbox_error": True,
+                    "launch_error": f"the sandbox needs Linux namespaces and cannot create them: {why}"}
     return _run(job, iso, cgroup=cgroup, stop=stop, uid=uid, gid=gid, bwrap_path=None)
 
 
