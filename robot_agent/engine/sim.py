@@ -243,6 +243,17 @@ class SimCore:
         self.timeout[i] = self.k[i] + max(1, int(round(watchdog_s / self.dt)))
         return replaced
 
+    def drive_all(self, vw: np.ndarray, watchdog_s: float) -> None:
+        """:meth:`drive` for every robot already in velocity mode at once: body velocities ``vw`` ``(N, 2)``
+        (m/s, rad/s; clipped to the profile's top speeds as :meth:`drive` clips them) from the next step, the
+        watchdog renewed to ``watchdog_s`` (s); rows of the other robots are ignored."""
+        d = (self.state == _MOVING) & (self.cid == DIRECT)
+        p = self.params
+        vw = np.asarray(vw, dtype=float)
+        self.want[d, 0] = np.clip(vw[d, 0], -p.max_speed_m_s, p.max_speed_m_s)
+        self.want[d, 1] = np.clip(vw[d, 1], -p.max_angular_speed_rad_s, p.max_angular_speed_rad_s)
+        self.timeout[d] = self.k[d] + max(1, int(round(watchdog_s / self.dt)))
+
     def moving(self, i: int) -> bool:
         """Whether robot ``i`` follows a path or drives in velocity mode (state MOVING)."""
         return int(self.state[i]) == _MOVING

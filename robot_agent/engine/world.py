@@ -86,6 +86,31 @@ class World:
         self._rebuild()
         return len(old)
 
+    def load_blocks(self, owner: int, blocks_local: np.ndarray) -> None:
+        """:meth:`set_blocks` for a robot alone in its world (a separate layout): the world's rows of the block
+        tables are rewritten in place when the blocks fit them (no rebuild of every world's tables: what a
+        training environment does at each episode of each of many robots)."""
+        w = int(self.world_of[owner])
+        b = np.asarray(blocks_local, dtype=float).reshape(-1, 5)
+        if (self.world_of == w).sum() != 1 or len(b) > self.centre.shape[1]:
+            self.set_blocks(owner, b)
+            return
+        b = b.copy()
+        b[:, :2] += self.origin[owner]
+        if len(b):
+            self._blocks[owner] = b
+        else:
+            self._blocks.pop(owner, None)
+        nb = len(b)
+        self.centre[w] = 0.0
+        self.half[w] = 0.0
+        self.cs[w] = 0.0
+        self.centre[w, :nb] = b[:, :2]
+        self.half[w, :nb] = b[:, 2:4] / 2
+        self.cs[w, :nb, 0], self.cs[w, :nb, 1] = np.cos(b[:, 4]), np.sin(b[:, 4])
+        self.nblocks[w] = nb
+        self.invalidate(owner)
+
     def blocks_local(self, owner: int) -> np.ndarray:
         """The blocks robot ``owner`` built, ``(B, 5)`` in its frame."""
         b = self._blocks.get(owner, np.zeros((0, 5))).copy()
