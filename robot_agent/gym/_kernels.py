@@ -12,7 +12,7 @@ import numpy as np
 
 from robot_agent.engine.compiled import kernel
 
-__all__ = ["observe"]
+__all__ = ["observe", "occupied_cells", "window_pad"]
 
 
 @kernel
@@ -23,8 +23,8 @@ def _wrap(a: float) -> float:
 
 
 @kernel
-def observe(belief: np.ndarray, pose: np.ndarray, goal: np.ndarray, map_of: np.ndarray, clearance: np.ndarray,
-            res: float, width: float, height: float, cell: float, failed: np.ndarray, goal_tol: float,
+def observe(belief: np.ndarray, pose: np.ndarray, goal: np.ndarray, map_of: np.ndarray, occupied: np.ndarray,
+            res: float, pad: int, width: float, height: float, cell: float, failed: np.ndarray, goal_tol: float,
             progress_gain: float, step_cost: float, goal_reward: float, collision_cost: float,
             last_dist: np.ndarray, rows: np.ndarray, out_pose: np.ndarray, out_goal: np.ndarray,
             out_occ: np.ndarray, reward: np.ndarray, reached: np.ndarray) -> None:
@@ -32,38 +32,42 @@ def observe(belief: np.ndarray, pose: np.ndarray, goal: np.ndarray, map_of: np.n
 
     ``belief`` ``(N, 3)``: the robot's localisation (what it observes of its pose); ``pose`` ``(N, 3)``:
     its actual pose (what reaching the goal and the reward are judged by); ``goal`` ``(N, 3)``; ``failed``
-    ``(N,)``: it collided.  ``out_occ[i, a, b]`` is 1 when the cell ``a`` steps of ``cell`` m ahead of the
-    robot and ``b`` to its left (both counted from the window's back right corner, the robot at its
-    centre) lies outside the field or has a block or wall within ``cell / sqrt(2)`` of its centre.
-    ``reward`` = ``progress_gain`` x (``last_dist`` - distance to the goal) - ``step_cost``, plus
-    ``goal_reward`` on arrival (within ``goal_tol``), minus ``collision_cost`` on a collision;
-    ``last_dist`` becomes the new distance.
+    ``(N,)``: it collided.  ``occupied`` ``(M, ny, nx)`` uint8 marks, per map, the cells of ``res`` m whose
+    centre has a block or wall within ``cell / sqrt(2)``, and ``pad`` cells around the field (see
+    :func:`occupied_cells`).  ``out_occ[i, a, b]``
+    is 1 when the window cell ``a`` cells of ``cell`` m ahead of the robot and ``b`` to its left (both
+    counted from the window's back right corner, the robot at its centre) lies outside the field or its
+    centre is in such a cell.  ``reward`` = ``progress_gain`` x (``last_dist`` - distance to the goal) -
+    ``step_cost``, plus ``goal_reward`` on arrival (within ``goal_tol``), minus ``collision_cost`` on a
+    collision; ``last_dist`` becomes the new distance.
     """
     k = out_occ.shape[1]
-    ny, nx = clearance.shape[1], clearance.shape[2]
-    near = cell * 0.7071067811865476
+    inv = 1.0 / res
     half = 0.5 * k
+    nx = np.uint64(occupied.shape[2])
+    colx = np.empty(k)
+    coly = np.empty(k)
     for r in range(len(rows)):
         i = rows[r]
-        bx, by, bth = belief[i, 0], belief[i, 1], _wrap(belief[i, 2])
-        out_pose[i, 0] = min(max(bx, 0.0), width)
-        out_pose[i, 1] = min(max(by, 0.0), height)
-        out_pose[i, 2] = min(max(bth, -math.pi), math.pi)
+        bx = min(max(belief[i, 0], 0.0), width)
+        by = min(max(belief[i, 1], 0.0), height)
+        bth = min(max(_wrap(belief[i, 2]), -math.pi), math.pi)
+        out_pose[i, 0], out_pose[i, 1], out_pose[i, 2] = bx, by, bth
         out_goal[i, 0], out_goal[i, 1], out_goal[i, 2] = goal[i, 0], goal[i, 1], goal[i, 2]
-        c, s = math.cos(bth), math.sin(bth)
-        m = map_of[i]
+        c, s = math.cos(bth) * cell * inv, math.sin(bth) * cell * inv
+        gx0, gy0 = bx * inv + pad, by * inv + pad  # the robot in grid cells (padded: every index is >= 0)
+        for b in range(k):  # the window's axes in grid cells: ahead (a) and to the left (b)
+            fb = b + 0.5 - half
+            colx[b], coly[b] = -s * fb, c * fb
+        grid = occupied[map_of[i]].ravel()
+        cells = out_occ[i].ravel()
+        j = 0
         for a in range(k):
-            fx = (a + 0.5 - half) * cell
+            fa = a + 0.5 - half
+            px, py = gx0 + c * fa, gy0 + s * fa
             for b in range(k):
-                fy = (b + 0.5 - half) * cell
-                wx = bx + c * fx - s * fy
-                wy = by + s * fx + c * fy
-                if wx < 0.0 or wy < 0.0 or wx >= width or wy >= height:
-                    out_occ[i, a, b] = 1
-                    continue
-                ix = min(int(wx / res), nx - 1)
-                iy = min(int(wy / res), ny - 1)
-                out_occ[i, a, b] = 1 if clearance[m, iy, ix] < near else 0
+                cells[j] = grid[np.uint64(py + coly[b]) * nx + np.uint64(px + colx[b])]
+                j += 1
         d = math.hypot(goal[i, 0] - pose[i, 0], goal[i, 1] - pose[i, 1])
         rw = progress_gain * (last_dist[i] - d) - step_cost
         reached[i] = d <= goal_tol and not failed[i]
@@ -73,3 +77,17 @@ def observe(belief: np.ndarray, pose: np.ndarray, goal: np.ndarray, map_of: np.n
             rw -= collision_cost
         reward[i] = rw
         last_dist[i] = d
+
+
+def occupied_cells(clearance: np.ndarray, cell: float, pad: int) -> np.ndarray:
+    """uint8 mask of the cells of a clearance field (m) with a block or wall within ``cell / sqrt(2)`` (m)
+    of their centre (a window cell of size ``cell`` centred there touches an obstacle), with ``pad`` cells
+    of 1 (outside the field) around it."""
+    inner = clearance < cell * math.sqrt(0.5)
+    return np.ascontiguousarray(np.pad(inner, pad, constant_values=True), dtype=np.uint8)
+
+
+def window_pad(cells: int, cell: float, res: float) -> int:
+    """Cells of ``res`` m around the field that a window of ``cells x cells`` cells of ``cell`` m, centred
+    anywhere on the field and turned any way, can reach (with one to spare)."""
+    return int(math.ceil(0.5 * cells * cell * math.sqrt(2.0) / res)) + 2

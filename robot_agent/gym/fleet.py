@@ -30,7 +30,7 @@ from robot_agent.engine.noise import path_key
 from robot_agent.engine.sim import SimCore, State
 from robot_agent.engine.world import World
 
-from ._kernels import observe
+from ._kernels import observe, occupied_cells, window_pad
 from .maps import NavMap, build_maps
 
 __all__ = ["NavigationFleet", "TaskConfig"]
@@ -104,8 +104,10 @@ class NavigationFleet:
         self.core = SimCore(p, make_backend(backend, self.n, p), World(sizes, world_of, origin, area,
                                                                        p.collision_radius_m), log_poses=False)
         self.backend = backend
-        self.clearance = np.ascontiguousarray(np.stack([m.clearance for m in self.maps]))
         self.res = self.maps[0].resolution
+        self.pad = window_pad(cfg.occupancy_cells, cfg.occupancy_cell_m, self.res)
+        self.occupied = np.ascontiguousarray(np.stack([occupied_cells(m.clearance, cfg.occupancy_cell_m, self.pad)
+                                                       for m in self.maps]))
         self.watchdog_s = cfg.frame_skip * self.core.dt + 1.0
         n, k = self.n, cfg.occupancy_cells
         self.goal = np.zeros((n, 3))
@@ -161,9 +163,10 @@ class NavigationFleet:
             if self.map_of[i] != m:
                 world.load_blocks(i, nav.blocks)
                 self.map_of[i] = m
-            why = world.place_conflict(i, (float(start[0]), float(start[1]), float(start[2])), core.backend.pose)
-            if why:
-                raise ValueError(f"`start` {start.tolist()} is not free: {why}")
+            if "start" in opts:  # a drawn start is free: its cell keeps the start clearance from everything
+                why = world.place_conflict(i, (float(start[0]), float(start[1]), float(start[2])), core.backend.pose)
+                if why:
+                    raise ValueError(f"`start` {start.tolist()} is not free: {why}")
             core.place(i, (float(start[0]), float(start[1]), float(start[2])))
             self.goal[i] = goal
             self.steps[i] = 0
@@ -182,10 +185,11 @@ class NavigationFleet:
         a = np.asarray(actions, dtype=float).reshape(self.n, 2)
         rows = self._all if rows is None else np.asarray(rows, dtype=np.int64)
         starting = rows[self.pending[rows]]
-        for i in starting.tolist():  # velocity mode begins: the episode's noise key, as a T,T,V drive
-            core.drive(i, float(a[i, 0]), float(a[i, 1]), int(self.keys[i]), self.watchdog_s)
-        self.pending[starting] = False
-        core.drive_all(a, self.watchdog_s)
+        if len(starting):  # velocity mode begins: the episode's noise key, as with a T,T,V
+            core.drive_from_rest(starting, a, self.keys, self.watchdog_s)  # (and drive_all)
+            self.pending[starting] = False
+        else:
+            core.drive_all(a, self.watchdog_s)
         core.advance(self.config.frame_skip)
         self.steps[rows] += 1
         self._observe(rows)
@@ -195,7 +199,7 @@ class NavigationFleet:
     def _observe(self, rows: np.ndarray) -> None:
         cfg = self.config
         np.equal(self.core.state, _FAILED, out=self.failed)
-        observe(self.core.backend.belief, self.core.backend.pose, self.goal, self.map_of, self.clearance, self.res,
+        observe(self.core.backend.belief, self.core.backend.pose, self.goal, self.map_of, self.occupied, self.res, self.pad,
                 float(self.size[0]), float(self.size[1]), cfg.occupancy_cell_m, self.failed, cfg.goal_tolerance_m,
                 cfg.progress_gain, cfg.step_cost, cfg.goal_reward, cfg.collision_cost, self.last_dist, rows,
                 self.obs_pose, self.obs_goal, self.obs_occ, self.reward, self.reached)
