@@ -283,7 +283,7 @@ def test_the_policy_is_an_uploadable_controller_program(tmp_path: Path) -> None:
     env_file = tmp_path / "env.json"
     env_file.write_text(json.dumps(ONE_BLOCK))
 
-    async def main() -> tuple[float, float, int]:
+    async def main() -> tuple[float, float, str]:
         async with running_agents(backend="field", time_scale=4.0) as host:
             port = host.ports[0]
             setup = await LineClient.connect(port)
@@ -303,9 +303,11 @@ def test_the_policy_is_an_uploadable_controller_program(tmp_path: Path) -> None:
                 if math.hypot(x - 1.5, y - 0.9) < 0.05 and not core.backend.busy() and child.returncode is None \
                         and np.allclose(core.want[0], 0.0):
                     break
-            child.kill()
+            if child.returncode is None:
+                child.kill()
+            said = (await child.stdout.read()).decode()  # type: ignore[union-attr]
             await child.wait()
-            return x, y, int(core.world.what[0])
+            return x, y, said
 
-    x, y, _ = asyncio.run(main())
-    assert math.hypot(x - 1.5, y - 0.9) < 0.05
+    x, y, said = asyncio.run(main())
+    assert math.hypot(x - 1.5, y - 0.9) < 0.05, said

@@ -30,11 +30,11 @@ REACH_M, SLOW_M, STOP_M = 0.25, 0.2, 0.03  # repulsion range, approach slow-down
 class GoToGoal:
     """The policy: body velocities (v m/s, w rad/s) for an observation ``{"pose", "goal", "occupancy"}``.
 
-    Memory of one kind: once blocked, it turns towards the freer side and then drives on along the
-    obstacle for ``FOLLOW`` calls before it heads for the goal again (a bug algorithm's wall following,
-    short); call :meth:`reset` at an episode's start."""
+    Memory of one kind: once blocked, it turns towards the freer side and then drives straight on for
+    ``FOLLOW_M`` before it heads for the goal again (a bug algorithm's wall following, short; by distance,
+    so it acts alike at any rate of observations); call :meth:`reset` at an episode's start."""
 
-    FOLLOW = 20
+    FOLLOW_M = 0.25
 
     def __init__(self, cell: float = CELL_M) -> None:
         self.cell = cell
@@ -42,7 +42,8 @@ class GoToGoal:
 
     def reset(self) -> None:
         """Forget the obstacle being followed."""
-        self.follow, self.side = 0, 1.0
+        self.follow: tuple[float, float] | None = None  # where following began
+        self.side = 1.0
 
     def __call__(self, obs) -> tuple[float, float]:
         return self.act(obs)
@@ -74,13 +75,14 @@ class GoToGoal:
                 if fx > 0.0 and abs(fy) < 0.07:
                     ahead = min(ahead, fx)
         if ahead < min(0.15, dist):  # blocked: turn on the spot towards the freer side (the goal's on a tie)
-            if self.follow == 0:
+            if self.follow is None:
                 self.side = 1.0 if left < right or (left == right and hy >= 0) else -1.0
-            self.follow = self.FOLLOW
+            self.follow = (x, y)
             return 0.0, self.side * 0.5 * W_MAX
-        if self.follow > 0:  # then straight on along the obstacle for a while
-            self.follow -= 1
-            return 0.6 * V_MAX, 0.0
+        if self.follow is not None:  # then straight on along the obstacle for a while
+            if math.hypot(x - self.follow[0], y - self.follow[1]) < self.FOLLOW_M:
+                return 0.6 * V_MAX, 0.0
+            self.follow = None
         err = math.atan2(hy, hx)
         w = max(-W_MAX, min(W_MAX, 2.5 * err))
         v = V_MAX * min(1.0, dist / SLOW_M) * max(math.cos(err), 0.0) * max(0.2, min(1.0, (ahead - 0.08) / 0.15))
@@ -125,7 +127,8 @@ def main() -> int:
     sock = socket.create_connection((os.environ["TWB_ROBOT_HOST"], int(os.environ["TWB_ROBOT_PORT"])))
     robot = sock.makefile("rw", newline="\n")
     print("robot:", robot.readline().strip())  # HELLO,<robot_id>,<platform>,1
-    robot.write("T,T,O,1\n")
+    robot.write("T,T,O,1\n")  # PO lines: the tracker's poses while the robot is in velocity mode
+    robot.write("T,T,V,0,0\n")  # velocity mode (the testbed has begun it for a run; a standalone agent has not)
     robot.flush()
     drive = GoToGoal()
     for line in robot:
