@@ -29,11 +29,11 @@ import sys
 if __package__ in (None, ""):  # run as a script: bench/ must not shadow the project's packages
     sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from bench._common import interleaved, report  # noqa: E402
-from bench.sim import busy_core  # noqa: E402
-from robot_agent.gym.envs import NavigationVectorEnv  # noqa: E402
+from bench._common import interleaved, report
+from bench.sim import busy_core
+from robot_agent.gym.envs import NavigationVectorEnv
 
 TARGET = 1_000_000  # robot-steps/s of the vector environment, 1000 robots, ideal robot, frame_skip 1
 

@@ -10,7 +10,6 @@ import importlib.metadata
 import json
 import math
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -19,22 +18,23 @@ import pytest
 
 gymnasium = pytest.importorskip("gymnasium")
 
-from contract.frames import field_layout  # noqa: E402
-from contract.params import robot_params  # noqa: E402
-from contract.protocol import encode_build, encode_place  # noqa: E402
-from gymnasium.utils.env_checker import check_env  # noqa: E402
-from robot_agent.engine.backends import make_backend  # noqa: E402
-from robot_agent.engine.sim import SimCore  # noqa: E402
-from robot_agent.engine.world import World  # noqa: E402
-from robot_agent.gym import ENV_IDS, register_envs  # noqa: E402
-from robot_agent.gym.envs import NavigationEnv, NavigationVectorEnv  # noqa: E402
-from robot_agent.gym.maps import build_map  # noqa: E402
-from planners.environment import load_environment  # noqa: E402
+from gymnasium.utils.env_checker import check_env
+
+from contract.frames import field_layout
+from contract.params import robot_params
+from contract.protocol import encode_build, encode_place
+from planners.environment import load_environment
+from robot_agent.engine.backends import make_backend
+from robot_agent.engine.sim import SimCore
+from robot_agent.engine.world import World
+from robot_agent.gym import ENV_IDS, register_envs
+from robot_agent.gym.envs import NavigationEnv, NavigationVectorEnv
+from robot_agent.gym.maps import build_map
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples" / "gym"
 sys.path.insert(0, str(EXAMPLES))
-from go_to_goal import GoToGoal, occupancy  # noqa: E402
+from go_to_goal import GoToGoal, occupancy
 
 # one block in the middle of an empty sub-field: the policy must go round it
 ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.2, "h": 0.2, "angle": 0.3}]}
@@ -117,7 +117,7 @@ def test_a_seeded_rollout_is_the_engines_own_run(backend: str, monkeypatch: pyte
     actions = random_actions(env.action_space, 150, seed=5)
     ours = []
     for a in actions:
-        obs, _, terminated, _, info = env.step(a)
+        obs, _, terminated, _, _info = env.step(a)
         ours.append((env.fleet.core.backend.pose[0].copy(), env.fleet.core.backend.belief[0].copy(),
                      int(env.fleet.core.state[0])))
         assert np.array_equal(obs["pose"][:2], env.fleet.core.backend.belief[0, :2].astype(np.float32))
@@ -133,7 +133,7 @@ def test_a_collision_ends_the_episode_as_the_engine_fails_the_drive() -> None:
     env = NavigationEnv(["room"], backend="field", max_episode_steps=10_000)
     env.reset(seed=0, options={"start": [0.3, 0.6, 0.0], "goal": [1.5, 0.3]})  # facing the wall at x = 0.87
     for t in range(200):
-        obs, reward, terminated, truncated, info = env.step(np.array([0.2, 0.0], dtype=np.float32))
+        _obs, reward, terminated, _truncated, info = env.step(np.array([0.2, 0.0], dtype=np.float32))
         if terminated:
             break
     assert terminated and info["collided"] and not info["reached"] and reward < -9
@@ -148,13 +148,13 @@ def test_a_collision_ends_the_episode_as_the_engine_fails_the_drive() -> None:
 def test_same_seed_same_episode_bit_for_bit(backend: str) -> None:
     def episode(seed: int) -> list:
         env = NavigationEnv(backend=backend, max_episode_steps=40)
-        obs, info = env.reset(seed=seed)
+        obs, _ = env.reset(seed=seed)
         out = [obs]
         for a in random_actions(env.action_space, 100, seed=1):
-            obs, r, te, tr, info = env.step(a)
+            obs, r, te, tr, _ = env.step(a)
             out.append((obs, r, te, tr))
             if te or tr:
-                obs, info = env.reset()  # the next episode from the same generator
+                obs, _ = env.reset()  # the next episode from the same generator
                 out.append(obs)
         return out
 

@@ -121,7 +121,8 @@ def occupancy(x: float, y: float, th: float, blocks: list, size: tuple[float, fl
 
 def main() -> int:
     """The controller program: PO lines in, T,T,V lines out (docs/controllers.md)."""
-    env = json.load(open(os.environ["TWB_ENV_FILE"]))
+    with open(os.environ["TWB_ENV_FILE"]) as f:
+        env = json.load(f)
     size = (float(env["size"][0]), float(env["size"][1]))
     goal = [float(v) for v in os.environ["TWB_GOAL"].split(",")] + [0.0]
     sock = socket.create_connection((os.environ["TWB_ROBOT_HOST"], int(os.environ["TWB_ROBOT_PORT"])))

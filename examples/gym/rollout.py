@@ -15,7 +15,7 @@ import numpy as np
 import robot_agent.gym  # noqa: F401 - registers Teleworkbench/... (Gymnasium >= 1.0 loads no plug-ins itself)
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from go_to_goal import GoToGoal  # noqa: E402
+from go_to_goal import GoToGoal
 
 
 def main() -> None:

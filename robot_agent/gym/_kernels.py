@@ -90,4 +90,4 @@ def occupied_cells(clearance: np.ndarray, cell: float, pad: int) -> np.ndarray:
 def window_pad(cells: int, cell: float, res: float) -> int:
     """Cells of ``res`` m around the field that a window of ``cells x cells`` cells of ``cell`` m, centred
     anywhere on the field and turned any way, can reach (with one to spare)."""
-    return int(math.ceil(0.5 * cells * cell * math.sqrt(2.0) / res)) + 2
+    return math.ceil(0.5 * cells * cell * math.sqrt(2.0) / res) + 2

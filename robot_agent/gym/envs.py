@@ -20,7 +20,8 @@ robot); the vector environment's robot ``i`` runs exactly what ``NavigationEnv``
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -57,7 +58,7 @@ class NavigationEnv(gym.Env):
     :class:`Environment` objects of one size; one per episode, drawn), ``backend`` (``field`` or ``ideal``)
     and ``profile`` (a robot profile of ``contract/profiles``)."""
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
     def __init__(self, environments: Sequence[str | Environment] = ("room", "blocks"), *, backend: str = "field",
                  profile: str | dict = DEFAULT_PROFILE, render_mode: str | None = None, **task: Any) -> None:
@@ -94,7 +95,7 @@ class NavigationVectorEnv(VectorEnv):
     autoreset: a robot whose episode ended is reset by the following ``step``, which ignores its action
     and returns its first observation with reward 0).  Keyword arguments as :class:`NavigationEnv`."""
 
-    metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, environments: Sequence[str | Environment] = ("room", "blocks"), *,
                  backend: str = "field", profile: str | dict = DEFAULT_PROFILE, render_mode: str | None = None,

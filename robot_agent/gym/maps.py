@@ -11,8 +11,8 @@ starts and goals are drawn: every drawn goal is reachable from its start.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 from scipy import ndimage
