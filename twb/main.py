@@ -11,7 +11,7 @@ import sys
 import typer
 
 from . import (agent_cmd, calibrate_cmd, demo_cmd, jobs_cmd, metrics_cmd, plan_cmd, plugins_cmd, replay_cmd, server_cmd,
-               study_cmd, upload_cmd)
+               study_cmd, upload_cmd, worlds_cmd)
 from .errors import report_exception
 
 app = typer.Typer(
@@ -42,6 +42,7 @@ app.command("replay")(replay_cmd.replay)
 app.command("study")(study_cmd.study)
 app.command("export-ompl")(study_cmd.export_ompl)
 app.command("calibrate")(calibrate_cmd.calibrate)
+app.add_typer(worlds_cmd.worlds_app, name="worlds")
 
 
 def main(argv: list[str] | None = None) -> int:
