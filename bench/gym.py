@@ -16,6 +16,9 @@ so each round of both sees the same machine load), are the engine's own figures 
   commands, ``frame_skip`` control steps per call, no observation.
 
 ``ratio_to_engine`` = environment robot-steps/s / the engine's; ``ratio_to_engine_velocity`` likewise.
+On a shared machine wall time depends on the others' load (``load_average`` is reported): the ratios,
+and the figures per CPU second (``robot_steps_per_cpu_s``, ``engine_control_steps_per_cpu_s``: one more
+run of each timed by this process's CPU time), are what carry over.
 
     python bench/gym.py [--robots 1000] [--steps 200] [--runs 5]
 """
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 
 if __package__ in (None, ""):  # run as a script: bench/ must not shadow the project's packages
     sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -67,6 +71,11 @@ def figures(robots: int, backend: str, frame_skip: int, steps: int, runs: int) -
 
     timed = interleaved({"engine": run_engine, "env": run_env, "engine_velocity": run_velocity}, "engine", runs)
     per_s = {name: steps * robots / t["median_s"] for name, t in timed.items()}
+    cpu = {}
+    for name, fn in (("engine", run_engine), ("env", run_env)):  # CPU time: what a loaded machine's wall time hides
+        c0 = time.process_time()
+        fn()
+        cpu[name] = time.process_time() - c0
     engine_per_s = steps * frame_skip * robots / timed["engine"]["median_s"]  # control steps
     return {
         "robots": robots,
@@ -80,6 +89,8 @@ def figures(robots: int, backend: str, frame_skip: int, steps: int, runs: int) -
         "engine_velocity_control_steps_per_s": per_s["engine_velocity"] * frame_skip,
         "ratio_to_engine": per_s["env"] * frame_skip / engine_per_s,
         "ratio_to_engine_velocity": timed["engine_velocity"]["median_s"] / timed["env"]["median_s"],
+        "robot_steps_per_cpu_s": steps * robots / cpu["env"],
+        "engine_control_steps_per_cpu_s": steps * frame_skip * robots / cpu["engine"],
     }
 
 
