@@ -40,8 +40,18 @@ from .errors import PlanningError
 from .geometry import distance_to_obstacles
 from .grid import grid_map
 
-__all__ = ["KINDS", "Difficulty", "GeneratedWorld", "cave_grid", "block_grid", "difficulty", "generate_world",
-           "generate_worlds", "grid_blocks", "point_metrics"]
+__all__ = [
+    "KINDS",
+    "Difficulty",
+    "GeneratedWorld",
+    "block_grid",
+    "cave_grid",
+    "difficulty",
+    "generate_world",
+    "generate_worlds",
+    "grid_blocks",
+    "point_metrics",
+]
 
 KINDS = ("cave", "blocks")
 START = (0.9, 0.15, math.pi / 2)  #: where every generated world's robot starts (m, m, rad): bottom centre
@@ -120,7 +130,7 @@ def block_grid(rng: np.random.Generator, cells: int, count: int, max_side: int =
 def grid_blocks(grid: np.ndarray, cell: float) -> list[dict[str, float]]:
     """The obstacle cells of ``grid`` as environment blocks (centre, size; m) of ``cell`` m cells: each row's
     runs, merged with the same run of the rows above."""
-    rows, cols = grid.shape
+    rows = grid.shape[0]
     open_runs: dict[tuple[int, int], int] = {}  # (x0, x1) -> first row
     out: list[tuple[int, int, int, int]] = []
     for y in range(rows + 1):
@@ -184,7 +194,7 @@ def _resample(path: np.ndarray, spacing: float) -> np.ndarray:
     xy = np.asarray(path, dtype=float)[:, :2]
     seg = np.hypot(*np.diff(xy, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(seg)])
-    at = np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1] / spacing)) + 1))
+    at = np.linspace(0.0, s[-1], max(2, math.ceil(s[-1] / spacing) + 1))
     return np.column_stack([np.interp(at, s, xy[:, 0]), np.interp(at, s, xy[:, 1])])
 
 

@@ -10,6 +10,7 @@ import importlib.metadata
 import json
 import math
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -311,3 +312,25 @@ def test_the_policy_is_an_uploadable_controller_program(tmp_path: Path) -> None:
 
     x, y, said = asyncio.run(main())
     assert math.hypot(x - 1.5, y - 0.9) < 0.05, said
+
+
+# ---------------------------------------------------------------------------------------- the page's examples
+
+
+def test_the_python_examples_of_docs_gymnasium_run(tmp_path: Path) -> None:
+    """Every ``python`` block of docs/gymnasium.md, as written, in a directory with a small world set."""
+    import re
+
+    from planners.worlds import generate_worlds
+
+    folder = tmp_path / "worlds-cave-0"
+    folder.mkdir()
+    for w in generate_worlds(3, 0):
+        (folder / f"{w.environment.name}.json").write_text(json.dumps(w.environment.to_dict()))
+    page = (ROOT / "docs" / "gymnasium.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", page, flags=re.DOTALL)
+    assert len(blocks) >= 3
+    for code in blocks:
+        run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, check=False, capture_output=True, text=True, timeout=600,
+                             env={**os.environ, "PYTHONPATH": str(ROOT)})
+        assert run.returncode == 0, f"{code}\n{run.stderr}"

@@ -27,7 +27,7 @@ def generate(
     count: Annotated[int, typer.Option(help="How many worlds (1 to 10000).")] = 10,
     seed: Annotated[int, typer.Option(help="World i is drawn from seed SEED + i: the same options, the same set.")] = 0,
     kind: Annotated[Kind, typer.Option(help="cave: cellular automaton (BARN); blocks: random rectangles.")] = Kind.cave,
-    out: Annotated[Optional[Path], typer.Option(
+    out: Annotated[Optional[Path], typer.Option(  # noqa: UP045 - typer reads Optional
         help="Directory for the environment files and index.json (default: worlds-KIND-SEED).")] = None,
     upload: Annotated[bool, typer.Option(help="Also add every world to the testbed as an environment.")] = False,
     url: UrlOpt = None,
