@@ -15,7 +15,8 @@ so each round of both sees the same machine load), are the engine's own figures 
 - ``engine_velocity``: the engine as the environment drives it, velocity mode with the same random
   commands, ``frame_skip`` control steps per call, no observation.
 
-``ratio_to_engine`` = environment robot-steps/s / the engine's; ``ratio_to_engine_velocity`` likewise.
+A last row repeats ideal robots at ``frame_skip`` 1 with the observations computed on numba's threads
+(``parallel=True``).  ``ratio_to_engine`` = environment robot-steps/s / the engine's; ``ratio_to_engine_velocity`` likewise.
 On a shared machine wall time depends on the others' load (``load_average`` is reported): the ratios,
 and the figures per CPU second (``robot_steps_per_cpu_s``, ``engine_control_steps_per_cpu_s``: one more
 run of each timed by this process's CPU time), are what carry over.
@@ -42,9 +43,9 @@ from robot_agent.gym.envs import NavigationVectorEnv
 TARGET = 1_000_000  # robot-steps/s of the vector environment, 1000 robots, ideal robot, frame_skip 1
 
 
-def figures(robots: int, backend: str, frame_skip: int, steps: int, runs: int) -> dict:
+def figures(robots: int, backend: str, frame_skip: int, steps: int, runs: int, parallel: bool = False) -> dict:
     """One configuration's timings (see the module docstring)."""
-    env = NavigationVectorEnv(robots, backend=backend, frame_skip=frame_skip)
+    env = NavigationVectorEnv(robots, backend=backend, frame_skip=frame_skip, parallel=parallel)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     top = env.single_action_space.high.astype(float)
@@ -81,6 +82,7 @@ def figures(robots: int, backend: str, frame_skip: int, steps: int, runs: int) -
         "robots": robots,
         "backend": backend,
         "frame_skip": frame_skip,
+        "parallel_observations": parallel,
         "env_steps_per_run": steps,
         "robot_steps_per_s": per_s["env"],
         "control_steps_per_s": per_s["env"] * frame_skip,
@@ -102,6 +104,7 @@ def main() -> None:
     args = ap.parse_args()
     results = [figures(args.robots, backend, fs, args.steps, args.runs)
                for backend in ("ideal", "field") for fs in (1, 5)]
+    results.append(figures(args.robots, "ideal", 1, args.steps, args.runs, parallel=True))
     head = next(r for r in results if r["backend"] == "ideal" and r["frame_skip"] == 1)
     report("gym", results, cpus=os.cpu_count(), load_average=os.getloadavg(),
            targets_met={f"vector env >= {TARGET:,} robot-steps/s (ideal, frame_skip 1)":

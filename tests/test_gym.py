@@ -334,3 +334,14 @@ def test_the_python_examples_of_docs_gymnasium_run(tmp_path: Path) -> None:
         run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, check=False, capture_output=True, text=True, timeout=600,
                              env={**os.environ, "PYTHONPATH": str(ROOT)})
         assert run.returncode == 0, f"{code}\n{run.stderr}"
+
+
+def test_parallel_observations_are_the_same() -> None:
+    envs = [NavigationVectorEnv(16, backend="field", parallel=p) for p in (False, True)]
+    outs = [e.reset(seed=3)[0] for e in envs]
+    acts = np.random.default_rng(0).uniform(-1, 1, (30, 16, 2)).astype(np.float32) * envs[0].single_action_space.high
+    for a in acts:
+        outs = [e.step(a) for e in envs]
+        for key in outs[0][0]:
+            assert np.array_equal(outs[0][0][key], outs[1][0][key])
+        assert np.array_equal(outs[0][1], outs[1][1])
