@@ -60,6 +60,7 @@ class World:
         self._blocks: dict[int, np.ndarray] = {}  # owner -> (B, 5) world frame
         counts = np.bincount(self.world_of, minlength=len(self.sizes))
         self.shared = np.flatnonzero(counts[self.world_of] > 1)  #: robots that can meet robots
+        self._alone = counts[self.world_of] == 1
         #: upper bound of how far a robot travels in one step (m); set by the simulation core
         self.step_travel = 0.0
         #: broad phase: the step until which each robot cannot touch a wall or block
@@ -92,7 +93,7 @@ class World:
         training environment does at each episode of each of many robots)."""
         w = int(self.world_of[owner])
         b = np.asarray(blocks_local, dtype=float).reshape(-1, 5)
-        if (self.world_of == w).sum() != 1 or len(b) > self.centre.shape[1]:
+        if not self._alone[owner] or len(b) > self.centre.shape[1]:
             self.set_blocks(owner, b)
             return
         b = b.copy()

@@ -49,13 +49,14 @@ class NavMap:
 
     def sample_pair(self, rng: np.random.Generator, min_distance: float) -> tuple[np.ndarray, np.ndarray]:
         """A start and a goal pose ``(3,)`` each (m, m, rad), ``min_distance`` (m) apart or more when the
-        region allows it (else as far apart as 64 draws found), headings uniform in [-pi, pi)."""
+        region allows it (the first of 64 drawn goals that is; else the farthest), headings uniform in
+        [-pi, pi)."""
         n = len(self.free_xy)
-        a = self.free_xy[rng.integers(n)]
-        cand = self.free_xy[rng.integers(n, size=64)]
+        pick = rng.integers(n, size=65)  # the start, then 64 candidate goals
+        a, cand = self.free_xy[pick[0]], self.free_xy[pick[1:]]
         d = np.hypot(cand[:, 0] - a[0], cand[:, 1] - a[1])
-        ok = np.flatnonzero(d >= min_distance)
-        b = cand[ok[0]] if len(ok) else cand[int(np.argmax(d))]
+        far = d >= min_distance
+        b = cand[int(np.argmax(far))] if far.any() else cand[int(np.argmax(d))]
         th = rng.uniform(-math.pi, math.pi, size=2)
         return np.array([a[0], a[1], th[0]]), np.array([b[0], b[1], th[1]])
 
