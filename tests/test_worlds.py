@@ -119,11 +119,12 @@ def test_bad_arguments_name_the_parameter() -> None:
 
 def test_twb_worlds_generate(tmp_path: Path) -> None:
     out = tmp_path / "set"
-    run = subprocess.run([sys.executable, "-m", "twb", "worlds", "generate", "--count", "2", "--seed", "4", "--out",
-                          str(out)], check=False, capture_output=True, text=True, timeout=300)
+    run = subprocess.run([sys.executable, "-m", "twb", "worlds", "generate", "--count", "2", "--seed", "4",
+                          "--test-fraction", "0.5", "--out", str(out)], check=False, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     index = json.loads((out / "index.json").read_text())
     assert [w["name"] for w in index["worlds"]] == ["cave-4-000", "cave-4-001"]
+    assert sorted(w["split"] for w in index["worlds"]) == ["test", "train"]
     for w in index["worlds"]:
         env = load_environment(out / w["file"])
         assert env.name == w["name"] and set(w["difficulty"]) == {
