@@ -201,6 +201,17 @@ def test_the_vector_env_runs_what_one_env_per_robot_runs() -> None:
                 assert np.array_equal(obs[key], vec_obs[t + 1][key][i]), (i, t, key)
 
 
+def test_a_world_set_directory_is_its_environments(tmp_path: Path) -> None:
+    from planners.worlds import generate_worlds
+
+    for w in generate_worlds(2, 50):
+        (tmp_path / f"{w.environment.name}.json").write_text(json.dumps(w.environment.to_dict()))
+    (tmp_path / "index.json").write_text("{}")
+    env = NavigationEnv(tmp_path, backend="ideal")
+    assert [m.env.name for m in env.fleet.maps] == ["cave-50-000", "cave-50-001"]
+    assert [m.env.name for m in NavigationEnv("room").fleet.maps] == ["room"]  # one name, not its letters
+
+
 def test_the_vector_env_resets_a_mask() -> None:
     vec = NavigationVectorEnv(3, backend="ideal")
     obs0, _ = vec.reset(seed=1)
@@ -325,8 +336,11 @@ def test_the_python_examples_of_docs_gymnasium_run(tmp_path: Path) -> None:
 
     folder = tmp_path / "worlds-cave-0"
     folder.mkdir()
-    for w in generate_worlds(3, 0):
+    index = []
+    for i, w in enumerate(generate_worlds(3, 0)):
         (folder / f"{w.environment.name}.json").write_text(json.dumps(w.environment.to_dict()))
+        index.append({"file": f"{w.environment.name}.json", "split": "test" if i == 2 else "train"})
+    (folder / "index.json").write_text(json.dumps({"worlds": index}))
     page = (ROOT / "docs" / "gymnasium.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", page, flags=re.DOTALL)
     assert len(blocks) >= 3

@@ -31,9 +31,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from contract.robot_profile import DEFAULT_PROFILE
-from planners.environment import Environment
 
 from .fleet import NavigationFleet, TaskConfig
+from .maps import Environments
 
 __all__ = ["NavigationEnv", "NavigationVectorEnv"]
 
@@ -55,12 +55,13 @@ def _spaces(fleet: NavigationFleet) -> tuple[spaces.Dict, spaces.Box]:
 class NavigationEnv(gym.Env):
     """One robot's navigation task (see the module docstring); keyword arguments as
     :class:`~robot_agent.gym.fleet.TaskConfig` takes them, plus ``environments`` (names, JSON files or
-    :class:`Environment` objects of one size; one per episode, drawn), ``backend`` (``field`` or ``ideal``)
+    :class:`~planners.environment.Environment` objects of one size, or a world set's directory; one per
+    episode, drawn), ``backend`` (``field`` or ``ideal``)
     and ``profile`` (a robot profile of ``contract/profiles``)."""
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
-    def __init__(self, environments: Sequence[str | Environment] = ("room", "blocks"), *, backend: str = "field",
+    def __init__(self, environments: Environments = ("room", "blocks"), *, backend: str = "field",
                  profile: str | dict = DEFAULT_PROFILE, render_mode: str | None = None, **task: Any) -> None:
         if render_mode is not None:
             raise ValueError(f"`render_mode` must be None (no rendering), got {render_mode!r}")
@@ -97,7 +98,7 @@ class NavigationVectorEnv(VectorEnv):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int = 1, environments: Sequence[str | Environment] = ("room", "blocks"), *,
+    def __init__(self, num_envs: int = 1, environments: Environments = ("room", "blocks"), *,
                  backend: str = "field", profile: str | dict = DEFAULT_PROFILE, render_mode: str | None = None,
                  **task: Any) -> None:
         if render_mode is not None:

@@ -25,14 +25,13 @@ import numpy as np
 from contract.frames import field_layout
 from contract.params import robot_params
 from contract.robot_profile import DEFAULT_PROFILE
-from planners.environment import Environment
 from robot_agent.engine.backends import make_backend
 from robot_agent.engine.noise import path_key
 from robot_agent.engine.sim import SimCore, State
 from robot_agent.engine.world import World
 
 from ._kernels import observe, observe_parallel, occupied_cells, window_pad
-from .maps import NavMap, build_maps
+from .maps import Environments, NavMap, build_maps
 
 __all__ = ["NavigationFleet", "TaskConfig"]
 
@@ -94,7 +93,7 @@ class NavigationFleet:
     """``n`` robots of ``profile`` on ``backend`` (``field``: the emulated field robot; ``ideal``), each in a
     world of its own with one of ``environments`` per episode (see the module docstring)."""
 
-    def __init__(self, n: int, environments: Sequence[str | Environment] = ("room", "blocks"), *,
+    def __init__(self, n: int, environments: Environments = ("room", "blocks"), *,
                  backend: str = "field", profile: str | dict = DEFAULT_PROFILE, config: TaskConfig | None = None) -> None:
         if not (isinstance(n, (int, np.integer)) and n >= 1):
             raise ValueError(f"`n` must be an integer >= 1, got {n!r}")

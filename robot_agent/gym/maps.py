@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -20,7 +21,7 @@ from scipy import ndimage
 from planners.environment import Environment, load_environment
 from planners.grid import grid_map
 
-__all__ = ["NavMap", "build_maps"]
+__all__ = ["Environments", "NavMap", "build_map", "build_maps", "environment_list"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,10 +87,29 @@ def build_map(env: Environment, *, clearance_m: float, resolution: float = 0.02)
                   gm.cell_centres(iy, ix))
 
 
-def build_maps(environments: Sequence[str | Environment], *, clearance_m: float,
+#: what an environment argument may be (:func:`environment_list`)
+Environments = str | Path | Environment | Sequence[str | Path | Environment]
+
+
+def environment_list(environments: Environments) -> list:
+    """The environments one argument names: a built-in name, a JSON file, an :class:`Environment`, a
+    directory (its ``*.json`` files but ``index.json``, sorted: a world set of ``twb worlds generate``), or
+    a sequence of those."""
+    items = [environments] if isinstance(environments, (str, Path, Environment)) else list(environments)
+    out: list = []
+    for item in items:
+        if isinstance(item, (str, Path)) and Path(item).is_dir():
+            out += sorted(str(p) for p in Path(item).glob("*.json") if p.name != "index.json")
+        else:
+            out.append(item)
+    return out
+
+
+def build_maps(environments: Environments, *, clearance_m: float,
                resolution: float = 0.02) -> list[NavMap]:
-    """:func:`build_map` of each environment (a built-in name, a JSON file or an :class:`Environment`); all
-    must have the same size (the engine's worlds are made once)."""
+    """:func:`build_map` of each environment (:func:`environment_list`); all must have the same size (the
+    engine's worlds are made once)."""
+    environments = environment_list(environments)
     if not environments:
         raise ValueError("`environments` must name at least one environment")
     maps = [build_map(load_environment(e), clearance_m=clearance_m, resolution=resolution) for e in environments]
