@@ -52,13 +52,13 @@ class NavMap:
         """A start and a goal pose ``(3,)`` each (m, m, rad), ``min_distance`` (m) apart or more when the
         region allows it (the first of 64 drawn goals that is; else the farthest), headings uniform in
         [-pi, pi)."""
-        n = len(self.free_xy)
-        pick = rng.integers(n, size=65)  # the start, then 64 candidate goals
+        u = rng.random(67)  # one draw: the start, 64 candidate goals, two headings
+        pick = (u[:65] * len(self.free_xy)).astype(np.int64)
         a, cand = self.free_xy[pick[0]], self.free_xy[pick[1:]]
         d = np.hypot(cand[:, 0] - a[0], cand[:, 1] - a[1])
         far = d >= min_distance
         b = cand[int(np.argmax(far))] if far.any() else cand[int(np.argmax(d))]
-        th = rng.uniform(-math.pi, math.pi, size=2)
+        th = (2.0 * u[65:] - 1.0) * math.pi
         return np.array([a[0], a[1], th[0]]), np.array([b[0], b[1], th[1]])
 
 
