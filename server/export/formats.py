@@ -1,0 +1,43 @@
+"""The export formats: names, file names, media types, and whether the optional packages they need are there."""
+
+from __future__ import annotations
+
+import importlib.util
+from enum import Enum
+
+__all__ = ["INSTALL_HINT", "ExportFormat", "missing_packages"]
+
+#: how to install what the exports need (the project's optional extra)
+INSTALL_HINT = "pip install 'teleworkbench[export]'"
+
+
+class ExportFormat(str, Enum):
+    """``mcap``: one MCAP file with Foxglove's schemas; ``rosbag2``: a ROS 2 bag directory, zipped."""
+
+    MCAP = "mcap"
+    ROSBAG2 = "rosbag2"
+
+    @property
+    def media_type(self) -> str:
+        return "application/octet-stream" if self is ExportFormat.MCAP else "application/zip"
+
+    @property
+    def suffix(self) -> str:
+        return ".mcap" if self is ExportFormat.MCAP else ".zip"
+
+    @property
+    def modules(self) -> tuple[str, ...]:
+        """The modules the format is written with (by distribution: mcap, mcap-protobuf-support,
+        foxglove-schemas-protobuf; rosbags)."""
+        if self is ExportFormat.MCAP:
+            return ("mcap", "mcap_protobuf", "foxglove_schemas_protobuf")
+        return ("rosbags",)
+
+    def filename(self, stem: str) -> str:
+        """The download's file name: ``run-12.mcap``, ``experiment-3.zip`` (holding the bag ``experiment-3/``)."""
+        return f"{stem}{self.suffix}"
+
+
+def missing_packages(fmt: ExportFormat) -> list[str]:
+    """The modules :class:`ExportFormat` ``fmt`` needs that are not installed (empty: it can be written)."""
+    return [m for m in fmt.modules if importlib.util.find_spec(m) is None]
