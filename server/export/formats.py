@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 from enum import Enum
 
 __all__ = ["INSTALL_HINT", "ExportFormat", "missing_packages"]
@@ -39,5 +39,11 @@ class ExportFormat(str, Enum):
 
 
 def missing_packages(fmt: ExportFormat) -> list[str]:
-    """The modules :class:`ExportFormat` ``fmt`` needs that are not installed (empty: it can be written)."""
-    return [m for m in fmt.modules if importlib.util.find_spec(m) is None]
+    """The modules :class:`ExportFormat` ``fmt`` needs that cannot be imported (empty: it can be written)."""
+    out = []
+    for module in fmt.modules:
+        try:
+            importlib.import_module(module)
+        except ImportError:
+            out.append(module)
+    return out
