@@ -64,11 +64,14 @@ def _plans(run: Run, exp: Experiment) -> list[Optional[np.ndarray]]:
 
 
 def _log(session: Session, run: Run) -> tuple[LogLine, ...]:
-    """The run's protocol lines; a line without a time gets the one before it (the run's start for the first)."""
-    last = float(run.t_start) if run.t_start is not None else 0.0
+    """The run's protocol lines in order; a line without a time gets the one before it, lines before the first
+    timed one that line's time (the run's start, or 0, when none has a time)."""
+    rows = session.execute(select(Message.t, Message.direction, Message.line)
+                           .where(Message.run_id == run.id).order_by(Message.id)).all()
+    first = next((float(t) for t, _, _ in rows if t is not None), None)
+    last = first if first is not None else (float(run.t_start) if run.t_start is not None else 0.0)
     out = []
-    for t, direction, line in session.execute(select(Message.t, Message.direction, Message.line)
-                                              .where(Message.run_id == run.id).order_by(Message.id)):
+    for t, direction, line in rows:
         last = float(t) if t is not None else last
         out.append(LogLine(last, direction, line))
     return tuple(out)
