@@ -89,7 +89,7 @@ def main() -> None:
                for name, val in timed.items()]
     report("export", results, seconds=args.seconds, poses=len(poses),
            obstacle_poses=sum(len(o.poses) for o in record.obstacles), log_lines=len(record.log), runs=args.runs,
-           cold_s=cold, baseline='json.dumps({"poses": poses.tolist()})',
+           cold_s=cold, load_avg_1m=os.getloadavg()[0], cpus=os.cpu_count(), baseline='json.dumps({"poses": poses.tolist()})',
            targets_met={f"mcap < {TARGET_S} s": timed["mcap"]["median_s"] < TARGET_S,
                         f"mcap cold (imports included) < {TARGET_S} s": cold < TARGET_S})
 
