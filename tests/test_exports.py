@@ -338,14 +338,14 @@ def test_twb_export_writes_the_file(testbed, twb, single, tmp_path):
 def bare(tmp_path_factory):
     """A `twb server` that cannot import the export packages (stand-ins that raise ImportError shadow them)."""
     stubs = tmp_path_factory.mktemp("no-export-extra")
-    for name in ("mcap", "rosbags"):
+    for name in ("foxglove", "rosbags"):
         (stubs / name).mkdir()
         (stubs / name / "__init__.py").write_text(f"raise ImportError('{name} is not installed (test stand-in)')\n")
     path = os.pathsep.join([str(stubs), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     yield from serve(["server", "--port", "0"], tmp_path_factory.mktemp("bare"), env={"PYTHONPATH": path})
 
 
-@pytest.mark.parametrize("fmt, missing", [("mcap", "mcap"), ("rosbag2", "rosbags")])
+@pytest.mark.parametrize("fmt, missing", [("mcap", "foxglove-sdk"), ("rosbag2", "rosbags")])
 def test_without_the_extra_the_answer_is_501_naming_the_install_command(bare, fmt, missing, tmp_path):
     with bare.client() as c:
         r = c.get("/api/v1/runs/1/export", params={"format": fmt})

@@ -26,12 +26,11 @@ class ExportFormat(str, Enum):
         return ".mcap" if self is ExportFormat.MCAP else ".zip"
 
     @property
-    def modules(self) -> tuple[str, ...]:
-        """The modules the format is written with (by distribution: mcap, mcap-protobuf-support,
-        foxglove-schemas-protobuf; rosbags)."""
+    def requirements(self) -> tuple[tuple[str, str], ...]:
+        """What the format is written with: ``(module, distribution)`` pairs."""
         if self is ExportFormat.MCAP:
-            return ("mcap", "mcap_protobuf", "foxglove_schemas_protobuf")
-        return ("rosbags",)
+            return (("foxglove.channels", "foxglove-sdk"),)
+        return (("rosbags.rosbag2", "rosbags"),)
 
     def filename(self, stem: str) -> str:
         """The download's file name: ``run-12.mcap``, ``experiment-3.zip`` (holding the bag ``experiment-3/``)."""
@@ -39,11 +38,12 @@ class ExportFormat(str, Enum):
 
 
 def missing_packages(fmt: ExportFormat) -> list[str]:
-    """The modules :class:`ExportFormat` ``fmt`` needs that cannot be imported (empty: it can be written)."""
+    """The distributions :class:`ExportFormat` ``fmt`` needs whose modules cannot be imported (empty: it can be
+    written)."""
     out = []
-    for module in fmt.modules:
+    for module, distribution in fmt.requirements:
         try:
             importlib.import_module(module)
         except ImportError:
-            out.append(module)
+            out.append(distribution)
     return out

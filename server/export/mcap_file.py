@@ -1,7 +1,8 @@
-"""A run (or an experiment's runs) as an MCAP file with Foxglove's well-known schemas, protobuf-encoded.
+"""A run (or an experiment's runs) as an MCAP file with Foxglove's well-known schemas, written by Foxglove's SDK.
 
-What goes where (names: :mod:`.layout`), each message's log and publish time
-the experiment time it belongs to (ns on the run's clock):
+What goes where (names: :mod:`.layout`), each message's log time the
+experiment time it belongs to (ns on the run's clock; the messages'
+``timestamp`` the same):
 
 - ``/tf`` ``foxglove.FrameTransforms``: ``map`` → the robot's ``base_link``, one per stored pose;
 - ``/robot/pose`` ``foxglove.PoseInFrame``: the same poses in ``map``;
@@ -12,7 +13,8 @@ the experiment time it belongs to (ns on the run's clock):
 - ``/log`` ``foxglove.Log``: the run's protocol lines;
 - ``/metrics`` (JSON, schema ``twb.RunMetrics``): the run's metrics, once, at its end.
 
-Needs the ``export`` extra (``mcap``, ``mcap-protobuf-support``, ``foxglove-schemas-protobuf``).
+The schemas are protobuf-encoded (as Foxglove's SDK writes them); the ``mcap`` package with
+``mcap-protobuf-support``'s decoder reads them.  Needs the ``export`` extra (``foxglove-sdk``).
 """
 
 from __future__ import annotations
@@ -26,16 +28,13 @@ import numpy as np
 from .layout import BLOCK_HEIGHT_M, MAP_FRAME, Names, log_times, ns, ns_array, yaw_quaternion
 from .record import RunRecord
 
-__all__ = ["MCAP_PROFILE", "METRICS_SCHEMA", "write_mcap"]
+__all__ = ["METRICS_SCHEMA", "write_mcap"]
 
-#: the MCAP header's profile: none of the registered ones (``ros1``, ``ros2``), as Foxglove's own SDK writes
-MCAP_PROFILE = ""
 #: the schema name of the ``/metrics`` channel (JSON)
 METRICS_SCHEMA = "twb.RunMetrics"
 _METRICS_JSONSCHEMA = {"title": METRICS_SCHEMA, "type": "object", "properties": {
     "run_id": {"type": "integer"}, "experiment_id": {"type": "integer"}, "mode": {"type": "string"},
     "repetition": {"type": "integer"}, "status": {"type": "string"}, "metrics": {"type": "object"}}}
-_LEVELS = {"info": 2, "warning": 3, "error": 4}
 _PLANNED_RGBA = (0.12, 0.47, 0.71, 1.0)
 _DRIVEN_RGBA = (0.84, 0.15, 0.16, 1.0)
 _BLOCK_RGBA = (0.35, 0.35, 0.35, 1.0)
@@ -44,59 +43,57 @@ _LINE_WIDTH_M = 0.006
 
 
 def write_mcap(records: Sequence[RunRecord], out: IO[bytes], *, experiment: bool = False) -> None:
-    """Write ``records`` to ``out`` (a binary file, written in order: it may be a pipe) as one MCAP file.
+    """Write ``records`` to ``out`` (a binary file that can ``seek`` and ``flush``) as one MCAP file.
 
     ``experiment``: the runs are an experiment's, each under its ``run_<id>`` prefix (:class:`~.layout.Names`).
     Times are the runs' experiment clocks, in nanoseconds (seconds x 1e9).
     """
-    writer = _McapOut(out)
-    for record in records:
-        _write_run(writer, record, Names.of(record, experiment))
-    writer.writer.add_metadata("teleworkbench", {
-        "runs": ",".join(str(r.run_id) for r in records),
-        "experiments": ",".join(sorted({str(r.experiment_id) for r in records})),
-        "clock": "experiment seconds on each run's clock (log time = t x 1e9 ns)",
-        "frame": f"{MAP_FRAME}: the experiment's field, origin at its lower-left corner (m, rad)"})
-    writer.writer.finish()
+    import foxglove
+    from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+    context = foxglove.Context()  # this export's own: exports may run in parallel threads
+    options = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_threads=0)
+    with foxglove.open_mcap(out, context=context, writer_options=options) as writer:
+        channels = _Channels(context)
+        for record in records:
+            _write_run(channels, record, Names.of(record, experiment))
+        writer.write_metadata("teleworkbench", {
+            "runs": ",".join(str(r.run_id) for r in records),
+            "experiments": ",".join(sorted({str(r.experiment_id) for r in records})),
+            "clock": "experiment seconds on each run's clock (log time = t x 1e9 ns)",
+            "frame": f"{MAP_FRAME}: the experiment's field, origin at its lower-left corner (m, rad)"})
+        channels.close()
 
 
-class _McapOut:
-    """An MCAP writer with one schema per message type and one channel per topic."""
+class _Channels:
+    """One channel per topic in the export's context, made at first use."""
 
-    def __init__(self, out: IO[bytes]) -> None:
-        from mcap.writer import CompressionType, Writer
+    def __init__(self, context: Any) -> None:
+        self.context = context
+        self._open: dict[str, Any] = {}
 
-        self.writer = Writer(out, compression=CompressionType.ZSTD)
-        self.writer.start(profile=MCAP_PROFILE, library="teleworkbench")
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
+    def typed(self, topic: str, kind: str) -> Any:
+        """The channel of ``topic`` for Foxglove's ``kind`` (``FrameTransforms``, ``SceneUpdate``, ...)."""
+        if topic not in self._open:
+            from foxglove import channels
 
-    def channel(self, topic: str, message_class: Any) -> int:
-        """The channel of ``topic`` carrying ``message_class`` (a protobuf class), registered at first use."""
-        if topic not in self._channels:
-            from mcap_protobuf.schema import register_schema
+            self._open[topic] = getattr(channels, f"{kind}Channel")(topic, context=self.context)
+        return self._open[topic]
 
-            name = message_class.DESCRIPTOR.full_name
-            if name not in self._schemas:
-                self._schemas[name] = register_schema(self.writer, message_class)
-            self._channels[topic] = self.writer.register_channel(topic=topic, message_encoding="protobuf",
-                                                                 schema_id=self._schemas[name])
-        return self._channels[topic]
+    def json(self, topic: str) -> Any:
+        if topic not in self._open:
+            import foxglove
 
-    def json_channel(self, topic: str) -> int:
-        if topic not in self._channels:
-            if METRICS_SCHEMA not in self._schemas:
-                self._schemas[METRICS_SCHEMA] = self.writer.register_schema(
-                    name=METRICS_SCHEMA, encoding="jsonschema", data=json.dumps(_METRICS_JSONSCHEMA).encode())
-            self._channels[topic] = self.writer.register_channel(topic=topic, message_encoding="json",
-                                                                 schema_id=self._schemas[METRICS_SCHEMA])
-        return self._channels[topic]
+            self._open[topic] = foxglove.Channel(topic, schema=_METRICS_JSONSCHEMA, message_encoding="json",
+                                                 context=self.context)
+        return self._open[topic]
 
-    def add(self, channel: int, t_ns: int, data: bytes) -> None:
-        self.writer.add_message(channel_id=channel, log_time=t_ns, publish_time=t_ns, data=data)
+    def close(self) -> None:
+        for channel in self._open.values():
+            channel.close()
 
 
-def _write_run(out: _McapOut, record: RunRecord, names: Names) -> None:
+def _write_run(out: _Channels, record: RunRecord, names: Names) -> None:
     t0, t1 = ns(record.t0), ns(record.t1)
     _scene(out, record, names, t0)
     for robot in record.robots:
@@ -110,108 +107,101 @@ def _write_run(out: _McapOut, record: RunRecord, names: Names) -> None:
     _log(out, record, names)
     body = {"run_id": record.run_id, "experiment_id": record.experiment_id, "mode": record.mode,
             "repetition": record.repetition, "status": record.status, "metrics": _finite(record.metrics)}
-    out.add(out.json_channel(names.topic("metrics")), t1, json.dumps(body).encode())
+    out.json(names.topic("metrics")).log(json.dumps(body).encode(), log_time=t1)
 
 
-def _poses(out: _McapOut, names: Names, index: int, poses: np.ndarray) -> None:
+def _stamp(t_ns: int) -> Any:
+    from foxglove.messages import Timestamp
+
+    sec, nsec = divmod(t_ns, 1_000_000_000)
+    return Timestamp(sec=sec, nsec=nsec)
+
+
+def _pose(x: float, y: float, z: float, qz: float, qw: float) -> Any:
+    from foxglove.messages import Pose, Quaternion, Vector3
+
+    return Pose(position=Vector3(x=x, y=y, z=z), orientation=Quaternion(x=0.0, y=0.0, z=qz, w=qw))
+
+
+def _color(rgba: tuple[float, float, float, float]) -> Any:
+    from foxglove.messages import Color
+
+    r, g, b, a = rgba
+    return Color(r=r, g=g, b=b, a=a)
+
+
+def _poses(out: _Channels, names: Names, index: int, poses: np.ndarray) -> None:
     """Each pose as a ``map`` → base frame transform on ``/tf`` and a pose on the robot's ``pose`` topic."""
-    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
-    from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
-    from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+    from foxglove.messages import FrameTransform, FrameTransforms, PoseInFrame, Quaternion, Timestamp, Vector3
 
     if not len(poses):
         return
-    tf_channel = out.channel("/tf", FrameTransforms)
-    pose_channel = out.channel(names.robot_topic(index, "pose"), PoseInFrame)
-    tfs = FrameTransforms(transforms=[FrameTransform(parent_frame_id=MAP_FRAME, child_frame_id=names.base_frame(index))])
-    tf = tfs.transforms[0]
-    pose = PoseInFrame(frame_id=MAP_FRAME)
-    times = ns_array(poses[:, 0])
+    tf_log = out.typed("/tf", "FrameTransforms").log
+    pose_log = out.typed(names.robot_topic(index, "pose"), "PoseInFrame").log
+    child = names.base_frame(index)
     z, w = yaw_quaternion(poses[:, 3])
-    for t_ns, x, y, qz, qw in zip(times.tolist(), poses[:, 1].tolist(), poses[:, 2].tolist(), z.tolist(), w.tolist()):
-        secs, nanos = divmod(t_ns, 1_000_000_000)
-        tf.timestamp.seconds, tf.timestamp.nanos = secs, nanos
-        tf.translation.x, tf.translation.y = x, y
-        tf.rotation.z, tf.rotation.w = qz, qw
-        out.add(tf_channel, t_ns, tfs.SerializeToString())
-        pose.timestamp.seconds, pose.timestamp.nanos = secs, nanos
-        pose.pose.position.x, pose.pose.position.y = x, y
-        pose.pose.orientation.z, pose.pose.orientation.w = qz, qw
-        out.add(pose_channel, t_ns, pose.SerializeToString())
+    for t_ns, x, y, qz, qw in zip(ns_array(poses[:, 0]).tolist(), poses[:, 1].tolist(), poses[:, 2].tolist(),
+                                  z.tolist(), w.tolist()):
+        sec, nsec = divmod(t_ns, 1_000_000_000)
+        stamp = Timestamp(sec=sec, nsec=nsec)
+        position = Vector3(x=x, y=y, z=0.0)
+        rotation = Quaternion(x=0.0, y=0.0, z=qz, w=qw)
+        tf_log(FrameTransforms(transforms=[FrameTransform(timestamp=stamp, parent_frame_id=MAP_FRAME,
+                                                          child_frame_id=child, translation=position,
+                                                          rotation=rotation)]), log_time=t_ns)
+        pose_log(PoseInFrame(timestamp=stamp, frame_id=MAP_FRAME, pose=_pose(x, y, 0.0, qz, qw)), log_time=t_ns)
 
 
-def _stamp(message: Any, t_ns: int) -> None:
-    message.timestamp.seconds, message.timestamp.nanos = divmod(t_ns, 1_000_000_000)
-
-
-def _rgba(target: Any, rgba: tuple[float, float, float, float]) -> None:
-    target.r, target.g, target.b, target.a = rgba
-
-
-def _line(out: _McapOut, topic: str, entity_id: str, xy: np.ndarray, t_ns: int,
+def _line(out: _Channels, topic: str, entity_id: str, xy: np.ndarray, t_ns: int,
           rgba: tuple[float, float, float, float]) -> None:
     """A path ``xy`` ``(K, 2)`` (m) as a line strip in one scene update on ``topic``."""
-    from foxglove_schemas_protobuf.Point3_pb2 import Point3
-    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity, SceneUpdate
 
-    update = SceneUpdate()
-    entity = update.entities.add(frame_id=MAP_FRAME, id=entity_id)
-    _stamp(entity, t_ns)
-    line = entity.lines.add(type=0, thickness=_LINE_WIDTH_M)  # LINE_STRIP
-    line.pose.orientation.w = 1.0
-    line.points.extend(Point3(x=x, y=y) for x, y in np.asarray(xy, dtype=float).tolist())
-    _rgba(line.color, rgba)
-    out.add(out.channel(topic, SceneUpdate), t_ns, update.SerializeToString())
+    line = LinePrimitive(type=LinePrimitiveLineType.LineStrip, pose=_pose(0.0, 0.0, 0.0, 0.0, 1.0),
+                         thickness=_LINE_WIDTH_M, color=_color(rgba),
+                         points=[Point3(x=x, y=y, z=0.0) for x, y in np.asarray(xy, dtype=float).tolist()])
+    entity = SceneEntity(timestamp=_stamp(t_ns), frame_id=MAP_FRAME, id=entity_id, lines=[line])
+    out.typed(topic, "SceneUpdate").log(SceneUpdate(entities=[entity]), log_time=t_ns)
 
 
-def _scene(out: _McapOut, record: RunRecord, names: Names, t0: int) -> None:
+def _scene(out: _Channels, record: RunRecord, names: Names, t0: int) -> None:
     """The field's boundary and blocks at ``t0``, then each moving obstacle at each of its poses."""
-    from foxglove_schemas_protobuf.Point3_pb2 import Point3
-    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    from foxglove.messages import (CubePrimitive, CylinderPrimitive, LinePrimitive, LinePrimitiveLineType, Point3,
+                                   SceneEntity, SceneUpdate, Vector3)
 
-    channel = out.channel(names.topic("scene"), SceneUpdate)
-    update = SceneUpdate()
-    env = update.entities.add(frame_id=MAP_FRAME, id="environment")
-    _stamp(env, t0)
+    log = out.typed(names.topic("scene"), "SceneUpdate").log
     w, h = record.size
-    border = env.lines.add(type=1, thickness=_LINE_WIDTH_M)  # LINE_LOOP
-    border.pose.orientation.w = 1.0
-    border.points.extend([Point3(x=0.0, y=0.0), Point3(x=w, y=0.0), Point3(x=w, y=h), Point3(x=0.0, y=h)])
-    _rgba(border.color, _BLOCK_RGBA)
-    for bx, by, bw, bh, angle in np.asarray(record.blocks, dtype=float).reshape(-1, 5).tolist():
-        cube = env.cubes.add()
-        cube.pose.position.x, cube.pose.position.y, cube.pose.position.z = bx, by, BLOCK_HEIGHT_M / 2
-        cube.pose.orientation.z, cube.pose.orientation.w = math.sin(angle / 2), math.cos(angle / 2)
-        cube.size.x, cube.size.y, cube.size.z = bw, bh, BLOCK_HEIGHT_M
-        _rgba(cube.color, _BLOCK_RGBA)
-    out.add(channel, t0, update.SerializeToString())
+    border = LinePrimitive(type=LinePrimitiveLineType.LineLoop, pose=_pose(0.0, 0.0, 0.0, 0.0, 1.0),
+                           thickness=_LINE_WIDTH_M, color=_color(_BLOCK_RGBA),
+                           points=[Point3(x=0.0, y=0.0, z=0.0), Point3(x=w, y=0.0, z=0.0), Point3(x=w, y=h, z=0.0),
+                                   Point3(x=0.0, y=h, z=0.0)])
+    cubes = [CubePrimitive(pose=_pose(bx, by, BLOCK_HEIGHT_M / 2, math.sin(a / 2), math.cos(a / 2)),
+                           size=Vector3(x=bw, y=bh, z=BLOCK_HEIGHT_M), color=_color(_BLOCK_RGBA))
+             for bx, by, bw, bh, a in np.asarray(record.blocks, dtype=float).reshape(-1, 5).tolist()]
+    log(SceneUpdate(entities=[SceneEntity(timestamp=_stamp(t0), frame_id=MAP_FRAME, id="environment",
+                                          lines=[border], cubes=cubes)]), log_time=t0)
     for obstacle in record.obstacles:
-        update = SceneUpdate()
-        entity = update.entities.add(frame_id=MAP_FRAME, id=f"obstacle_{obstacle.index}")
-        disc = entity.cylinders.add()
-        disc.size.x = disc.size.y = 2 * obstacle.radius
-        disc.size.z = BLOCK_HEIGHT_M
-        disc.bottom_scale = disc.top_scale = 1.0
-        _rgba(disc.color, _OBSTACLE_RGBA)
-        times = ns_array(obstacle.poses[:, 0]).tolist()
-        for t_ns, (x, y, a) in zip(times, obstacle.poses[:, 1:4].tolist()):
-            _stamp(entity, t_ns)
-            disc.pose.position.x, disc.pose.position.y, disc.pose.position.z = x, y, BLOCK_HEIGHT_M / 2
-            disc.pose.orientation.z, disc.pose.orientation.w = math.sin(a / 2), math.cos(a / 2)
-            out.add(channel, t_ns, update.SerializeToString())
+        d = 2 * obstacle.radius
+        size, color, entity_id = Vector3(x=d, y=d, z=BLOCK_HEIGHT_M), _color(_OBSTACLE_RGBA), f"obstacle_{obstacle.index}"
+        for t_ns, (x, y, a) in zip(ns_array(obstacle.poses[:, 0]).tolist(), obstacle.poses[:, 1:4].tolist()):
+            disc = CylinderPrimitive(pose=_pose(x, y, BLOCK_HEIGHT_M / 2, math.sin(a / 2), math.cos(a / 2)), size=size,
+                                     bottom_scale=1.0, top_scale=1.0, color=color)
+            log(SceneUpdate(entities=[SceneEntity(timestamp=_stamp(t_ns), frame_id=MAP_FRAME, id=entity_id,
+                                                  cylinders=[disc])]), log_time=t_ns)
 
 
-def _log(out: _McapOut, record: RunRecord, names: Names) -> None:
-    from foxglove_schemas_protobuf.Log_pb2 import Log
+_LEVELS = {"info": "Info", "warning": "Warning", "error": "Error"}
+
+
+def _log(out: _Channels, record: RunRecord, names: Names) -> None:
+    from foxglove.messages import Log, LogLevel
 
     if not record.log:
         return
-    channel = out.channel("/log", Log)
-    message = Log(name=names.log_name)
+    log = out.typed("/log", "Log").log
     for t_ns, level, text, _ in log_times(record):
-        _stamp(message, t_ns)
-        message.level, message.message = _LEVELS[level], text
-        out.add(channel, t_ns, message.SerializeToString())
+        log(Log(timestamp=_stamp(t_ns), level=getattr(LogLevel, _LEVELS[level]), message=text, name=names.log_name),
+            log_time=t_ns)
 
 
 def _finite(value: Any) -> Any:
