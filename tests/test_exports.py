@@ -13,6 +13,7 @@ import io
 import json
 import math
 import os
+import re
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -361,3 +362,22 @@ def test_without_the_extra_the_answer_is_501_naming_the_install_command(bare, fm
 def test_quaternion_yaw_inverts_the_export_rotation():
     for theta in (-math.pi + 1e-9, -1.0, 0.0, 0.5, math.pi - 1e-9):
         assert quaternion_yaw(math.sin(theta / 2), math.cos(theta / 2)) == pytest.approx(theta, abs=1e-12)
+
+
+def test_the_python_examples_of_docs_exports_run_as_written(testbed, single, tmp_path, monkeypatch, capsys):
+    """docs/exports.md's Python blocks, in order, in a scratch directory against this testbed (its run and
+    experiment ids in place of the page's)."""
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "exports.md").read_text(), re.S)
+    assert len(blocks) == 3
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("TWB_URL", testbed.url)
+    monkeypatch.setenv("TWB_TOKEN", TOKEN)
+    ids = "run_id, experiment_id = 2, 1"
+    assert ids in blocks[0]
+    blocks[0] = blocks[0].replace(ids, f"run_id, experiment_id = {single['runs'][0]['id']}, {single['id']}")
+    for code in blocks:
+        exec(compile(code, "docs/exports.md", "exec"), {})  # noqa: S102 - the page's own examples
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0] == "run.mcap run-bag experiment.mcap"
+    assert len(printed) == 4 and printed[1] == printed[3]  # the first pose, from the MCAP file and from the bag
+    assert ("/robot/pose", "geometry_msgs/msg/PoseStamped") in [c[:2] for c in eval(printed[2])]  # noqa: S307
