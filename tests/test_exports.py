@@ -317,6 +317,19 @@ def test_the_sdk_downloads_each_format(testbed, client, single, tmp_path):
     assert zipfile.is_zipfile(zipped)
 
 
+async def test_the_async_sdk_downloads_too(testbed, single, tmp_path):
+    from client_sdk import AsyncClient
+
+    run = single["runs"][0]
+    async with AsyncClient(testbed.url, TOKEN) as twb:
+        got = await twb.export(run["id"], format="rosbag2", out=tmp_path / "bag")
+        with pytest.raises(NotFound):
+            await twb.export(999999, out=tmp_path / "none.mcap")
+    with Reader(got) as reader:
+        assert "/robot/pose" in {c.topic for c in reader.connections}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]
+
+
 def test_twb_export_writes_the_file(testbed, twb, single, tmp_path):
     run = single["runs"][0]
     env = {"TWB_URL": testbed.url, "TWB_TOKEN": TOKEN}
@@ -347,7 +360,7 @@ def bare(tmp_path_factory):
 
 
 @pytest.mark.parametrize("fmt, missing", [("mcap", "foxglove-sdk"), ("rosbag2", "rosbags")])
-def test_without_the_extra_the_answer_is_501_naming_the_install_command(bare, fmt, missing, tmp_path):
+def test_without_the_extra_the_answer_is_501_naming_the_install_command(bare, twb, fmt, missing, tmp_path):
     with bare.client() as c:
         r = c.get("/api/v1/runs/1/export", params={"format": fmt})
     assert r.status_code == 501
@@ -355,8 +368,11 @@ def test_without_the_extra_the_answer_is_501_naming_the_install_command(bare, fm
     assert f"missing: {missing}" in detail and "pip install 'teleworkbench[export]'" in detail
     with Client(bare.url, TOKEN) as twb, pytest.raises(ApiError) as err:
         twb.export(1, format=fmt, out=tmp_path / "never-written.zip")
-    assert err.value.status == 501 and "teleworkbench[export]" in str(err.value)
+    assert err.value.status == 501 and str(err.value).startswith("501 Not Implemented: exporting")
+    assert "teleworkbench[export]" in str(err.value)
     assert list(tmp_path.iterdir()) == []
+    done = twb("export", "1", "--format", fmt, "--out", str(tmp_path / "x"), env={"TWB_URL": bare.url, "TWB_TOKEN": TOKEN})
+    assert done.returncode == 2 and "pip install 'teleworkbench[export]'" in done.stderr, done.stderr
 
 
 def test_quaternion_yaw_inverts_the_export_rotation():
