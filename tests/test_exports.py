@@ -366,8 +366,8 @@ def test_without_the_extra_the_answer_is_501_naming_the_install_command(bare, tw
     assert r.status_code == 501
     detail = r.json()["detail"]
     assert f"missing: {missing}" in detail and "pip install 'teleworkbench[export]'" in detail
-    with Client(bare.url, TOKEN) as twb, pytest.raises(ApiError) as err:
-        twb.export(1, format=fmt, out=tmp_path / "never-written.zip")
+    with Client(bare.url, TOKEN) as sdk, pytest.raises(ApiError) as err:
+        sdk.export(1, format=fmt, out=tmp_path / "never-written.zip")
     assert err.value.status == 501 and str(err.value).startswith("501 Not Implemented: exporting")
     assert "teleworkbench[export]" in str(err.value)
     assert list(tmp_path.iterdir()) == []
