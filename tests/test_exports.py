@@ -4,7 +4,7 @@ serves of the same run — message counts, timestamps, poses, paths, obstacles, 
 topics per robot; an experiment's runs under their prefixes; 404 for unknown ids; the SDK and `twb export`;
 a server without the `export` extra answers 501 naming the install command.
 
-(The conversion alone, on made-up records, and the benchmark's figure: bench/export.py.)
+(At the end, the conversion alone on a made-up run; the benchmark's figure: bench/export.py.)
 """
 
 from __future__ import annotations
@@ -25,7 +25,9 @@ from mcap_protobuf.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 
 from client_sdk import ApiError, Client, NotFound
-from server.export import quaternion_yaw
+from server.export import ExportFormat, Names, RobotTrack, RunRecord, quaternion_yaw
+from server.export.convert import write_export
+from server.export.layout import flat_metrics, log_level
 from server.export.rosbag2_file import typestore
 from servers import TOKEN, serve, wait_for
 
@@ -397,3 +399,39 @@ def test_the_python_examples_of_docs_exports_run_as_written(testbed, single, tmp
     assert printed[0] == "run.mcap run-bag experiment.mcap"
     assert len(printed) == 4 and printed[1] == printed[3]  # the first pose, from the MCAP file and from the bag
     assert ("/robot/pose", "geometry_msgs/msg/PoseStamped") in [c[:2] for c in eval(printed[2])]  # noqa: S307
+
+
+# --------------------------------------------------------------------------- the conversion alone
+
+
+def _record(**kw: Any) -> RunRecord:
+    """A run that never drove (no poses, no times), with ``kw`` changed."""
+    base: dict[str, Any] = dict(run_id=5, experiment_id=2, mode="sim", repetition=1, status="queued",
+                                environment="room", size=(1.8, 1.8), blocks=np.zeros((0, 5)), robot_radius=0.045,
+                                robots=(RobotTrack(0, np.zeros((0, 4))),))
+    return RunRecord(**{**base, **kw})
+
+
+@pytest.mark.parametrize("fmt", ["mcap", "rosbag2"])
+def test_a_run_that_never_drove_exports_its_scene_and_metrics_only(fmt, tmp_path):
+    buf = io.BytesIO()
+    write_export([_record()], ExportFormat(fmt), buf, name="run-5")
+    topics = read_mcap(buf.getvalue()) if fmt == "mcap" else read_bag(buf.getvalue(), tmp_path)
+    topics.pop("__types__", None)
+    assert {k: len(v) for k, v in topics.items()} == {"/scene": 1, "/metrics": 1}
+    assert all(t == 0 for rows in topics.values() for t, _ in rows)  # no clock: time 0
+
+
+def test_names_levels_and_flat_metrics():
+    alone, fleet = Names.of(_record(), False), Names.of(_record(fleet=True), True)
+    assert (alone.robot_topic(0, "pose"), alone.base_frame(0), alone.topic("scene")) == \
+        ("/robot/pose", "base_link", "/scene")
+    assert (fleet.robot_topic(3, "pose"), fleet.base_frame(3), fleet.topic("scene"), fleet.log_name) == \
+        ("/run_5/robot_3/pose", "run_5/robot_3/base_link", "/run_5/scene", "run_5")
+    assert [log_level(d, x) for d, x in [("<", "EV,FAIL,12.0,stalled"), ("<", "robot 2: EV,FAIL,1"),
+                                         ("<", "ERR,RANGE,x"), ("e", "Traceback"), ("<", "EV,DONE,4")]] == \
+        ["error", "error", "warning", "warning", "info"]
+    assert flat_metrics({"length_m": 0.1 + 0.2, "goal_reached": True, "planned": {"length_m": 1.5},
+                         "robots": [{"length_m": 2.0}], "poses": [1, 2], "deadlock": None}) == [
+        ("length_m", repr(0.1 + 0.2)), ("goal_reached", "true"), ("planned.length_m", "1.5"),
+        ("robots.0.length_m", "2.0"), ("poses", "[1, 2]"), ("deadlock", "null")]

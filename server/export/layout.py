@@ -93,11 +93,10 @@ def log_level(direction: str, line: str) -> str:
     return "info"
 
 
-def log_times(record: RunRecord) -> Iterator[tuple[int, str, str, str]]:
-    """The run's log as ``(log time ns, level, name-less text, direction)``: the text is ``"<direction>
-    <line>"``."""
+def log_times(record: RunRecord) -> Iterator[tuple[int, str, str]]:
+    """The run's log as ``(log time ns, level, text)``, the text ``"<direction> <line>"`` (``"> T,T,P,..."``)."""
     for entry in record.log:
-        yield ns(entry.t), log_level(entry.direction, entry.line), f"{entry.direction} {entry.line}", entry.direction
+        yield ns(entry.t), log_level(entry.direction, entry.line), f"{entry.direction} {entry.line}"
 
 
 def flat_metrics(metrics: dict[str, Any], prefix: str = "") -> list[tuple[str, str]]:

@@ -199,7 +199,7 @@ def _log(out: _Channels, record: RunRecord, names: Names) -> None:
     if not record.log:
         return
     log = out.typed("/log", "Log").log
-    for t_ns, level, text, _ in log_times(record):
+    for t_ns, level, text in log_times(record):
         log(Log(timestamp=_stamp(t_ns), level=getattr(LogLevel, _LEVELS[level]), message=text, name=names.log_name),
             log_time=t_ns)
 

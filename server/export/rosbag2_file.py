@@ -186,7 +186,7 @@ def _scene(bag: _Bag, record: RunRecord, names: Names, t0: int) -> None:
 
 
 def _log(bag: _Bag, record: RunRecord, names: Names) -> None:
-    for t_ns, level, text, _ in log_times(record):
+    for t_ns, level, text in log_times(record):
         bag.add("/rosout", LOG, t_ns, bag.types[LOG](stamp=bag.time(t_ns), level=_LEVELS[level], name=names.log_name,
                                                      msg=text, file="", function="", line=0))
 
