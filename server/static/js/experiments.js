@@ -401,7 +401,7 @@ export class ExperimentPage {
   renderRuns(d, m) {
     const columns = d.robots ? FLEET_COLUMNS : RUN_COLUMNS;
     const head = h("thead", {}, h("tr", {}, ["Run", "Mode #", "Status", "Robot", "Sub-field", ...columns.map(([, t]) => t),
-      "Poses, messages"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + columns.length ? "num" : null }, t))));
+      "Downloads"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + columns.length ? "num" : null }, t))));
     const rows = this.runs().map((r) => {
       const mt = r.metrics || {};
       return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
@@ -515,7 +515,7 @@ export class ExperimentPage {
         if (blob) saveBlob(blob, `experiment-${id}-paths.png`);
       } }, "Path figure (PNG)"),
       h("button", { type: "button", class: "small", onclick: () => this.saveCharts(id) }, "Charts (SVG)"),
-      h("span", { class: "muted small" }, "Per-run poses and messages: in the runs table. A run's replay GIF: ",
+      h("span", { class: "muted small" }, "Per-run poses, messages, MCAP and ROS 2 bags: in the runs table. A run's replay GIF: ",
         h("code", {}, `twb replay ${this.runs().find((r) => r.t_start != null)?.id ?? "RUN_ID"} -o run.gif`), " on your machine."),
     );
   }
