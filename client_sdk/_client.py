@@ -572,8 +572,8 @@ class AsyncClient(BaseClient):
 
     async def export(self, run_id: Optional[int] = None, *, experiment_id: Optional[int] = None,
                      format: ExportFormat = "mcap", out: Optional[str | os.PathLike[str]] = None) -> Path:
-        """See :meth:`Client.export` (the file is written in a worker thread's chunks, the loop never waits on disk
-        for long)."""
+        """See :meth:`Client.export` (each chunk goes to disk in a worker thread: the event loop never waits on
+        the disk)."""
         target = export_target(API_PREFIX, run_id, experiment_id, format, out)
         try:
             with translate_errors(self.url):
