@@ -26,7 +26,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile
 
 bench: $(STAMP)
-	$(PY) bench/planners.py && $(PY) bench/metrics.py && $(PY) bench/sim.py && $(PY) bench/controllers.py && $(PY) bench/protocol.py && $(PY) bench/scheduler.py && $(PY) bench/server.py && $(PY) bench/study.py && $(PY) bench/closed_loop.py && $(PY) bench/fleet_live.py && $(PY) bench/fleet_playback.py && $(PY) bench/scale.py --runs 1000
+	$(PY) bench/planners.py && $(PY) bench/metrics.py && $(PY) bench/sim.py && $(PY) bench/controllers.py && $(PY) bench/protocol.py && $(PY) bench/scheduler.py && $(PY) bench/server.py && $(PY) bench/study.py && $(PY) bench/closed_loop.py && $(PY) bench/fleet_live.py && $(PY) bench/fleet_playback.py && $(PY) bench/export.py && $(PY) bench/scale.py --runs 1000
 
 clean:
 	rm -rf $(VENV) .pytest_cache

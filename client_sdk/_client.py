@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import os
 import time
+from pathlib import Path
 from typing import Any, Literal, Mapping, Optional, Sequence, TypeVar, overload
 
 import httpx
@@ -17,7 +18,9 @@ import numpy as np
 
 from contract.plugins import LoadError
 
-from ._base import BaseClient, Call, Flow, Sleep, program_body, translate_errors
+from ._base import API_PREFIX, BaseClient, Call, Flow, Sleep, program_body, raise_for_status, translate_errors
+from ._config import missing_token_hint
+from ._export import ExportFormat, export_target
 from ._exceptions import TwbError
 from ._models import (
     CancelResult,
@@ -342,6 +345,36 @@ class Client(BaseClient):
         """Protocol lines exchanged with the robot during a run, with experiment time."""
         return self._send(self._get_messages(run_id, offset, limit))
 
+    # ------------------------------------------------------------------ exports
+
+    def export(self, run_id: Optional[int] = None, *, experiment_id: Optional[int] = None,
+               format: ExportFormat = "mcap", out: Optional[str | os.PathLike[str]] = None) -> Path:
+        """Download a run (or every run of an experiment) as an MCAP file or a ROS 2 bag; returns where it is.
+
+        ``format="mcap"``: one file with Foxglove's well-known schemas (default
+        ``run-<id>.mcap``); ``"rosbag2"``: a ROS 2 bag directory (default
+        ``run-<id>``; an ``out`` ending in ``.zip`` keeps it zipped).  Times
+        are experiment seconds on each run's clock, poses in the ``map``
+        frame (m, rad); topics in docs/exports.md.  The download streams to
+        disk.  :class:`NotFound` for an unknown run, :class:`ApiError` 501 when
+        the testbed lacks the ``export`` extra (its message says how to
+        install it), :class:`FileExistsError` when ``out`` exists.
+        """
+        target = export_target(API_PREFIX, run_id, experiment_id, format, out)
+        try:
+            with translate_errors(self.url), self._http.stream("GET", target.path, params=target.params,
+                                                               timeout=max(self.timeout, 300.0)) as response:
+                if response.status_code >= 400:
+                    response.read()
+                    raise_for_status(response, "" if self.token else missing_token_hint())
+                with open(target.part, "wb") as f:
+                    for chunk in response.iter_bytes():
+                        f.write(chunk)
+        except BaseException:
+            target.part.unlink(missing_ok=True)
+            raise
+        return target.finish()
+
 
 class AsyncClient(BaseClient):
     """Asynchronous twin of :class:`Client`: the same methods, as coroutines.
@@ -536,6 +569,26 @@ class AsyncClient(BaseClient):
     async def get_obstacles(self, run_id: int) -> ObstacleTracks:
         """See :meth:`Client.get_obstacles`."""
         return await self._send(self._get_obstacles(run_id))
+
+    async def export(self, run_id: Optional[int] = None, *, experiment_id: Optional[int] = None,
+                     format: ExportFormat = "mcap", out: Optional[str | os.PathLike[str]] = None) -> Path:
+        """See :meth:`Client.export` (each chunk goes to disk in a worker thread: the event loop never waits on
+        the disk)."""
+        target = export_target(API_PREFIX, run_id, experiment_id, format, out)
+        try:
+            with translate_errors(self.url):
+                async with self._http.stream("GET", target.path, params=target.params,
+                                             timeout=max(self.timeout, 300.0)) as response:
+                    if response.status_code >= 400:
+                        await response.aread()
+                        raise_for_status(response, "" if self.token else missing_token_hint())
+                    with open(target.part, "wb") as f:
+                        async for chunk in response.aiter_bytes():
+                            await asyncio.to_thread(f.write, chunk)
+        except BaseException:
+            target.part.unlink(missing_ok=True)
+            raise
+        return await asyncio.to_thread(target.finish)
 
     async def get_messages(self, run_id: int, *, offset: int = 0, limit: int = 1000) -> Page[Message]:
         """See :meth:`Client.get_messages`."""

@@ -8,7 +8,8 @@
     │   ├── TooLarge            413
     │   ├── Invalid             422
     │   │   └── PreflightError  a job that cannot run (server.validation)
-    │   └── QuotaExceeded       429
+    │   ├── QuotaExceeded       429
+    │   └── NotInstalled        501 (an optional package the request needs is missing)
     └── RunEnded                a run stopped short of ``completed``; the class says whose fault it is
         ├── RunFailed           ``failed``: the job's own fault, of a :class:`FailureKind`
         │   └── ProgramFailed   the uploaded program gave no usable path
@@ -38,6 +39,7 @@ __all__ = [
     "Forbidden",
     "Invalid",
     "NotFound",
+    "NotInstalled",
     "PreflightError",
     "ProgramFailed",
     "QuotaExceeded",
@@ -96,6 +98,13 @@ class PreflightError(Invalid):
 
 class QuotaExceeded(RequestRefused):
     status_code = 429
+
+
+class NotInstalled(RequestRefused):
+    """The server lacks an optional package (an extra of the project) the request needs; the message names
+    the command that installs it."""
+
+    status_code = 501
 
 
 # --------------------------------------------------------------------------- run outcomes

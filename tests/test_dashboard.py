@@ -282,6 +282,11 @@ def test_submit_through_the_form_watch_it_complete_and_read_the_metrics(page, te
     path = dl.value.path()
     assert dl.value.suggested_filename == f"run-{twb_run['id']}-poses.csv"
     assert Path(path).read_text().splitlines()[0] == "t,x,y,theta"
+    # and the run for Foxglove: an MCAP file (docs/exports.md; its contents: tests/test_exports.py)
+    with page.expect_download() as dl:
+        page.click(f'#runs-table button[aria-label="Download run {twb_run["id"]} as MCAP (Foxglove)"]')
+    assert dl.value.suggested_filename == f"run-{twb_run['id']}.mcap"
+    assert Path(dl.value.path()).read_bytes()[:8] == b"\x89MCAP0\r\n"
 
     # back on the field: the robot that drove stands at the goal, its trace drawn
     page.click("#nav a[data-view=field]")

@@ -15,6 +15,8 @@ NOT_JSON = {
     ("get", "/api/v1/events"): {"text/event-stream"},
     ("get", "/api/v1/programs/{program_id}/content"): {"application/octet-stream"},
     ("get", "/api/v1/runs/{run_id}/poses"): {"application/json", "text/csv"},
+    ("get", "/api/v1/runs/{run_id}/export"): {"application/octet-stream", "application/zip"},
+    ("get", "/api/v1/experiments/{experiment_id}/export"): {"application/octet-stream", "application/zip"},
 }
 
 

@@ -10,7 +10,7 @@ from typing import Any, Optional, Union
 
 from pydantic import BaseModel, Field
 
-__all__ = ["AUTHENTICATED", "ErrorBody", "errors"]
+__all__ = ["AUTHENTICATED", "EXPORTED", "ErrorBody", "errors"]
 
 
 class Issue(BaseModel):
@@ -36,6 +36,7 @@ _WHY = {
     413: "The request body (or an uploaded program) is larger than allowed.",
     422: "Invalid input: the reason first, then every problem found.",
     429: "Too many: over a quota, or too many failed tokens from this client (see Retry-After).",
+    501: "The server lacks an optional package this needs; the message names the command that installs it.",
     503: "The database is unreachable for the moment (see Retry-After).",
 }
 
@@ -47,3 +48,11 @@ def errors(*codes: int) -> dict[Union[int, str], dict[str, Any]]:
 
 #: what any operation that needs a token can answer
 AUTHENTICATED = errors(401, 403, 422, 429, 503)
+
+
+#: the success answer of an export: an MCAP file or a zipped ROS 2 bag (docs/exports.md)
+EXPORTED: dict[Union[int, str], dict[str, Any]] = {200: {
+    "description": "The export as a download: an MCAP file (`format=mcap`) or a ROS 2 bag directory, zipped "
+                   "(`format=rosbag2`).",
+    "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
+                "application/zip": {"schema": {"type": "string", "format": "binary"}}}}}

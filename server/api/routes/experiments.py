@@ -1,4 +1,4 @@
-"""Experiments: submit (202), list, inspect, cancel (one or many), metrics."""
+"""Experiments: submit (202), list, inspect, cancel (one or many), metrics, export."""
 
 from __future__ import annotations
 
@@ -6,11 +6,15 @@ from typing import Any, Optional
 
 import anyio
 from fastapi import APIRouter, Query, Response
+from fastapi.responses import StreamingResponse
 from sqlalchemy import func, select
 
 from ...access import owned
 from ...dispatch import pending_of
 from ...errors import Conflict
+from ...export import ExportFormat
+from ...export.load import experiment_records
+from ...export.serve import download_headers, export_chunks, require_format
 from ...models import Experiment
 from ...results import experiment_metrics
 from ...schemas import (CancelledMany, CancelMany, ExperimentCreate, ExperimentMetricsPublic, ExperimentPublic,
@@ -18,7 +22,7 @@ from ...schemas import (CancelledMany, CancelMany, ExperimentCreate, ExperimentM
 from ...status import TERMINAL, RunStatus
 from ...submission import submit
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep, TestbedDep
-from ..responses import AUTHENTICATED, errors
+from ..responses import AUTHENTICATED, EXPORTED, errors
 
 router = APIRouter(prefix="/experiments", tags=["experiments"], responses=AUTHENTICATED)
 
@@ -135,3 +139,25 @@ def get_experiment_metrics(experiment_id: IdPath, session: SessionDep, user: Cur
     """
     exp = owned(session, user, Experiment, experiment_id, "Experiment")
     return ExperimentMetricsPublic.model_validate(experiment_metrics(session, exp))
+
+
+@router.get("/{experiment_id:int}/export", response_class=StreamingResponse, responses={**EXPORTED, **errors(404, 501)})
+def export_experiment(
+    experiment_id: IdPath,
+    session: SessionDep,
+    user: CurrentUser,
+    format: ExportFormat = Query(default=ExportFormat.MCAP, description=(
+        "mcap (Foxglove's well-known schemas) or rosbag2 (a ROS 2 bag directory, zipped).")),
+) -> StreamingResponse:
+    """Every run of the experiment in one MCAP file or ROS 2 bag, each run's topics under ``/run_<id>``.
+
+    As ``GET /runs/{id}/export`` per run (docs/exports.md), with each run's
+    topics and frames prefixed ``run_<id>``; ``/tf`` and the log are shared.
+    Each run keeps its own clock.  501 when the server lacks the ``export`` extra.
+    """
+    require_format(format)
+    exp = owned(session, user, Experiment, experiment_id, "Experiment")
+    name = f"experiment-{experiment_id}"
+    chunks, size = export_chunks(experiment_records(session, exp), format, name, experiment=True)
+    return StreamingResponse(chunks, media_type=format.media_type,
+                             headers=download_headers(format.filename(name), size))

@@ -1,4 +1,4 @@
-"""Runs: one run, its logged poses (JSON or CSV), its moving obstacles' tracks and protocol messages."""
+"""Runs: one run, its logged poses (JSON or CSV), its moving obstacles' tracks and protocol messages, its export."""
 
 from __future__ import annotations
 
@@ -6,16 +6,19 @@ import io
 from typing import Literal, Optional
 
 from fastapi import APIRouter, Query
-from fastapi.responses import JSONResponse, PlainTextResponse
+from fastapi.responses import JSONResponse, PlainTextResponse, StreamingResponse
 from sqlalchemy import func, select
 
 from ...access import owned
+from ...export import ExportFormat
+from ...export.load import run_record
+from ...export.serve import download_headers, export_chunks, require_format
 from ...models import Message, Run
 from ...obstacles import run_obstacles
 from ...schemas import MAX_ROBOTS, MessagePublic, Page, RunObstaclesPublic, RunPosesPublic, RunPublic
 from ...store.poses import run_poses
 from ..deps import MAX_OFFSET, CurrentUser, IdPath, SessionDep
-from ..responses import AUTHENTICATED, errors
+from ..responses import AUTHENTICATED, EXPORTED, errors
 
 router = APIRouter(prefix="/runs", tags=["runs"], responses=AUTHENTICATED)
 
@@ -106,3 +109,29 @@ def get_messages(
     ).all()
     count = session.scalar(select(func.count(Message.id)).where(Message.run_id == run_id)) or 0
     return Page(data=[MessagePublic.model_validate(m) for m in rows], count=count)
+
+
+@router.get("/{run_id:int}/export", response_class=StreamingResponse, responses={**EXPORTED, **errors(404, 501)})
+def export_run(
+    run_id: IdPath,
+    session: SessionDep,
+    user: CurrentUser,
+    format: ExportFormat = Query(default=ExportFormat.MCAP, description=(
+        "mcap (Foxglove's well-known schemas) or rosbag2 (a ROS 2 bag directory, zipped).")),
+) -> StreamingResponse:
+    """The run as an MCAP file or a ROS 2 bag: poses, paths, scene, log and metrics on its clock.
+
+    Topics (docs/exports.md): ``/tf`` and ``/robot/pose`` per stored pose,
+    ``/robot/planned_path`` and ``/robot/driven_path``, ``/scene`` (blocks and
+    moving obstacles), the log (``/log``; ``/rosout`` in a bag) and
+    ``/metrics``; a multi-robot run's robots each under ``/robot_<k>``.  Times
+    are experiment seconds on the run's clock (x 1e9 ns); poses in the
+    ``map`` frame, the experiment's field (m, rad).  501 when the server lacks
+    the ``export`` extra.
+    """
+    require_format(format)
+    run = owned(session, user, Run, run_id, "Run")
+    name = f"run-{run_id}"
+    chunks, size = export_chunks([run_record(session, run)], format, name)
+    return StreamingResponse(chunks, media_type=format.media_type,
+                             headers=download_headers(format.filename(name), size))

@@ -401,7 +401,7 @@ export class ExperimentPage {
   renderRuns(d, m) {
     const columns = d.robots ? FLEET_COLUMNS : RUN_COLUMNS;
     const head = h("thead", {}, h("tr", {}, ["Run", "Mode #", "Status", "Robot", "Sub-field", ...columns.map(([, t]) => t),
-      "Poses, messages"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + columns.length ? "num" : null }, t))));
+      "Downloads"].map((t, i) => h("th", { scope: "col", class: i > 4 && i < 5 + columns.length ? "num" : null }, t))));
     const rows = this.runs().map((r) => {
       const mt = r.metrics || {};
       return h("tr", { dataset: { run: r.id, mode: r.mode, status: r.status } },
@@ -416,7 +416,11 @@ export class ExperimentPage {
         h("td", {}, r.t_start == null ? "–" : h("span", { class: "downloads" },
           this.dl(`/api/v1/runs/${r.id}/poses?format=csv`, `run-${r.id}-poses.csv`, "CSV", `Download poses of run ${r.id} as CSV`),
           this.dl(`/api/v1/runs/${r.id}/poses?format=json`, `run-${r.id}-poses.json`, "JSON", `Download poses of run ${r.id} as JSON`),
-          this.dl(`/api/v1/runs/${r.id}/messages?limit=10000`, `run-${r.id}-messages.json`, "messages", `Download protocol messages of run ${r.id}`))));
+          this.dl(`/api/v1/runs/${r.id}/messages?limit=10000`, `run-${r.id}-messages.json`, "messages", `Download protocol messages of run ${r.id}`)),
+          // for Foxglove and ROS 2 tools (docs/exports.md): on a line of their own, so the column stays narrow
+          r.t_start == null ? "" : h("span", { class: "downloads exports" },
+            this.dl(`/api/v1/runs/${r.id}/export?format=mcap`, `run-${r.id}.mcap`, "MCAP", `Download run ${r.id} as MCAP (Foxglove)`),
+            this.dl(`/api/v1/runs/${r.id}/export?format=rosbag2`, `run-${r.id}.zip`, "ROS 2 bag", `Download run ${r.id} as a ROS 2 bag (zipped)`))));
     });
     if (m.planned) {
       rows.unshift(h("tr", { class: "planned-row" }, h("td", {}, "–"), h("td", {}, d.planner_stochastic ? "planned (rep. 1)" : "planned"), h("td", {}, ""),
@@ -502,12 +506,16 @@ export class ExperimentPage {
     this.els.downloads.replaceChildren(
       this.dl(`/api/v1/experiments/${id}`, `experiment-${id}.json`, "Experiment (JSON)", "Download the experiment as JSON"),
       this.dl(`/api/v1/experiments/${id}/metrics`, `experiment-${id}-metrics.json`, "Metrics (JSON)", "Download the metrics as JSON"),
+      this.dl(`/api/v1/experiments/${id}/export?format=mcap`, `experiment-${id}.mcap`, "All runs (MCAP)",
+        "Download every run as one MCAP file (Foxglove)"),
+      this.dl(`/api/v1/experiments/${id}/export?format=rosbag2`, `experiment-${id}.zip`, "All runs (ROS 2 bag)",
+        "Download every run as one ROS 2 bag (zipped)"),
       h("button", { type: "button", class: "small", onclick: async () => {
         const blob = await this.map.toBlob();
         if (blob) saveBlob(blob, `experiment-${id}-paths.png`);
       } }, "Path figure (PNG)"),
       h("button", { type: "button", class: "small", onclick: () => this.saveCharts(id) }, "Charts (SVG)"),
-      h("span", { class: "muted small" }, "Per-run poses and messages: in the runs table. A run's replay GIF: ",
+      h("span", { class: "muted small" }, "Per-run poses, messages, MCAP and ROS 2 bags: in the runs table. A run's replay GIF: ",
         h("code", {}, `twb replay ${this.runs().find((r) => r.t_start != null)?.id ?? "RUN_ID"} -o run.gif`), " on your machine."),
     );
   }
