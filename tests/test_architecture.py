@@ -5,7 +5,7 @@ a cycle hidden behind either is still a cycle to a reader.  Strongly
 connected components come from SciPy's graph routines.  The layers
 (docs/design.md, "Layers"), bottom up::
 
-    contract  ->  planners  ->  robot_agent.engine  ->  robot_agent.host, server, client_sdk  ->  twb, bench
+    contract  ->  planners  ->  robot_agent.engine  ->  robot_agent.host, robot_agent.gym, server, client_sdk  ->  twb, bench
 """
 
 from __future__ import annotations
@@ -29,10 +29,13 @@ LAYERS: dict[str, set[str]] = {
     "robot_agent": set(),  # the package's own __init__
     "robot_agent.engine": {"contract", "planners"},
     "robot_agent.host": {"contract", "planners", "robot_agent.engine"},
+    "robot_agent.gym": {"contract", "planners", "robot_agent.engine"},  # Gymnasium environments on the engine
     "client_sdk": {"contract", "planners"},  # users install the SDK without the server or the agent
     "server": {"contract", "planners", "robot_agent.engine", "robot_agent.host"},
-    "twb": {"contract", "planners", "robot_agent.engine", "robot_agent.host", "server", "client_sdk"},
-    "bench": {"contract", "planners", "robot_agent.engine", "robot_agent.host", "server", "client_sdk", "twb"},
+    "twb": {"contract", "planners", "robot_agent.engine", "robot_agent.host", "robot_agent.gym", "server",
+            "client_sdk"},
+    "bench": {"contract", "planners", "robot_agent.engine", "robot_agent.host", "robot_agent.gym", "server",
+              "client_sdk", "twb"},
 }
 
 

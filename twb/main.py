@@ -10,8 +10,8 @@ import sys
 
 import typer
 
-from . import (agent_cmd, calibrate_cmd, demo_cmd, export_cmd, jobs_cmd, metrics_cmd, plan_cmd, plugins_cmd, replay_cmd, server_cmd,
-               study_cmd, upload_cmd)
+from . import (agent_cmd, calibrate_cmd, demo_cmd, export_cmd, jobs_cmd, metrics_cmd, plan_cmd, plugins_cmd, replay_cmd,
+               server_cmd, study_cmd, upload_cmd, worlds_cmd)
 from .errors import report_exception
 
 app = typer.Typer(
@@ -43,6 +43,7 @@ app.command("export")(export_cmd.export)
 app.command("study")(study_cmd.study)
 app.command("export-ompl")(study_cmd.export_ompl)
 app.command("calibrate")(calibrate_cmd.calibrate)
+app.add_typer(worlds_cmd.worlds_app, name="worlds")
 
 
 def main(argv: list[str] | None = None) -> int:

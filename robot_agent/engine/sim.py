@@ -192,8 +192,12 @@ class SimCore:
         replaced = self.stop(i)
         from_rest = np.zeros(self.n, dtype=bool)
         from_rest[i] = replaced is None
-        self._paths[i] = np.asarray(points, dtype=float).reshape(-1, 3)
-        self._dirty = True
+        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+        self._paths[i] = pts
+        if not self._dirty and 0 < len(pts) == self.count[i]:  # as long as the old one: in place, no rebuild
+            self.points[self.offset[i]:self.offset[i] + len(pts)] = pts
+        else:
+            self._dirty = True
         self.state[i] = State.MOVING
         self.aligning[i] = False
         self.wp[i] = 0
@@ -242,6 +246,54 @@ class SimCore:
                         min(max(float(w), -p.max_angular_speed_rad_s), p.max_angular_speed_rad_s))
         self.timeout[i] = self.k[i] + max(1, int(round(watchdog_s / self.dt)))
         return replaced
+
+    def drive_from_rest(self, rows: np.ndarray, vw: np.ndarray, keys: np.ndarray, watchdog_s: float) -> None:
+        """:meth:`drive` for robots ``rows`` at once, none of them moving: velocity mode begins for each with
+        its noise key ``keys[i]`` and body velocities ``vw[i]`` (``(N, 2)`` and ``(N,)`` over all robots; m/s,
+        rad/s), the watchdog ``watchdog_s`` (s).  The same state as one :meth:`drive` call per robot."""
+        rows = np.asarray(rows, dtype=np.int64)
+        if not len(rows):
+            return
+        if (self.state[rows] == _MOVING).any():
+            raise ValueError("`rows` must not be moving robots (stop them first)")
+        start = self.backend.belief[rows].copy()  # the one-point path of velocity mode, as drive() makes it
+        for j, i in enumerate(rows.tolist()):
+            self._paths[i] = start[j:j + 1]
+            self._plugins.pop(i, None)
+        if not self._dirty and (self.count[rows] == 1).all():
+            self.points[self.offset[rows]] = start
+        else:
+            self._dirty = True
+        self.state[rows] = State.MOVING
+        self.aligning[rows] = False
+        self.wp[rows] = 0
+        self.k[rows] = 0
+        self.cmd[rows] = 0.0
+        self.keys[rows] = np.asarray(keys, dtype=np.uint64)[rows]
+        self.cid[rows] = DIRECT
+        self.cpar[rows] = 0.0
+        self.cmem[rows] = 0.0
+        self.want[rows] = 0.0
+        mask = np.zeros(self.n, dtype=bool)
+        mask[rows] = True
+        self.backend.begin_path(mask, self.keys, mask)
+        w = self.world
+        for i in rows.tolist():
+            if w.mo_first[i + 1] > w.mo_first[i]:
+                w.restart_movers(i, int(self.keys[i]))
+            if self.replanner is not None or self._maps:
+                self._begin_replanning(i, None)
+        self.drive_all(vw, watchdog_s)
+
+    def drive_all(self, vw: np.ndarray, watchdog_s: float) -> None:
+        """:meth:`drive` for every robot already in velocity mode at once: body velocities ``vw`` ``(N, 2)``
+        (m/s, rad/s; clipped to the profile's top speeds as :meth:`drive` clips them) from the next step, the
+        watchdog renewed to ``watchdog_s`` (s); rows of the other robots are ignored."""
+        d = (self.state == _MOVING) & (self.cid == DIRECT)
+        p = self.params
+        top = np.array([p.max_speed_m_s, p.max_angular_speed_rad_s])
+        np.copyto(self.want, np.clip(np.asarray(vw, dtype=float).reshape(self.n, 2), -top, top), where=d[:, None])
+        np.copyto(self.timeout, self.k + max(1, int(round(watchdog_s / self.dt))), where=d)
 
     def moving(self, i: int) -> bool:
         """Whether robot ``i`` follows a path or drives in velocity mode (state MOVING)."""

@@ -60,6 +60,7 @@ class World:
         self._blocks: dict[int, np.ndarray] = {}  # owner -> (B, 5) world frame
         counts = np.bincount(self.world_of, minlength=len(self.sizes))
         self.shared = np.flatnonzero(counts[self.world_of] > 1)  #: robots that can meet robots
+        self._alone = counts[self.world_of] == 1
         #: upper bound of how far a robot travels in one step (m); set by the simulation core
         self.step_travel = 0.0
         #: broad phase: the step until which each robot cannot touch a wall or block
@@ -85,6 +86,31 @@ class World:
             self._blocks[owner] = b
         self._rebuild()
         return len(old)
+
+    def load_blocks(self, owner: int, blocks_local: np.ndarray) -> None:
+        """:meth:`set_blocks` for a robot alone in its world (a separate layout): the world's rows of the block
+        tables are rewritten in place when the blocks fit them (no rebuild of every world's tables: what a
+        training environment does at each episode of each of many robots)."""
+        w = int(self.world_of[owner])
+        b = np.asarray(blocks_local, dtype=float).reshape(-1, 5)
+        if not self._alone[owner] or len(b) > self.centre.shape[1]:
+            self.set_blocks(owner, b)
+            return
+        b = b.copy()
+        b[:, :2] += self.origin[owner]
+        if len(b):
+            self._blocks[owner] = b
+        else:
+            self._blocks.pop(owner, None)
+        nb = len(b)
+        self.centre[w] = 0.0
+        self.half[w] = 0.0
+        self.cs[w] = 0.0
+        self.centre[w, :nb] = b[:, :2]
+        self.half[w, :nb] = b[:, 2:4] / 2
+        self.cs[w, :nb, 0], self.cs[w, :nb, 1] = np.cos(b[:, 4]), np.sin(b[:, 4])
+        self.nblocks[w] = nb
+        self.invalidate(owner)
 
     def blocks_local(self, owner: int) -> np.ndarray:
         """The blocks robot ``owner`` built, ``(B, 5)`` in its frame."""
