@@ -14,7 +14,7 @@ from sqlalchemy.exc import InterfaceError, OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from .api.deps import authenticate, bearer_token
-from .api.middleware import BodyLimit
+from .api.middleware import BodyLimit, StopCancels
 from .api.routes import (comparisons, controllers, dashboard, environments, events, experiments, field, health, meta,
                          planners, programs, runs, users)
 from .core.settings import Settings
@@ -99,6 +99,7 @@ def create_app(settings: Optional[Settings] = None, testbed: Optional[Testbed] =
                    programs):
         app.include_router(module.router, prefix=API_PREFIX)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    app.add_middleware(StopCancels)  # outermost
     generate = app.openapi
 
     def openapi() -> dict:

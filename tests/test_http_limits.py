@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import time
 
 import pytest
@@ -215,3 +216,33 @@ def test_the_connection_budget_leaves_the_robots_their_descriptors():
     assert connection_budget(2048, 8 * 275, open_files=4096) == 4096 - 256 - 2048  # robots capped at half
     assert connection_budget(2048, 8 * 275, open_files=1024) == 1024 - 256 - 512
     assert connection_budget(2048, 0, open_files=200) == 16
+
+
+async def test_a_request_still_running_at_stop_is_one_log_line_not_a_traceback(caplog):
+    """uvicorn cancels what outlives its graceful shutdown; StopCancels answers 503 and names the request
+    instead of the traceback uvicorn would log ("Exception in ASGI application")."""
+    from server.api.middleware import StopCancels
+
+    async def forever(scope, receive, send):  # type: ignore[no-untyped-def]
+        if scope["type"] == "http":
+            await asyncio.sleep(3600)
+
+    config = uvicorn.Config(StopCancels(forever), host="127.0.0.1", port=0, lifespan="off",
+                            timeout_graceful_shutdown=0.2, log_config=None)
+    server = uvicorn.Server(config)
+    serving = asyncio.create_task(server.serve())
+    while not server.started:
+        await asyncio.sleep(0.01)
+    port = server.servers[0].sockets[0].getsockname()[1]
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    writer.write(b"GET /slow-report HTTP/1.1\r\nHost: x\r\n\r\n")
+    await writer.drain()
+    await asyncio.sleep(0.2)  # the request is in the application
+    with caplog.at_level(logging.WARNING):
+        server.should_exit = True
+        await serving
+    answer = await reader.read()
+    assert answer.startswith(b"HTTP/1.1 503 ") and b"The server stopped before this request finished" in answer
+    writer.close()
+    assert "GET /slow-report was still running when the server stopped: cancelled" in caplog.text
+    assert "Exception in ASGI application" not in caplog.text and "Traceback" not in caplog.text

@@ -2,7 +2,42 @@
 
 from __future__ import annotations
 
-__all__ = ["BodyLimit"]
+import asyncio
+import logging
+
+__all__ = ["BodyLimit", "StopCancels"]
+
+log = logging.getLogger("twb.server")
+
+
+class StopCancels:
+    """ASGI middleware: a request still running when the server stops (uvicorn cancels it after its graceful
+    shutdown) is answered 503 if nothing was sent yet and logged in one line naming it, not as a traceback."""
+
+    def __init__(self, app) -> None:  # type: ignore[no-untyped-def]
+        self.app = app
+
+    async def __call__(self, scope, receive, send):  # type: ignore[no-untyped-def]
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        started = False
+
+        async def tracked_send(message):  # type: ignore[no-untyped-def]
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tracked_send)
+        except asyncio.CancelledError:
+            log.warning("%s %s was still running when the server stopped: cancelled", scope.get("method", ""),
+                        scope.get("path", ""))
+            if not started:
+                body = b'{"detail": "The server stopped before this request finished; retry when it is back."}'
+                await send({"type": "http.response.start", "status": 503,
+                            "headers": [(b"content-type", b"application/json"),
+                                        (b"content-length", str(len(body)).encode())]})
+                await send({"type": "http.response.body", "body": body})
 
 
 class BodyLimit:
