@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 from contract.plugins import RESTART_HINT, LoadError, PluginRegistry, PluginStatus
 
+from .anyangle import ThetaStarPlanner
 from .astar import AStarPlanner
 from .base import Planner
 from .errors import UnknownPlanner
@@ -37,6 +38,7 @@ _BUILTINS: dict[str, type[Planner]] = {
     "prm": PRMPlanner,
     "astar": AStarPlanner,
     "st_astar": SpaceTimeAStar,
+    "theta_star": ThetaStarPlanner,
 }
 _builtin_instances: dict[str, Planner] = {}
 
