@@ -130,3 +130,25 @@ def test_clearance_by_the_exact_distance(name, planner):
     h = 0.01
     assert polyline_min_clearance(p.env, r.path) >= PROBLEM_CLEARANCE - h / math.sqrt(2)
     assert polyline_min_clearance(p.env, r.raw_path) >= PROBLEM_CLEARANCE - h / math.sqrt(2)
+
+
+@pytest.mark.parametrize("name", list(PROBLEMS))
+def test_fm2_has_no_sawtooth(name):
+    """The raw descent zigzags across the travel time's valley wherever the speed map has a ridge; the
+    smoothed descent has no turn sharper than 60° (the unsmoothed one has many in the narrow passage)."""
+    p = PROBLEMS[name]
+    r = plan_path(p.env, p.start, p.goal, "fm2", **KW)
+    assert _turning(r.path)[1] == 0 and _turning(r.raw_path)[1] == 0
+    if name in ("narrow", "zigzag"):
+        raw = plan_path(p.env, p.start, p.goal, "fm2", params={"smooth": 0}, **KW)
+        assert _turning(raw.path)[1] >= 10
+
+
+@pytest.mark.parametrize(("name", "params"), [("narrow", {}), ("clutter", {"saturation": 0.05})])
+def test_fm2_turns_at_most_twice_as_much_as_fmm(name, params):
+    """At the default saturation (0.2 m) FM² follows the middle between clutter's blocks, its purpose, and turns
+    about 3x as much as fmm there (docs/planners.md); with a 0.05 m band it stays within 2x."""
+    p = PROBLEMS[name]
+    fm2 = plan_path(p.env, p.start, p.goal, "fm2", params=params, **KW)
+    fmm = plan_path(p.env, p.start, p.goal, "fmm", **KW)
+    assert _turning(fm2.path)[0] <= 2 * _turning(fmm.path)[0]
