@@ -25,6 +25,7 @@ from .base import Planner
 from .errors import UnknownPlanner
 from .fm2 import FM2Planner
 from .fmm import FMMPlanner
+from .ompl_planners import ompl_builtins
 from .prm import PRMPlanner
 from .st_astar import SpaceTimeAStar
 
@@ -39,6 +40,7 @@ _BUILTINS: dict[str, type[Planner]] = {
     "astar": AStarPlanner,
     "st_astar": SpaceTimeAStar,
     "theta_star": ThetaStarPlanner,
+    **ompl_builtins(),  # OMPL's planners: listed always, usable with the ompl extra
 }
 _builtin_instances: dict[str, Planner] = {}
 

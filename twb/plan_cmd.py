@@ -47,8 +47,11 @@ def plan(
     plan_name: Annotated[
         Optional[str], typer.Option("--plan", help="Use the environment's named start/goal plan (e.g. A).")
     ] = None,
-    planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar, st_astar or a plug-in name (twb planners).")] = "fmm",
-    seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM).", min=0)] = 0,
+    planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar, st_astar, theta_star, ompl_rrtconnect, "
+                                                  "ompl_rrtstar, ompl_informed_rrtstar, ompl_bitstar, ompl_prmstar, "
+                                                  "ompl_kpiece1, ompl_fmt (the ompl extra) or a plug-in name "
+                                                  "(twb planners).")] = "fmm",
+    seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM, OMPL's).", min=0)] = 0,
     robot_radius: RobotRadiusOpt = None,
     planning_margin: PlanningMarginOpt = None,
     resolution: Annotated[float, typer.Option(help="Grid resolution in metres per cell.")] = 0.01,
