@@ -67,6 +67,15 @@ def segment_free(free, nx, ny, inv_h, width, height, ax, ay, bx, by):
     return True
 
 
+@_jit
+def segments_free_batch(free, nx, ny, inv_h, width, height, a, b):
+    """:func:`segment_free` of every segment ``a[i] -> b[i]`` (``(S, 2)`` arrays, m): ``(S,)`` bool."""
+    out = np.empty(len(a), dtype=np.bool_)
+    for i in range(len(a)):
+        out[i] = segment_free(free, nx, ny, inv_h, width, height, a[i, 0], a[i, 1], b[i, 0], b[i, 1])
+    return out
+
+
 class SegmentTest:
     """:func:`segment_free` and :func:`point_free` bound to one configuration space."""
 
@@ -76,7 +85,14 @@ class SegmentTest:
                      float(space.env.width), float(space.env.height))
 
     def segment(self, ax: float, ay: float, bx: float, by: float) -> bool:
+        """Whether the segment (ax, ay) -> (bx, by) (m) is free."""
         return bool(segment_free(*self.args, ax, ay, bx, by))
 
     def point(self, x: float, y: float) -> bool:
+        """Whether the point (x, y) (m) is free."""
         return bool(point_free(*self.args, x, y))
+
+    def segments(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """:meth:`~planners.grid.ConfigSpace.segments_free` of ``a[i] -> b[i]`` (m), compiled: ``(S,)`` bool."""
+        return segments_free_batch(*self.args, np.ascontiguousarray(a[:, :2], dtype=float),
+                                   np.ascontiguousarray(b[:, :2], dtype=float))

@@ -60,10 +60,22 @@ def sample_free(space: ConfigSpace, n: int, rng: np.random.Generator) -> np.ndar
     raise NoPathFound("could not sample free configurations: the free space is almost empty")
 
 
+def _segment_test(space: ConfigSpace) -> Any:
+    """The space's compiled segment test (:class:`planners._segment.SegmentTest`), made once per space."""
+    test = space.__dict__.get("_segment_test")
+    if test is None:
+        from ._segment import SegmentTest  # numba loads with it
+
+        test = SegmentTest(space)
+        object.__setattr__(space, "_segment_test", test)
+    return test
+
+
 def _free_edges(space: ConfigSpace, pts: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """The ``pairs`` of ``pts`` whose segments are free (the exact test of ``ConfigSpace.segments_free``)."""
     if len(pairs) == 0:
         return pairs
-    return pairs[space.segments_free(pts[pairs[:, 0]], pts[pairs[:, 1]])]
+    return pairs[_segment_test(space).segments(pts[pairs[:, 0]], pts[pairs[:, 1]])]
 
 
 def _knn_pairs(tree: cKDTree, query: np.ndarray, k: int, offset: int = 0) -> np.ndarray:

@@ -152,3 +152,11 @@ def test_fm2_turns_at_most_twice_as_much_as_fmm(name, params):
     fm2 = plan_path(p.env, p.start, p.goal, "fm2", params=params, **KW)
     fmm = plan_path(p.env, p.start, p.goal, "fmm", **KW)
     assert _turning(fm2.path)[0] <= 2 * _turning(fmm.path)[0]
+
+
+def test_compiled_batch_is_segments_free():
+    space = config_space(PROBLEMS["blocks-A"].env, PROBLEM_CLEARANCE)
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0, 1.8, (5000, 2))
+    b = np.clip(a + rng.normal(0, 0.2, (5000, 2)), 0, 1.8)
+    assert np.array_equal(SegmentTest(space).segments(a, b), space.segments_free(a, b))
