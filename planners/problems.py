@@ -8,6 +8,9 @@ environments of the testbed):
 - ``clutter``: 30 seeded random blocks, corner to corner;
 - ``zigzag``: a serpentine corridor through five walls.
 
+Each has plan A corner to corner and plan B back (the same optimum), so that a study's plans A and B exist in
+every environment (``twb study planners``).
+
 Each carries its **optimum**: the length (m) of the shortest path keeping :data:`PROBLEM_CLEARANCE` from every
 block and wall by the exact distance, computed on the visibility graph of the inflated blocks
 (:func:`visibility_optimum`) and stored with the problem, so that a study reports length / optimum without
@@ -93,6 +96,7 @@ def visibility_optimum(env: Environment, start: np.ndarray, goal: np.ndarray, cl
 
 
 def _load(name: str) -> dict:
+    """The stored JSON ``planners/data/problems/<name>.json``: an environment file, or the optima."""
     return json.loads(resources.files("planners").joinpath("data", "problems", f"{name}.json").read_text("utf-8"))
 
 
@@ -108,6 +112,11 @@ def problems(names: tuple[str, ...] | None = None) -> list[Problem]:
     return out
 
 
+def _both_ways(a: list[float], b: list[float]) -> list[dict]:
+    """Plan A from ``a`` to ``b`` and plan B back (m), so that a study's plans A and B exist in every environment."""
+    return [{"name": "A", "start": [*a, 0.0], "goal": [*b, 0.0]}, {"name": "B", "start": [*b, 0.0], "goal": [*a, 0.0]}]
+
+
 def _clutter(seed: int) -> dict:
     rng = np.random.default_rng(seed)
     blocks: list[dict] = []
@@ -120,7 +129,7 @@ def _clutter(seed: int) -> dict:
                        "h": round(float(h), 3), "angle": round(float(rng.uniform(0, math.pi)), 4)})
     return {"name": "clutter", "size": [1.8, 1.8],
             "description": f"30 random blocks (numpy seed {seed}), 0.06-0.2 m a side, any angle.",
-            "blocks": blocks, "plans": [{"name": "A", "start": [0.2, 0.2, 0.0], "goal": [1.6, 1.6, 0.0]}]}
+            "blocks": blocks, "plans": _both_ways([0.2, 0.2], [1.6, 1.6])}
 
 
 def generate_environments() -> dict[str, dict]:
@@ -129,7 +138,7 @@ def generate_environments() -> dict[str, dict]:
               "description": "A 0.1 m wall across the field at x = 0.9 m with one 0.15 m gap (y 0.8 to 0.95 m).",
               "blocks": [{"x": 0.9, "y": 0.4, "w": 0.1, "h": 0.8, "angle": 0.0},
                          {"x": 0.9, "y": 1.375, "w": 0.1, "h": 0.85, "angle": 0.0}],
-              "plans": [{"name": "A", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0]}]}
+              "plans": _both_ways([0.3, 0.3], [1.5, 1.5])}
     seed = 31
     while True:  # the first seed from 31 whose corners are connected at PROBLEM_CLEARANCE
         clutter = _clutter(seed)
@@ -147,5 +156,5 @@ def generate_environments() -> dict[str, dict]:
     zigzag = {"name": "zigzag", "size": [1.8, 1.8],
               "description": "Five 1.5 m walls 0.3 m apart, open alternately at the top and bottom: a serpentine.",
               "blocks": walls,
-              "plans": [{"name": "A", "start": [0.15, 0.15, 0.0], "goal": [1.65, 1.65, 0.0]}]}
+              "plans": _both_ways([0.15, 0.15], [1.65, 1.65])}
     return {"narrow": narrow, "clutter": clutter, "zigzag": zigzag}
