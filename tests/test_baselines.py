@@ -160,3 +160,18 @@ def test_compiled_batch_is_segments_free():
     a = rng.uniform(0, 1.8, (5000, 2))
     b = np.clip(a + rng.normal(0, 0.2, (5000, 2)), 0, 1.8)
     assert np.array_equal(SegmentTest(space).segments(a, b), space.segments_free(a, b))
+
+
+def test_the_planner_study_has_every_planner_and_the_hard_problems():
+    from client_sdk.study import load_spec
+    from planners.ompl_planners import OMPL_PLANNERS
+
+    spec = load_spec("planners")
+    names = [getattr(p, "name", p) for p in spec.planners]
+    assert {"fmm", "fm2", "prm", "astar", "theta_star"} <= set(names)
+    assert set(OMPL_PLANNERS) <= set(names) or pytest.importorskip("ompl") is None
+    envs = [getattr(e, "name", None) or (e.get("name") if isinstance(e, dict) else e) for e in spec.environments]
+    assert {"narrow", "clutter", "zigzag"} <= {str(e) for e in envs} or len(spec.environments) == 5
+    for name in ("narrow-B", "clutter-B", "zigzag-B"):
+        (p,) = problems((name,))
+        assert p.optimum_m == PROBLEMS[name.split("-")[0]].optimum_m
