@@ -204,13 +204,13 @@ def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict]
     for pb in problem_set():
         space = config_space(pb.env, PROBLEM_CLEARANCE)
         s, g = np.array(pb.start[:2]), np.array(pb.goal[:2])
-        tasks = {"baseline": lambda: baseline(space, g)}
+        tasks = {"baseline": lambda space=space, g=g: baseline(space, g)}
         for label, (name, extra) in ours.items():
             impl = get_planner(name)
             params = impl.validate_params(extra)
             counter = iter(range(10**9))
 
-            def solve(impl=impl, params=params, counter=counter) -> None:  # type: ignore[no-untyped-def]
+            def solve(impl=impl, params=params, counter=counter, space=space, s=s, g=g) -> None:  # type: ignore[no-untyped-def]
                 impl.forget()
                 try:
                     impl.solve(space, s.copy(), g.copy(), params, next(counter))
@@ -250,7 +250,7 @@ def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict]
                 if near and r.info["time_to_first_solution_s"] is not None:
                     within.append(near[0])
                 ratio.append(r.length_m / pb.optimum_m)
-            med = (lambda xs: statistics.median(xs) if xs else None)  # noqa: E731
+            med = (lambda xs: statistics.median(xs) if xs else None)
             row["planners"][name] = {
                 "success": f"{ok}/{seeds}", "budget_s": ompl_budget,
                 "first_solution_s": med(first), "first_solution_ratio": med(first) / base if first else None,
