@@ -22,9 +22,9 @@ PRM = {"environment": "room", "start": START, "goal": GOAL, "planner": "prm", "m
        "repetitions": 3, "seed": 11}
 FMM = {**PRM, "planner": "fmm"}
 ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
-#: PRM with two samples and one neighbour: whether it finds a path around the block depends on its seed
+#: the paper's fixed-sample PRM with two samples and one neighbour: whether it finds a path around the block depends on its seed
 SPARSE = {"environment": "one-block", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0], "planner": "prm",
-          "planner_params": {"samples": 2, "k": 1}, "modes": ["sim", "twb"], "repetitions": 4, "seed": 1}
+          "planner_params": {"samples": 2, "k": 1, "grow": False}, "modes": ["sim", "twb"], "repetitions": 4, "seed": 1}
 #: what differs between two runs of one job that are otherwise the same: when they ran (on the robot's clock too),
 #: where, and how long planning took
 TIMED = {"planning_time_s", "planning_cpu_s", "planning_repeats", "planning_load", "id", "experiment_id",
@@ -224,7 +224,8 @@ def test_a_verdict_on_a_randomised_planner_does_not_flip_with_the_study_seed(tes
     with Client(testbed.url, testbed.token) as c:
         for seed in (0, 1):
             spec = StudySpec.from_json({"name": f"narrow-{seed}", "environments": [NARROW], "plans": ["A"],
-                                        "planners": [{"name": "prm", "params": {"samples": 60}, "label": "prm-60"},
+                                        "planners": [{"name": "prm", "params": {"samples": 60, "grow": False},
+                                                      "label": "prm-60"},
                                                      "astar"],
                                         "repetitions": 8, "modes": ["sim"], "seed": seed})
             data = run_study(c, spec, progress=False, out=tmp_path / f"narrow-{seed}")
