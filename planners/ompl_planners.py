@@ -25,6 +25,7 @@ Without the package, choosing one of these planners fails with one line naming t
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import Any
 
@@ -54,6 +55,9 @@ OMPL_PLANNERS: dict[str, tuple[str, str, bool]] = {
 #: OMPL planners that check their solution in a thread of their own: their termination stays in C++ (a Python
 #: condition would be called from that thread while the planning thread holds the interpreter)
 _THREADED = {"PRMstar"}
+
+#: OMPL's seed is the process's: one OMPL plan at a time per process, so that each keeps its own seed
+_LOCK = threading.Lock()
 
 
 def ompl_modules() -> tuple[Any, Any, Any]:
@@ -96,12 +100,13 @@ class OMPLPlanner(Planner):
         test = SegmentTest(space)
         test.segment(*start, *goal)  # loads the compiled tests before the clock starts
         test.point(*start)
-        level = ou.getLogLevel()
-        ou.setLogLevel(ou.LOG_NONE)  # OMPL logs to stderr; its outcome is in the result instead
-        try:
-            return self._solve(ob, og, ou, test, space, start, goal, params, seed)
-        finally:
-            ou.setLogLevel(level)
+        with _LOCK:
+            level = ou.getLogLevel()
+            ou.setLogLevel(ou.LOG_NONE)  # OMPL logs to stderr; its outcome is in the result instead
+            try:
+                return self._solve(ob, og, ou, test, space, start, goal, params, seed)
+            finally:
+                ou.setLogLevel(level)
 
     def _solve(self, ob: Any, og: Any, ou: Any, test: Any, space: ConfigSpace, start: np.ndarray,
                goal: np.ndarray, params: dict[str, Any], seed: int) -> tuple[np.ndarray, dict[str, Any]]:

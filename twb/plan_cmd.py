@@ -129,5 +129,7 @@ def planners() -> None:
     """List the planners that --planner accepts (built-ins and installed plug-ins)."""
     from planners import available_planners
 
-    for name, desc in available_planners().items():
-        typer.echo(f"{name:10s} {desc}")
+    listed = available_planners()
+    width = max(map(len, listed), default=10)
+    for name, desc in listed.items():
+        typer.echo(f"{name:{width}s} {desc}")
