@@ -111,6 +111,24 @@ def test_a_randomised_planner_plans_each_repetition_with_its_own_seed_and_both_m
     assert exp["planned_path"] == paths[1] and exp["planning_time_s"] == reps[1]["sim"]["planning_time_s"]
 
 
+def test_the_built_in_ompl_planners_and_theta_star_plan_jobs(client):
+    """Issue 31: OMPL's planners are built-ins a job can choose, randomised per repetition like PRM (the path each
+    repetition drove is the one its planner seed gives offline); Theta* is deterministic."""
+    pytest.importorskip("ompl.geometric", reason="the ompl package is not installed (pip install -e '.[ompl]')")
+    job = {**PRM, "planner": "ompl_rrtconnect", "modes": ["sim"]}
+    exp = run_job(client, job)
+    assert exp["status"] == "completed", exp["error"]
+    assert exp["planner_stochastic"] is True
+    paths = {}
+    for rep, modes in by_repetition(exp).items():
+        sim = modes["sim"]
+        assert sim["planned_path"] == np.round(offline(job, "room", sim["planner_seed"]).path, 6).tolist(), rep
+        paths[rep] = sim["planned_path"]
+    assert len({repr(p) for p in paths.values()}) == 3
+    theta = run_job(client, {**FMM, "planner": "theta_star", "modes": ["sim"], "repetitions": 1})
+    assert theta["status"] == "completed" and theta["planner_stochastic"] is False
+
+
 def test_a_deterministic_planner_drives_one_path_timed_again_for_every_repetition(client):
     exp = run_job(client, FMM)
     assert exp["status"] == "completed", exp["error"]
