@@ -33,12 +33,13 @@ over the paper's four problems on 360 cells a side, FMM <= 0.25x and FM² <=
 
 Part 3 (``baselines``, issue 31), on the problem set of ``planners.problems`` (the paper's four, ``narrow``,
 ``clutter``, ``zigzag``; 1 cm grid, 0.065 m clearance, each problem's visibility-graph optimum stored) against
-the same-run baseline on that grid: ``prm`` (grown until connected, its defaults), ``prm_fixed`` (the paper's
+the same-run baseline on that grid: ``fmm``, ``fm2``, ``astar``, ``prm`` (grown until connected, its defaults), ``prm_fixed`` (the paper's
 500 samples, ``grow`` false), ``prm_star`` and ``theta_star`` as ratios to the baseline (``Planner.solve``,
 PRM with a fresh roadmap and its own seed every call: a seed per round), with success and length / optimum
 over ``--seeds`` seeds; and every OMPL planner (when the ``ompl`` package is installed) over ``--seeds``
 seeds with a ``--ompl-budget`` time budget: success, time to the first solution and to within 1 % of the
 optimum (from its progress), length / optimum at the end, each time also as a ratio to the baseline's median.
+For every planner also the smallest exact clearance (m) and the median total turning (rad) of the sent paths.
 The issue's target: PRM's median ratio over the paper's four <= 0.6.
 
 Prints JSON.
@@ -198,8 +199,19 @@ def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict]
         ompl_names = list(OMPL_PLANNERS)
     except ImportError:
         ompl_names = []
-    ours = {"prm": ("prm", {}), "prm_fixed": ("prm", {"grow": False}), "prm_star": ("prm", {"prm_star": True}),
+    from planners.geometry import polyline_min_clearance
+
+    ours = {"fmm": ("fmm", {}), "fm2": ("fm2", {}), "astar": ("astar", {}), "prm": ("prm", {}),
+            "prm_fixed": ("prm", {"grow": False}), "prm_star": ("prm", {"prm_star": True}),
             "theta_star": ("theta_star", {})}
+
+    def shape(path: np.ndarray) -> tuple[float, float]:
+        """Exact minimum clearance (m) and total turning (rad) of a sent path."""
+        d = np.diff(path[:, :2], axis=0)
+        d = d[np.hypot(*d.T) > 1e-9]
+        a = np.arctan2(d[:, 1], d[:, 0])
+        turn = float(np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi).sum())
+        return polyline_min_clearance(pb.env, path), turn
     rows, paper_prm = [], []
     for pb in problem_set():
         space = config_space(pb.env, PROBLEM_CLEARANCE)
@@ -222,20 +234,27 @@ def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict]
         base = timed["baseline"]["median_s"]
         row: dict = {"problem": pb.name, "optimum_m": pb.optimum_m, "baseline_travel_time_s": base, "planners": {}}
         for label, (name, extra) in ours.items():
-            lengths, fails = [], 0
+            lengths, clear, turns, fails = [], [], [], 0
             for seed in range(seeds if get_planner(name).stochastic else 1):
                 get_planner(name).forget()
                 try:
-                    lengths.append(plan_path(pb.env, pb.start, pb.goal, name, robot_radius=0.045,
-                                             planning_margin=0.02, params=extra, seed=seed).length_m)
+                    r = plan_path(pb.env, pb.start, pb.goal, name, robot_radius=0.045, planning_margin=0.02,
+                                  params=extra, seed=seed)
                 except PlanningError:
                     fails += 1
+                    continue
+                lengths.append(r.length_m)
+                c, t = shape(r.path)
+                clear.append(c)
+                turns.append(t)
             row["planners"][label] = {"solve_s": timed[label]["median_s"], "ratio": timed[label]["ratio"],
                                       "success": f"{len(lengths)}/{len(lengths) + fails}",
                                       "length_over_optimum": statistics.median(lengths) / pb.optimum_m
-                                      if lengths else None}
+                                      if lengths else None,
+                                      "clearance_min_m": min(clear) if clear else None,
+                                      "turning_rad": statistics.median(turns) if turns else None}
         for name in ompl_names:
-            first, within, ratio, ok = [], [], [], 0
+            first, within, ratio, clear, turns, ok = [], [], [], [], [], 0
             for seed in range(seeds):
                 try:
                     r = plan_path(pb.env, pb.start, pb.goal, name, robot_radius=0.045, planning_margin=0.02,
@@ -250,13 +269,17 @@ def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict]
                 if near and r.info["time_to_first_solution_s"] is not None:
                     within.append(near[0])
                 ratio.append(r.length_m / pb.optimum_m)
+                c, t = shape(r.path)
+                clear.append(c)
+                turns.append(t)
             med = (lambda xs: statistics.median(xs) if xs else None)
             row["planners"][name] = {
                 "success": f"{ok}/{seeds}", "budget_s": ompl_budget,
                 "first_solution_s": med(first), "first_solution_ratio": med(first) / base if first else None,
                 "within_1pct_s": med(within), "within_1pct_runs": f"{len(within)}/{seeds}",
                 "within_1pct_ratio": med(within) / base if within else None,
-                "length_over_optimum": med(ratio)}
+                "length_over_optimum": med(ratio), "clearance_min_m": min(clear) if clear else None,
+                "turning_rad": med(turns)}
         rows.append(row)
         print(f"{pb.name}: baseline {base * 1e3:.1f} ms, " + ", ".join(
             f"{k} {v.get('ratio', v.get('first_solution_ratio')) or float('nan'):.2f}x {v['success']}"
