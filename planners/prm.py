@@ -145,7 +145,8 @@ class PRMPlanner(Planner):
         Param("k", "", 10, 1, 100, "nearest neighbours each sample is joined to (unless prm_star)", type="integer"),
         Param("grow", "", True, None, None, "double the roadmap until start and goal connect (false: the paper's "
               "fixed sample count)", type="boolean"),
-        Param("max_samples", "", 50_000, 2, 1_000_000, "the sample budget of a growing roadmap", type="integer"),
+        Param("max_samples", "", 50_000, 2, 1_000_000, "the sample budget of a growing roadmap (it grows no further; "
+              "the first roadmap has samples nodes in any case)", type="integer"),
         Param("time_budget_s", "s", 0.5, 0.0, 600.0, "stop growing after this planning time", low_exclusive=True),
         Param("prm_star", "", False, None, None, "join each sample to PRM*'s e(1 + 1/2) ln n nearest instead of k",
               type="boolean"),
