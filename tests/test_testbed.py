@@ -157,7 +157,7 @@ def test_a_path_grazing_a_block_collides_on_the_field_for_some_seeds(client):
 
 
 def test_planning_failure_fails_the_job_with_the_reason(client):
-    job = {**JOB, "planner": "prm", "planner_params": {"samples": 2, "k": 1}}
+    job = {**JOB, "planner": "prm", "planner_params": {"samples": 2, "k": 1, "grow": False}}
     done = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)
     assert done["status"] == "failed"
     assert all(r["status"] == "failed" for r in done["runs"])
