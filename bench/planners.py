@@ -31,9 +31,21 @@ march accepted (its cost: docs/performance.md).  The issue's targets: median
 over the paper's four problems on 360 cells a side, FMM <= 0.25x and FM² <=
 0.5x the baseline.
 
+Part 3 (``baselines``, issue 31), on the problem set of ``planners.problems`` (the paper's four, ``narrow``,
+``clutter``, ``zigzag``; 1 cm grid, 0.065 m clearance, each problem's visibility-graph optimum stored) against
+the same-run baseline on that grid: ``fmm``, ``fm2``, ``astar``, ``prm`` (grown until connected, its defaults), ``prm_fixed`` (the paper's
+500 samples, ``grow`` false), ``prm_star`` and ``theta_star`` as ratios to the baseline (``Planner.solve``,
+PRM with a fresh roadmap and its own seed every call: a seed per round), with success and length / optimum
+over ``--seeds`` seeds; and every OMPL planner (when the ``ompl`` package is installed) over ``--seeds``
+seeds with a ``--ompl-budget`` time budget: success, time to the first solution and to within 1 % of the
+optimum (from its progress), length / optimum at the end, each time also as a ratio to the baseline's median.
+For every planner also the smallest exact clearance (m) and the median total turning (rad) of the sent paths.
+The issue's target: PRM's median ratio over the paper's four <= 0.6.
+
 Prints JSON.
 
-    python bench/planners.py [--runs 5] [--sizes 180,360,1800] [--problem-sizes 360,1800] [--only field|problems]
+    python bench/planners.py [--runs 5] [--sizes 180,360,1800] [--problem-sizes 360,1800]
+                             [--only field|problems|baselines] [--seeds 10] [--ompl-budget 1.0]
 """
 
 from __future__ import annotations
@@ -177,14 +189,123 @@ def run_problems(sizes: list[int], runs: int) -> tuple[list[dict], dict[str, dic
     return rows, medians, checks
 
 
+def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict], dict[str, bool]]:
+    """Part 3: the new PRM, Theta* and OMPL's planners on the problem set against the same-run baseline."""
+    from planners.ompl_planners import OMPL_PLANNERS
+    from planners.problems import PROBLEM_CLEARANCE, problems as problem_set
+
+    try:
+        import ompl.geometric  # noqa: F401
+        ompl_names = list(OMPL_PLANNERS)
+    except ImportError:
+        ompl_names = []
+    from planners.geometry import polyline_min_clearance
+
+    ours = {"fmm": ("fmm", {}), "fm2": ("fm2", {}), "astar": ("astar", {}), "prm": ("prm", {}),
+            "prm_fixed": ("prm", {"grow": False}), "prm_star": ("prm", {"prm_star": True}),
+            "theta_star": ("theta_star", {})}
+
+    def shape(path: np.ndarray) -> tuple[float, float]:
+        """Exact minimum clearance (m) and total turning (rad) of a sent path."""
+        d = np.diff(path[:, :2], axis=0)
+        d = d[np.hypot(*d.T) > 1e-9]
+        a = np.arctan2(d[:, 1], d[:, 0])
+        turn = float(np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi).sum())
+        return polyline_min_clearance(pb.env, path), turn
+    rows, paper_prm = [], []
+    for pb in problem_set():
+        space = config_space(pb.env, PROBLEM_CLEARANCE)
+        s, g = np.array(pb.start[:2]), np.array(pb.goal[:2])
+        tasks = {"baseline": lambda space=space, g=g: baseline(space, g)}
+        for label, (name, extra) in ours.items():
+            impl = get_planner(name)
+            params = impl.validate_params(extra)
+            counter = iter(range(10**9))
+
+            def solve(impl=impl, params=params, counter=counter, space=space, s=s, g=g) -> None:  # type: ignore[no-untyped-def]
+                impl.forget()
+                try:
+                    impl.solve(space, s.copy(), g.copy(), params, next(counter))
+                except PlanningError:
+                    pass  # a failed PRM run is timed as well: its time was spent
+
+            tasks[label] = solve
+        timed = interleaved(tasks, "baseline", runs)
+        base = timed["baseline"]["median_s"]
+        row: dict = {"problem": pb.name, "optimum_m": pb.optimum_m, "baseline_travel_time_s": base, "planners": {}}
+        for label, (name, extra) in ours.items():
+            lengths, clear, turns, fails = [], [], [], 0
+            for seed in range(seeds if get_planner(name).stochastic else 1):
+                get_planner(name).forget()
+                try:
+                    r = plan_path(pb.env, pb.start, pb.goal, name, robot_radius=0.045, planning_margin=0.02,
+                                  params=extra, seed=seed)
+                except PlanningError:
+                    fails += 1
+                    continue
+                lengths.append(r.length_m)
+                c, t = shape(r.path)
+                clear.append(c)
+                turns.append(t)
+            row["planners"][label] = {"solve_s": timed[label]["median_s"], "ratio": timed[label]["ratio"],
+                                      "success": f"{len(lengths)}/{len(lengths) + fails}",
+                                      "length_over_optimum": statistics.median(lengths) / pb.optimum_m
+                                      if lengths else None,
+                                      "clearance_min_m": min(clear) if clear else None,
+                                      "turning_rad": statistics.median(turns) if turns else None}
+        for name in ompl_names:
+            first, within, ratio, clear, turns, ok = [], [], [], [], [], 0
+            for seed in range(seeds):
+                try:
+                    r = plan_path(pb.env, pb.start, pb.goal, name, robot_radius=0.045, planning_margin=0.02,
+                                  params={"time_budget_s": ompl_budget}, seed=seed)
+                except PlanningError:
+                    continue
+                ok += 1
+                prog = r.info["progress"]
+                if r.info["time_to_first_solution_s"] is not None:
+                    first.append(r.info["time_to_first_solution_s"])
+                near = [t for t, c in prog if c <= 1.01 * pb.optimum_m]
+                if near and r.info["time_to_first_solution_s"] is not None:
+                    within.append(near[0])
+                ratio.append(r.length_m / pb.optimum_m)
+                c, t = shape(r.path)
+                clear.append(c)
+                turns.append(t)
+            med = (lambda xs: statistics.median(xs) if xs else None)
+            row["planners"][name] = {
+                "success": f"{ok}/{seeds}", "budget_s": ompl_budget,
+                "first_solution_s": med(first), "first_solution_ratio": med(first) / base if first else None,
+                "within_1pct_s": med(within), "within_1pct_runs": f"{len(within)}/{seeds}",
+                "within_1pct_ratio": med(within) / base if within else None,
+                "length_over_optimum": med(ratio), "clearance_min_m": min(clear) if clear else None,
+                "turning_rad": med(turns)}
+        rows.append(row)
+        print(f"{pb.name}: baseline {base * 1e3:.1f} ms, " + ", ".join(
+            f"{k} {v.get('ratio', v.get('first_solution_ratio')) or float('nan'):.2f}x {v['success']}"
+            for k, v in row["planners"].items()), file=sys.stderr)
+        if pb.name in ("room-A", "room-B", "blocks-A", "blocks-B"):
+            paper_prm.append(row["planners"]["prm"]["ratio"])
+    checks = {f"prm: median over the paper's four <= {PRM_TARGET_OF_360}x baseline (1 cm grid)":
+              statistics.median(paper_prm) <= PRM_TARGET_OF_360}
+    return rows, checks
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--sizes", default="180,360,1800", help="part 1: cells a side of the 3.6 m field")
     ap.add_argument("--problem-sizes", default="360,1800", help="part 2: cells a side of each problem's field")
-    ap.add_argument("--only", choices=("field", "problems"), help="run one part")
+    ap.add_argument("--only", choices=("field", "problems", "baselines"), help="run one part")
+    ap.add_argument("--seeds", type=int, default=10, help="part 3: seeds per stochastic planner and problem")
+    ap.add_argument("--ompl-budget", type=float, default=1.0, help="part 3: OMPL's time budget (s)")
     args = ap.parse_args()
     results, checks, rows, medians = [], {}, [], {}
+    if args.only == "baselines":
+        rows, checks = run_baselines(args.runs, args.seeds, args.ompl_budget)
+        report("planners", [], clearance_m=0.065, resolution_m=0.01, runs=args.runs, seeds=args.seeds,
+               targets_met=checks, baselines=rows)
+        return
     if args.only != "field":
         rows, medians, checks = run_problems([int(n) for n in args.problem_sizes.split(",")], args.runs)
     if args.only == "problems":

@@ -1,7 +1,8 @@
 """Path planning for the Teleworkbench: environments, occupancy grids, planners, post-processing.
 
-numpy/scipy/scikit-fmm, and numba for the fast-marching kernels (loaded with
-the first FMM or FM² plan); imports nothing else of the project.  Units are
+numpy/scipy/scikit-fmm, and numba for the compiled kernels (fast marching,
+Theta*, the segment test of PRM and OMPL's planners; loaded with the first
+plan that needs them); imports nothing else of the project.  Units are
 metres and radians throughout.
 
 >>> from planners import plan_path

@@ -2,8 +2,9 @@
 
 :func:`plan_path` is what the command line, the server and users call; it
 treats built-in and plug-in planners the same way and guarantees that the
-returned path starts at the start, ends at the goal and never enters an
-obstacle dilated by the robot radius.
+returned path starts at the start, ends at the goal and crosses only free
+cells of the configuration space (cells whose centres keep the robot radius
+and margin; the path itself keeps that less half a cell diagonal).
 """
 
 from __future__ import annotations
@@ -209,9 +210,11 @@ def plan_path(
     """Plan a collision-free path from ``start`` to ``goal`` with the planner called ``planner``.
 
     Poses are ``(x, y[, theta])`` in metres/radians; ``robot_radius`` and
-    ``resolution`` in metres; the path keeps ``robot_radius +
-    planning_margin`` (m) from every obstacle (the testbed plans with
-    :data:`DEFAULT_PLANNING_MARGIN`); ``max_spacing`` is the largest distance (m)
+    ``resolution`` in metres; the path crosses only cells whose centres keep
+    ``robot_radius + planning_margin`` (m) from every obstacle (the testbed
+    plans with :data:`DEFAULT_PLANNING_MARGIN`), so by the exact distance it
+    keeps at least that less ``resolution / sqrt(2)`` (docs/planners.md,
+    "What clearance a path keeps"); ``max_spacing`` is the largest distance (m)
     between consecutive points of the returned path; ``tolerance`` (m) the
     largest deviation allowed when dropping points of the raw path.
 

@@ -1,17 +1,24 @@
 """Probabilistic RoadMap (Kavraki et al.), vectorised.
 
 Build: sample ``samples`` free configurations in batches, join each to its
-``k`` nearest neighbours (``scipy.spatial.cKDTree``), collision-check every
-candidate edge at once against the configuration space, and keep the free
-ones as a sparse graph.  Query: add start and goal the same way and take the
-shortest path with ``scipy.sparse.csgraph.dijkstra``.  A roadmap depends only
-on the configuration space, ``samples``, ``k`` and the seed, so it is built
-once and reused by every query with the same inputs.
+``k`` nearest neighbours (``scipy.spatial.cKDTree``; PRM*'s ``e (1 + 1/2) ln n``
+with ``prm_star``), collision-check every candidate edge at once against the
+configuration space, and keep the free ones as a sparse graph.  Query: add
+start and goal the same way and take the shortest path with
+``scipy.sparse.csgraph.dijkstra``.  With ``grow`` (the default) a roadmap
+that does not connect start and goal doubles (new samples from the same
+seeded stream, each joined to its nearest among all nodes) until it does or
+``max_samples`` or ``time_budget_s`` runs out; without it the roadmap has
+``samples`` nodes, the paper's fixed-sample PRM.  A roadmap depends only on
+the configuration space, the parameters and the seed, so it is built once
+and reused by every query with the same inputs (a grown roadmap is read back
+at the stage each query needs: the path does not depend on earlier queries).
 """
 
 from __future__ import annotations
 
 import math
+import time
 import weakref
 from dataclasses import dataclass
 from typing import Any
@@ -25,7 +32,7 @@ from .base import Param, Planner
 from .errors import NoPathFound
 from .grid import ConfigSpace
 
-__all__ = ["PRMPlanner", "Roadmap", "build_roadmap"]
+__all__ = ["PRMPlanner", "Roadmap", "build_roadmap", "prm_star_k"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,10 +60,22 @@ def sample_free(space: ConfigSpace, n: int, rng: np.random.Generator) -> np.ndar
     raise NoPathFound("could not sample free configurations: the free space is almost empty")
 
 
+def _segment_test(space: ConfigSpace) -> Any:
+    """The space's compiled segment test (:class:`planners._segment.SegmentTest`), made once per space."""
+    test = space.__dict__.get("_segment_test")
+    if test is None:
+        from ._segment import SegmentTest  # numba loads with it
+
+        test = SegmentTest(space)
+        object.__setattr__(space, "_segment_test", test)
+    return test
+
+
 def _free_edges(space: ConfigSpace, pts: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """The ``pairs`` of ``pts`` whose segments are free (the exact test of ``ConfigSpace.segments_free``)."""
     if len(pairs) == 0:
         return pairs
-    return pairs[space.segments_free(pts[pairs[:, 0]], pts[pairs[:, 1]])]
+    return pairs[_segment_test(space).segments(pts[pairs[:, 0]], pts[pairs[:, 1]])]
 
 
 def _knn_pairs(tree: cKDTree, query: np.ndarray, k: int, offset: int = 0) -> np.ndarray:
@@ -82,17 +101,60 @@ def build_roadmap(space: ConfigSpace, samples: int, k: int, seed: int) -> Roadma
     return Roadmap(nodes, _free_edges(space, nodes, pairs), tree)
 
 
+def prm_star_k(n: int) -> int:
+    """PRM*'s neighbour count for ``n`` nodes in the plane: ``ceil(e (1 + 1/2) ln n)`` (Karaman and Frazzoli 2011)."""
+    return max(1, math.ceil(math.e * 1.5 * math.log(max(n, 2))))
+
+
+@dataclass
+class _Growing:
+    """A roadmap grown in stages from one seed: stage ``s`` holds the first ``sizes[s]`` nodes and exactly the
+    edges among them (each node was joined to its neighbours among the nodes before it and itself), so any
+    stage can be read back from a larger roadmap: a query's path does not depend on what earlier queries grew."""
+
+    rng: np.random.Generator
+    nodes: np.ndarray
+    edges: np.ndarray
+    sizes: list[int]
+
+    def grow(self, space: ConfigSpace, n: int, k: int, star: bool) -> None:
+        """Add free samples up to ``n`` nodes, each joined to its k (or PRM*'s k) nearest among all."""
+        have = len(self.nodes)
+        new = sample_free(space, n - have, self.rng)
+        nodes = np.vstack([self.nodes, new]) if have else new
+        kk = prm_star_k(n) if star else k
+        pairs = _knn_pairs(cKDTree(nodes), new, kk + 1, offset=have)
+        self.nodes = nodes
+        self.edges = np.vstack([self.edges, _free_edges(space, nodes, pairs)])
+        self.sizes.append(n)
+
+    def stage(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """Nodes and edges of stage ``s``."""
+        n = self.sizes[s]
+        return self.nodes[:n], self.edges[self.edges[:, 1] < n]
+
+
 class PRMPlanner(Planner):
-    """Probabilistic RoadMap with k-nearest connection; roadmaps cached per configuration space."""
+    """Probabilistic RoadMap, grown until start and goal connect; roadmaps cached per configuration space."""
 
     name = "prm"
-    description = "Probabilistic RoadMap: seeded samples, k-nearest edges, Dijkstra query"
-    parameters = (Param("samples", "", 500, 2, 200_000, "free samples of the roadmap", type="integer"),
-                  Param("k", "", 10, 1, 100, "nearest neighbours each sample is joined to", type="integer"))
+    description = "Probabilistic RoadMap: seeded samples grown until start and goal connect, k-nearest edges, Dijkstra"
+    parameters = (
+        Param("samples", "", 500, 2, 200_000, "free samples of the first roadmap (all of it unless grow)",
+              type="integer"),
+        Param("k", "", 10, 1, 100, "nearest neighbours each sample is joined to (unless prm_star)", type="integer"),
+        Param("grow", "", True, None, None, "double the roadmap until start and goal connect (false: the paper's "
+              "fixed sample count)", type="boolean"),
+        Param("max_samples", "", 50_000, 2, 1_000_000, "the sample budget of a growing roadmap (it grows no further; "
+              "the first roadmap has samples nodes in any case)", type="integer"),
+        Param("time_budget_s", "s", 0.5, 0.0, 600.0, "stop growing after this planning time", low_exclusive=True),
+        Param("prm_star", "", False, None, None, "join each sample to PRM*'s e(1 + 1/2) ln n nearest instead of k",
+              type="boolean"),
+    )
     stochastic = True  # the roadmap is a random sample: each seed gives its own path
 
     def __init__(self) -> None:
-        self._cache: weakref.WeakKeyDictionary[ConfigSpace, dict[tuple[int, int, int], Roadmap]]
+        self._cache: weakref.WeakKeyDictionary[ConfigSpace, dict[tuple[Any, ...], Any]]
         self._cache = weakref.WeakKeyDictionary()
 
     def forget(self) -> None:
@@ -100,7 +162,7 @@ class PRMPlanner(Planner):
         self._cache = weakref.WeakKeyDictionary()
 
     def roadmap(self, space: ConfigSpace, samples: int, k: int, seed: int) -> tuple[Roadmap, bool]:
-        """The roadmap for these inputs and whether it came from the cache."""
+        """The fixed-size roadmap for these inputs and whether it came from the cache."""
         per_space = self._cache.setdefault(space, {})
         key = (samples, k, seed)
         if key in per_space:
@@ -109,30 +171,73 @@ class PRMPlanner(Planner):
         per_space[key] = rm
         return rm, False
 
-    def solve(
-        self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        samples, k = params["samples"], params["k"]
-        rm, cached = self.roadmap(space, samples, k, seed)
-        m = len(rm.nodes)
+    def _growing(self, space: ConfigSpace, samples: int, k: int, star: bool, seed: int) -> tuple[_Growing, bool]:
+        per_space = self._cache.setdefault(space, {})
+        key = ("grow", samples, k, star, seed)
+        cached = key in per_space
+        if not cached:
+            g = _Growing(np.random.default_rng(seed), np.zeros((0, 2)), np.zeros((0, 2), dtype=np.int64), [])
+            g.grow(space, samples, k, star)
+            per_space[key] = g
+        return per_space[key], cached
+
+    @staticmethod
+    def _query(space: ConfigSpace, nodes: np.ndarray, edges: np.ndarray, start: np.ndarray, goal: np.ndarray,
+               k: int) -> np.ndarray | None:
+        """The shortest roadmap path start -> goal ``(N, 2)`` (m), or None when they do not connect."""
+        m = len(nodes)
         ends = np.array([start[:2], goal[:2]])
-        pts = np.vstack([rm.nodes, ends])
+        pts = np.vstack([nodes, ends])
         # start/goal join their k nearest roadmap nodes, and each other directly
-        query_pairs = np.vstack([_knn_pairs(rm.tree, ends, k, offset=m), [[m, m + 1]]])
-        edges = np.vstack([rm.edges, _free_edges(space, pts, query_pairs)])
+        query_pairs = np.vstack([_knn_pairs(cKDTree(nodes), ends, k, offset=m), [[m, m + 1]]])
+        edges = np.vstack([edges, _free_edges(space, pts, query_pairs)])
         w = np.hypot(*(pts[edges[:, 0]] - pts[edges[:, 1]]).T)
         # zero-length edges would vanish from a sparse matrix; keep them tiny instead
         w = np.maximum(w, 1e-12)
         graph = coo_matrix((w, (edges[:, 0], edges[:, 1])), shape=(m + 2, m + 2)).tocsr()
         dist, pred = dijkstra(graph, directed=False, indices=m, return_predecessors=True)
         if not math.isfinite(dist[m + 1]):
-            raise NoPathFound(
-                f"PRM found no path with {samples} samples and k={k}; "
-                "try more samples (planner_params {\"samples\": ...}) or a larger k"
-            )
+            return None
         order = [m + 1]
         while order[-1] != m:  # a loop over the path's nodes only
             order.append(int(pred[order[-1]]))
-        path = pts[order[::-1]]
-        info = {"roadmap_nodes": m, "roadmap_edges": int(len(rm.edges)), "roadmap_cached": cached}
-        return path, info
+        return pts[order[::-1]]
+
+    def solve(
+        self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        params = {**(self.defaults or {}), **params}  # direct callers may give only some
+        samples, k, star = params["samples"], params["k"], params["prm_star"]
+        if not params["grow"]:
+            if star:
+                k = prm_star_k(samples)
+            rm, cached = self.roadmap(space, samples, k, seed)
+            path = self._query(space, rm.nodes, rm.edges, start, goal, k)
+            if path is None:
+                raise NoPathFound(
+                    f"PRM found no path with {samples} samples and k={k}; "
+                    "try more samples (planner_params {\"samples\": ...}), a larger k or grow"
+                )
+            info = {"roadmap_nodes": len(rm.nodes), "roadmap_edges": len(rm.edges), "roadmap_cached": cached}
+            return path, info
+        t0 = time.perf_counter()
+        g, cached = self._growing(space, samples, k, star, seed)
+        s = 0
+        while True:
+            nodes, edges = g.stage(s)
+            kq = prm_star_k(len(nodes)) if star else k
+            path = self._query(space, nodes, edges, start, goal, kq)
+            if path is not None:
+                info = {"roadmap_nodes": len(nodes), "roadmap_edges": len(edges), "roadmap_cached": cached,
+                        "roadmap_stages": s + 1}
+                return path, info
+            n = min(2 * len(nodes), params["max_samples"])
+            if n <= len(nodes):
+                raise NoPathFound(f"PRM found no path with its sample budget of {len(nodes)} samples "
+                                  f"(max_samples); try a larger max_samples")
+            if time.perf_counter() - t0 > params["time_budget_s"]:
+                raise NoPathFound(f"PRM found no path within its time budget of {params['time_budget_s']:g} s "
+                                  f"({len(nodes)} samples; time_budget_s)")
+            s += 1
+            if s >= len(g.sizes):
+                g.grow(space, n, k, star)

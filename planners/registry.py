@@ -19,11 +19,13 @@ from typing import Any, Callable
 
 from contract.plugins import RESTART_HINT, LoadError, PluginRegistry, PluginStatus
 
+from .anyangle import ThetaStarPlanner
 from .astar import AStarPlanner
 from .base import Planner
 from .errors import UnknownPlanner
 from .fm2 import FM2Planner
 from .fmm import FMMPlanner
+from .ompl_planners import ompl_builtins
 from .prm import PRMPlanner
 from .st_astar import SpaceTimeAStar
 
@@ -37,6 +39,8 @@ _BUILTINS: dict[str, type[Planner]] = {
     "prm": PRMPlanner,
     "astar": AStarPlanner,
     "st_astar": SpaceTimeAStar,
+    "theta_star": ThetaStarPlanner,
+    **ompl_builtins(),  # OMPL's planners: listed always, usable with the ompl extra
 }
 _builtin_instances: dict[str, Planner] = {}
 

@@ -92,7 +92,7 @@ def test_submit_from_a_job_file_and_a_path_file(run, tmp_path):
 
 
 def test_a_failed_job_exits_1_with_the_reason(run):
-    r = run("submit", "--env", "room", "--plan", "A", "--planner", "prm", "-p", "samples=2", "-p", "k=1",
+    r = run("submit", "--env", "room", "--plan", "A", "--planner", "prm", "-p", "samples=2", "-p", "k=1", "-p", "grow=false",
             "--modes", "sim", "--wait")
     assert r.returncode == 1
     assert "failed" in r.stderr and "PRM found no path" in r.stderr

@@ -22,9 +22,9 @@ PRM = {"environment": "room", "start": START, "goal": GOAL, "planner": "prm", "m
        "repetitions": 3, "seed": 11}
 FMM = {**PRM, "planner": "fmm"}
 ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
-#: PRM with two samples and one neighbour: whether it finds a path around the block depends on its seed
+#: the paper's fixed-sample PRM with two samples and one neighbour: whether it finds a path around the block depends on its seed
 SPARSE = {"environment": "one-block", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0], "planner": "prm",
-          "planner_params": {"samples": 2, "k": 1}, "modes": ["sim", "twb"], "repetitions": 4, "seed": 1}
+          "planner_params": {"samples": 2, "k": 1, "grow": False}, "modes": ["sim", "twb"], "repetitions": 4, "seed": 1}
 #: what differs between two runs of one job that are otherwise the same: when they ran (on the robot's clock too),
 #: where, and how long planning took
 TIMED = {"planning_time_s", "planning_cpu_s", "planning_repeats", "planning_load", "id", "experiment_id",
@@ -109,6 +109,24 @@ def test_a_randomised_planner_plans_each_repetition_with_its_own_seed_and_both_m
         paths[rep] = sim["planned_path"]
     assert len({repr(p) for p in paths.values()}) == 3  # three roadmaps, three paths
     assert exp["planned_path"] == paths[1] and exp["planning_time_s"] == reps[1]["sim"]["planning_time_s"]
+
+
+def test_the_built_in_ompl_planners_and_theta_star_plan_jobs(client):
+    """Issue 31: OMPL's planners are built-ins a job can choose, randomised per repetition like PRM (the path each
+    repetition drove is the one its planner seed gives offline); Theta* is deterministic."""
+    pytest.importorskip("ompl.geometric", reason="the ompl package is not installed (pip install -e '.[ompl]')")
+    job = {**PRM, "planner": "ompl_rrtconnect", "modes": ["sim"]}
+    exp = run_job(client, job)
+    assert exp["status"] == "completed", exp["error"]
+    assert exp["planner_stochastic"] is True
+    paths = {}
+    for rep, modes in by_repetition(exp).items():
+        sim = modes["sim"]
+        assert sim["planned_path"] == np.round(offline(job, "room", sim["planner_seed"]).path, 6).tolist(), rep
+        paths[rep] = sim["planned_path"]
+    assert len({repr(p) for p in paths.values()}) == 3
+    theta = run_job(client, {**FMM, "planner": "theta_star", "modes": ["sim"], "repetitions": 1})
+    assert theta["status"] == "completed" and theta["planner_stochastic"] is False
 
 
 def test_a_deterministic_planner_drives_one_path_timed_again_for_every_repetition(client):
@@ -224,7 +242,8 @@ def test_a_verdict_on_a_randomised_planner_does_not_flip_with_the_study_seed(tes
     with Client(testbed.url, testbed.token) as c:
         for seed in (0, 1):
             spec = StudySpec.from_json({"name": f"narrow-{seed}", "environments": [NARROW], "plans": ["A"],
-                                        "planners": [{"name": "prm", "params": {"samples": 60}, "label": "prm-60"},
+                                        "planners": [{"name": "prm", "params": {"samples": 60, "grow": False},
+                                                      "label": "prm-60"},
                                                      "astar"],
                                         "repetitions": 8, "modes": ["sim"], "seed": seed})
             data = run_study(c, spec, progress=False, out=tmp_path / f"narrow-{seed}")

@@ -131,10 +131,11 @@ async def test_no_path_of_a_deterministic_planner_fails_the_whole_experiment_and
 
 
 async def test_no_path_of_a_randomised_planner_fails_its_repetition_only(tmp_path):
-    """PRM with two samples finds no path around the block with repetition 1's planner seed: that repetition
-    fails (remembered for it), the experiment does not; other seeds are tried (docs/study.md, "Seeds")."""
+    """Fixed-sample PRM with two samples finds no path around the block with repetition 1's planner seed: that
+    repetition fails (remembered for it), the experiment does not; other seeds are tried (docs/study.md, "Seeds")."""
     async with running(tmp_path) as tb:
-        exp_id, run_id = add_experiment(tb, planner="prm", params={"samples": 2, "k": 1}, mode="sim", seed=1)
+        exp_id, run_id = add_experiment(tb, planner="prm", params={"samples": 2, "k": 1, "grow": False}, mode="sim",
+                                        seed=1)
         with tb.sessions() as s:
             assert s.get(Experiment, exp_id).planner_stochastic
         end = await run_and_store(tb, assignment(tb, run_id, "sim"), stopping=lambda: False)

@@ -133,7 +133,9 @@ def test_prm_with_too_few_samples_says_what_to_do():
     env = load_environment("room")
     plan = env.plan("A")
     with pytest.raises(NoPathFound, match="try more samples"):
-        plan_path(env, plan.start, plan.goal, "prm", params={"samples": 2, "k": 1})
+        plan_path(env, plan.start, plan.goal, "prm", params={"samples": 2, "k": 1, "grow": False})
+    with pytest.raises(NoPathFound, match="sample budget of 4 samples"):
+        plan_path(env, plan.start, plan.goal, "prm", params={"samples": 2, "k": 1, "max_samples": 4})
 
 
 WALLED = parse_environment(
@@ -166,7 +168,8 @@ def test_bad_poses_are_refused_with_a_clear_reason(start, goal, message):
 def test_unknown_planner_and_bad_parameters():
     with pytest.raises(UnknownPlanner, match=r"unknown planner 'rrt' \(available: fmm, fm2, prm, astar"):
         plan_path("room", (0.3, 0.3), (1.5, 1.5), "rrt")
-    with pytest.raises(PlanningError, match=r"planner 'prm' has no parameter 'n' \(parameters: k, samples\)"):
+    with pytest.raises(PlanningError, match=r"planner 'prm' has no parameter 'n' \(parameters: grow, k, max_samples, "
+                                            r"prm_star, samples, time_budget_s\)"):
         plan_path("room", (0.3, 0.3), (1.5, 1.5), "prm", params={"n": 3})
     with pytest.raises(PlanningError, match="parameter prm.samples must be an integer"):
         plan_path("room", (0.3, 0.3), (1.5, 1.5), "prm", params={"samples": 2.5})

@@ -157,7 +157,7 @@ def test_a_path_grazing_a_block_collides_on_the_field_for_some_seeds(client):
 
 
 def test_planning_failure_fails_the_job_with_the_reason(client):
-    job = {**JOB, "planner": "prm", "planner_params": {"samples": 2, "k": 1}}
+    job = {**JOB, "planner": "prm", "planner_params": {"samples": 2, "k": 1, "grow": False}}
     done = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)
     assert done["status"] == "failed"
     assert all(r["status"] == "failed" for r in done["runs"])
@@ -304,7 +304,8 @@ def test_a_robot_dying_mid_run_is_an_error_retried_once_on_another_robot(tmp_pat
 def test_planners_robot_positions_and_incremental_poses(client):
     planners = {p["name"]: p for p in client.get("/api/v1/planners").json()["data"]}
     assert {"fmm", "fm2", "prm", "astar"} <= set(planners)
-    assert planners["prm"]["defaults"] == {"samples": 500, "k": 10}
+    assert planners["prm"]["defaults"] == {"samples": 500, "k": 10, "grow": True, "max_samples": 50_000,
+                                           "time_budget_s": 0.5, "prm_star": False}
     job = {**JOB, "modes": ["twb"], "repetitions": 1, "seed": 5}
     run = wait_for(client, client.post("/api/v1/experiments", json=job).json()["id"], timeout=60)["runs"][0]
     robot = next(r for r in client.get("/api/v1/robots").json()["data"] if r["robot_id"] == run["robot_id"])

@@ -47,8 +47,11 @@ def plan(
     plan_name: Annotated[
         Optional[str], typer.Option("--plan", help="Use the environment's named start/goal plan (e.g. A).")
     ] = None,
-    planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar, st_astar or a plug-in name (twb planners).")] = "fmm",
-    seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM).", min=0)] = 0,
+    planner: Annotated[str, typer.Option(help="fmm, fm2, prm, astar, st_astar, theta_star, ompl_rrtconnect, "
+                                                  "ompl_rrtstar, ompl_informed_rrtstar, ompl_bitstar, ompl_prmstar, "
+                                                  "ompl_kpiece1, ompl_fmt (the ompl extra) or a plug-in name "
+                                                  "(twb planners).")] = "fmm",
+    seed: Annotated[int, typer.Option(help="Seed for randomised planners (PRM, OMPL's).", min=0)] = 0,
     robot_radius: RobotRadiusOpt = None,
     planning_margin: PlanningMarginOpt = None,
     resolution: Annotated[float, typer.Option(help="Grid resolution in metres per cell.")] = 0.01,
@@ -126,5 +129,7 @@ def planners() -> None:
     """List the planners that --planner accepts (built-ins and installed plug-ins)."""
     from planners import available_planners
 
-    for name, desc in available_planners().items():
-        typer.echo(f"{name:10s} {desc}")
+    listed = available_planners()
+    width = max(map(len, listed), default=10)
+    for name, desc in listed.items():
+        typer.echo(f"{name:{width}s} {desc}")

@@ -31,7 +31,7 @@ def embedded_testbed(data_dir: Path, *, sim_robots: int = 4, timeout: float = 60
 
 
 def study(
-    spec: Annotated[str, typer.Argument(help="'paper' (the paper's 48 runs), 'noise' (sensor noise and control inaccuracies, 80 field runs), 'controllers' (every built-in controller, 64 runs), 'fleet' (LaCAM vs prioritized vs uncoordinated FMM on 4 to 64 robots on the whole field, 60 runs), 'fleet-discs' (prioritized vs FMM on 2, 4, 8 robots among moving discs, 72 runs) or a study file (JSON; see docs/study.md).")],
+    spec: Annotated[str, typer.Argument(help="'paper' (the paper's 48 runs), 'noise' (sensor noise and control inaccuracies, 80 field runs), 'controllers' (every built-in controller, 64 runs), 'fleet' (LaCAM vs prioritized vs uncoordinated FMM on 4 to 64 robots on the whole field, 60 runs), 'fleet-discs' (prioritized vs FMM on 2, 4, 8 robots among moving discs, 72 runs), 'planners' (every built-in planner, OMPL's when installed, on the paper's and three hard problems, 3 repetitions, simulation) or a study file (JSON; see docs/study.md).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory (created).")] = Path("study"),
     embedded: Annotated[bool, typer.Option("--embedded", help="Start a testbed of our own (twb up --time-scale max) in OUT/testbed and stop it after.")] = False,
     ompl: Annotated[Optional[Path], typer.Option("--ompl", help="Also write an OMPL benchmark database (Planner Arena) here; an existing one only with --ompl-append or --ompl-replace.")] = None,

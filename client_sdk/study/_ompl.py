@@ -16,7 +16,8 @@ appended to one OMPL's tools wrote, and Planner Arena plots twb's planners next 
   ended (``twb_outcome``, an enum of its own) and every metric of ``runs.csv`` (``twb_length_m`` is the
   driven path's length, ``twb_smoothness_rad`` twb's κ′, ...);
 - no *progress* rows: OMPL's progress properties are an anytime planner's (its best cost over its
-  planning time); twb's planners are not anytime and report none.
+  planning time); twb's own planners are not anytime and report none, and the testbed does not keep the
+  progress its built-in OMPL planners report (``plan_path``'s ``info["progress"]``) with their runs yet.
 """
 
 from __future__ import annotations

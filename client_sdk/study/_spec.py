@@ -583,14 +583,41 @@ def fleet_discs_spec() -> StudySpec:
     return StudySpec.from_json(FLEET_DISCS, "fleet-discs")
 
 
+#: our built-in single-robot planners in the planner study (``twb study planners``); OMPL's join them when the
+#: ``ompl`` package is installed
+OUR_PLANNERS = ("fmm", "fm2", "prm", "astar", "theta_star")
+
+
+def planners_spec() -> StudySpec:
+    """The ready planner study (docs/planners.md, "The planner study"): every built-in planner (OMPL's when the
+    ``ompl`` package is installed) on the paper's environments and the three hard ones of
+    :mod:`planners.problems` (narrow passage, clutter, zigzag), plans A and B, 3 repetitions (each with its own
+    planner seed), simulation."""
+    import importlib.util
+
+    from planners.ompl_planners import OMPL_PLANNERS
+    from planners.problems import HARD, _load
+
+    planners = list(OUR_PLANNERS)
+    if importlib.util.find_spec("ompl") is not None:
+        planners += list(OMPL_PLANNERS)
+    data = {"name": "planners",
+            "description": "Every built-in planner (ours; OMPL's when installed) on room, blocks and the hard "
+                           "problems narrow (a 0.15 m gap), clutter (30 random blocks) and zigzag (a serpentine), "
+                           "plans A and B, 3 repetitions with their own planner seeds, simulation",
+            "environments": ["room", "blocks", *(_load(name) for name in HARD)],
+            "plans": ["A", "B"], "planners": planners, "repetitions": 3, "modes": ["sim"], "seed": 0}
+    return StudySpec.from_json(data, "planners")
+
+
 #: the ready studies by name (``twb study NAME``)
 READY = {"paper": paper_spec, "noise": noise_spec, "controllers": controllers_spec, "fleet": fleet_spec,
-         "fleet-discs": fleet_discs_spec}
+         "fleet-discs": fleet_discs_spec, "planners": planners_spec}
 
 
 def load_spec(source: str | Path) -> StudySpec:
     """A ready study by name (:data:`READY`: ``"paper"``, ``"noise"``, ``"controllers"``, ``"fleet"``,
-    ``"fleet-discs"``) or a study
+    ``"fleet-discs"``, ``"planners"``) or a study
     file (``.json``; ``.yaml``/``.yml`` if PyYAML is installed)."""
     if str(source) in READY:
         return READY[str(source)]()
