@@ -21,7 +21,7 @@ async def drive_to_goal(c: LineClient, goal: tuple[float, float]) -> tuple[list[
     seen: list[str] = []
     x = y = math.nan
     while True:
-        line = await c.recv(timeout=30)
+        line = c.stash.pop(0) if c.stash else await c.recv(timeout=30)
         seen.append(line)
         if line.startswith("EV,FAIL") or line.startswith("ERR"):
             raise AssertionError(f"the robot ended the drive: {line}")
@@ -89,7 +89,8 @@ async def test_the_gripper_refuses_a_robot_in_velocity_mode_saying_so():
         assert (await c.ask("T,T,B,900,900,100,100,0")) == "ERR,STATE,the robot is following a path (send T,T,S first)"
         await c.close()
     assert parse_command("T,T,V,100,90") == VelocityCommand(0.1, math.pi / 2)
-    for bad in ("T,T,V", "T,T,V,1", "T,T,V,1,2,3", "T,T,V,1,x"):
+    assert parse_command("T,T,V,100,90,2.5") == VelocityCommand(0.1, math.pi / 2, 0.0025)  # compute time, ms
+    for bad in ("T,T,V", "T,T,V,1", "T,T,V,1,2,-3", "T,T,V,1,2,3,4", "T,T,V,1,x", "T,T,V,1,2,x"):
         with pytest.raises(ProtocolError):
             parse_command(bad)
 

@@ -35,6 +35,7 @@ gripper) by raising ``NotImplementedError``.  No such driver ships.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -43,6 +44,7 @@ from contract.params import RobotParams
 
 from .compiled import kernel
 from .physics import (
+    _SENSE_CHANNELS,
     BIAS_FEATURES,
     FIELD,
     IDEAL,
@@ -51,7 +53,9 @@ from .physics import (
     field_begin,
     field_gains,
     field_sense,
+    _six_normals,
     ideal_actuate,
+    tracker_bias,
 )
 
 __all__ = ["BACKENDS", "Backend", "Emulated", "FieldBackend", "IdealBackend", "make_backend"]
@@ -104,6 +108,20 @@ class Backend(ABC):
     def busy(self) -> bool:
         """True while some robot still moves although commanded to stand still."""
         return bool(self.in_motion().any())
+
+    #: tracker latency in control steps (a measurement taken at step s arrives at step s + latency_steps)
+    latency_steps: int = 0
+
+    def frame(self, step: int) -> bool:
+        """Whether the tracker takes a frame at global control step ``step`` (every step unless a backend
+        has a slower camera)."""
+        return True
+
+    def measure(self, i: int, step: int, key: int) -> tuple[bool, np.ndarray]:
+        """The tracker's measurement of robot ``i`` outside a path (standing, or coasting after one) at
+        global control step ``step``: (whether it saw the robot, the pose ``(3,)`` m/rad); ``key`` the
+        robot's noise key for such frames.  The backend's exact pose unless a backend measures with noise."""
+        return True, self.pose[i].copy()
 
 
 class Emulated(Backend):
@@ -251,6 +269,26 @@ class FieldBackend(Emulated):
 
     def busy(self) -> bool:
         return bool(self.tracks.any())
+
+    @property
+    def latency_steps(self) -> int:  # type: ignore[override]
+        return int(self.fg.delay)
+
+    def frame(self, step: int) -> bool:
+        fg = self.fg
+        return (step * fg.camera_rate) // fg.control_rate != ((step - 1) * fg.camera_rate) // fg.control_rate
+
+    def measure(self, i: int, step: int, key: int) -> tuple[bool, np.ndarray]:
+        """As the tracker measures a robot during a path (:func:`~.physics.field_sense`): the pose plus the
+        bias field of the robot's last run and per-frame jitter, on the camera's frames, with dropouts;
+        the noise is drawn from ``key`` and the global step (a stream of its own, apart from the paths')."""
+        fg = self.fg
+        u = np.empty(_SENSE_CHANNELS)
+        z0, z1, z2, _, _, _ = _six_normals(np.uint64(key), int(step), u)
+        bx, by = tracker_bias(i, float(self.pose[i, 0]), float(self.pose[i, 1]), self.bias, fg)
+        meas = np.array([self.pose[i, 0] + bx + z0 * fg.sigma_xy, self.pose[i, 1] + by + z1 * fg.sigma_xy,
+                         math.remainder(self.pose[i, 2] + z2 * fg.sigma_theta, math.tau)])
+        return self.frame(step) and bool(u[6] >= fg.dropout), meas
 
 
 BACKENDS: dict[str, type[Backend]] = {"ideal": IdealBackend, "field": FieldBackend}
