@@ -650,7 +650,7 @@ class AgentHost:
                     if ls.busy(i, step):
                         ls.withheld[i] = (due, line)
                         continue
-                    ls.deliver(i, due, time.monotonic())
+                    ls.deliver(i, max(due, self.core.t), time.monotonic())  # sent now (due may lie in this step)
                 conn.send(line)
         if self.sink is None and self.core.poses.count:
             self.core.poses.clear()  # nobody else wants them
