@@ -574,6 +574,22 @@ def _result_rows(m: Any, metrics: tuple[tuple[str, str], ...] = RESULT_COLUMNS) 
     return rows
 
 
+def clock_line(runs: Any) -> str:
+    """How the runs' clocks ran: ``clock: lockstep at time scale 5x`` (per run when they differ); '' when none
+    recorded it."""
+    seen: dict[str, list[int]] = {}
+    for r in runs:
+        if r.clock is None:
+            continue
+        scale = "max" if r.time_scale is None else f"{r.time_scale:g}x"
+        seen.setdefault(f"{r.clock} at time scale {scale}", []).append(r.id)
+    if not seen:
+        return ""
+    if len(seen) == 1:
+        return f"clock: {next(iter(seen))}"
+    return "clock: " + "; ".join(f"{k} (runs {', '.join(map(str, ids))})" for k, ids in seen.items())
+
+
 def _print_plans(con: Any, exp: Any) -> None:
     """A randomised planner's plans, one per repetition (both modes drove it): planner seed, planned length,
     planning wall and CPU time (the median of k calls) and the machine's load then."""
@@ -618,6 +634,8 @@ def _print_results(m: Any, exp: Any, wide: bool) -> None:
     optional = [headers[k] for k in reversed(priority)]
     print_fitted(con, build, columns, optional, wide)
     stochastic = exp is not None and exp.planner_stochastic
+    if exp is not None and (clocks := clock_line(exp.runs)):
+        con.print(clocks, highlight=False)
     if m.planned:
         con.print(("planned path (repetition 1): " if stochastic else "planned path: ")
                   + "  ".join(f"{h} {_num(m.planned.get(k))}" for k, h in RESULT_COLUMNS[:3]), highlight=False)

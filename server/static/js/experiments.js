@@ -151,6 +151,20 @@ function planningTitle(r) {
   return `Planning of its repetition: ${parts.join(", ")}`;
 }
 
+/** How its runs' clocks ran: "lockstep at time scale 5x" (per run when they differ), or "not recorded". */
+function clockText(d) {
+  const seen = new Map();
+  for (const r of d.runs) {
+    if (r.clock == null) continue;
+    const k = `${r.clock} at time scale ${r.time_scale == null ? "max" : `${r.time_scale}x`}`;
+    if (!seen.has(k)) seen.set(k, []);
+    seen.get(k).push(r.id);
+  }
+  if (!seen.size) return "not recorded";
+  if (seen.size === 1) return [...seen.keys()][0];
+  return [...seen].map(([k, ids]) => `${k} (runs ${ids.join(", ")})`).join("; ");
+}
+
 /** The experiment's planning time: its runs' range (each repetition is timed), else repetition 1's. */
 function planningRange(d) {
   const ts = d.runs.map((r) => r.planning_time_s).filter((t) => t != null);
@@ -291,6 +305,7 @@ export class ExperimentPage {
       ["Owner", d.owner],
       ["Submitted", when(d.created_at)], ["Finished", when(d.finished_at)],
       ["Planning time", planningRange(d)],
+      ["Clock", clockText(d)],
       ["Robot radius + margin", `${num(d.robot_radius, 3)} + ${num(d.planning_margin, 3)} m`],
     ];
     if (d.status === "queued") facts.push(["Estimated start", duration(d.estimated_start_s)]);
