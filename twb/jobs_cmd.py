@@ -212,6 +212,16 @@ def status(
     _print_experiment(exp, wide)
 
 
+def clip(text: str, limit: int, wide: bool) -> str:
+    """``text`` for a table cell: whole with ``wide``, else at most ``limit`` characters, cut after a whole word
+    with an ellipsis (never mid-word)."""
+    text = " ".join(text.split())
+    if wide or len(text) <= limit:
+        return text
+    cut = text[:limit].rsplit(" ", 1)[0] if " " in text[:limit] else text[:limit - 1]
+    return cut.rstrip(",;:") + "…"
+
+
 def _print_experiment_list(page: Any, wide: bool) -> None:
     from rich.table import Table
 
@@ -219,7 +229,7 @@ def _print_experiment_list(page: Any, wide: bool) -> None:
 
     rows = [{"id": str(e.id), "status": e.status, "environment": e.environment, "planner": job_label(e),
              "modes": ",".join(e.modes), "reps": str(e.repetitions),
-             "created": e.created_at.strftime("%Y-%m-%d %H:%M:%S") if e.created_at else "", "error": e.error[:60]}
+             "created": e.created_at.strftime("%Y-%m-%d %H:%M:%S") if e.created_at else "", "error": clip(e.error, 60, wide)}
             for e in page.data]
 
     def build(cols: list[str]) -> Table:
@@ -276,7 +286,7 @@ def _print_experiment(exp: Any, wide: bool) -> None:
         m = r.metrics
         rows.append(dict(zip(names, (
             str(r.id), r.mode, str(r.repetition), r.status, r.robot_id or "", _num(r.subfield),
-            *(_num(m.get(k), digits) for k, digits in numbers), r.error[:50]))))
+            *(_num(m.get(k), digits) for k, digits in numbers), clip(r.error, 50, wide)))))
 
     def build(cols: list[str]) -> Table:
         table = Table(*cols)
