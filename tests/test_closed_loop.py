@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from itertools import pairwise
 
 import pytest
 from agent_support import OK_I, LineClient, running_agents
@@ -174,9 +175,9 @@ async def test_a_stated_compute_time_delays_the_answer_by_whole_control_periods(
         slow = await lockstep_drive(c, (0.7, 0.3), compute_ms=40.0)
         await c.close()
     dt = 1.0 / agents.params.controller.control_rate_hz
-    gaps = {round(float(b.split(",")[4]) - float(a.split(",")[4]), 3) for a, b in zip(slow, slow[1:])}
+    gaps = {round(float(b.split(",")[4]) - float(a.split(",")[4]), 3) for a, b in pairwise(slow)}
     assert gaps == {round(2 * dt, 3)}
-    assert {round(float(b.split(",")[4]) - float(a.split(",")[4]), 3) for a, b in zip(fast, fast[1:])} \
+    assert {round(float(b.split(",")[4]) - float(a.split(",")[4]), 3) for a, b in pairwise(fast)} \
         == {round(dt, 3)}
 
 
@@ -211,6 +212,6 @@ async def test_a_standing_robot_sends_poses_at_the_trackers_rate(backend):
     latency = field.tracker_latency_s if backend == "field" else 0.0
     t = [float(p.split(",")[4]) for p in poses]
     assert t[0] >= t_sub - latency - period - 1e-6  # the newest frame that had arrived when it subscribed
-    gaps = [b - a for a, b in zip(t, t[1:])]
+    gaps = [b - a for a, b in pairwise(t)]
     assert min(gaps) > 0.5 * period and sorted(gaps)[len(gaps) // 2] == pytest.approx(period, abs=0.021)
     assert all(abs(float(p.split(",")[1]) - 100.0) < 5 and abs(float(p.split(",")[2]) - 100.0) < 5 for p in poses)

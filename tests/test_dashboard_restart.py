@@ -7,9 +7,14 @@ from __future__ import annotations
 import re
 
 import pytest
-
 from servers import Process, wait_for
-from test_dashboard import CHROMIUM, CHROMIUM_ARGS, REQUIRE_BROWSER, _missing_browser, login
+from test_dashboard import (
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    REQUIRE_BROWSER,
+    _missing_browser,
+    login,
+)
 
 JOB = {"environment": "crossing", "plan": None, "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708],
        "planner": "fmm", "modes": ["twb"], "repetitions": 1, "seed": 3}
@@ -31,7 +36,7 @@ def test_after_a_restart_the_field_view_shows_the_robots_at_their_start_up_poses
             done = wait_for(c, c.post("/api/v1/experiments", json=job).json()["id"], timeout=240)
             assert done["status"] == "completed", done
             robot = done["runs"][0]["robot_id"]
-            moved = [r for r in c.get("/api/v1/robots").json()["data"] if r["robot_id"] == robot][0]["last_pose"]
+            moved = next(r for r in c.get("/api/v1/robots").json()["data"] if r["robot_id"] == robot)["last_pose"]
             assert moved is not None and moved[1] % 1.8 > 1.0  # it ended far from its start-up corner
     finally:
         assert first.stop() == 0, first.output()

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from servers import serve, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -27,7 +26,7 @@ LIMITS = {"TWB_SANDBOX_WALL_S": "120", "TWB_SANDBOX_CPU_S": "30", "TWB_SANDBOX_N
 def drive(tmp_path: Path, scale: str) -> tuple[dict, dict[str, np.ndarray]]:
     """One testbed at ``scale``: the job's experiment and each mode's poses, times from the run's first pose."""
     gen = serve(["up", "--time-scale", scale, "--sim-robots", "1", "--enable-uploads"], tmp_path / scale,
-                env=LIMITS)
+                env=LIMITS, timeout=240)
     testbed = next(gen)
     try:
         with testbed.client() as c:

@@ -11,8 +11,8 @@ Create Date: 2026-11-27 20:00:00
 from __future__ import annotations
 
 import sqlalchemy as sa
-from alembic import op
 
+from alembic import op
 
 revision = '0015'
 down_revision = '0014'

@@ -49,11 +49,11 @@ from .physics import (
     FIELD,
     IDEAL,
     FieldGains,
+    _six_normals,
     field_actuate,
     field_begin,
     field_gains,
     field_sense,
-    _six_normals,
     ideal_actuate,
     tracker_bias,
 )
