@@ -44,21 +44,31 @@ from contract.params import RobotParams
 
 from .compiled import kernel
 from .physics import (
-    _SENSE_CHANNELS,
     BIAS_FEATURES,
     FIELD,
     IDEAL,
     FieldGains,
-    _six_normals,
     field_actuate,
     field_begin,
     field_gains,
     field_sense,
     ideal_actuate,
-    tracker_bias,
 )
 
 __all__ = ["BACKENDS", "Backend", "Emulated", "FieldBackend", "IdealBackend", "make_backend"]
+
+_U64 = (1 << 64) - 1
+
+
+def _bias_at(features: np.ndarray, x: float, y: float, bias_xy: float) -> tuple[float, float]:
+    """:func:`~.physics.tracker_bias` in numpy (m at ``(x, y)`` m; ``features`` one robot's ``(2F, 3)``): the
+    same smooth field, without compiling a kernel for a call from Python."""
+    if bias_xy == 0.0:
+        return 0.0, 0.0
+    f = features.shape[0] // 2
+    c = np.cos(features[:, 0] * x + features[:, 1] * y + features[:, 2])
+    scale = bias_xy * math.sqrt(2.0 / f)
+    return scale * float(c[:f].sum()), scale * float(c[f:].sum())
 
 
 class Backend(ABC):
@@ -281,14 +291,16 @@ class FieldBackend(Emulated):
     def measure(self, i: int, step: int, key: int) -> tuple[bool, np.ndarray]:
         """As the tracker measures a robot during a path (:func:`~.physics.field_sense`): the pose plus the
         bias field of the robot's last run and per-frame jitter, on the camera's frames, with dropouts;
-        the noise is drawn from ``key`` and the global step (a stream of its own, apart from the paths')."""
+        the noise is drawn from ``key`` and the global step (a Philox stream of its own, apart from the paths';
+        plain numpy, so that no kernel is compiled for a call from Python)."""
         fg = self.fg
-        u = np.empty(_SENSE_CHANNELS)
-        z0, z1, z2, _, _, _ = _six_normals(np.uint64(key), int(step), u)
-        bx, by = tracker_bias(i, float(self.pose[i, 0]), float(self.pose[i, 1]), self.bias, fg)
+        rng = np.random.Generator(np.random.Philox(key=np.array([key & _U64, step & _U64], dtype=np.uint64)))
+        z0, z1, z2 = rng.standard_normal(3)
+        seen = rng.random() >= fg.dropout
+        bx, by = _bias_at(self.bias[i], float(self.pose[i, 0]), float(self.pose[i, 1]), fg.bias_xy)
         meas = np.array([self.pose[i, 0] + bx + z0 * fg.sigma_xy, self.pose[i, 1] + by + z1 * fg.sigma_xy,
                          math.remainder(self.pose[i, 2] + z2 * fg.sigma_theta, math.tau)])
-        return self.frame(step) and bool(u[6] >= fg.dropout), meas
+        return self.frame(step) and bool(seen), meas
 
 
 BACKENDS: dict[str, type[Backend]] = {"ideal": IdealBackend, "field": FieldBackend}

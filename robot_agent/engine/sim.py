@@ -500,5 +500,4 @@ def warm_up() -> None:
             core.set_path(i, np.array([[0.3, 0.3, 0.0], [0.5, 0.3, 0.0]]), i + 1)
         core.step()
         core.advance(5)
-        core.backend.measure(0, 1, 1)  # the tracker's frames of a standing robot (kernels called from Python)
     _warm = True
