@@ -14,7 +14,7 @@ the newest one kept for it until it subscribes — so a run is the same at every
 time scale.  The run ends when:
 
 - the program stops the robot (``T,T,S``, or ``T,T,V,0,0`` within the goal
-  tolerance: the server stops it) — ``completed`` within the goal tolerance,
+  tolerance: the server sends ``T,T,S`` instead, answered ``OK,V``) — ``completed`` within the goal tolerance,
   else ``failed`` (program);
 - the program exits, crashes or hits a sandbox limit — the robot is stopped;
   ``completed`` only after a clean exit with the robot within the tolerance
@@ -146,11 +146,12 @@ class ControllerRelay:
             if self._unanswered is not None:
                 self.responses_s.append(time.perf_counter() - self._unanswered)
                 self._unanswered = None
-        reply = await self.link.forward(line, self.ctx.wall(0))
-        if line.startswith("T,T,V") and reply.startswith("OK") and self._zero(line) \
-                and self.distance_m() <= self.tolerance_m:
-            await self.link.forward("T,T,S", self.ctx.wall(0))  # arrived and told to stand: the run is over
-        return reply
+        if line.startswith("T,T,V") and self.armed and self._zero(line) and self.distance_m() <= self.tolerance_m:
+            # arrived and told to stand: the run is over; the stop goes instead of the T,T,V, as the answer to the
+            # pose, so that a lockstep robot stops in the same control step at every time scale
+            reply = await self.link.forward("T,T,S", self.ctx.wall(0))
+            return "OK,V" if reply.startswith("OK") else reply
+        return await self.link.forward(line, self.ctx.wall(0))
 
     @staticmethod
     def _zero(line: str) -> bool:
