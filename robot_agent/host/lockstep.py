@@ -5,16 +5,18 @@ with the ``lockstep`` clock (``T,T,O,1,lockstep``, or ``T,T,O,1`` on a host whos
 lockstep) is that robot's *lockstep controller*.  The model (docs/protocol.md, "Lockstep"), after
 CARLA's synchronous mode, where the simulator advances only when its client has acted on a frame:
 
-- **One pose at a time.**  A ``PO`` line delivered at experiment time ``d`` (the tracker's
-  measurement time plus its latency) is *awaited*: the host's clock does not run the control step
-  ``floor(d / dt) + 1`` (the first one that starts after ``d``) until the controller's answer, its
-  next ``T,T,V``, has come.  Poses that become due while the controller computes are not sent to it;
+- **One pose at a time.**  A ``PO`` line sent at experiment time ``d`` (when it is sent: the
+  tracker's measurement time plus its latency, or the end of the control step that logged it) is
+  *awaited*: the host's clock does not run the control step ``ceil(d / dt)`` (the one that starts at
+  ``d``, or the first after it) until the controller's answer, its next ``T,T,V`` (or a ``T,T,S``), has
+  come: every line of the controller then acts in the same control step, whenever it arrives.  Poses that become due while the controller computes are not sent to it;
   it gets the newest when it is free again, as a subscriber with a queue of one (ROS's
   ``queue_size=1``).  Other connections subscribed to the robot get every line, as before.
 - **Compute time is latency.**  The answer states the controller's compute time ``c`` (``T,T,V,v,w,c``,
   ms; 0 when not stated).  It is ready at ``d + c`` (``d``: the pose's delivery, or when the controller
   became free if that was later) and applies from the first control step that starts at or after
-  then — at least the step after ``d``: a compute time rounded up to control periods.  Until then
+  then: a compute time rounded up to control periods (none stated: the step that starts at ``d``,
+  one control period after the pose was measured in simulation).  Until then
   the robot drives on with the previous command, and the controller is busy (no new pose).
 - **A controller that does not answer** within ``wait_s`` wall seconds is *lapsed*: the clock runs
   on without it (its watchdog then stops the robot after 0.5 s of experiment time, as a real robot's
@@ -79,7 +81,7 @@ class Lockstep:
 
     def deliver(self, i: int, t: float, wall: float) -> None:
         """A pose was sent to robot ``i``'s controller at experiment time ``t``: its answer is awaited."""
-        self.hold[i] = math.floor(t / self.dt + _EPS) + 1
+        self.hold[i] = math.ceil(t / self.dt - _EPS)
         self.delivered[i], self.sent[i] = t, wall
 
     def answer(self, i: int, compute_s: float) -> int:
