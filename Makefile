@@ -17,8 +17,9 @@ $(STAMP): pyproject.toml
 	fi
 	@touch $(STAMP)
 
+# make run ARGS="--port 8101 --time-scale 5": any `twb up` options
 run: $(STAMP)
-	$(VENV)/bin/twb up
+	$(VENV)/bin/twb up $(ARGS)
 
 # Two workers (CI has two cores); --dist loadfile keeps a test file on one worker, so a module's
 # testbed fixture starts once.  One file alone: $(PY) -m pytest tests/test_x.py

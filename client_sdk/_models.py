@@ -194,6 +194,10 @@ class Run(_FromJson):
     #: the seed of the run's noise, dropouts and start jitter (its own per mode)
     seed: int = 0
     attempt: int = 1
+    #: how its robot's clock treated a closed-loop controller: ``lockstep`` or ``free`` (None: not recorded)
+    clock: Optional[str] = None
+    #: experiment seconds per wall second it ran at (None: as fast as possible, or not recorded)
+    time_scale: Optional[float] = None
     subfield: Optional[int] = None
     robot_id: Optional[str] = None
     t_start: Optional[float] = None

@@ -27,6 +27,8 @@ from typing import Iterable, Sequence
 import numpy as np
 
 __all__ = [
+    "CLOCKS",
+    "MAX_COMPUTE_MS",
     "MAX_BLOCKS",
     "MAX_LINE_BYTES",
     "MAX_NUMBER_CHARS",
@@ -78,6 +80,10 @@ MAX_POINTS = 10_000
 MAX_BLOCKS = 1000
 MAX_NUMBER_CHARS = 32  # a number's characters, surrounding spaces not counted
 MIN_SECRET_CHARS, MAX_SECRET_CHARS = 16, 128
+#: how a robot's clock treats a closed-loop connection (``T,T,O,1,<clock>``): wait for its answer to every
+#: ``PO`` line, or run on (docs/protocol.md, "Closed-loop programs")
+CLOCKS = ("lockstep", "free")
+MAX_COMPUTE_MS = 60_000.0  #: the largest compute time a ``T,T,V`` may state (ms)
 MAX_MOVING = 16  #: moving obstacles of one robot (the tracker's robot budget; planners.moving)
 MAX_TRACK_POINTS = 1000  #: waypoints of one moving obstacle
 MAX_NAME_CHARS = 64  #: a controller's or parameter's name in ``T,T,C``
@@ -202,17 +208,25 @@ class ControllerCommand:
 
 @dataclass(frozen=True)
 class LocalisationCommand:
-    """``T,T,O,1`` / ``T,T,O,0``: send (or stop sending) this connection ``PO`` localisation lines."""
+    """``T,T,O,1[,<clock>]`` / ``T,T,O,0``: send (or stop sending) this connection ``PO`` localisation lines.
+
+    ``clock`` (:data:`CLOCKS`) is how the robot's clock treats this connection while it drives the robot in
+    velocity mode: ``lockstep`` waits for its answer (a ``T,T,V``) to every ``PO`` line, ``free`` runs on;
+    None: the robot's default (docs/protocol.md)."""
 
     on: bool
+    clock: str | None = None
 
 
 @dataclass(frozen=True)
 class VelocityCommand:
-    """``T,T,V,<v>,<w>``: drive with body velocities ``v`` (m/s) and ``w`` (rad/s) until the next one."""
+    """``T,T,V,<v>,<w>[,<c>]``: drive with body velocities ``v`` (m/s) and ``w`` (rad/s) until the next one;
+    ``compute_s`` (the optional ``c``, ms on the wire): the controller's compute time for this answer, which
+    a robot in lockstep applies as latency (docs/protocol.md); None: not stated."""
 
     v: float
     w: float
+    compute_s: float | None = None
 
 
 Command = (PathCommand | StopCommand | QueryCommand | PlaceCommand | BuildCommand | AuthCommand | LeaseCommand
@@ -546,15 +560,24 @@ def parse_arguments(verb: str, rest: str | None, *, field_size: tuple[float, flo
     if verb == "C":
         return _controller(rest)
     if verb == "O":
-        flag = "" if rest is None else rest.strip()
-        if flag not in ("0", "1"):
-            raise ProtocolError(ErrorCode.SYNTAX, "T,T,O takes 1 (send PO lines) or 0 (stop)")
-        return LocalisationCommand(flag == "1")
+        flag, _, clock = ("" if rest is None else rest).partition(",")
+        flag, clock = flag.strip(), clock.strip() if _ else None
+        if flag not in ("0", "1") or (clock is not None and (flag == "0" or clock not in CLOCKS)):
+            raise ProtocolError(ErrorCode.SYNTAX, "T,T,O takes 1 (send PO lines), optionally with the clock "
+                                                  "(T,T,O,1,lockstep or T,T,O,1,free), or 0 (stop)")
+        return LocalisationCommand(flag == "1", clock)
     if verb == "V":
-        if rest is None or ";" in rest:
-            raise ProtocolError(ErrorCode.SYNTAX, "T,T,V takes v,w (mm/s, deg/s)")
-        v, w = _parse_tuples(rest, 2, "velocity", 1)[0]
-        return VelocityCommand(float(v) / 1000.0, math.radians(float(w)))
+        if rest is None or ";" in rest or rest.count(",") not in (1, 2):
+            raise ProtocolError(ErrorCode.SYNTAX, "T,T,V takes v,w (mm/s, deg/s), optionally with the compute "
+                                                  "time c (ms): v,w,c")
+        row = _parse_tuples(rest, rest.count(",") + 1, "velocity", 1)[0]
+        compute = None
+        if len(row) == 3:
+            if not 0.0 <= row[2] <= MAX_COMPUTE_MS:
+                raise ProtocolError(ErrorCode.RANGE, f"compute time must be 0 to {MAX_COMPUTE_MS:g} ms, "
+                                                     f"got {row[2]:g}")
+            compute = float(row[2]) / 1000.0
+        return VelocityCommand(float(row[0]) / 1000.0, math.radians(float(row[1])), compute)
     if verb == "A":
         return AuthCommand(_secret(rest, "A"))
     if verb == "L":

@@ -59,10 +59,12 @@ class _RouterSink:
 
 
 class EmbeddedField:
-    """Four field robots and ``sim_robots`` simulated ones at ``time_scale``, seeded with ``seed``."""
+    """Four field robots and ``sim_robots`` simulated ones at ``time_scale``, seeded with ``seed``; ``clock``
+    their closed-loop clock (``lockstep`` or ``free``, :mod:`robot_agent.host.lockstep`)."""
 
-    def __init__(self, *, sim_robots: int = 4, seed: int = 0, time_scale: float = 1.0) -> None:
-        self.sim_robots, self.seed, self.time_scale = sim_robots, seed, time_scale
+    def __init__(self, *, sim_robots: int = 4, seed: int = 0, time_scale: float = 1.0,
+                 clock: str = "lockstep") -> None:
+        self.sim_robots, self.seed, self.time_scale, self.clock = sim_robots, seed, time_scale, clock
         self._hosts: list["AgentHost"] = []
         self._host_of: dict[str, "AgentHost"] = {}
 
@@ -83,7 +85,7 @@ class EmbeddedField:
         sink = _RouterSink(router)
         # their ports listen on 127.0.0.1 like any agent's: only the testbed (which knows the key) drives them
         key = secrets.token_hex(32)
-        common = {"time_scale": self.time_scale, "seed": self.seed, "tracker_sink": sink,
+        common = {"time_scale": self.time_scale, "clock": self.clock, "seed": self.seed, "tracker_sink": sink,
                   "advertise_host": "127.0.0.1", "control_key": key}
         self._hosts = [
             AgentHost(robots=4, backend="field", world="shared", robot_ids=[f"field-{k}" for k in range(1, 5)],

@@ -460,6 +460,13 @@ class RunPublic(FromRow):
     planning_load: Optional[float] = Field(default=None, description=(
         "The machine's 1-minute load average per CPU when the planning was timed."))
     attempt: int
+    clock: Optional[str] = Field(default=None, description=(
+        "How its robot's clock treated a closed-loop controller: `lockstep` (the clock waited for the controller's "
+        "answer to every pose: the result does not depend on the time scale) or `free` (it ran on at the time "
+        "scale); null: not recorded (runs before the testbed stored it)."))
+    time_scale: Optional[float] = Field(default=None, description=(
+        "Experiment seconds per wall second the run ran at; null: as fast as possible (`max`), or not recorded "
+        "(then `clock` is null too)."))
     subfield: Optional[int]
     robot_id: Optional[str]
     t_start: Optional[float]

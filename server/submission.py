@@ -56,10 +56,10 @@ def submit(session: Session, *, user: Principal, body: ExperimentCreate, setting
     if body.program is not None:
         stochastic = _check_program(session, user, body.program, settings)
     if body.controller_program is not None:
-        if math.isinf(settings.time_scale):
-            raise Invalid("controller_program: a controller program closes the loop against the robot's 0.5 s "
-                          "watchdog, which needs a finite time scale; this testbed runs as fast as possible "
-                          "(start it with --time-scale 1, or up to about 5)")
+        if math.isinf(settings.time_scale) and settings.clock == "free":
+            raise Invalid("controller_program: with the free-running clock a controller program closes the loop "
+                          "against the robot's 0.5 s watchdog in wall time, which needs a finite time scale; this "
+                          "testbed runs as fast as possible (start it with --clock lockstep, or --time-scale 1)")
         _check_program(session, user, body.controller_program, settings, field="controller_program")
     env_row = environment_named(session, user, body.environment)
     if env_row is None:

@@ -42,7 +42,7 @@ class LineClient:
 
     def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         self.reader, self.writer = reader, writer
-        self.stash: list[str] = []  # EV lines that arrived while waiting for a reply
+        self.stash: list[str] = []  # EV and PO lines that arrived while waiting for a reply
 
     @classmethod
     async def connect(cls, port: int, *, hello: str | None = None) -> "LineClient":
@@ -66,11 +66,11 @@ class LineClient:
         return line.decode("ascii").rstrip("\r\n")
 
     async def ask(self, line: str | bytes) -> str:
-        """Send a line and return the reply; events arriving meanwhile go to :attr:`stash`."""
+        """Send a line and return the reply; events and localisation lines arriving meanwhile go to :attr:`stash`."""
         await self.send(line)
         while True:
             reply = await self.recv()
-            if not reply.startswith("EV,"):
+            if not reply.startswith(("EV,", "PO,")):
                 return reply
             self.stash.append(reply)
 

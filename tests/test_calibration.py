@@ -101,11 +101,17 @@ def test_twb_calibrate_asks_for_a_variant(capsys, monkeypatch, tmp_path):
     spec = StudySpec.from_json({"name": "two", "environments": ["room"], "plans": ["A", "B"], "planners": ["fmm"],
                                 "repetitions": 1, "modes": ["twb"], "seed": 1}, "two")
     data = _bench().study_data(spec)
-    for row, label in zip(data.rows, ("noiseless", "tracker 3 mm")):
+    for row, label in zip(data.rows, ("noiseless", "wheel slip x4")):
         row["profile"] = label
     data.save(tmp_path)
     r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path)
     assert r.returncode == 2
-    assert "2 robot variants (noiseless, tracker 3 mm): choose one with --variant" in r.stderr
+    assert "2 robot variants (noiseless, wheel slip x4): choose one with --variant" in r.stderr
     r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path, "--variant", "noiseless")
     assert r.returncode == 2 and "1 completed field run(s) of variant 'noiseless'; calibration needs at least 2" in r.stderr
+    # the docs' spelling (docs/fidelity.md: "wheel slip ×4") names the study's "wheel slip x4"
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path, "--variant", "Wheel slip ×4")
+    assert r.returncode == 2 and "1 completed field run(s) of variant 'Wheel slip ×4'" in r.stderr  # found: 1 run
+    r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path, "--variant", "x4")
+    assert r.returncode == 2
+    assert "no field runs of variant 'x4'; the study's variants: 'noiseless', 'wheel slip x4'" in r.stderr

@@ -67,6 +67,8 @@ def test_status_results_and_wait(run, finished):
     assert doc["status"] == "completed" and len(doc["runs"]) == 2
     r = run("results", str(finished))
     assert r.returncode == 0 and "mean" in r.stdout and "direct comparison ST" in r.stdout
+    assert "clock: lockstep at time scale max" in r.stdout  # how its runs' clocks ran (stored per run)
+    assert {(x["clock"], x["time_scale"]) for x in doc["runs"]} == {("lockstep", None)}
     m = json.loads(run("results", str(finished), "--json").stdout)
     assert set(m["aggregates"]) == {"sim", "twb"} and m["direct"][0]["deviation_mean_m"] > 0
     rows = list(csv.DictReader(io.StringIO(run("results", str(finished), "--csv").stdout)))
@@ -74,6 +76,22 @@ def test_status_results_and_wait(run, finished):
     assert "planned_length_m" in rows[0]
     r = run("wait", str(finished))
     assert r.returncode == 0 and "completed" in r.stderr
+
+
+def test_table_cells_cut_after_whole_words_and_clock_lines():
+    from types import SimpleNamespace as R
+
+    from twb.jobs_cmd import clip, clock_line
+
+    text = "program stopped the robot 0.412 m from the goal (tolerance 0.05 m)"
+    assert clip(text, 30, wide=False) == "program stopped the robot…"
+    assert clip(text, 30, wide=True) == text and clip("short", 30, wide=False) == "short"
+    assert clip("x" * 40, 10, wide=False) == "x" * 9 + "…"
+    assert clock_line([R(id=1, clock="lockstep", time_scale=5.0), R(id=2, clock="lockstep", time_scale=5.0)]) \
+        == "clock: lockstep at time scale 5x"
+    assert clock_line([R(id=1, clock="lockstep", time_scale=None), R(id=2, clock="free", time_scale=1.0)]) \
+        == "clock: lockstep at time scale max (runs 1); free at time scale 1x (runs 2)"
+    assert clock_line([R(id=1, clock=None, time_scale=None)]) == ""
 
 
 def test_submit_from_a_job_file_and_a_path_file(run, tmp_path):

@@ -420,3 +420,25 @@ def test_the_same_difference_on_every_problem_gets_the_sign_test_not_a_fake_inte
     facts = " ".join(which_is_better(data)[0].facts)
     assert "coordinated reached the goal more often than FMM on every one of the 6 problems, but over so few " \
            "problems that is not significant: +100 percentage points (the same on all 6 problems" in facts
+
+
+def test_fig6_tick_labels_of_four_configurations_do_not_overlap():
+    """Four configurations under a Fig. 6 panel: each tick label within its own slot (issue 32: "T 10/$0")."""
+    from client_sdk.study._figures import figure_metrics
+
+    configs = ("fm2", "fmm", "prm", "astar")
+    rows = [run(c, m, rep, length=1.0 + 0.01 * rep, run_id=1000 * k + 10 * rep + (m == "twb"))
+            for k, c in enumerate(configs) for m in ("sim", "twb") for rep in range(1, 11)]
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = figure_metrics(study(rows, configs=configs, reps=10))
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    for ax in fig.axes:
+        boxes = [t.get_window_extent(renderer) for t in ax.get_xticklabels() if t.get_text()]
+        if not boxes:
+            continue
+        assert len(boxes) == 4
+        assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:])), [(b.x0, b.x1) for b in boxes]
+        assert all("$" not in t.get_text() or "\\$" in t.get_text() for t in ax.get_xticklabels())

@@ -543,7 +543,7 @@ def test_a_crash_is_marked_and_experiments_compare_side_by_side(page, testbed):
     if located:
         expect(page.locator("#runs-table .stopped").first).to_contain_text("✕ stopped at (0.9")
     expect(page.locator(".legend label", has_text="✕ collision")).to_have_count(2)
-    expect(page.locator("#experiment-charts figure").first).to_contain_text("twb: none completed")
+    expect(page.locator("#experiment-charts figure").first).to_contain_text("none completed")  # under "twb"
     page.wait_for_timeout(400)
     for r in located:
         x, y = r["stopped_at"]

@@ -85,7 +85,7 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0014",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0015",)]
 
 
 def _old_run(c, mode: str) -> None:  # type: ignore[no-untyped-def]
@@ -242,6 +242,30 @@ def test_label_and_problem_migration_names_old_experiments(database_url):
     assert not {"label", "problem"} & {c["name"] for c in inspect(engine).get_columns("experiments")}
     with engine.begin() as c:
         assert c.execute(text("select count(*) from experiments")).scalar() == 4
+
+
+def test_run_clock_migration_up_and_down(database_url):
+    """0015 on both databases: old runs record no clock or time scale (NULL); new ones are written and read; the
+    downgrade drops both columns and keeps the runs."""
+    from sqlalchemy import inspect, text
+
+    cfg = config(database_url)
+    command.upgrade(cfg, "0014")
+    engine = make_engine(database_url)
+    with engine.begin() as c:
+        _old_run(c, "sim")
+    command.upgrade(cfg, "0015")
+    with engine.begin() as c:
+        assert c.execute(text("select clock, time_scale from runs where id = 7")).one() == (None, None)
+        c.execute(text("update runs set clock = 'lockstep', time_scale = 5.0 where id = 7"))
+        assert c.execute(text("select clock, time_scale from runs where id = 7")).one() == ("lockstep", 5.0)
+    engine.dispose()
+    command.downgrade(cfg, "0014")
+    engine = make_engine(database_url)
+    assert not {"clock", "time_scale"} & {c["name"] for c in inspect(engine).get_columns("runs")}
+    with engine.begin() as c:
+        assert c.execute(text("select count(*) from runs")).scalar() == 1
+    engine.dispose()
 
 
 def test_per_run_plans_migration_up_and_down(database_url):

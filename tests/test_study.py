@@ -308,6 +308,19 @@ def test_twb_study_controllers_groups_by_controller(testbed, tmp_path):
     assert {"cross_track_error_mean_m", "heading_error_rms_rad", "time_to_goal_s", "jerk_linear_rms_m_s3"} <= comparisons
 
 
+def test_environment_files_are_read_relative_to_the_study_file(tmp_path):
+    (tmp_path / "envs").mkdir()
+    env = {"name": "narrow", "size": [1.8, 1.8], "blocks": []}
+    (tmp_path / "envs" / "narrow.json").write_text(json.dumps(env))
+    f = tmp_path / "s.json"
+    f.write_text(json.dumps({"environments": ["room", "envs/narrow.json"], "planners": ["fmm"]}))
+    assert load_spec(f).environments == ["room", env]
+    f.write_text(json.dumps({"environments": ["missing.json"], "planners": ["fmm"]}))
+    with pytest.raises(StudySpecError, match=r"environments\[0\]: cannot read environment file .*missing.json "
+                                             r"\(paths are relative to the study file\)"):
+        load_spec(f)
+
+
 @pytest.mark.parametrize("content,message", [
     ("{not json", "invalid JSON"),
     ('{"environments": ["room"]}', "`planners` must be a non-empty list"),
@@ -353,10 +366,18 @@ def test_unknown_environment_in_a_study(capsys, monkeypatch, testbed, tmp_path):
 
 
 def test_embedded_study(twb, tmp_path):
-    f = tmp_path / "tiny.json"
-    f.write_text(json.dumps({"name": "tiny", "environments": ["blocks"], "plans": ["A"], "planners": ["fmm"],
-                             "modes": ["sim"], "repetitions": 1}))
-    r = twb("study", str(f), "--embedded", "--out", str(tmp_path / "out"), "--no-progress", timeout=180)
+    """An embedded study whose environment is a file next to the study file (issue 32: "unknown environment
+    'narrow.json'"), run from another directory."""
+    (tmp_path / "studies" / "envs").mkdir(parents=True)
+    (tmp_path / "out-of-the-way").mkdir()
+    (tmp_path / "studies" / "envs" / "narrow.json").write_text(json.dumps(
+        {"name": "narrow", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.06, "h": 0.9}],
+         "plans": [{"name": "A", "start": [0.3, 0.9, 0.0], "goal": [1.5, 0.9, 0.0]}]}))
+    f = tmp_path / "studies" / "tiny.json"
+    f.write_text(json.dumps({"name": "tiny", "environments": ["envs/narrow.json"], "plans": ["A"],
+                             "planners": ["fmm"], "modes": ["sim"], "repetitions": 1}))
+    r = twb("study", str(f), "--embedded", "--out", str(tmp_path / "out"), "--no-progress", timeout=180,
+            cwd=str(tmp_path / "out-of-the-way"))
     assert r.returncode == 0, r.stderr
     assert "study tiny: 1/1 runs completed" in r.stdout
     assert (tmp_path / "out" / "fig8_paths.png").exists()

@@ -56,6 +56,7 @@ def agent(
     subfield: Annotated[Optional[int], typer.Option(help="Put a single robot on sub-field K (1-4) of the field: its frame's origin is that sub-field's lower-left corner.", min=1, max=4)] = None,
     advertise_host: Annotated[Optional[str], typer.Option(help="Host name the server should use to reach these robots (e.g. a container name) (default: --host).")] = None,
     control_key: Annotated[Optional[str], typer.Option(help="Robot-port control key of a standalone agent (16-128 printable ASCII characters, no , or ;): only connections that send T,T,A,KEY (or a lease it grants) may move the robots or build; T,T,Q stays open. Default: none, every connection may. With --server the key of each robot is the one the server derives from --token.", envvar="TWB_CONTROL_KEY")] = None,
+    clock: Annotated[str, typer.Option(help="How the clock treats a closed-loop controller that subscribes with plain T,T,O,1: 'lockstep' waits for its answer to every pose (results independent of the time scale), 'free' runs on (docs/protocol.md, \"Lockstep\").", envvar="TWB_CLOCK")] = "lockstep",
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log every path and event.")] = False,
 ) -> None:
     """Run emulated robots speaking the T,T,P line protocol until Ctrl-C (logs on stderr)."""
@@ -68,6 +69,8 @@ def agent(
     if profile not in profile_names():
         fail(f"unknown --profile {profile!r} (profiles: {', '.join(profile_names())})")
     scale = parse_time_scale(time_scale)
+    if clock not in ("lockstep", "free"):
+        fail(f"--clock {clock!r}: expected 'lockstep' or 'free'")
     if server and not token:
         fail("--server needs --token (or TWB_TOKEN)")
     if server and control_key:
@@ -88,7 +91,7 @@ def agent(
         robots=robots, backend=backend.value, profile=profile, host=host, port=port, time_scale=scale,
         seed=seed, robot_id=robot_id, world=world.value, area=_pair(area, "area"), origins=origins,
         tracker_sink=sink, server_url=server, token=token, advertise_host=advertise_host,
-        control_key=control_key or None,
+        control_key=control_key or None, clock=clock,
     )
 
     async def run() -> None:

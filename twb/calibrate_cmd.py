@@ -13,7 +13,13 @@ from contract.vocabulary import Mode
 
 from .errors import fail
 
-__all__ = ["calibrate", "calibration_figure", "recorded_runs"]
+__all__ = ["calibrate", "calibration_figure", "recorded_runs", "variant_key"]
+
+
+def variant_key(label: str) -> str:
+    """How a variant's label is matched: case, spacing and the multiplication sign aside (the docs' "wheel slip
+    ×4" is the study's "wheel slip x4")."""
+    return " ".join(label.replace("×", "x").replace("✕", "x").casefold().split())
 
 
 def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
@@ -32,6 +38,12 @@ def recorded_runs(data: Any, variant: Optional[str] = None) -> list[Any]:
     if variant is None and len(variants) > 1:
         fail(f"the study's field runs have {len(variants)} robot variants ({', '.join(variants)}): "
              "choose one with --variant")
+    if variant is not None:
+        match = [v for v in variants if variant_key(v) == variant_key(variant)]
+        if not match:
+            fail(f"no field runs of variant {variant!r}; the study's variants: "
+                 + (", ".join(repr(v) for v in variants) if variants else "none (no field runs)"))
+        variant = match[0]
     experiments = {e["experiment_id"]: e for e in data.experiments if e.get("experiment_id") is not None}
     area = FIELD_SIZE if data.spec.field == "full" else SUBFIELD_SIZE
     runs = []

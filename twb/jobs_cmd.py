@@ -212,6 +212,16 @@ def status(
     _print_experiment(exp, wide)
 
 
+def clip(text: str, limit: int, wide: bool) -> str:
+    """``text`` for a table cell: whole with ``wide``, else at most ``limit`` characters, cut after a whole word
+    with an ellipsis (never mid-word)."""
+    text = " ".join(text.split())
+    if wide or len(text) <= limit:
+        return text
+    cut = text[:limit].rsplit(" ", 1)[0] if " " in text[:limit] else text[:limit - 1]
+    return cut.rstrip(",;:") + "…"
+
+
 def _print_experiment_list(page: Any, wide: bool) -> None:
     from rich.table import Table
 
@@ -219,7 +229,7 @@ def _print_experiment_list(page: Any, wide: bool) -> None:
 
     rows = [{"id": str(e.id), "status": e.status, "environment": e.environment, "planner": job_label(e),
              "modes": ",".join(e.modes), "reps": str(e.repetitions),
-             "created": e.created_at.strftime("%Y-%m-%d %H:%M:%S") if e.created_at else "", "error": e.error[:60]}
+             "created": e.created_at.strftime("%Y-%m-%d %H:%M:%S") if e.created_at else "", "error": clip(e.error, 60, wide)}
             for e in page.data]
 
     def build(cols: list[str]) -> Table:
@@ -276,7 +286,7 @@ def _print_experiment(exp: Any, wide: bool) -> None:
         m = r.metrics
         rows.append(dict(zip(names, (
             str(r.id), r.mode, str(r.repetition), r.status, r.robot_id or "", _num(r.subfield),
-            *(_num(m.get(k), digits) for k, digits in numbers), r.error[:50]))))
+            *(_num(m.get(k), digits) for k, digits in numbers), clip(r.error, 50, wide)))))
 
     def build(cols: list[str]) -> Table:
         table = Table(*cols)
@@ -574,6 +584,22 @@ def _result_rows(m: Any, metrics: tuple[tuple[str, str], ...] = RESULT_COLUMNS) 
     return rows
 
 
+def clock_line(runs: Any) -> str:
+    """How the runs' clocks ran: ``clock: lockstep at time scale 5x`` (per run when they differ); '' when none
+    recorded it."""
+    seen: dict[str, list[int]] = {}
+    for r in runs:
+        if r.clock is None:
+            continue
+        scale = "max" if r.time_scale is None else f"{r.time_scale:g}x"
+        seen.setdefault(f"{r.clock} at time scale {scale}", []).append(r.id)
+    if not seen:
+        return ""
+    if len(seen) == 1:
+        return f"clock: {next(iter(seen))}"
+    return "clock: " + "; ".join(f"{k} (runs {', '.join(map(str, ids))})" for k, ids in seen.items())
+
+
 def _print_plans(con: Any, exp: Any) -> None:
     """A randomised planner's plans, one per repetition (both modes drove it): planner seed, planned length,
     planning wall and CPU time (the median of k calls) and the machine's load then."""
@@ -618,6 +644,8 @@ def _print_results(m: Any, exp: Any, wide: bool) -> None:
     optional = [headers[k] for k in reversed(priority)]
     print_fitted(con, build, columns, optional, wide)
     stochastic = exp is not None and exp.planner_stochastic
+    if exp is not None and (clocks := clock_line(exp.runs)):
+        con.print(clocks, highlight=False)
     if m.planned:
         con.print(("planned path (repetition 1): " if stochastic else "planned path: ")
                   + "  ".join(f"{h} {_num(m.planned.get(k))}" for k, h in RESULT_COLUMNS[:3]), highlight=False)

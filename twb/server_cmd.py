@@ -198,6 +198,19 @@ def _engine_line(testbed) -> str:  # type: ignore[no-untyped-def]
     return f"Simulation runs: Ray tasks on {pool.description}." if getattr(pool, "engine", "") else ""
 
 
+CLOCK_HELP = ("How robots' clocks treat closed-loop controllers: 'lockstep' (wait for the answer to every pose; the "
+              "default) or 'free' (run on at the time scale); docs/protocol.md, \"Lockstep\". Also TWB_CLOCK.")
+
+
+def _clock(clock: Optional[str]) -> dict:
+    """Settings for --clock; without it TWB_CLOCK (or lockstep) decides."""
+    if clock is None:
+        return {}
+    if clock not in ("lockstep", "free"):
+        fail(f"--clock {clock!r}: expected 'lockstep' or 'free'")
+    return {"clock": clock}
+
+
 def _uploads(enable: bool) -> dict:
     """Settings for --enable-uploads; without the flag TWB_UPLOADS_ENABLED decides."""
     return {"uploads_enabled": True} if enable else {}
@@ -228,26 +241,27 @@ def up(
     sim_engine: Annotated[Optional[str], typer.Option(help=SIM_ENGINE_HELP)] = None,
     ray_address: Annotated[Optional[str], typer.Option(help=RAY_ADDRESS_HELP)] = None,
     ray_cpus: Annotated[Optional[int], typer.Option(help=RAY_CPUS_HELP, min=1)] = None,
+    clock: Annotated[Optional[str], typer.Option(help=CLOCK_HELP)] = None,
 ) -> None:
     """The whole testbed on this machine: server (on SQLite unless told), four field robots, a simulation pool."""
     from server.embedded import EmbeddedField
 
     scale = parse_time_scale(time_scale)
     settings = _settings(data_dir, token, scale, **_uploads(enable_uploads), **_database(database_url),
-                         **_engine(sim_engine, ray_address, ray_cpus))
+                         **_engine(sim_engine, ray_address, ray_cpus), **_clock(clock))
     on_ray = settings.sim_engine == "ray"
     # nothing else shows until the banner: the robots' kernels load first (numba compiles them once)
     typer.echo("twb: starting the testbed (the first start after installing compiles the simulation kernels: "
                "about 12 s, up to a minute on a busy machine)", err=True)
     testbed, admin = _open(settings, embedded=EmbeddedField(sim_robots=0 if on_ray else sim_robots, seed=seed,
-                                                            time_scale=scale))
+                                                            time_scale=scale, clock=settings.clock))
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
         shown = "max" if math.isinf(scale) else f"{scale:g}x"
         print(f"Teleworkbench is up: {url}  (dashboard {url}/ , API docs {url}/docs)", flush=True)
         print(f"Admin token: {admin}  (also in {settings.token_file})", flush=True)
         sims = "simulation runs on Ray" if on_ray else f"{sim_robots} simulated"
-        print(f"Robots: 4 field robots (sub-fields 1-4), {sims}; time scale {shown}. "
+        print(f"Robots: 4 field robots (sub-fields 1-4), {sims}; time scale {shown}, {settings.clock} clock. "
               "Ctrl-C stops everything.", flush=True)
         if on_ray:
             print(_engine_line(testbed), flush=True)
@@ -268,10 +282,11 @@ def server(
     sim_engine: Annotated[Optional[str], typer.Option(help=SIM_ENGINE_HELP)] = None,
     ray_address: Annotated[Optional[str], typer.Option(help=RAY_ADDRESS_HELP)] = None,
     ray_cpus: Annotated[Optional[int], typer.Option(help=RAY_CPUS_HELP, min=1)] = None,
+    clock: Annotated[Optional[str], typer.Option(help=CLOCK_HELP)] = None,
 ) -> None:
     """The server alone; robots join with `twb agent --server URL --token T`."""
     settings = _settings(data_dir, token, parse_time_scale(time_scale), **_uploads(enable_uploads),
-                         **_database(database_url), **_engine(sim_engine, ray_address, ray_cpus))
+                         **_database(database_url), **_engine(sim_engine, ray_address, ray_cpus), **_clock(clock))
     testbed, admin = _open(settings)
 
     async def ready(url: str):  # type: ignore[no-untyped-def]

@@ -91,12 +91,14 @@ def _completed(data: StudyData) -> list[dict[str, Any]]:
 
 def _tick_label(data: StudyData, config: str, modes: Iterable[str]) -> str:
     """``FM²`` (a field-robot variant on a line of its own: ``FMM\ntracker 3 mm``) and, per mode, completed of
-    runs: ``S 2/2 · T 0/2``."""
+    runs: ``S 2/2 · T 0/2``; with more than three configurations a line per mode, so that neighbours' labels
+    do not run into each other.  Dollar signs are escaped (no mathtext)."""
     counts = []
     for m in modes:
         mine = [r for r in data.rows if r["configuration"] == config and r["mode"] == m]
         counts.append(f"{SHORT.get(m, m)} {sum(r.get('status') == 'completed' for r in mine)}/{len(mine)}")
-    return display_name(config).replace(" · ", "\n", 1) + "\n" + " · ".join(counts)
+    sep = "\n" if len(data.configurations) > 3 else " · "
+    return (display_name(config).replace(" · ", "\n", 1) + "\n" + sep.join(counts)).replace("$", r"\$")
 
 
 def _grouped_bars(ax, labels: list[str], series: dict[str, list[tuple[Optional[float], Optional[float]]]],  # type: ignore[no-untyped-def]
@@ -115,7 +117,7 @@ def _grouped_bars(ax, labels: list[str], series: dict[str, list[tuple[Optional[f
             if gone:
                 ax.text(xp, 0.02, "no completed run", transform=ax.get_xaxis_transform(), rotation=90, ha="center",
                         va="bottom", fontsize=7, color=COLORS[kind])
-    ax.set_xticks(x, labels, fontsize=8)
+    ax.set_xticks(x, labels, fontsize=8 if len(labels) <= 3 else 7)
     ax.grid(axis="y", color="0.9")
     ax.set_axisbelow(True)
 

@@ -4,7 +4,7 @@ A study file is JSON (YAML too when PyYAML happens to be installed; it is not a
 dependency)::
 
     {"name": "my-study",
-     "environments": ["room", "blocks"],          # names, or environment files (objects) to create
+     "environments": ["room", "blocks"],          # names, environment objects to create, or their files
      "plans": ["A", "B"],                          # plan names of each environment; omit for all of them
      "planners": ["fmm", "fm2", {"name": "prm", "params": {"samples": 800}}],
      "repetitions": 2, "modes": ["sim", "twb"], "seed": 0, "field": "sub",
@@ -641,4 +641,27 @@ def load_spec(source: str | Path) -> StudySpec:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise StudySpecError(f"{path}: invalid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
-    return StudySpec.from_json(data, str(path))
+    return StudySpec.from_json(_environment_files(data, path), str(path))
+
+
+def _environment_files(data: Any, path: Path) -> Any:
+    """The study file's ``environments`` with each entry that names a file (``*.json``, or a path with a ``/``)
+    replaced by the environment object in it, read relative to the study file's directory, as ``twb submit
+    --env FILE`` reads one."""
+    envs = data.get("environments") if isinstance(data, Mapping) else None
+    if not isinstance(envs, list):
+        return data
+    out = []
+    for i, e in enumerate(envs):
+        if isinstance(e, str) and (e.lower().endswith(".json") or "/" in e):
+            f = path.parent / e
+            try:
+                e = json.loads(f.read_text())
+            except OSError as exc:
+                raise StudySpecError(f"{path}: environments[{i}]: cannot read environment file {f} (paths are "
+                                     f"relative to the study file): {exc.strerror or exc}") from None
+            except json.JSONDecodeError as exc:
+                raise StudySpecError(f"{path}: environments[{i}]: {f}: invalid JSON: {exc.msg} at line "
+                                     f"{exc.lineno} column {exc.colno}") from None
+        out.append(e)
+    return {**data, "environments": out}

@@ -35,6 +35,7 @@ gripper) by raising ``NotImplementedError``.  No such driver ships.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -55,6 +56,19 @@ from .physics import (
 )
 
 __all__ = ["BACKENDS", "Backend", "Emulated", "FieldBackend", "IdealBackend", "make_backend"]
+
+_U64 = (1 << 64) - 1
+
+
+def _bias_at(features: np.ndarray, x: float, y: float, bias_xy: float) -> tuple[float, float]:
+    """:func:`~.physics.tracker_bias` in numpy (m at ``(x, y)`` m; ``features`` one robot's ``(2F, 3)``): the
+    same smooth field, without compiling a kernel for a call from Python."""
+    if bias_xy == 0.0:
+        return 0.0, 0.0
+    f = features.shape[0] // 2
+    c = np.cos(features[:, 0] * x + features[:, 1] * y + features[:, 2])
+    scale = bias_xy * math.sqrt(2.0 / f)
+    return scale * float(c[:f].sum()), scale * float(c[f:].sum())
 
 
 class Backend(ABC):
@@ -104,6 +118,20 @@ class Backend(ABC):
     def busy(self) -> bool:
         """True while some robot still moves although commanded to stand still."""
         return bool(self.in_motion().any())
+
+    #: tracker latency in control steps (a measurement taken at step s arrives at step s + latency_steps)
+    latency_steps: int = 0
+
+    def frame(self, step: int) -> bool:
+        """Whether the tracker takes a frame at global control step ``step`` (every step unless a backend
+        has a slower camera)."""
+        return True
+
+    def measure(self, i: int, step: int, key: int) -> tuple[bool, np.ndarray]:
+        """The tracker's measurement of robot ``i`` outside a path (standing, or coasting after one) at
+        global control step ``step``: (whether it saw the robot, the pose ``(3,)`` m/rad); ``key`` the
+        robot's noise key for such frames.  The backend's exact pose unless a backend measures with noise."""
+        return True, self.pose[i].copy()
 
 
 class Emulated(Backend):
@@ -251,6 +279,28 @@ class FieldBackend(Emulated):
 
     def busy(self) -> bool:
         return bool(self.tracks.any())
+
+    @property
+    def latency_steps(self) -> int:  # type: ignore[override]
+        return int(self.fg.delay)
+
+    def frame(self, step: int) -> bool:
+        fg = self.fg
+        return (step * fg.camera_rate) // fg.control_rate != ((step - 1) * fg.camera_rate) // fg.control_rate
+
+    def measure(self, i: int, step: int, key: int) -> tuple[bool, np.ndarray]:
+        """As the tracker measures a robot during a path (:func:`~.physics.field_sense`): the pose plus the
+        bias field of the robot's last run and per-frame jitter, on the camera's frames, with dropouts;
+        the noise is drawn from ``key`` and the global step (a Philox stream of its own, apart from the paths';
+        plain numpy, so that no kernel is compiled for a call from Python)."""
+        fg = self.fg
+        rng = np.random.Generator(np.random.Philox(key=np.array([key & _U64, step & _U64], dtype=np.uint64)))
+        z0, z1, z2 = rng.standard_normal(3)
+        seen = rng.random() >= fg.dropout
+        bx, by = _bias_at(self.bias[i], float(self.pose[i, 0]), float(self.pose[i, 1]), fg.bias_xy)
+        meas = np.array([self.pose[i, 0] + bx + z0 * fg.sigma_xy, self.pose[i, 1] + by + z1 * fg.sigma_xy,
+                         math.remainder(self.pose[i, 2] + z2 * fg.sigma_theta, math.tau)])
+        return self.frame(step) and bool(seen), meas
 
 
 BACKENDS: dict[str, type[Backend]] = {"ideal": IdealBackend, "field": FieldBackend}

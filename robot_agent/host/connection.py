@@ -148,6 +148,7 @@ class Connection:
         self.auth_failures = 0
         self.controller: Selection | None = None  #: the controller of this connection's paths (``T,T,C``)
         self.localisation = False  #: whether this connection gets ``PO`` lines (``T,T,O``)
+        self.clock: str | None = None  #: its clock while it drives the robot (``T,T,O,1,<clock>``; None: the host's)
         self._loop = asyncio.get_running_loop()
         self.opened = self._loop.time()
         self._last_accepted = self.opened

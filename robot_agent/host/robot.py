@@ -70,6 +70,11 @@ class RobotServices:
     sleep: Callable[[float], Awaitable[None]]  #: wait this many seconds of experiment time
     event_hook: Callable[["Robot", str], None]  #: an ``EV`` line of this robot, for the host's listeners
     localisation_changed: Callable[[], None]  #: a connection subscribed to ``PO`` lines or left
+    #: a ``T,T,V`` of a connection driving the robot: True when it answers a pose its lockstep controller was sent
+    #: (the host applies it in its control step), False: apply it now
+    answer: Callable[["Robot", "Connection", VelocityCommand], bool] = lambda robot, conn, cmd: False
+    #: a path or velocity mode starts: the tracker's stream of the robot restarts with it (frames in flight dropped)
+    path_started: Callable[["Robot"], None] = lambda robot: None
 
 
 class Robot:
@@ -144,8 +149,10 @@ class Robot:
         return replies if isinstance(replies, list) else await replies
 
     def cmd_localisation(self, conn: "Connection", cmd: LocalisationCommand) -> list[str]:
-        """``T,T,O``: send (or stop sending) this connection ``PO`` lines."""
+        """``T,T,O``: send (or stop sending) this connection ``PO`` lines; with a clock, how the robot's clock
+        treats it while it drives the robot (``lockstep``/``free``; none named: the host's default)."""
         conn.localisation = cmd.on
+        conn.clock = cmd.clock if cmd.on else None
         self.services.localisation_changed()
         return [format_ok("O")]
 
@@ -220,6 +227,7 @@ class Robot:
             raise ProtocolError(ErrorCode.STATE, "the gripper is busy with this robot")
         self.services.sync_clock()
         replaced = self.services.core.set_path(self.index, cmd.points, self._noise_key(), conn.controller)
+        self.services.path_started(self)
         self.path_count += 1
         if replaced is not None:
             self._deliver(replaced)
@@ -250,8 +258,11 @@ class Robot:
             raise ProtocolError(ErrorCode.STATE, "a path is in progress: T,T,V drives a robot without one (T,T,S first)")
         if not started and self.owner is not conn:
             raise ProtocolError(ErrorCode.STATE, "another connection drives this robot")
+        if not started and self.services.answer(self, conn, cmd):
+            return [format_ok("V")]  # a lockstep controller's answer: it applies in its control step
         core.drive(self.index, cmd.v, cmd.w, self._noise_key() if started else 0, WATCHDOG_S)
         if started:
+            self.services.path_started(self)
             self.path_count += 1
             self.owner = conn
             self.services.wake()

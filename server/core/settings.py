@@ -26,6 +26,9 @@ class Settings(BaseSettings):
     database_url: str = Field(default="", description="SQLAlchemy URL; default: SQLite in data_dir.")
     admin_token: str = Field(default="", description="Fixed admin token; generated when empty.")
     time_scale: float = Field(default=1.0, gt=0, description="Experiment seconds per wall second.")
+    clock: Literal["lockstep", "free"] = Field(default="lockstep", description=(
+        "How a robot's clock treats a closed-loop controller (docs/protocol.md, \"Lockstep\"): 'lockstep' waits for "
+        "its answer to every pose (results independent of the time scale and the host's speed), 'free' runs on."))
     max_body_bytes: int = Field(default=12 << 20, gt=0, description=(
         "Largest accepted request body (at least what an upload of the largest program takes, base64)."))
     # the API's HTTP connections (docs/security.md, "HTTP connections")

@@ -5,11 +5,16 @@ runs in the sandbox (:meth:`server.sandbox.Sandbox.run_controller`).  Its robot
 port relays the closed-loop verbs (``T,T,O``, ``T,T,V``, ``T,T,S``, ``T,T,Q``)
 to the run's robot over the run's own authenticated connection, and sends the
 program the robot's ``PO`` and ``EV`` lines.  When the program connects, the
-server puts the robot in velocity mode (``T,T,V,0,0``): from then on the
-robot's 0.5 s watchdog holds.  The run ends when:
+server subscribes with the testbed's clock (``T,T,O,1,<clock>``, settings
+``clock``) and puts the robot in velocity mode (``T,T,V,0,0``): from then on the
+robot's 0.5 s watchdog holds.  In lockstep (the default) the robot's clock waits for
+the program's answer to every pose it is sent (docs/protocol.md, "Lockstep"): the
+program gets the run's poses only — from the first after velocity mode started,
+the newest one kept for it until it subscribes — so a run is the same at every
+time scale.  The run ends when:
 
 - the program stops the robot (``T,T,S``, or ``T,T,V,0,0`` within the goal
-  tolerance: the server stops it) — ``completed`` within the goal tolerance,
+  tolerance: the server sends ``T,T,S`` instead, answered ``OK,V``) — ``completed`` within the goal tolerance,
   else ``failed`` (program);
 - the program exits, crashes or hits a sandbox limit — the robot is stopped;
   ``completed`` only after a clean exit with the robot within the tolerance
@@ -59,14 +64,17 @@ class ControllerRelay:
     """
 
     def __init__(self, link: AgentLink, ctx: RunContext, goal: tuple[float, float], tolerance_m: float,
-                 seed: Callable[[], bool] = lambda: False) -> None:
-        self.link, self.ctx, self._seed = link, ctx, seed
+                 seed: Callable[[], bool] = lambda: False, clock: str = "lockstep") -> None:
+        self.link, self.ctx, self._seed, self.clock = link, ctx, seed, clock
         self.goal, self.tolerance_m = goal, tolerance_m
         self.pose: Optional[tuple[float, float]] = None  # the last PO position, m
         self.t_start: Optional[float] = None
         self.t_end: Optional[float] = None
         self.ended: asyncio.Future[tuple[str, ...]] = asyncio.get_running_loop().create_future()
         self._subscribed = False
+        self._arming = False  # T,T,V,0,0 sent: the robot's OK,V starts the run's poses
+        self._run_poses = False  # PO lines from now on are the run's (velocity mode started)
+        self._held: Optional[str] = None  # the run's newest PO line while the program has not subscribed
         self._lines: asyncio.Queue[Optional[str]] = asyncio.Queue()
         #: the program's T,T,V lines, and how long each answered the first PO line it had not answered yet (s)
         self.steps = 0
@@ -82,6 +90,8 @@ class ControllerRelay:
 
     def _log(self, direction: str, line: str, t: Optional[float], estimated: bool) -> None:
         """The run's line between server and robot while the program drives: logged up to RELAY_LOGGED_LINES."""
+        if self._arming and direction == "<" and line.startswith("OK,V"):
+            self._arming, self._run_poses = False, True  # in the order the robot sent them: the next PO is the run's
         if self._relay_logged < RELAY_LOGGED_LINES:
             self._relay_logged += 1
             self.ctx.on_line(direction, line, t, estimated)
@@ -104,8 +114,12 @@ class ControllerRelay:
             self.pose = (float(fields[0]) / 1000.0, float(fields[1]) / 1000.0)
         except (IndexError, ValueError):
             return
-        if self._subscribed and not self.ended.done():
+        if not self._run_poses or self.ended.done():
+            return
+        if self._subscribed:
             self._lines.put_nowait(line)
+        else:
+            self._held = line
 
     async def connected(self) -> None:
         """The program is on its robot port: localise, and put the robot in velocity mode (the watchdog holds)."""
@@ -113,13 +127,17 @@ class ControllerRelay:
             return
         self.armed = True
         self.ctx.seeded = self._seed()  # velocity mode draws the robot's noise as a path does
-        await self.link.request("T,T,O,1", self.ctx.wall(0))
+        await self.link.request(f"T,T,O,1,{self.clock}", self.ctx.wall(0))
+        self._arming = True
         await self.link.request("T,T,V,0,0", self.ctx.wall(0))
 
     async def to_robot(self, line: str) -> str:
         """One valid closed-loop line of the program; the reply for it."""
         if line.startswith("T,T,O"):  # the server's own subscription stays; only what the program gets changes
-            self._subscribed = line.endswith("1")
+            self._subscribed = line.split(",")[3:4] == ["1"]
+            if self._subscribed and self._held is not None and not self.ended.done():
+                self._lines.put_nowait(self._held)  # the pose a lockstep robot waits for an answer to
+            self._held = None
             return "OK,O"
         if self.ended.done() or self.fault is not None:
             return "ERR,STATE,the run has ended"
@@ -128,11 +146,12 @@ class ControllerRelay:
             if self._unanswered is not None:
                 self.responses_s.append(time.perf_counter() - self._unanswered)
                 self._unanswered = None
-        reply = await self.link.forward(line, self.ctx.wall(0))
-        if line.startswith("T,T,V") and reply.startswith("OK") and self._zero(line) \
-                and self.distance_m() <= self.tolerance_m:
-            await self.link.forward("T,T,S", self.ctx.wall(0))  # arrived and told to stand: the run is over
-        return reply
+        if line.startswith("T,T,V") and self.armed and self._zero(line) and self.distance_m() <= self.tolerance_m:
+            # arrived and told to stand: the run is over; the stop goes instead of the T,T,V, as the answer to the
+            # pose, so that a lockstep robot stops in the same control step at every time scale
+            reply = await self.link.forward("T,T,S", self.ctx.wall(0))
+            return "OK,V" if reply.startswith("OK") else reply
+        return await self.link.forward(line, self.ctx.wall(0))
 
     @staticmethod
     def _zero(line: str) -> bool:
@@ -182,7 +201,7 @@ async def drive_program(ctx: RunContext, svc: RunServices, link: AgentLink, job:
     await rec.add_messages(ctx.take_messages())
     line_log = link.on_line  # the relay logs its lines itself while the program drives
     relay = ControllerRelay(link, ctx, (job.goal[0], job.goal[1]), DEFAULT_GOAL_TOLERANCE,
-                            seed=lambda: svc.hooks.seed_next_path(robot_id, job.seed))
+                            seed=lambda: svc.hooks.seed_next_path(robot_id, job.seed), clock=svc.settings.clock)
     s = svc.settings
     program = asyncio.create_task(svc.sandbox.run_controller(
         spec, relay, env_data=job.environment_data, start=start_pose(job), goal=list(job.goal), path=plan.path,

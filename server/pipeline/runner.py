@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Optional
 
@@ -162,7 +163,8 @@ async def _carry_out(ctx: RunContext, svc: RunServices) -> None:
     overrides (the emulated field robot with other parameters, :mod:`.remote`): one task; else the steps on
     the robot."""
     job = await svc.recorder.start(
-        ctx.run_id, robot_id=ctx.robot.robot_id, started_at=utcnow(),
+        ctx.run_id, robot_id=ctx.robot.robot_id, started_at=utcnow(), clock=svc.settings.clock,
+        time_scale=None if math.isinf(svc.settings.time_scale) else svc.settings.time_scale,
         subfield=ctx.subfields[0] if len(ctx.subfields) == 1 else None,
         status=lambda j: _first_status(ctx, svc, j))
     if job.robots is not None:

@@ -60,8 +60,10 @@ export function barChart({ title, unit = "", groups, ref = null }) {
       const jitter = g.values.length > 1 ? ((k / (g.values.length - 1)) - 0.5) * bw * 0.6 : 0;
       svg.append(s("circle", { cx: cx + jitter, cy: y(v), r: 2.6, fill: g.color }, s("title", {}, `${g.label} run ${k + 1}: ${num(v)}`)));
     });
-    svg.append(s("text", { x: cx, y: H - 9, "text-anchor": "middle", "font-size": 10.5, fill: "#1c2430" },
-      `${g.label} (n=${g.agg?.n ?? g.values.length})`));
+    // a group without values says so on a line of its own, within its slot
+    svg.append(s("text", { x: cx, y: g.note ? H - 14 : H - 9, "text-anchor": "middle", "font-size": 10.5, fill: "#1c2430" },
+      g.note ? g.label : `${g.label} (n=${g.agg?.n ?? g.values.length})`));
+    if (g.note) svg.append(s("text", { x: cx, y: H - 3, "text-anchor": "middle", "font-size": 9, fill: "#5b6675" }, g.note));
   });
   if (ref && Number.isFinite(ref.value)) {
     svg.append(s("line", { x1: L, x2: W - R, y1: y(ref.value), y2: y(ref.value), stroke: "#2e9d4a", "stroke-dasharray": "5 3", "stroke-width": 1.5 },

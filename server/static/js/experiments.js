@@ -151,6 +151,20 @@ function planningTitle(r) {
   return `Planning of its repetition: ${parts.join(", ")}`;
 }
 
+/** How its runs' clocks ran: "lockstep at time scale 5x" (per run when they differ), or "not recorded". */
+function clockText(d) {
+  const seen = new Map();
+  for (const r of d.runs) {
+    if (r.clock == null) continue;
+    const k = `${r.clock} at time scale ${r.time_scale == null ? "max" : `${r.time_scale}x`}`;
+    if (!seen.has(k)) seen.set(k, []);
+    seen.get(k).push(r.id);
+  }
+  if (!seen.size) return "not recorded";
+  if (seen.size === 1) return [...seen.keys()][0];
+  return [...seen].map(([k, ids]) => `${k} (runs ${ids.join(", ")})`).join("; ");
+}
+
 /** The experiment's planning time: its runs' range (each repetition is timed), else repetition 1's. */
 function planningRange(d) {
   const ts = d.runs.map((r) => r.planning_time_s).filter((t) => t != null);
@@ -291,6 +305,7 @@ export class ExperimentPage {
       ["Owner", d.owner],
       ["Submitted", when(d.created_at)], ["Finished", when(d.finished_at)],
       ["Planning time", planningRange(d)],
+      ["Clock", clockText(d)],
       ["Robot radius + margin", `${num(d.robot_radius, 3)} + ${num(d.planning_margin, 3)} m`],
     ];
     if (d.status === "queued") facts.push(["Estimated start", duration(d.estimated_start_s)]);
@@ -434,7 +449,8 @@ export class ExperimentPage {
   renderAggregates(m, d) {
     const modes = Object.keys(m.aggregates || {});
     if (!modes.length) {
-      this.els.aggregates.replaceChildren(h("tbody", {}, h("tr", { class: "empty-row" }, h("td", {}, "No completed runs yet."))));
+      this.els.aggregates.replaceChildren(h("tbody", {}, h("tr", { class: "empty-row" }, h("td", {},
+        TERMINAL.has(d.status) ? "No run completed: nothing to aggregate." : "No completed runs yet."))));
       return;
     }
     const keys = [...new Set(modes.flatMap((md) => Object.keys(m.aggregates[md].metrics)))];
@@ -446,7 +462,9 @@ export class ExperimentPage {
         const a = m.aggregates[md].metrics[k] || {};
         // identical repetitions (the deterministic simulation): a zero-width interval would be a fake certainty
         const same = allEqual(a);
-        return [h("td", { class: "num" }, `${num(a.mean)} ± ${num(a.std)}`),
+        // a spread below the mean's rounding is floating-point noise of equal values (e.g. 1.99e-12): shown as 0
+        const std = Number.isFinite(a.std) && Math.abs(a.std) <= 1e-9 * Math.max(1, Math.abs(a.mean)) ? 0 : a.std;
+        return [h("td", { class: "num" }, `${num(a.mean)} ± ${num(std)}`),
           h("td", { class: same ? "num said" : "num" }, same ? (md === "sim" && !d.jitter ? "identical repetitions (deterministic simulation)" : "all equal: no interval")
             : intervalText(k, a.ci_low, a.ci_high)),
           h("td", { class: "num" }, a.n ?? "–")];
@@ -471,11 +489,15 @@ export class ExperimentPage {
   renderCharts(d, m) {
     const modes = d.modes;
     const done = (m.runs || []).filter((r) => r.status === "completed");
-    const charts = (d.robots ? FLEET_CHARTS : CHARTS).map(([key, withRef]) => {
+    // nothing to chart: one line instead of empty charts
+    const charts = !done.length ? [h("p", { class: "empty-row" }, TERMINAL.has(d.status)
+      ? "No run completed: no metrics to chart." : "Charts appear when the first run completes.")]
+      : (d.robots ? FLEET_CHARTS : CHARTS).map(([key, withRef]) => {
       const [title, unit] = METRICS[key];
       const groups = modes.map((md) => ({
         // a mode whose runs all failed says so instead of showing an empty slot
-        label: done.some((r) => r.mode === md) || !d.runs.some((r) => r.mode === md) ? md : `${md}: none completed`,
+        label: md,
+        note: done.some((r) => r.mode === md) || !d.runs.some((r) => r.mode === md) ? "" : "none completed",
         color: MODE_COLOR[md],
         values: done.filter((r) => r.mode === md).map((r) => r.metrics[key]).filter((v) => typeof v === "number"),
         agg: m.aggregates?.[md]?.metrics?.[key] || null,
