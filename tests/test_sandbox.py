@@ -431,6 +431,15 @@ def test_exit_codes_signals_and_files_that_cannot_run(sandbox_isolation, data_di
         assert explain(r, LIMITS).startswith("program could not start: ") and error in r["launch_error"], r
 
 
+def test_a_program_still_running_after_its_grace_is_killed_in_its_sandbox_not_run_again(sandbox_isolation, data_dir):
+    """bwrap reports an exit code only for a program that exits: one killed after sending its path (its grace
+    ran out) is the sandbox's normal end, not a sandbox that failed to start (which ran it again unsandboxed)."""
+    r = launch(job(SEND_PATH + "print('sent', flush=True)\nimport time\ntime.sleep(600)", data_dir=data_dir))
+    assert r["isolation"]["sandbox"] == "bubblewrap" and r["isolation"]["reason"] == "", r["isolation"]
+    assert r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]] and r["launch_error"] is None, r
+    assert r["stdout"].count("sent") == 1, r["stdout"]  # it ran once
+
+
 @needs_root
 def test_root_without_namespaces_still_protects_files_by_uid_and_kills_escapees(data_dir):
     listener = socket.create_server(("127.0.0.1", 0))

@@ -141,7 +141,9 @@ def _run(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[ProgramCg
     wall = time.monotonic() - prog.t0
     ended_itself = reap(prog, cgroup=cgroup)
     launch_error = stopped
-    if prog.bubble is not None and not prog.bubble.program_started() and not stopped and not timed_out:
+    # bwrap reports the program's exit code only when the program exits: one still running when the run
+    # ended, its grace ran out or it was stopped was killed here, which is not a sandbox that failed to start
+    if prog.bubble is not None and ended_itself and not prog.bubble.program_started():
         why = _bwrap_said(prog)
         if not why.startswith("execvp "):
             raise bwrap.SetupFailed(why)
