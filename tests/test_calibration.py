@@ -83,7 +83,8 @@ def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
     data.save(tmp_path)
     r = invoke(capsys, monkeypatch, "calibrate", "--runs", tmp_path)
     assert r.returncode == 0, r.stderr
-    assert "3 runs, RMS tracked - re-simulated" in r.stdout
+    assert "3 runs, replay error (fitted profile re-simulated against the runs)" in r.stdout and " cm RMS" in r.stdout
+    assert "[95 % interval: a bootstrap over the runs" in r.stdout
     prof = json.loads((tmp_path / "calibrated-profile.json").read_text())
     assert set(prof["calibration"]["values"]) == set(FITTED) and prof["calibration"]["runs"] == 3
     assert prof["field"]["motor_time_constant_s"] == pytest.approx(prof["calibration"]["values"]["motor_time_constant_s"],
