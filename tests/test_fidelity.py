@@ -239,26 +239,18 @@ def test_each_finding_fails_when_its_comparison_does(keys, change):
     assert all(v for k, v in held.items() if k not in keys), held
 
 
-def test_a_uniform_field_fails_the_planner_dependence_of_its_gaps():
-    """A field that changed every metric by the same factor for every planner fails finding 18 (and 6)."""
-    def uniform(planner, mode, row):
+def test_a_field_that_changes_every_planner_alike_fails_the_planner_dependence():
+    """A field whose metrics are the simulation's times one factor, the same for every planner, except PRM's κ'
+    (which goes the other way): one metric whose gaps differ is not enough, finding 18 fails; the data made to
+    hold every finding (its clearance drop, 4 mm, a different share of each planner's clearance) holds it."""
+    def alike(planner, mode, row):
         if mode == "twb":
-            row.update({k: row[k] * f for k, f in (("length_m", 1.0), ("execution_time_s", 1.1),
-                                                    ("clearance_min_m", 1.0), ("deviation_mean_m", 1.0))})
-    def same(planner, mode, row):
-        if mode in ("sim", "twb") and planner != "prm":
-            row["smoothness_rad"] = row["planned_smoothness_rad"] * (0.95 if mode == "sim" else 1.05)
-        if mode == "twb":
-            row["clearance_min_m"] = row["planned_clearance_min_m"] * 0.95
-            row["execution_time_s"] = 1.2 * 6.0 * row["planned_length_m"]
-        if mode == "sim":
-            row["clearance_min_m"] = row["planned_clearance_min_m"]
-    held = _held(_study(_both(uniform, same)))
-    assert held["slowdown_differs"] is True  # seconds: longer paths lose more
-    assert held["deviations_differ_across_planners"] is True  # PRM's κ' still goes the other way
-    flat = _study(_both(uniform, same, _set("prm", "twb", smoothness_rad=0.25 * 0.95 * 1.05 / 0.95)))
-    flat_held = _held(flat)
-    assert flat_held["deviations_differ_across_planners"] is False, flat_held
+            factor = {"smoothness_rad": 1.05 / 0.95, "clearance_min_m": 0.95, "execution_time_s": 7 / 6}
+            for k, f in factor.items():
+                row[k] = row[k] * f if k != "clearance_min_m" else row["planned_clearance_min_m"] * f
+    held = _held(_study(alike))
+    assert held["deviations_differ_across_planners"] is False
+    assert _held(_study())["deviations_differ_across_planners"] is True
 
 
 def test_length_similar_just_inside_the_threshold():
@@ -352,9 +344,11 @@ def test_without_compensation_the_robot_acts_on_the_old_pose():
     assert lag.max() > 0.015  # about speed x 0.1 s, plus the hold between frames
 
 
-def test_the_controller_steers_by_the_pose_predicted_one_motor_time_constant_ahead():
+def test_the_controller_steers_by_the_pose_predicted_its_lead_ahead():
+    """The lead is the motor time constant the controller was tuned for (0.12 s); the shipped motors lag more
+    (0.25 s: the field robot overshoots corners, docs/fidelity.md)."""
     _, belief, ctl, b = _track_belief(_exact_profile(), steps=60)
-    assert b.fg.lead == P.field.motor_time_constant_s
+    assert b.fg.lead == P.field.control_lead_s == 0.12 < P.field.motor_time_constant_s
     # the last step's odometry: the modelled tracks after the command of step 58
     v, w = tracks_to_body(b.odo[0, 0], b.odo[0, 1], P.wheel_base_m)
     steer = b.sense(np.array([60]), np.array([True]))[0][0]
@@ -451,14 +445,18 @@ def _zigzag(corners: int = 6, leg: float = 0.2, turn_deg: float = 60.0) -> np.nd
     return np.column_stack([p, heading])
 
 
-def test_the_field_robot_rounds_sharp_corners_more_than_the_ideal_one():
+def test_the_field_robot_cannot_follow_sharp_corners_and_overshoots_them():
+    """On 60° corners both robots drive smoother than the path (κ' 0.49); the field robot, whose motors lag
+    0.25 s behind a lead tuned for 0.12 s and whose tracks accelerate at 0.3 m/s², overshoots each corner: a path
+    1.5-4 % longer than the ideal robot's and as smooth (before issue 33 it cut them: 5 % smoother, as long)."""
     path = _zigzag()
     ideal = _drive("ideal", path, 0)[:, 1:3]
-    assert smoothness(ideal) < smoothness(path[:, :2])  # the follower's switch radius cuts corners
+    assert smoothness(ideal) < 0.7 * smoothness(path[:, :2])  # the follower's switch radius cuts corners
     for seed in range(4):
         field = _drive("field", path, seed)[:, 1:3]
-        assert smoothness(field) < 0.95 * smoothness(ideal), seed
-        assert abs(path_length(field) / path_length(ideal) - 1) < 0.02, seed
+        assert smoothness(field) < 0.75 * smoothness(path[:, :2]), seed
+        assert abs(smoothness(field) / smoothness(ideal) - 1) < 0.1, seed
+        assert 1.015 < path_length(field) / path_length(ideal) < 1.05, seed
 
 
 def test_the_ideal_robot_is_unchanged():
