@@ -35,24 +35,30 @@ REDUCED = {"name": "reduced", "environments": ["room"], "plans": ["A", "B"], "pl
            "repetitions": 1, "modes": ["sim", "twb"]}
 
 
-def test_a_reduced_study_reproduces_the_nine_findings(twb, tmp_path):
+def test_a_reduced_study_checks_every_claim_as_the_offline_runs_do(twb, tmp_path):
     """Room A and B, FMM, FM² and PRM, one repetition (12 runs) on an embedded testbed at maximum speed.
 
-    bench/fidelity.py runs the same study offline for seeds 0-19: every finding holds in at least 19;
-    the paper's full study holds all nine in all 20 (docs/fidelity.md)."""
+    Twelve runs are too few for every claim (one run per planner and mode): on seed 0, 16 of the 18 hold —
+    FMM's field run deviates 7 mm more than its simulated one, PRM's 3 mm (not "almost constant"), and PRM's
+    field length ratio is 0.996.  bench/fidelity.py runs the paper's study (48 runs) offline for seeds 0-19:
+    every claim holds in at least 18 (docs/fidelity.md); :func:`test_the_paper_study_holds_every_claim`."""
     spec = tmp_path / "reduced.json"
     spec.write_text(json.dumps(REDUCED))
     out = tmp_path / "out"
     r = twb("study", str(spec), "--embedded", "--out", str(out), "--no-progress", "--seed", "0", timeout=300)
     assert r.returncode == 0, r.stderr
     assert "study reduced: 12/12 runs completed" in r.stdout
-    assert "The paper's findings on this study: 9 of 9 held" in r.stdout
+    n = len(FINDINGS)
+    assert f"The paper's findings on this study: {n - 2} of {n} held" in r.stdout
+    assert "Sim-to-field predictivity, 3 configurations" in r.stdout
+    assert (out / "predictivity.md").is_file() and (out / "predictivity.png").is_file()
     doc = json.loads((out / "findings.json").read_text())
     assert [f["key"] for f in doc["findings"]] == list(FINDINGS)
-    assert doc["held"] == doc["applicable"] == 9, [(f["key"], f["detail"]) for f in doc["findings"] if not f["held"]]
+    assert doc["applicable"] == n and doc["held"] == n - 2
+    assert [f["key"] for f in doc["findings"] if not f["held"]] == ["deviation_gap_constant", "field_length_ratio_above_1"]
     assert json.loads((out / "study.json").read_text())["spec"]["seed"] == 0
     md = (out / "findings.md").read_text()
-    assert md.count("| held |") == 9 and "Path length deviation shows similar results" in md
+    assert md.count("| held |") == n - 2 and "Path length deviation shows similar results" in md
     # bench/fidelity.py's offline runs are these runs: the same metrics, run for run
     offline = {_run_key(r): r for r in _bench().study_data(StudySpec.from_json(REDUCED, "reduced")).rows}
     with open(out / "runs.csv", newline="") as f:
@@ -62,6 +68,14 @@ def test_a_reduced_study_reproduces_the_nine_findings(twb, tmp_path):
         mine = offline[_run_key(row)]
         for key in ("length_m", "smoothness_rad", "deviation_mean_m", "clearance_min_m", "execution_time_s"):
             assert float(row[key]) == pytest.approx(mine[key], rel=1e-4, abs=1e-6), (_run_key(row), key)
+
+
+def test_the_paper_study_holds_every_claim():
+    """The paper's study (48 runs) offline with seed 0: every one of the 18 checks holds (docs/fidelity.md:
+    each in at least 18 of the seeds 0-19)."""
+    found = paper_findings(_bench().paper(0))
+    assert len(found) == len(FINDINGS)
+    assert all(f.held for f in found), [(f.key, f.detail) for f in found if not f.held]
 
 
 def _run_key(row: dict) -> tuple:
