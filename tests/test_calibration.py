@@ -22,6 +22,10 @@ from sdk_helpers import invoke
 TRUE = {"motor_time_constant_s": 0.2, "wheel_gain_mean": 0.85, "wheel_bias_sigma": 0.04, "wheel_noise_rel": 0.12,
         "wheel_noise_abs_m_s": 0.006, "tracker_latency_s": 0.14, "tracker_noise_xy_m": 0.0008,
         "tracker_noise_theta_rad": 0.01}
+#: calibration models slip as white (drawn afresh every control step); the shipped BeBot's slip is correlated over
+#: 0.1 s since issue 33, which the fit reads partly as motor lag (0.32 s for 0.2 s on these runs: docs/fidelity.md,
+#: "Calibration"), so the runs are emulated with white slip
+WHITE_SLIP = {"wheel_noise_corr_s": 0.0}
 #: docs/fidelity.md, "Calibration": relative (rel) or absolute (abs) tolerances of six 10 s runs
 TOLERANCE = {"motor_time_constant_s": ("rel", 0.2), "wheel_gain_mean": ("abs", 0.04), "wheel_bias_sigma": ("abs", 0.02),
              "wheel_noise_rel": ("rel", 0.3), "wheel_noise_abs_m_s": ("rel", 0.3), "tracker_latency_s": ("abs", 0.041),
@@ -48,13 +52,15 @@ def emulated_runs(profile: dict, seed: int, n: int = 6) -> list[RecordedRun]:
 
 
 def test_calibration_recovers_a_known_profile():
-    truth = apply_overrides(load_profile("bebot"), TRUE)
+    truth = apply_overrides(load_profile("bebot"), {**TRUE, **WHITE_SLIP})
     cal = calibrate(emulated_runs(truth, seed=3), "bebot", seed=0)
     for key in FITTED:
         kind, tol = TOLERANCE[key]
         err = cal.values[key] - TRUE[key]
         assert abs(err if kind == "abs" else err / TRUE[key]) <= tol, (key, cal.values[key], TRUE[key])
         assert 0 < cal.std[key] < float("inf"), key
+        lo, hi = cal.interval[key]  # the bootstrap's 95 % interval
+        assert lo <= hi and hi - lo < 4 * abs(cal.values[key]) + 0.05, (key, lo, hi)
     assert cal.profile["field"]["motor_time_constant_s"] == pytest.approx(cal.values["motor_time_constant_s"])
     robot_params(cal.profile)  # a valid profile
     assert cal.rms_m < 0.01 and len(cal.resimulated) == 6 and cal.gains.shape == (6, 2)
