@@ -20,12 +20,12 @@ from typing import Any
 if __package__ in (None, ""):
     sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from contract.overrides import apply_overrides  # noqa: E402
-from contract.robot_profile import load_profile  # noqa: E402
-from robot_agent.engine.calibration import FITTED, RecordedRun, calibrate  # noqa: E402
-from robot_agent.engine.headless import simulate_run  # noqa: E402
+from contract.overrides import apply_overrides
+from contract.robot_profile import load_profile
+from robot_agent.engine.calibration import FITTED, RecordedRun, calibrate
+from robot_agent.engine.headless import simulate_run
 
 #: the noise study's variants (docs/fidelity.md, "twb study noise") and the shipped robot
 VARIANTS: dict[str, dict[str, float]] = {

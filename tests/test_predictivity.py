@@ -8,7 +8,13 @@ import json
 import pytest
 from scipy.stats import spearmanr
 
-from client_sdk.study import StudyData, StudySpec, predictivity, predictivity_markdown, write_predictivity
+from client_sdk.study import (
+    StudyData,
+    StudySpec,
+    predictivity,
+    predictivity_markdown,
+    write_predictivity,
+)
 
 PLANNERS = ("fmm", "fm2", "prm")
 CONTROLLERS = ("schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama")

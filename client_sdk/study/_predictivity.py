@@ -29,7 +29,7 @@ import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -56,9 +56,9 @@ class MetricPredictivity:
     """How well the simulation predicts the field for one metric (None: not enough data)."""
 
     metric: str
-    spearman: Optional[float]  #: ρ over (configuration, problem) cells
-    spearman_within: Optional[float]  #: mean over problems of ρ over the configurations
-    flipped: Optional[float]  #: share of the configuration pairs on a problem whose order flips
+    spearman: float | None  #: ρ over (configuration, problem) cells
+    spearman_within: float | None  #: mean over problems of ρ over the configurations
+    flipped: float | None  #: share of the configuration pairs on a problem whose order flips
     pairs: int  #: pairs counted for ``flipped``
     cells: int  #: (configuration, problem) cells with both modes
     configurations: int
@@ -88,7 +88,7 @@ def _cells(data: StudyData, metric: str) -> dict[tuple[str, str], dict[str, tupl
     return out
 
 
-def _spearman(x: list[float], y: list[float]) -> Optional[float]:
+def _spearman(x: list[float], y: list[float]) -> float | None:
     from scipy.stats import spearmanr
 
     if len(x) < 3 or len(set(x)) < 2 or len(set(y)) < 2:
@@ -118,13 +118,13 @@ def _one(data: StudyData, metric: str) -> MetricPredictivity:
                               flips / pairs if pairs else None, pairs, len(xs), len(confs_all), len(cells))
 
 
-def predictivity(data: StudyData, metrics: Optional[list[str]] = None) -> list[MetricPredictivity]:
+def predictivity(data: StudyData, metrics: list[str] | None = None) -> list[MetricPredictivity]:
     """The predictivity of every metric (default :data:`PREDICTIVITY_METRICS`) on ``data``'s completed runs of
     both modes; a metric without two configurations on a problem in both modes has None values."""
     return [_one(data, m) for m in (metrics or list(PREDICTIVITY_METRICS))]
 
 
-def _f(x: Optional[float], digits: int = 2) -> str:
+def _f(x: float | None, digits: int = 2) -> str:
     return "–" if x is None else f"{x:.{digits}f}"
 
 
@@ -133,10 +133,10 @@ def predictivity_markdown(found: list[MetricPredictivity]) -> str:
     n = max((p.configurations for p in found), default=0)
     q = max((p.problems for p in found), default=0)
     lines = ["# Sim-to-field predictivity", "",
-             f"{n} configurations on {q} problems. Spearman ρ between the simulated and the field means of each "
+             (f"{n} configurations on {q} problems. Spearman ρ between the simulated and the field means of each "
              "configuration and problem (across problems, and within a problem averaged over the problems); "
              "flipped: the share of configuration pairs on a problem whose order reverses from simulation to "
-             "field (docs/fidelity.md, \"Predictivity\").", "",
+             "field (docs/fidelity.md, \"Predictivity\")."), "",
              "| metric | Spearman ρ | ρ within problems | flipped | pairs |", "|---|---|---|---|---|"]
     for p in found:
         lines.append(f"| {PREDICTIVITY_METRICS.get(p.metric, p.metric)} | {_f(p.spearman)} | "
@@ -172,7 +172,7 @@ def figure_predictivity(found: list[MetricPredictivity]):  # type: ignore[no-unt
     return fig
 
 
-def write_predictivity(data: StudyData, directory: Optional[Path] = None) -> Optional[list[MetricPredictivity]]:
+def write_predictivity(data: StudyData, directory: Path | None = None) -> list[MetricPredictivity] | None:
     """Write ``predictivity.md``, ``.json`` and ``.png`` into ``directory`` (default: the study's) when the study
     has two configurations with runs in both modes on a problem; returns the predictivity, else None."""
     if data.spec.fleet:
