@@ -1,4 +1,16 @@
-"""Shared fixtures: running the real ``twb`` console script."""
+"""Shared fixtures: running the real ``twb`` console script, the session's shared testbeds, PostgreSQL, Ray; the
+markers that follow from them.
+
+Markers (registered in pyproject.toml; ``make test-fast`` runs the tests without any of them):
+
+- ``browser``: the test uses the ``browser`` fixture (Chromium through Playwright; tests/test_dashboard.py);
+- ``postgres``: it uses the ``postgres`` fixture, or the ``postgresql`` kind of ``database_url``;
+- ``ray``: it uses the ``ray`` fixture;
+- ``slow``: it uses the ``testbeds`` factory, or is marked by hand (its module's ``pytestmark``): real testbed
+  processes, studies, long simulations.  tests/servers.Process refuses to start a testbed for a test without it.
+
+The first three are applied here from the fixtures a test uses, so that a new test cannot forget them.
+"""
 
 from __future__ import annotations
 
@@ -28,6 +40,49 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
     warm_up()
     warm_up_planners()
+
+
+#: a fixture a test uses (directly or through other fixtures) -> the marker it gets
+MARKED_FIXTURES = {"browser": "browser", "postgres": "postgres", "ray": "ray", "testbeds": "slow"}
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        used = set(getattr(item, "fixturenames", ()))
+        for fixture, marker in MARKED_FIXTURES.items():
+            if fixture in used:
+                item.add_marker(marker)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem):  # type: ignore[no-untyped-def]
+    """Note the running test for tests/servers.Process (module fixtures start during a test's set-up)."""
+    import servers
+
+    servers.current_test = item
+    try:
+        return (yield)
+    finally:
+        servers.current_test = None
+
+
+@pytest.fixture(scope="session")
+def testbeds(tmp_path_factory):
+    """The session's shared testbeds (tests/servers.Testbeds): ``testbeds.module("up", "--time-scale", "max",
+    ...)`` in a module fixture yields the one running ``twb up`` with those flags on this worker, started at first
+    use; all stop at the end of the session (cleanly, or the last test errors)."""
+    from servers import Testbeds
+
+    started = Testbeds(tmp_path_factory.mktemp)
+    yield started
+    started.stop_all()
+
+
+@pytest.fixture(scope="session")
+def ray():
+    """The ``ray`` package, for the tests of the simulation pool on Ray; skipped where it is not installed (an
+    optional extra; ``make test`` installs it with the dev extra)."""
+    return pytest.importorskip("ray", reason="Ray is an optional extra (make test installs it with the dev extra)")
 
 
 @pytest.fixture
@@ -62,7 +117,7 @@ def postgres():
     server.stop()
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def database_url(request, tmp_path):
     """A fresh, empty store of each kind: a SQLite file, or a database on the session's PostgreSQL server."""
     if request.param == "sqlite":

@@ -27,15 +27,15 @@ from client_sdk import (
     send_path,
 )
 from sdk_helpers import agent_process
-from servers import serve
+from servers import STANDARD
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 1, "seed": 3}
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("sdk"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.570
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 3}
 
 
-@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+@pytest.fixture(scope="module", params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def server(request, tmp_path_factory):
     """`twb server` on each store: its SQLite default, and PostgreSQL (the session's, a fresh database)."""
     data = tmp_path_factory.mktemp("server")
