@@ -20,6 +20,11 @@ COPY twb twb
 RUN pip wheel --no-cache-dir --wheel-dir /wheels .
 
 FROM python:3.11-slim
+# bubblewrap: the sandbox of uploaded programs; libseccomp2: its system-call allowlist (docs/security.md).
+# Under Docker's default seccomp profile bwrap cannot make its namespaces (docs/uploads.md, "Caveats").
+RUN apt-get update \
+ && apt-get install -y --no-install-recommends bubblewrap libseccomp2 \
+ && rm -rf /var/lib/apt/lists/*
 COPY --from=build /wheels /wheels
 RUN pip install --no-cache-dir --no-index --find-links /wheels teleworkbench && rm -rf /wheels
 # compile the simulation kernels into the image (numba's cache), not at every container start

@@ -1045,6 +1045,7 @@ class SandboxIsolationPublic(Public):
 
     namespaces: list[str]
     user_namespace: bool
+    sandbox: str = Field(description="What makes the namespaces: bwrap's version (`bubblewrap 0.8.0`), or `none`.")
     network: str
     seccomp: bool
     runs_as: str

@@ -93,7 +93,7 @@ def preflight(body: ExperimentCreate, env_data: dict[str, Any], robot_radius: fl
 
 def _stochastic(body: ExperimentCreate) -> bool:
     """Whether the job's planner is randomised (a program's declaration is read where the program is)."""
-    if body.planner is None or body.planner == FLEET_PLANNER:
+    if body.planner is None or body.planner in FLEET_PLANNERS:
         return False
     return bool(get_planner(body.planner).stochastic)
 

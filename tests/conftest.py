@@ -117,6 +117,26 @@ def postgres():
     server.stop()
 
 
+@pytest.fixture(scope="session")
+def sandbox_isolation():
+    """What the sandbox of uploaded programs gives here (the launcher's probe); skipped with the reason where
+    bubblewrap cannot make its namespaces (not installed: Debian ``apt-get install -y bubblewrap``; or user
+    namespaces refused), except in CI (TWB_REQUIRE_SANDBOX=1), where that fails."""
+    import json
+
+    from server.sandbox import launcher_env
+
+    r = subprocess.run([sys.executable, "-m", "server.sandbox.launch"], input=b'{"probe": true}', capture_output=True,
+                       timeout=60, cwd=Path(__file__).resolve().parent.parent, env=launcher_env())
+    probe = json.loads(r.stdout.decode().splitlines()[-1])
+    if "net" not in probe["namespaces"] or not probe["seccomp"]:
+        reason = f"the sandbox has no namespaces or no seccomp filter here: {probe['reason']}"
+        if os.environ.get("TWB_REQUIRE_SANDBOX"):
+            pytest.fail(reason)
+        pytest.skip(reason)
+    return probe
+
+
 @pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def database_url(request, tmp_path):
     """A fresh, empty store of each kind: a SQLite file, or a database on the session's PostgreSQL server."""

@@ -12,8 +12,10 @@ from servers import Process, wait_for
 WORKER = textwrap.dedent("""
     import numpy as np
     from planners import PlanningError, plan_path
+    from planners.fast_marching import warm_up
     from robot_agent.engine.limits import PlanningLimit, configure_worker, planning_limits
 
+    warm_up()  # as the pool's workers do before their first job: the kernels' loading is not a plan's time
     configure_worker(memory_mb={memory}, deadline_s={deadline})
     try:
         with planning_limits():

@@ -38,6 +38,8 @@ LIMITS = {"wall_s": 5, "cpu_s": 2, "memory_bytes": 256 << 20, "file_bytes": 1 <<
           "open_files": 64, "output_bytes": 1 << 16, "tmpfs_bytes": 16 << 20}
 PYTHON = next((p for p in ("/usr/local/bin/python3", "/usr/bin/python3") if os.access(p, os.X_OK)), None)
 is_root = os.geteuid() == 0
+#: what bubblewrap makes (and, where the kernel has it, a cgroup namespace)
+NAMESPACES = ["user", "net", "mount", "pid", "ipc", "uts"]
 needs_root = pytest.mark.skipif(not is_root or PYTHON is None, reason="needs root and a system python3")
 
 SEND_PATH = """
@@ -215,11 +217,44 @@ async def test_sandbox_uids_are_locked_off_the_event_loop_and_freed_when_cancell
         await asyncio.sleep(0.05)
 
 
+async def test_the_server_decides_auto_once_by_its_probe(monkeypatch, tmp_path):
+    """Where the probe found bwrap's namespaces, every program must have them (a failure to set its sandbox
+    up is the testbed's error, never an unisolated run); where it found none, programs run without, saying why."""
+    from server.core.settings import Settings
+    from server.sandbox import ProgramSpec
+
+    box = service.Sandbox(Settings(data_dir=tmp_path, sandbox_uid_base=3_980_000 + random.randrange(0, 900) * 10))
+    jobs, results = [], []
+
+    async def fake_launch(spec: dict, timeout_s: float):
+        jobs.append(spec)
+        return results.pop(0), ""
+
+    monkeypatch.setattr(box, "_launch", fake_launch)
+    program = ProgramSpec(1, "p", "python", None, [], b"print(1)")
+    kw = dict(env_data={"size": [1.8, 1.8], "blocks": []}, start=[0.3, 0.3, 0.0], goal=[1.5, 0.3],
+              field_size=(1.8, 1.8), seed=1, robot_radius=0.045, planning_margin=0.02, robot_id="sim-1",
+              platform="BeBot")
+    box._probe = {"namespaces": NAMESPACES, "note": ""}
+    results.append({"exit_code": 0, "path": None, "stdout": "", "stderr": ""})
+    await box.run(program, **kw)
+    assert jobs[-1]["namespaces"] == "required"
+    results.append({"sandbox_error": True, "launch_error": "the sandbox needs Linux namespaces and cannot create "
+                                                          "them: the robot ports: no"})
+    with pytest.raises(RuntimeError, match="the sandbox could not be set up: the sandbox needs"):
+        await box.run(program, **kw)
+    box._probe = {"namespaces": [], "note": "no namespaces available (bubblewrap (bwrap) is not installed)"}
+    results.append({"exit_code": 0, "path": None, "stdout": "", "stderr": ""})
+    await box.run(program, **kw)
+    assert jobs[-1]["namespaces"] == "off"
+    assert jobs[-1]["no_namespaces"] == "no namespaces available (bubblewrap (bwrap) is not installed)"
+
+
 # --------------------------------------------------------------------------- as root
 
 
 @needs_root
-def test_root_with_namespaces_hides_the_data_dir_and_refuses_long_lines(data_dir):
+def test_root_with_namespaces_hides_the_data_dir_and_refuses_long_lines(sandbox_isolation, data_dir):
     shared = data_dir.with_name(data_dir.name + "-shared")  # writable for everybody, outside /tmp
     shared.mkdir(mode=0o1777)
     shared.chmod(0o1777)
@@ -240,14 +275,160 @@ for d in [{str(shared)!r}, "/tmp"]:
     finally:
         shutil.rmtree(shared)
     iso = r["isolation"]
-    assert iso["namespaces"] == ["net", "mount", "pid", "ipc", "uts"] and iso["uid"] == 3_950_000
-    assert iso["hidden"] == [str(data_dir)] and iso["proc"] == "private" and iso["read_only_refused"] == 0
+    assert iso["namespaces"][:6] == NAMESPACES and iso["uid"] == 3_950_000 and iso["sandbox"] == "bubblewrap"
+    assert iso["hidden"] == [str(data_dir)] and iso["proc"] == "private"
     assert "READ" not in r["stdout"] and "refused Permission denied" in r["stdout"]
     assert f"cannot write {shared} Read-only file system" in r["stdout"] and "wrote /tmp" in r["stdout"]
     assert iso["seccomp"] is True and "unshare -1 1" in r["stdout"]
     assert r["refused"] == [f"ERR,TOOLONG,line longer than {MAX_LINE_BYTES} bytes"]
     assert r["path"] == [[0.3, 0.3, 0.0], [1.5, 0.3, 1.570796]]
     assert f"ERR,TOOLONG,line longer than {MAX_LINE_BYTES} bytes OK,P,2" in r["stdout"]
+
+
+def syscall_numbers(*names: str) -> dict[str, int]:
+    """This machine's numbers of system calls (libseccomp's table)."""
+    import pyseccomp
+
+    return {n: pyseccomp.resolve_syscall(pyseccomp.Arch.NATIVE, n) for n in names}
+
+
+ESCAPES = """
+import ctypes, errno, os, socket
+libc = ctypes.CDLL(None, use_errno=True)
+libc.syscall.restype = ctypes.c_long
+NR = {nr}
+def call(name, *args, nr=None):
+    rc = libc.syscall(ctypes.c_long(NR[name] if nr is None else nr), *[ctypes.c_long(a) for a in args])
+    e = ctypes.get_errno()
+    if rc >= 0 and name in ("clone",) and rc == 0:
+        os._exit(0)  # a child that got through: gone at once
+    return "ok" if rc >= 0 else errno.errorcode.get(e, str(e))
+out = {{}}
+out["clone newuser"] = call("clone", 0x10000000 | 17, 0, 0, 0, 0)
+out["clone newnet"] = call("clone", 0x40000000 | 17, 0, 0, 0, 0)
+out["clone3"] = call("clone3", 0, 0)
+for name in ("unshare", "setns", "mount", "umount2", "ptrace", "keyctl", "bpf", "perf_event_open", "userfaultfd",
+             "io_uring_setup", "init_module", "kexec_load", "open_by_handle_at", "process_vm_readv", "chroot",
+             "sethostname", "settimeofday", "reboot", "swapon", "acct"):
+    out[name] = call(name, 0, 0, 0, 0, 0)
+out["a call unknown to the filter"] = call("x", 0, nr=1000)
+out["x32 getpid"] = call("x", nr=0x40000000 | NR["getpid"]) if NR["getpid"] < 1024 and os.uname().machine == "x86_64" else "ENOSYS"
+out["personality query"] = call("personality", 0xFFFFFFFF)
+out["personality no-aslr"] = call("personality", 0x0040000)
+for fam, proto, name in ((socket.AF_PACKET, 0, "packet"), (socket.AF_NETLINK, 9, "netlink audit"),
+                         (socket.AF_NETLINK, 0, "netlink route"), (socket.AF_INET6, 0, "inet6"), (40, 0, "vsock")):
+    try:
+        socket.socket(fam, socket.SOCK_RAW if fam != socket.AF_INET6 else socket.SOCK_STREAM, proto).close()
+        out["socket " + name] = "ok"
+    except OSError as exc:
+        out["socket " + name] = errno.errorcode.get(exc.errno, str(exc.errno))
+try:
+    socket.socketpair(socket.AF_INET, socket.SOCK_STREAM)
+    out["socketpair inet"] = "ok"
+except OSError as exc:
+    out["socketpair inet"] = errno.errorcode.get(exc.errno, str(exc.errno))
+out["processes"] = sorted(int(p) for p in os.listdir("/proc") if p.isdigit())
+out["run"] = sorted(os.listdir("/run"))
+out["hostname"] = socket.gethostname()
+out["caps"] = open("/proc/self/status").read().split("CapEff:")[1].split()[0]
+out["/tmp"] = os.listdir("/tmp")
+wrote = 0
+try:
+    for k in range(40):
+        with open(f"/tmp/fill{{k}}", "wb") as f:
+            f.write(b"x" * (1 << 20))
+            f.flush()
+            os.fsync(f.fileno())
+        wrote += 1
+    out["tmp full"] = "never"
+except OSError as exc:
+    out["tmp full"] = errno.errorcode.get(exc.errno, str(exc.errno)) + f" after {{wrote}} MiB"
+import json
+print(json.dumps(out))
+"""
+
+
+@needs_root
+def test_the_sandbox_refuses_what_its_allowlist_does_not_allow(sandbox_isolation, data_dir):
+    """The escapes the seccomp allowlist, bubblewrap's namespaces and its tmpfs stop; what a program needs works."""
+    nr = syscall_numbers("clone", "clone3", "unshare", "setns", "mount", "umount2", "ptrace", "keyctl", "bpf",
+                         "perf_event_open", "userfaultfd", "io_uring_setup", "init_module", "kexec_load",
+                         "open_by_handle_at", "process_vm_readv", "chroot", "sethostname", "settimeofday", "reboot",
+                         "swapon", "acct", "getpid", "personality")
+    r = launch(job(ESCAPES.format(nr=nr), data_dir=data_dir))
+    assert r["exit_code"] == 0, r
+    out = json.loads(r["stdout"])
+    denied = ["clone newuser", "clone newnet", "unshare", "setns", "mount", "umount2", "ptrace", "keyctl", "bpf",
+              "perf_event_open", "userfaultfd", "io_uring_setup", "init_module", "kexec_load", "open_by_handle_at",
+              "process_vm_readv", "chroot", "sethostname", "settimeofday", "reboot", "swapon", "acct"]
+    assert {k: out[k] for k in denied} == {k: "EPERM" for k in denied}
+    not_there = ["clone3", "a call unknown to the filter", "x32 getpid", "personality no-aslr", "socket packet",
+                 "socket netlink audit", "socket vsock", "socketpair inet"]
+    assert {k: out[k] for k in not_there} == {k: "ENOSYS" for k in not_there}
+    assert out["personality query"] == "ok" and out["socket netlink route"] == "ok" and out["socket inet6"] == "ok"
+    assert out["processes"] == [1, 2] and out["run"] == [] and out["hostname"] == "twb-sandbox"
+    assert out["caps"] == "0000000000000000" and out["/tmp"] == ["twb-program"]
+    assert out["tmp full"] in (f"ENOSPC after {k} MiB" for k in (14, 15))  # a 16 MiB tmpfs holds the program too
+    assert r["isolation"]["seccomp"] is True
+
+
+@needs_root
+def test_without_bubblewrap_auto_falls_back_and_required_refuses(data_dir):
+    """bwrap missing: the program runs without namespaces (its own uid, the seccomp filter loaded by the
+    launcher), or, with namespaces required, not at all."""
+    program = """
+import ctypes
+libc = ctypes.CDLL(None, use_errno=True)
+print("unshare", libc.unshare(0x10000000), ctypes.get_errno())
+"""
+    spec = {**job(program, data_dir=data_dir, uid=3_950_005), "bwrap": "/nonexistent/bwrap"}
+    r = launch(spec)
+    iso = r["isolation"]
+    assert iso["namespaces"] == [] and iso["uid"] == 3_950_005 and iso["sandbox"] is None
+    assert iso["reason"] == "no namespaces available (bubblewrap (bwrap) is not installed)"
+    assert iso["seccomp"] is True and r["stdout"] == "unshare -1 1\n"
+    r = launch({**spec, "namespaces": "required"})
+    assert explain(r, LIMITS) == ("program could not start: the sandbox needs Linux namespaces and cannot create "
+                                  "them: bubblewrap (bwrap) is not installed")
+
+
+@needs_root
+def test_a_sandbox_bwrap_cannot_make_is_reported_in_its_words(data_dir):
+    """A machine that refuses user namespaces (bwrap says so and exits): auto falls back, required refuses."""
+    where = Path(tempfile.mkdtemp(prefix="twb-fake-bwrap-"))
+    try:
+        where.chmod(0o755)  # the program's uid runs it
+        fake = where / "bwrap"
+        fake.write_text("#!/bin/sh\necho 'bwrap: No permissions to creating new namespace, likely because the "
+                        "kernel does not allow non-privileged user namespaces.' >&2\nexit 1\n")
+        fake.chmod(0o755)
+        spec = {**job("print('ran')", data_dir=data_dir), "bwrap": str(fake)}
+        r = launch(spec)
+        assert r["isolation"]["namespaces"] == [] and r["stdout"] == "ran\n"
+        assert r["isolation"]["reason"].startswith("no namespaces available (No permissions to creating new namespace")
+        r = launch({**spec, "namespaces": "required"})
+        assert r["launch_error"].startswith("the sandbox needs Linux namespaces and cannot create them: No permissions")
+    finally:
+        shutil.rmtree(where)
+
+
+@needs_root
+def test_exit_codes_signals_and_files_that_cannot_run(sandbox_isolation, data_dir):
+    """bwrap passes the program's exit code, and a signal as 128 + its number; a file the kernel cannot execute
+    is the program's failure to start, not the sandbox's."""
+    r = launch(job("import sys\nsys.exit(3)", data_dir=data_dir))
+    assert (r["exit_code"], r["signal"], r["launch_error"]) == (3, None, None)
+    r = launch(job("import os, signal\nos.kill(os.getpid(), signal.SIGSEGV)", data_dir=data_dir))
+    assert (r["exit_code"], r["signal"]) == (None, signal.SIGSEGV)
+    assert explain(r, LIMITS).startswith("program crashed: killed by signal SIGSEGV")
+    spec = job("", data_dir=data_dir)
+    spec["argv"] = ["{workdir}/program"]
+    for content, error in ((b"\x7fELF not really", "Exec format error"), (b"echo no #! line", "Exec format error"),
+                           (b"#!/nonexistent/interpreter\n", "No such file or directory")):
+        spec["files"]["program"] = {"base64": base64.b64encode(content).decode(), "mode": 0o555}
+        r = launch(spec)
+        assert r["stdout"] == r["stderr"] == "", r
+        assert explain(r, LIMITS).startswith("program could not start: ") and error in r["launch_error"], r
 
 
 @needs_root
@@ -276,14 +457,15 @@ print("uid", os.getuid(), "groups", os.getgroups())
 @needs_root
 @pytest.mark.skipif(shutil.which("setpriv") is None, reason="needs setpriv")
 def test_without_namespaces_required_refuses_and_auto_falls_back(data_dir):
-    """Root without capabilities (a container without CAP_SYS_ADMIN): no namespaces at all."""
+    """Root without capabilities (a container without CAP_SYS_ADMIN): it cannot switch to a uid of its own, and
+    bwrap, running as root, may not map root into a user namespace (that needs CAP_SETFCAP): no namespaces."""
     no_caps = ["setpriv", "--inh-caps=-all", "--bounding-set=-all"]
     r = launch(job("print('ran')", data_dir=data_dir, namespaces="required"), no_caps)
     assert r["launch_error"].startswith("the sandbox needs Linux namespaces and cannot create them")
     assert explain(r, LIMITS).startswith("program could not start: the sandbox needs Linux namespaces")
     r = launch(job("print('ran')", data_dir=data_dir), no_caps)
     assert r["isolation"]["namespaces"] == [] and r["isolation"]["uid"] is None and r["stdout"] == "ran\n"
-    assert "no namespaces available" in r["isolation"]["reason"]
+    assert r["isolation"]["reason"] == "no namespaces available (setting up uid map: Operation not permitted)"
 
 
 # --------------------------------------------------------------------------- the memory limit is per program

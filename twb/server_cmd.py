@@ -209,8 +209,9 @@ async def _print_uploads(testbed) -> None:  # type: ignore[no-untyped-def]
         return
     iso = await testbed.sandbox.probe()
     ns = "+".join(iso["namespaces"]) or "none"
-    print(f"Uploads: enabled; programs run as {iso['runs_as']}, namespaces {ns}, network {iso['network']}"
-          + (", seccomp" if iso.get("seccomp") else "")
+    box = f" in a {iso['sandbox']} sandbox" if iso.get("sandbox", "none") != "none" else ""
+    print(f"Uploads: enabled; programs run as {iso['runs_as']}{box}, namespaces {ns}, network {iso['network']}"
+          + (", seccomp allowlist" if iso.get("seccomp") else "")
           + (f" ({iso['note']})" if iso["note"] else ""), flush=True)
 
 

@@ -12,9 +12,10 @@ In the launcher (``python -m server.sandbox.launch``, one process tree per progr
 - :mod:`.launch` — the entry point: JSON job in, one JSON result line out;
 - :mod:`.lifetime` — ending early: SIGTERM from the server, or its death;
 - :mod:`.cgroups` — the program's cgroup: one memory limit for all its processes;
-- :mod:`.isolation` — namespaces, mounts, loopback, capabilities;
-- :mod:`.seccomp` — the system-call filter;
-- :mod:`.confine` — the program's process between fork and exec: cgroup, uid, rlimits, seccomp;
+- :mod:`.bwrap` — the sandbox, made by bubblewrap: namespaces, mounts, the robot ports inside it;
+- :mod:`.seccomp` — the system-call allowlist, compiled by libseccomp;
+- :mod:`.isolation` — the kernel calls left: ``prctl``, capabilities, entering a network namespace;
+- :mod:`.confine` — the process between fork and exec: cgroup, uid, rlimits (seccomp without bwrap);
 - :mod:`.workdir` — its working directory, environment and command line;
 - :mod:`.supervise` — spawn, pump (output and robot port), reap, report;
 - :mod:`.robot_port` — the robot port, on :mod:`contract.protocol`;

@@ -1,7 +1,7 @@
 """A cgroup per program: one memory limit for all its processes together, a process limit, a clean end.
 
-The launcher makes the program's cgroup as a child of the cgroup it runs in,
-before it unshares its namespaces:
+The launcher makes the program's cgroup as a child of the cgroup it runs in
+(bubblewrap has none of its own):
 
 - **cgroup v2** (the unified hierarchy): ``memory.max`` = the limit,
   ``memory.swap.max`` = 0, ``memory.oom.group`` = 1 (an out-of-memory kill
@@ -15,11 +15,11 @@ before it unshares its namespaces:
   ``memory.memsw.limit_in_bytes`` (no swap either) in the memory hierarchy,
   ``pids.max`` in the pids hierarchy.
 
-It keeps directory descriptors opened before ``unshare``: they refer to the
-host's mount of the cgroup file system, which stays writable after the
-sandbox's mount namespace made every mount read-only.  So the program's
-process can enter the cgroup between fork and exec, and the launcher can
-read its counters and remove it at the end.
+It keeps directory descriptors to it.  The process that becomes bwrap (or,
+without it, the program) enters the cgroup between fork and exec, so that
+everything the program starts is in it, and the launcher (which stays
+outside the sandbox's namespaces) reads its counters and removes it at the
+end.
 """
 
 from __future__ import annotations
@@ -73,6 +73,11 @@ class ProgramCgroup:
         """Move the calling process into the cgroup (run between fork and exec; ``0`` means the writer)."""
         for node in self.nodes:
             _write(node.fd, "cgroup.procs", "0")
+
+    def limit_processes(self, processes: int) -> None:
+        """Set the process limit (``pids.max``), where the pids controller is there."""
+        if self.pids is not None:
+            _write(self.pids.fd, "pids.max", str(processes))
 
     def oom_kills(self) -> int:
         """Processes the kernel killed because the program used all its memory."""

@@ -5,19 +5,42 @@ from __future__ import annotations
 import os
 import signal
 import time
-from typing import Optional
 
-__all__ = ["count_processes", "kill_uid"]
+__all__ = ["count_descendants", "count_uid", "kill_uid"]
 
 
-def count_processes(*, pid_namespace: bool, uid: Optional[int], me: int) -> int:
-    """Processes of the sandbox now, ``me`` not counted; -1 if unknown.
+def count_descendants(pid: int) -> int:
+    """Processes below ``pid`` now (its children, theirs, ...; ``pid`` not counted); -1 if unknown.
 
-    ``pid_namespace``: this process sees only the sandbox's (its own pid
-    namespace and /proc); else those of the dedicated ``uid`` count.
+    The sandbox's first process reaps every orphan of its pid namespace, so
+    below it are exactly the program's processes.  Read from each thread's
+    ``/proc/<pid>/task/<tid>/children``.
     """
-    if not pid_namespace and uid is None:
-        return -1
+    seen: set[int] = set()
+    todo = [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            tasks = os.listdir(f"/proc/{p}/task")
+        except OSError:
+            if p == pid:
+                return -1 if not os.path.isdir("/proc/self/task") else 0
+            continue
+        for tid in tasks:
+            try:
+                with open(f"/proc/{p}/task/{tid}/children") as f:
+                    kids = [int(k) for k in f.read().split()]
+            except (OSError, ValueError):
+                continue
+            for k in kids:
+                if k not in seen:
+                    seen.add(k)
+                    todo.append(k)
+    return len(seen)
+
+
+def count_uid(uid: int, me: int) -> int:
+    """Processes of the dedicated ``uid`` now (``me`` not counted); -1 if unknown."""
     try:
         entries = os.listdir("/proc")
     except OSError:
@@ -25,9 +48,6 @@ def count_processes(*, pid_namespace: bool, uid: Optional[int], me: int) -> int:
     n = 0
     for e in entries:
         if not e.isdigit() or int(e) == me:
-            continue
-        if pid_namespace:
-            n += 1
             continue
         try:
             if os.stat(f"/proc/{e}").st_uid == uid:
@@ -51,6 +71,6 @@ def kill_uid(uid: int) -> None:
                 pass
             os._exit(0)
         os.waitpid(pid, 0)
-        if count_processes(pid_namespace=False, uid=uid, me=os.getpid()) <= 0:
+        if count_uid(uid, os.getpid()) <= 0:
             return
         time.sleep(0.01)

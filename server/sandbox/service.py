@@ -44,8 +44,8 @@ UID_RANGE = 4096
 def launcher_env() -> dict[str, str]:
     """The launcher's environment: a few of ours, and one thread for numpy's BLAS/OpenMP.
 
-    One thread matters: the launcher imports the codec (numpy) before it
-    unshares namespaces and forks, which must happen single-threaded.
+    One thread matters: the launcher imports the codec (numpy), then forks
+    and runs Python between fork and exec, which must happen single-threaded.
     """
     env = {k: v for k, v in os.environ.items() if k in ("PATH", "PYTHONPATH", "LANG", "VIRTUAL_ENV")}
     env.update({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
@@ -157,18 +157,24 @@ class Sandbox:
         return result, err.decode("utf-8", "replace")
 
     async def probe(self) -> dict[str, Any]:
-        """What isolation this machine gives programs (cached)."""
+        """What isolation this machine gives programs (cached): bwrap's sandbox tried as a program's user."""
         if self._probe is None:
-            result, err = await self._launch({"probe": True, "namespaces": self.settings.sandbox_namespaces}, 30)
+            uid, lock = await _take_uid_off_loop(self.settings.sandbox_uid_base)
+            try:
+                result, err = await self._launch({"probe": True, "namespaces": self.settings.sandbox_namespaces,
+                                                  "uid": uid, "gid": uid}, 30)
+            finally:
+                os.close(lock)
             iso = result or {"namespaces": [], "user_namespace": False, "uid_switch": False,
                              "reason": f"the sandbox launcher failed: {err.strip()[-300:]}"}
             self._probe = {
                 "namespaces": iso.get("namespaces", []),
                 "user_namespace": iso.get("user_namespace", False),
+                "sandbox": iso.get("sandbox") or "none",
                 "network": "loopback only" if "net" in iso.get("namespaces", []) else "not isolated",
                 "seccomp": iso.get("seccomp", False),
                 "runs_as": ("a uid of its own" if iso.get("uid_switch")
-                            else "root of a user namespace (the server's uid outside)" if iso.get("user_namespace")
+                            else "the server's uid, in a user namespace" if iso.get("user_namespace")
                             else "the server's uid"),
                 "memory_limit": iso.get("memory_limit", "per-process"),
                 "cgroup": iso.get("cgroup"),
@@ -176,6 +182,22 @@ class Sandbox:
                 "note": iso.get("reason", ""),
             }
         return self._probe
+
+    async def _namespaces(self) -> dict[str, Any]:
+        """The job's ``namespaces``: ``auto`` is decided once, by the probe.
+
+        Where bwrap makes its sandbox here, every program runs in it
+        (``required``: a program whose sandbox cannot be set up does not run,
+        it never runs unisolated because of a passing failure); where it does
+        not, programs run without (``off``, with the probe's reason).
+        """
+        mode = self.settings.sandbox_namespaces
+        if mode != "auto":
+            return {"namespaces": mode}
+        iso = await self.probe()
+        if "net" in iso["namespaces"]:
+            return {"namespaces": "required"}
+        return {"namespaces": "off", "no_namespaces": iso["note"] or "the probe found none"}
 
     async def run(self, spec: ProgramSpec, *, env_data: dict[str, Any], start: list[float], goal: list[float],
                   field_size: tuple[float, float], seed: int, robot_radius: float, planning_margin: float,
@@ -223,7 +245,7 @@ class Sandbox:
                           planning_margin=planning_margin, robot_id=robot_id, wall_s=s.sandbox_wall_s,
                           path=path, fleet=fleet)
         job = {"files": program_files(spec, env_data, path), "argv": argv, "env": env,
-               "namespaces": s.sandbox_namespaces, "hide": self.hidden_paths(), "limits": self._job_limits(),
+               **await self._namespaces(), "hide": self.hidden_paths(), "limits": self._job_limits(),
                "field_size": list(field_size), "robot_id": robot_id, "platform": platform,
                "start_pose": list(start[:3]), "grace_s": 1.0, "relay": relay is not None}
         if fleet is not None:
@@ -241,6 +263,8 @@ class Sandbox:
                 os.close(lock)
         if result is None:
             raise RuntimeError(f"the sandbox launcher failed: {err.strip()[-500:] or 'no result'}")
+        if result.get("sandbox_error") and s.sandbox_namespaces == "auto":  # it works here, but not this time
+            raise RuntimeError(f"the sandbox could not be set up: {result.get('launch_error')}")
         if relay is not None:
             return to_controller_outcome(spec, argv, result, self._job_limits())
         return to_outcome(spec, argv, result, self._job_limits())

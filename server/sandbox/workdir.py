@@ -10,16 +10,13 @@ from typing import Any, Optional
 __all__ = ["make_workdir", "program_command"]
 
 
-def make_workdir(job: dict[str, Any], *, private_tmp: bool, uid: Optional[int], gid: Optional[int]) -> str:
+def make_workdir(job: dict[str, Any], *, uid: Optional[int], gid: Optional[int]) -> str:
     """Write the job's files into a fresh directory owned by the program's user; its path.
 
-    ``private_tmp``: /tmp is this sandbox's own tmpfs (mount namespace), so a fixed name will do.
+    For a program without namespaces: in a sandbox, bwrap copies the files
+    into the sandbox's own /tmp (:mod:`.bwrap`).
     """
-    if private_tmp:
-        work = "/tmp/twb-program"
-        os.mkdir(work, 0o700)
-    else:
-        work = tempfile.mkdtemp(prefix="twb-program-", dir=job.get("tmp_dir") or None)
+    work = tempfile.mkdtemp(prefix="twb-program-", dir=job.get("tmp_dir") or None)
     for name, spec in job["files"].items():
         path = os.path.join(work, name)
         data = base64.b64decode(spec["base64"])

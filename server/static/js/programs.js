@@ -91,9 +91,10 @@ export class ProgramsPage {
     const iso = sb.isolation || {};
     const facts = [
       ["Runs as", iso.runs_as || "–"],
+      ["Sandbox", iso.sandbox || "none"],
       ["Network", iso.network || "–"],
       ["Namespaces", (iso.namespaces || []).join(" + ") || "none"],
-      ["System-call filter", iso.seccomp ? "seccomp" : "none"],
+      ["System-call filter", iso.seccomp ? "seccomp allowlist" : "none"],
       ["Wall / CPU time", `${num(L.wall_s, 0)} s / ${num(L.cpu_s, 0)} s`],
       ["Memory", `${L.memory_mb} MiB ${iso.memory_limit === "per-process" ? "a process" : "for all its processes together"}`],
       ["Processes", L.processes],
