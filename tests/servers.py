@@ -62,7 +62,11 @@ class Testbeds:
     Modules share it one after the other (a worker runs one test at a time), so a module must not depend on being
     alone on it: it names its users and environments uniquely, finds its experiments by id, and counts only what it
     made.  A module that changes the testbed for everyone after it (its robots, its time scale, its settings) or
-    needs it empty starts its own with :func:`serve` and says why.
+    needs it empty starts its own with :meth:`own` (stopped at the end of the module) and says why::
+
+        @pytest.fixture(scope="module")
+        def testbed(testbeds):  # its own: uploads enabled, sixteen simulated robots
+            yield from testbeds.own("up", "--time-scale", "max", "--sim-robots", "16", "--enable-uploads")
     """
 
     def __init__(self, make_dir) -> None:  # type: ignore[no-untyped-def]
@@ -93,6 +97,13 @@ class Testbeds:
                 c.post("/api/v1/experiments/cancel", json={"ids": active}).raise_for_status()
         tail = p.output()[start:]
         assert "Traceback" not in tail, tail
+
+    def own(self, *args: str, env: dict[str, str] | None = None, timeout: float = 60.0):  # type: ignore[no-untyped-def]
+        """A module fixture's body for a testbed this module does not share (unusual flags, or it changes the
+        testbed for everyone after it): ``twb ARGS`` starts in a fresh data directory and is yielded; afterwards it
+        must stop cleanly, without a traceback in its output.  Through this factory the module's tests are marked
+        ``slow`` like those of a shared testbed."""
+        yield from serve(list(args), self._make_dir("own-testbed"), timeout=timeout, env=env)
 
     def stop_all(self) -> None:
         """Stop every testbed started; each must stop cleanly, without a traceback in its output."""

@@ -46,6 +46,7 @@ def compose_commands() -> dict[str, list[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_compose_agent_commands_register_on_their_subfields(tmp_path):
     cmds = compose_commands()
     assert set(cmds) == {"server", "field-1", "field-2", "field-3", "field-4", "sim"}

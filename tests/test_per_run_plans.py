@@ -182,6 +182,7 @@ def test_a_randomised_planner_that_fails_one_repetition_fails_that_repetition_on
     assert metrics["outcomes"]["sim"]["counts"].get("planning") == list(expected.values()).count(False)
 
 
+@pytest.mark.slow
 def test_the_same_randomised_job_gives_the_same_paths_on_sqlite_and_postgresql(postgres, tmp_path):
     job = {**PRM, "repetitions": 2, "seed": 4}
     found = {}

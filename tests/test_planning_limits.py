@@ -7,6 +7,7 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 from servers import Process, wait_for
 
 WORKER = textwrap.dedent("""
@@ -47,6 +48,7 @@ def test_a_plan_past_the_deadline_is_stopped_and_the_worker_goes_on():
     assert "NEXT " in out
 
 
+@pytest.mark.slow
 def test_the_server_fails_a_plan_past_its_deadline_as_planning(tmp_path):
     p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path, env={"TWB_PLANNING_TIMEOUT_S": "0.3"})
     try:

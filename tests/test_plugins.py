@@ -17,7 +17,7 @@ from contract.plugins import LoadError
 from planners import (Planner, PlanningError, UnknownPlanner, available_planners, get_planner, plan_path,
                       register_planner)
 from planners import registry
-from servers import TOKEN, serve
+from servers import TOKEN
 
 PLUGIN = textwrap.dedent(
     '''
@@ -342,10 +342,10 @@ def test_the_older_defaults_dict_declares_the_same_params():
 
 
 @pytest.fixture(scope="module")
-def plugin_server(tmp_path_factory):
-    """`twb server` whose Python sees the test distribution (PYTHONPATH), as after installing it."""
+def plugin_server(testbeds, tmp_path_factory):
+    """`twb server` whose Python sees the test distribution (PYTHONPATH), as after installing it (its own)."""
     dist = write_plugin_dist(tmp_path_factory.mktemp("dist"))
-    yield from serve(["server"], tmp_path_factory.mktemp("server"), env={"PYTHONPATH": str(dist)})
+    yield from testbeds.own("server", env={"PYTHONPATH": str(dist)})
 
 
 def test_the_listings_show_each_plugin_that_does_not_load_with_its_error(plugin_server):

@@ -64,6 +64,7 @@ def _close(a: object, b: object, key: str = "") -> None:
         assert a == b, (key, a, b)
 
 
+@pytest.mark.slow
 def test_a_run_on_ray_equals_the_same_run_on_a_local_agent(ray, postgres, tmp_path):
     """Local agents on SQLite against Ray tasks on PostgreSQL: the same outcomes, poses and metrics."""
     local = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path / "local")
@@ -140,6 +141,7 @@ def paused_ray(ray, tmp_path_factory):
     p.stop()
 
 
+@pytest.mark.slow
 def test_a_killed_ray_worker_ends_the_run_error_and_it_is_retried_once(paused_ray):
     with paused_ray.client() as c:
         exp = c.post("/api/v1/experiments", json={**JOBS[0], "repetitions": 1}).json()
@@ -155,6 +157,7 @@ def test_a_killed_ray_worker_ends_the_run_error_and_it_is_retried_once(paused_ra
     assert run["robot_id"].startswith("ray-") and run["metrics"]["execution_time_s"] > 0
 
 
+@pytest.mark.slow
 def test_the_local_ray_cluster_ends_with_a_killed_server(paused_ray):
     pgid = _head_of(paused_ray.proc.pid)
     assert len(_processes_of_group(pgid)) >= 3  # the head, Ray's GCS and raylet at least

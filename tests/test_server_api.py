@@ -7,6 +7,8 @@ from sqlalchemy import create_engine, text
 
 from servers import Process
 
+pytestmark = pytest.mark.slow  # every test here is against the real `twb server` of the module's fixture
+
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 3}
 
