@@ -1,17 +1,35 @@
-"""Shared fixtures: running the real ``twb`` console script, the session's shared testbeds, PostgreSQL, Ray; the
-markers that follow from them.
+"""Shared fixtures: running the real ``twb`` console script, the session's testbeds, PostgreSQL, Ray, the
+sandbox's probe; the markers that follow from them (docs/design.md, "Tests").
 
-Markers (registered in pyproject.toml; ``make test-fast`` runs the tests without any of them):
+Markers (registered in pyproject.toml, ``--strict-markers``; ``make test-fast`` runs the tests without any of them):
 
 - ``browser``: the test uses the ``browser`` fixture (Chromium through Playwright; tests/test_dashboard.py);
 - ``postgres``: it uses the ``postgres`` fixture, or the ``postgresql`` kind of ``database_url``;
 - ``ray``: it uses the ``ray`` fixture;
-- ``slow``: it uses the ``testbeds`` factory, or is marked by hand (its module's ``pytestmark``): real testbed
-  processes, studies, long simulations.  tests/servers.Process refuses to start a testbed for a test without it.
+- ``slow``: it uses the ``testbeds`` factory, or is marked by hand (``@pytest.mark.slow``, or its module's
+  ``pytestmark``) because it starts a ``servers.Process`` itself.  tests/servers.Process refuses to start a
+  testbed for a test without it, so a forgotten mark fails ``make test-fast`` at once.
 
-The first three are applied here from the fixtures a test uses, so that a new test cannot forget them.
+The markers are applied here from the fixtures a test uses (directly or through other fixtures), so that a new
+test cannot forget them.
+
+A new test module that needs a running testbed takes it from the factory (tests/servers.Testbeds), never with
+its own ``Process`` in a module fixture::
+
+    from servers import STANDARD
+
+    @pytest.fixture(scope="module")
+    def testbed(testbeds):
+        yield from testbeds.module(*STANDARD)   # shared: the worker's `twb up --time-scale max --sim-robots 2`
+
+    @pytest.fixture(scope="module")
+    def uploads(testbeds):                      # its own, with these flags, stopped when the module ends
+        yield from testbeds.own("up", "--time-scale", "max", "--sim-robots", "4", "--enable-uploads")
+
+On a shared testbed a module names its environments and users uniquely, finds its experiments by id and counts
+only what it made (other modules of the same worker ran on it before); the factory cancels what a module leaves
+queued or running and fails the module if the testbed wrote a traceback.
 """
-
 from __future__ import annotations
 
 import os
