@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.mark.skipif(shutil.which("docker-compose") is None,
                     reason="docker-compose is not installed (Debian: apt-get install --no-install-recommends docker-compose)")
+@pytest.mark.slow
 def test_compose_file_is_valid():
     out = subprocess.run(["docker-compose", "-f", "docker-compose.yml", "config"], cwd=ROOT, capture_output=True,
                          text=True, env={**os.environ, "TWB_TOKEN": "compose-test-token"}, timeout=60)

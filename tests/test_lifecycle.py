@@ -139,6 +139,7 @@ def test_a_testbed_started_by_a_program_ends_when_the_program_is_killed(tmp_path
 
 
 
+@pytest.mark.slow
 def test_an_agent_stops_on_ctrl_c_and_sigterm_even_when_started_with_ctrl_c_ignored():
     """A background job of a script starts with SIGINT ignored: `twb agent` must still stop on Ctrl-C (and on
     SIGTERM, flushing what it has), not hang until killed."""

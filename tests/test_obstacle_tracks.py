@@ -87,6 +87,7 @@ def _off_exact(tracks: dict, t_zero: float, env: dict = SIDE) -> list[np.ndarray
 # --------------------------------------------------------------------------- in-process, both databases
 
 
+@pytest.mark.slow
 async def test_a_field_run_stores_its_obstacle_robots_with_its_end_and_nothing_else_changes(tmp_path, database_url):
     """On SQLite and on PostgreSQL (its COPY path): the agent's field run stores the obstacle robots the server
     replayed for its metrics, bit for bit, and they give its obstacle metrics again; they lag their exact tracks

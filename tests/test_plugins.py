@@ -149,6 +149,7 @@ def test_a_broken_plugin_gives_a_clear_error(plugin_dist):
         get_planner("broken")
 
 
+@pytest.mark.slow
 def test_plugin_from_the_command_line(plugin_dist, twb):
     env = {"PYTHONPATH": str(plugin_dist)}
     out = twb("plan", "--env", "room", "--start", "0.3,0.3", "--goal", "0.6,0.5", "--planner", "straight", env=env)
@@ -201,6 +202,7 @@ def _twb_with(python: Path, *args: str, env: dict | None = None):
                           env={**os.environ, **(env or {})})
 
 
+@pytest.mark.slow
 def test_plugins_install_goes_into_the_interpreter_running_twb(scratch_venv, twb):
     import shutil
 
@@ -219,6 +221,7 @@ def test_plugins_install_goes_into_the_interpreter_running_twb(scratch_venv, twb
     assert "shortcut" not in twb("planners").stdout
 
 
+@pytest.mark.slow
 def test_without_uv_or_pip_install_says_what_to_do(scratch_venv, tmp_path):
     import os
 
@@ -229,6 +232,7 @@ def test_without_uv_or_pip_install_says_what_to_do(scratch_venv, tmp_path):
     assert "uv is not on PATH and this Python has no pip" in r.stderr and "ensurepip" in r.stderr
 
 
+@pytest.mark.slow
 def test_plugins_list_names_the_ones_that_fail_and_says_to_restart(plugin_dist, twb):
     r = twb("plugins", "list", env={"PYTHONPATH": str(plugin_dist)})
     assert r.returncode == 1

@@ -182,6 +182,7 @@ def test_an_unreachable_ray_address_is_one_clear_line(ray, twb, tmp_path):
     assert bad.returncode == 2 and "expected host:port of the Ray head" in bad.stderr
 
 
+@pytest.mark.slow
 def test_without_ray_the_server_says_how_to_install_it(tmp_path):
     import subprocess
 

@@ -199,6 +199,7 @@ def agent_port():
         yield port
 
 
+@pytest.mark.slow
 def test_send_path_raw_tcp(agent_port):
     path = np.array([[0.1, 0.1], [0.5, 0.1], [0.5, 0.6]])
     r = send_path("127.0.0.1", agent_port, path, follow=True, timeout=10)
@@ -211,6 +212,7 @@ def test_send_path_raw_tcp(agent_port):
         send_path("127.0.0.1", agent_port, [[0, 0], [np.nan, 1]])
 
 
+@pytest.mark.slow
 def test_send_path_with_a_secret_to_a_robot_with_a_control_key():
     key = "sdk-control-key-0001"
     path = [[0.1, 0.1], [0.5, 0.1]]

@@ -350,6 +350,7 @@ def test_unknown_environment_in_a_study(capsys, monkeypatch, testbed, tmp_path):
     assert r.returncode == 2 and "unknown environment 'atlantis'" in r.stderr and r.stderr.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_embedded_study(twb, tmp_path):
     f = tmp_path / "tiny.json"
     f.write_text(json.dumps({"name": "tiny", "environments": ["blocks"], "plans": ["A"], "planners": ["fmm"],
