@@ -27,7 +27,7 @@ current_test = None
 class Process(LocalTestbed):
     """A running `twb` server for tests (the project's :class:`~twb.launch.LocalTestbed`), token ``TOKEN``."""
 
-    def __init__(self, args: list[str], data_dir: Path, timeout: float = 60.0, env: dict | None = None) -> None:
+    def __init__(self, args: list[str], data_dir: Path, timeout: float = 300.0, env: dict | None = None) -> None:
         if current_test is not None and current_test.get_closest_marker("slow") is None:
             raise RuntimeError(f"{current_test.nodeid} starts `twb {' '.join(args)}`, a real testbed process: mark it "
                                "slow (@pytest.mark.slow, or use the `testbeds` fixture), `make test-fast` leaves "
@@ -73,7 +73,7 @@ class Testbeds:
         self._make_dir = make_dir
         self._started: dict[tuple, Process] = {}
 
-    def get(self, *args: str, env: dict[str, str] | None = None, timeout: float = 60.0) -> Process:
+    def get(self, *args: str, env: dict[str, str] | None = None, timeout: float = 300.0) -> Process:
         """The running testbed ``twb ARGS`` (``env`` added to its environment), started on first use."""
         key = (args, tuple(sorted((env or {}).items())))
         p = self._started.get(key)
@@ -82,7 +82,7 @@ class Testbeds:
         assert p.proc.poll() is None, f"the shared testbed `twb {' '.join(args)}` has ended: {p.output()}"
         return p
 
-    def module(self, *args: str, env: dict[str, str] | None = None, timeout: float = 60.0):  # type: ignore[no-untyped-def]
+    def module(self, *args: str, env: dict[str, str] | None = None, timeout: float = 300.0):  # type: ignore[no-untyped-def]
         """A module fixture's body: the shared testbed ``twb ARGS`` is yielded; afterwards its output since then
         must hold no traceback, and the experiments the module left queued or running are cancelled, so that the
         next module finds the testbed idle."""
@@ -98,7 +98,7 @@ class Testbeds:
         tail = p.output()[start:]
         assert "Traceback" not in tail, tail
 
-    def own(self, *args: str, env: dict[str, str] | None = None, timeout: float = 60.0):  # type: ignore[no-untyped-def]
+    def own(self, *args: str, env: dict[str, str] | None = None, timeout: float = 300.0):  # type: ignore[no-untyped-def]
         """A module fixture's body for a testbed this module does not share (unusual flags, or it changes the
         testbed for everyone after it): ``twb ARGS`` starts in a fresh data directory and is yielded; afterwards it
         must stop cleanly, without a traceback in its output.  Through this factory the module's tests are marked

@@ -32,12 +32,13 @@ class LocalTestbed:
     """``twb <command> --port 0 --data-dir DATA_DIR --token TOKEN *args`` as a child process.
 
     ``env``: variables added to this process's environment for it.  ``url`` is
-    known once the process printed it; ``stop()`` sends SIGINT
-    (Ctrl-C) and waits, killing it after ``timeout`` seconds.
+    known once the process printed it; a process that exits first is reported at once, one that prints no
+    address within ``timeout`` seconds (300: a first start compiles kernels, slowly on a busy machine) is
+    stopped.  ``stop()`` sends SIGINT (Ctrl-C) and waits, killing it after ``timeout`` seconds.
     """
 
     def __init__(self, data_dir: Path, *args: str, command: str = "up", token: Optional[str] = None,
-                 timeout: float = 60.0, env: Optional[dict[str, str]] = None) -> None:
+                 timeout: float = 300.0, env: Optional[dict[str, str]] = None) -> None:
         self.data_dir = make_data_dir(Path(data_dir))
         self.token = token or secrets.token_urlsafe(24)
         self.log = self.data_dir / "stdout.log"

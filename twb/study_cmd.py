@@ -18,7 +18,7 @@ __all__ = ["embedded_testbed", "export_ompl", "study"]
 
 
 @contextlib.contextmanager
-def embedded_testbed(data_dir: Path, *, sim_robots: int = 4, timeout: float = 60.0) -> Iterator[tuple[str, str]]:
+def embedded_testbed(data_dir: Path, *, sim_robots: int = 4, timeout: float = 300.0) -> Iterator[tuple[str, str]]:
     """Run ``twb up --time-scale max --port 0`` as a child process; yields (url, token), stops it after."""
     from .launch import LaunchError, LocalTestbed
 
