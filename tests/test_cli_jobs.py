@@ -11,13 +11,15 @@ import re
 import pytest
 from PIL import Image
 
-from servers import STANDARD
+from servers import Process
 from sdk_helpers import invoke
 
 
 @pytest.fixture(scope="module")
-def testbed(testbeds):
-    yield from testbeds.module(*STANDARD)
+def testbed(tmp_path_factory):
+    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("cli-jobs"))
+    yield p
+    assert p.stop() == 0, p.output()
 
 
 @pytest.fixture
