@@ -17,8 +17,6 @@ from test_dashboard import (
     login,
 )
 
-pytestmark = pytest.mark.slow  # real testbed processes (make test-fast leaves them out)
-
 JOB = {"environment": "crossing", "plan": None, "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708],
        "planner": "fmm", "modes": ["twb"], "repetitions": 1, "seed": 3}
 

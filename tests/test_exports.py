@@ -31,8 +31,6 @@ from server.export.layout import flat_metrics, log_level
 from server.export.rosbag2_file import typestore
 from servers import TOKEN, serve, wait_for
 
-pytestmark = pytest.mark.slow  # real testbed processes (make test-fast leaves them out)
-
 ROOT = Path(__file__).resolve().parents[1]
 FLEET = json.loads((ROOT / "examples" / "fleet" / "swap-prioritized.json").read_text())
 #: two discs beside the straight way from (0.3, 0.3) to (1.5, 0.3) (tests/test_obstacle_tracks.py's)

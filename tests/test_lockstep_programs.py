@@ -12,8 +12,6 @@ import numpy as np
 import pytest
 from servers import serve, wait_for
 
-pytestmark = pytest.mark.slow  # real testbed processes (make test-fast leaves them out)
-
 ROOT = Path(__file__).resolve().parent.parent
 PROGRAM = (ROOT / "examples" / "controllers" / "p_controller.py").read_bytes()
 ENV = {"name": "open", "size": [1.8, 1.8], "blocks": []}
