@@ -99,8 +99,6 @@ export class FieldPage {
     for (const sf of st.subfields) {
       const runId = st.subfieldRun.get(sf.id);
       if (runId == null || seenRuns.has(runId)) continue;
-      // a sub-field with nothing built and no run (e.g. after a restart) shows no earlier run's trace or obstacles
-      if (sf.run_id == null && !sf.environment) continue;
       seenRuns.add(runId);
       const run = st.runs.get(runId);
       const trace = st.traces.get(runId);

@@ -294,23 +294,37 @@ export class Store extends EventTarget {
     }
   }
 
-  /** Field robots not followed live: where the testbed last tracked them (`last_pose`, this session's), else
-   * where they start up — never a pose logged by an earlier session's runs: after a restart the robots stand at
-   * their start-up poses whatever the last session's runs left in the store. */
+  /** Field robots never seen moving: their last logged pose, else where they start up. */
   async resolveRobotPoses() {
-    for (const r of this.robots) {
-      if (r.pool !== "field") continue;
-      const cur = this.poses.get(r.robot_id);
-      if (cur && cur.source === "live") continue;
-      if (r.last_pose) {
-        const [t, x, y, theta] = r.last_pose;
-        if (!cur || cur.t == null || t >= cur.t) this.poses.set(r.robot_id, { x, y, theta, t, run_id: cur?.run_id ?? null, source: "testbed" });
-      } else if (!cur || cur.source !== "log") {
-        const [ox, oy] = this.originOf(r.robot_id);
-        this.poses.set(r.robot_id, { x: HOME[0] + ox, y: HOME[1] + oy, theta: HOME[2], t: null, run_id: null, source: "home" });
+    if (this.resolving) return;
+    this.resolving = true;
+    try {
+      await this.experimentsReady;
+      const missing = new Set(this.robots.filter((r) => r.pool === "field" && !this.poses.has(r.robot_id)).map((r) => r.robot_id));
+      if (!missing.size) return;
+      const recent = this.experiments.filter((e) => e.status !== "queued" && e.modes.includes("twb")).slice(0, 10);
+      for (const e of recent) {
+        if (!missing.size) break;
+        const d = await this.detail(e.id, { fresh: !TERMINAL.has(e.status) });
+        const runs = d.runs.filter((r) => r.mode === "twb" && missing.has(r.robot_id) && r.t_start != null)
+          .sort((a, b) => b.id - a.id);
+        for (const r of runs) {
+          if (!missing.has(r.robot_id)) continue;
+          await this.loadTrace(r.id);
+          if (this.poses.has(r.robot_id)) missing.delete(r.robot_id);
+        }
       }
+      for (const id of missing) {
+        if (this.poses.has(id)) continue;
+        const [ox, oy] = this.originOf(id);
+        this.poses.set(id, { x: HOME[0] + ox, y: HOME[1] + oy, theta: HOME[2], t: null, run_id: null, source: "home" });
+      }
+    } catch (err) {
+      this.failed(err, "Robot positions");
+    } finally {
+      this.resolving = false;
+      this.emit("field");
     }
-    this.emit("field");
   }
 
   /** An experiment moved on: its field runs' traces and robots (what events would have told, when polling). */
