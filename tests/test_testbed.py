@@ -6,15 +6,15 @@ import time
 import numpy as np
 import pytest
 
-from servers import EventListener, Process, serve, wait_for
+from servers import STANDARD, EventListener, Process, wait_for
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 1}
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("up"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")
@@ -188,6 +188,7 @@ ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y":
 SLOW_JOB = {"environment": "one-block", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0], "planner": "fmm"}
 
 
+@pytest.mark.slow
 def test_cancel_a_running_job(tmp_path):
     p = Process(["up", "--time-scale", "5", "--sim-robots", "1"], tmp_path)
     try:
@@ -208,6 +209,7 @@ def test_cancel_a_running_job(tmp_path):
         p.stop()
 
 
+@pytest.mark.slow
 def test_a_server_killed_mid_run_resumes_the_run_and_keeps_the_queue(tmp_path):
     p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path)
     with p.client() as c:
@@ -240,6 +242,7 @@ def test_a_server_killed_mid_run_resumes_the_run_and_keeps_the_queue(tmp_path):
         back.stop()
 
 
+@pytest.mark.slow
 def test_without_resuming_interrupted_runs_stay_interrupted(tmp_path):
     p = Process(["up", "--time-scale", "2", "--sim-robots", "1"], tmp_path, env={"TWB_RESUME_INTERRUPTED": "0"})
     with p.client() as c:
@@ -257,6 +260,7 @@ def test_without_resuming_interrupted_runs_stay_interrupted(tmp_path):
         again.stop()
 
 
+@pytest.mark.slow
 def test_a_robot_dying_mid_run_is_an_error_retried_once_on_another_robot(tmp_path):
     import subprocess
 
