@@ -56,7 +56,8 @@ def _missing_browser() -> str | None:
 
 @pytest.fixture(scope="module")
 def testbed(testbeds):
-    yield from testbeds.module(*STANDARD)
+    # its own: the field page's robots, traces and legend are those of this module's runs only
+    yield from testbeds.own(*STANDARD)
 
 
 @pytest.fixture(scope="module")
