@@ -115,16 +115,16 @@ def test_explicit_path_and_full_field_jobs(client):
     done = wait_for(client, client.post("/api/v1/experiments", json=path).json()["id"], timeout=60)
     assert done["status"] == "completed", done
     assert done["planned_path"][1][:2] == [0.45, 0.6]
-    env = {"name": "open-field", "size": [3.6, 3.6], "blocks": [{"x": 1.8, "y": 1.8, "w": 0.4, "h": 0.4}]}
+    env = {"name": "full-open-field", "size": [3.6, 3.6], "blocks": [{"x": 1.8, "y": 1.8, "w": 0.4, "h": 0.4}]}
     assert client.post("/api/v1/environments", json=env).status_code == 201
-    full = {"environment": "open-field", "start": [0.5, 1.8, 0.0], "goal": [3.1, 1.8, 0.0], "planner": "fmm",
+    full = {"environment": "full-open-field", "start": [0.5, 1.8, 0.0], "goal": [3.1, 1.8, 0.0], "planner": "fmm",
             "modes": ["twb", "sim"], "field": "full"}
     done = wait_for(client, client.post("/api/v1/experiments", json=full).json()["id"], timeout=60)
     assert done["status"] == "completed", [(r["mode"], r["status"], r["error"]) for r in done["runs"]]
     twb = next(r for r in done["runs"] if r["mode"] == "twb")
     assert twb["robot_id"] == "field-1" and twb["subfield"] is None
     assert twb["metrics"]["length_m"] > 2.6
-    sub = {**JOB, "environment": "open-field"}
+    sub = {**JOB, "environment": "full-open-field"}
     r = client.post("/api/v1/experiments", json=sub)
     assert r.status_code == 422 and 'use "field": "full"' in r.json()["detail"]
 
