@@ -47,6 +47,7 @@ def emulated_runs(profile: dict, seed: int, n: int = 6) -> list[RecordedRun]:
     return runs
 
 
+@pytest.mark.slow
 def test_calibration_recovers_a_known_profile():
     truth = apply_overrides(load_profile("bebot"), TRUE)
     cal = calibrate(emulated_runs(truth, seed=3), "bebot", seed=0)
@@ -74,6 +75,7 @@ def _bench():
     return bench.fidelity
 
 
+@pytest.mark.slow
 def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
     from client_sdk.study import StudySpec
 

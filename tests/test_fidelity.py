@@ -35,6 +35,7 @@ REDUCED = {"name": "reduced", "environments": ["room"], "plans": ["A", "B"], "pl
            "repetitions": 1, "modes": ["sim", "twb"]}
 
 
+@pytest.mark.slow
 def test_a_reduced_study_reproduces_the_nine_findings(twb, tmp_path):
     """Room A and B, FMM, FM² and PRM, one repetition (12 runs) on an embedded testbed at maximum speed.
 
