@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 PYTHON ?= python3
 
-.PHONY: run test bench plan-demo clean
+.PHONY: run test test-fast bench plan-demo clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -m pip install -q uv >/dev/null 2>&1 || true
@@ -25,6 +25,12 @@ run: $(STAMP)
 # testbed fixture starts once.  One file alone: $(PY) -m pytest tests/test_x.py
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile
+
+# The inner loop: everything but the tests marked browser, postgres, ray or slow (pyproject.toml; tests/conftest.py
+# marks them): no Chromium, PostgreSQL or Ray needed, no testbed process started.  Under 2 minutes on 2 cores.
+FAST := not browser and not postgres and not ray and not slow
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -n 2 --dist loadfile -m "$(FAST)"
 
 bench: $(STAMP)
 	$(PY) bench/planners.py && $(PY) bench/metrics.py && $(PY) bench/sim.py && $(PY) bench/controllers.py && $(PY) bench/protocol.py && $(PY) bench/scheduler.py && $(PY) bench/server.py && $(PY) bench/study.py && $(PY) bench/closed_loop.py && $(PY) bench/fleet_live.py && $(PY) bench/fleet_playback.py && $(PY) bench/export.py && $(PY) bench/scale.py --runs 1000

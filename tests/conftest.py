@@ -1,5 +1,35 @@
-"""Shared fixtures: running the real ``twb`` console script."""
+"""Shared fixtures: running the real ``twb`` console script, the session's testbeds, PostgreSQL, Ray, the
+sandbox's probe; the markers that follow from them (docs/design.md, "Tests").
 
+Markers (registered in pyproject.toml, ``--strict-markers``; ``make test-fast`` runs the tests without any of them):
+
+- ``browser``: the test uses the ``browser`` fixture (Chromium through Playwright; tests/test_dashboard.py);
+- ``postgres``: it uses the ``postgres`` fixture, or the ``postgresql`` kind of ``database_url``;
+- ``ray``: it uses the ``ray`` fixture;
+- ``slow``: it uses the ``testbeds`` factory, or is marked by hand (``@pytest.mark.slow``, or its module's
+  ``pytestmark``) because it starts a ``servers.Process`` itself.  tests/servers.Process refuses to start a
+  testbed for a test without it, so a forgotten mark fails ``make test-fast`` at once.
+
+The markers are applied here from the fixtures a test uses (directly or through other fixtures), so that a new
+test cannot forget them.
+
+A new test module that needs a running testbed takes it from the factory (tests/servers.Testbeds), never with
+its own ``Process`` in a module fixture::
+
+    from servers import STANDARD
+
+    @pytest.fixture(scope="module")
+    def testbed(testbeds):
+        yield from testbeds.module(*STANDARD)   # shared: the worker's `twb up --time-scale max --sim-robots 2`
+
+    @pytest.fixture(scope="module")
+    def uploads(testbeds):                      # its own, with these flags, stopped when the module ends
+        yield from testbeds.own("up", "--time-scale", "max", "--sim-robots", "4", "--enable-uploads")
+
+On a shared testbed a module names its environments and users uniquely, finds its experiments by id and counts
+only what it made (other modules of the same worker ran on it before); the factory cancels what a module leaves
+queued or running and fails the module if the testbed wrote a traceback.
+"""
 from __future__ import annotations
 
 import os
@@ -28,6 +58,49 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
     warm_up()
     warm_up_planners()
+
+
+#: a fixture a test uses (directly or through other fixtures) -> the marker it gets
+MARKED_FIXTURES = {"browser": "browser", "postgres": "postgres", "ray": "ray", "testbeds": "slow"}
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        used = set(getattr(item, "fixturenames", ()))
+        for fixture, marker in MARKED_FIXTURES.items():
+            if fixture in used:
+                item.add_marker(marker)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem):  # type: ignore[no-untyped-def]
+    """Note the running test for tests/servers.Process (module fixtures start during a test's set-up)."""
+    import servers
+
+    servers.current_test = item
+    try:
+        return (yield)
+    finally:
+        servers.current_test = None
+
+
+@pytest.fixture(scope="session")
+def testbeds(tmp_path_factory):
+    """The session's shared testbeds (tests/servers.Testbeds): ``testbeds.module("up", "--time-scale", "max",
+    ...)`` in a module fixture yields the one running ``twb up`` with those flags on this worker, started at first
+    use; all stop at the end of the session (cleanly, or the last test errors)."""
+    from servers import Testbeds
+
+    started = Testbeds(tmp_path_factory.mktemp)
+    yield started
+    started.stop_all()
+
+
+@pytest.fixture(scope="session")
+def ray():
+    """The ``ray`` package, for the tests of the simulation pool on Ray; skipped where it is not installed (an
+    optional extra; ``make test`` installs it with the dev extra)."""
+    return pytest.importorskip("ray", reason="Ray is an optional extra (make test installs it with the dev extra)")
 
 
 @pytest.fixture
@@ -82,7 +155,7 @@ def sandbox_isolation():
     return probe
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def database_url(request, tmp_path):
     """A fresh, empty store of each kind: a SQLite file, or a database on the session's PostgreSQL server."""
     if request.param == "sqlite":

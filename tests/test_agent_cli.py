@@ -30,6 +30,7 @@ def _lines(sock: socket.socket):
         yield line.decode()
 
 
+@pytest.mark.slow
 def test_agent_process_drives_writes_csv_and_stops_on_ctrl_c(tmp_path):
     csv = tmp_path / "poses.csv"
     proc = subprocess.Popen(
@@ -76,6 +77,7 @@ def test_agent_process_drives_writes_csv_and_stops_on_ctrl_c(tmp_path):
     (["--control-key", "short"], "control_key"),
     (["--server", "http://127.0.0.1:9", "--token", "t", "--control-key", "x" * 20], "--control-key is for standalone"),
 ])
+@pytest.mark.slow
 def test_agent_bad_options_fail_with_one_line(twb, args, message):
     r = twb("agent", "--port", "0", *args, env={"TWB_TOKEN": ""} if "--server" in args else None, timeout=30)
     assert r.returncode != 0

@@ -290,6 +290,7 @@ def test_advance_equals_single_steps_and_stops_when_nothing_moves(backend):
     assert (a[2] == b[2]).all()
 
 
+@pytest.mark.slow
 def test_kernel_cache_follows_every_kernel_source(tmp_path):
     """numba only notices changes to a cached function's own file; the cache directory is keyed by
     all kernel sources, so editing the follower cannot leave a stale compiled stepper behind."""

@@ -11,6 +11,7 @@ import subprocess
 import time
 
 import httpx
+import pytest
 
 from servers import TWB, Process, wait_for
 
@@ -52,6 +53,7 @@ def wait_until(what, timeout: float, message: str):  # type: ignore[no-untyped-d
     return found
 
 
+@pytest.mark.slow
 def test_agents_on_several_hosts_share_one_server_and_a_vanished_host_comes_back(tmp_path, postgres):
     server = Process(["server", "--time-scale", "5", "--database-url", postgres.database()], tmp_path / "server")
     hosts: dict[str, Host] = {}

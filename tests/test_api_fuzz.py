@@ -26,17 +26,15 @@ from pathlib import Path
 
 import pytest
 
-from servers import serve
 
 ST = Path(sys.executable).with_name("st")
 CHECKS = ["--checks", "all", "--exclude-checks", "positive_data_acceptance"]
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    # the limit on unknown tokens would answer 429 to the fuzzer's invalid-credential probes
-    yield from serve(["server", "--enable-uploads"], tmp_path_factory.mktemp("fuzzed"),
-                     env={"TWB_AUTH_FAILURES_PER_MINUTE": "1000000"})
+def server(testbeds):
+    # its own: the limit on unknown tokens would answer 429 to the fuzzer's invalid-credential probes
+    yield from testbeds.own("server", "--enable-uploads", env={"TWB_AUTH_FAILURES_PER_MINUTE": "1000000"})
 
 
 def schemathesis(server, tmp_path, *args: str) -> subprocess.CompletedProcess:

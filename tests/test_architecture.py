@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -127,6 +128,7 @@ def test_the_check_finds_a_cycle_added_on_purpose(tmp_path):
                                      ("contract.frames", "robot_agent.engine.noise")]
 
 
+@pytest.mark.slow
 def test_each_layer_imports_only_the_layers_below_it():
     graph = import_graph()
     assert {layer_of(m) for m in graph} <= set(LAYERS)
@@ -151,6 +153,7 @@ def test_inside_the_server_each_layer_imports_only_what_is_below_it():
     assert [(m, d) for m in routes for d in graph[m] if d in routes] == []  # routes never import each other
 
 
+@pytest.mark.slow
 def test_the_server_imports_no_simulation_core():
     """numba and the agent's simulation load only where robots run (``twb up``'s embedded field, the workers)."""
     code = ("import sys, server.app, server.testbed, server.dispatch; "
@@ -160,6 +163,7 @@ def test_the_server_imports_no_simulation_core():
     assert out.stdout.strip() == "[]"
 
 
+@pytest.mark.slow
 def test_the_sdk_imports_neither_the_server_nor_the_agent():
     """Users install the SDK alone: importing it (studies included) loads only the contract and the planners."""
     code = ("import sys, client_sdk, client_sdk.study; "
@@ -181,6 +185,7 @@ def _string_sets(text: str, suffix: str) -> list[set[str]]:
     return [set(re.findall(r"""["']([a-z_]+)["']""", m)) for m in re.findall(r"\[([^\[\]]*)\]", text)]
 
 
+@pytest.mark.slow
 def test_the_run_vocabulary_is_written_once():
     """No module but contract/vocabulary.py spells out the terminal statuses or the modes as a collection: the
     server, the SDK, the study tooling, the tests and the dashboard (from GET /api/v1/meta) take them from it."""

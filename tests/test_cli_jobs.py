@@ -11,15 +11,13 @@ import re
 import pytest
 from PIL import Image
 
-from servers import Process
+from servers import STANDARD
 from sdk_helpers import invoke
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("cli-jobs"))
-    yield p
-    assert p.stop() == 0, p.output()
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture

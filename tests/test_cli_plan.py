@@ -9,6 +9,7 @@ import pytest
 from contract.protocol import decode_path
 
 
+@pytest.mark.slow
 def test_json_output_matches_the_contract(twb):
     out = twb("plan", "--env", "room", "--start", "0.3,0.3,0", "--goal", "1.5,1.5,90deg", "--planner", "fm2")
     assert out.returncode == 0, out.stderr
@@ -22,6 +23,7 @@ def test_json_output_matches_the_contract(twb):
     assert doc["planner"] == "fm2" and doc["robot_radius_m"] == 0.045
 
 
+@pytest.mark.slow
 def test_ttp_output_is_one_wire_line(twb):
     out = twb("plan", "--env", "blocks", "--plan", "A", "--planner", "prm", "--seed", "4", "--format", "ttp")
     assert out.returncode == 0, out.stderr
@@ -33,6 +35,7 @@ def test_ttp_output_is_one_wire_line(twb):
     assert again.stdout == out.stdout
 
 
+@pytest.mark.slow
 def test_csv_output_feeds_twb_metrics(twb, tmp_path):
     env_file = tmp_path / "env.json"
     env_file.write_text(json.dumps({"name": "open", "size": [1.0, 1.0]}))
@@ -73,6 +76,7 @@ def test_bad_input_exits_non_zero_with_one_line(twb, args, message):
     assert re.search(message, lines[0]), lines[0]
 
 
+@pytest.mark.slow
 def test_unreachable_goal_and_invalid_file(twb, tmp_path):
     walled = tmp_path / "walled.json"
     walled.write_text(json.dumps({"name": "w", "size": [1, 1], "blocks": [{"x": 0.5, "y": 0.5, "w": 0.06, "h": 1}]}))
@@ -84,6 +88,7 @@ def test_unreachable_goal_and_invalid_file(twb, tmp_path):
     assert out.returncode == 2 and "is not valid JSON" in out.stderr
 
 
+@pytest.mark.slow
 def test_demo_plans_every_builtin_case(twb):
     out = twb("demo")
     assert out.returncode == 0, out.stderr

@@ -22,7 +22,7 @@ from planners.stats import proportion
 from planners.compared import (COMPARED_METRICS, DIRECTION, enters, flat_metrics, job_configuration, plain,
                                problem_label)
 from sdk_helpers import invoke, study_process
-from servers import serve, wait_for
+from servers import STANDARD, wait_for
 from test_dashboard import OUTPUT, login, no_horizontal_overflow
 from test_dashboard import browser, page  # noqa: F401  (the shared fixtures: Chromium against this module's testbed)
 
@@ -35,8 +35,8 @@ STUDY = {"name": "cmp", "environments": ["room"],
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("cmp-tb"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")

@@ -15,6 +15,7 @@ import re
 import time
 from datetime import datetime
 
+import pytest
 from servers import serve, wait_for
 from test_controller_programs import CONNECT, EXAMPLES, GOAL, START, b64
 
@@ -40,6 +41,7 @@ print("sent", sent)
 """
 
 
+@pytest.mark.slow
 def test_a_flooding_controller_program_fails_as_its_own_fault_and_frees_the_robot(tmp_path_factory):
     for testbed in serve(["up", "--time-scale", "2", "--sim-robots", "1", "--enable-uploads"],
                          tmp_path_factory.mktemp("flood"), env=ENV):

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from servers import TOKEN, TWB, serve, wait_for
+from servers import TOKEN, TWB, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples" / "controllers"
@@ -53,9 +53,8 @@ def b64(data: str | bytes) -> str:
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "2", "--sim-robots", "8", "--enable-uploads"],
-                     tmp_path_factory.mktemp("controllers"), env=LIMITS)
+def testbed(testbeds):  # its own: uploads, eight simulated robots at twice live speed, the programs' limits
+    yield from testbeds.own("up", "--time-scale", "2", "--sim-robots", "8", "--enable-uploads", env=LIMITS)
 
 
 @pytest.fixture(scope="module")

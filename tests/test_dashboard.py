@@ -18,7 +18,7 @@ import httpx
 import numpy as np
 import pytest
 
-from servers import TOKEN, serve, wait_for
+from servers import STANDARD, TOKEN, wait_for
 
 CHROMIUM = Path(os.environ.get("TWB_CHROMIUM") or "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"]
@@ -55,8 +55,9 @@ def _missing_browser() -> str | None:
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("dash"))
+def testbed(testbeds):
+    # its own: the field page's robots, traces and legend are those of this module's runs only
+    yield from testbeds.own(*STANDARD)
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ import math
 
 import pytest
 
-from servers import serve
+from servers import STANDARD
 from test_dashboard import (FLEET_RGB, LAPTOP, OUTPUT, ROOT, TABLET, canvas_geometry, count_pixels, login,
                             no_horizontal_overflow, submit_and_wait, world_to_page)
 from test_dashboard import browser, page  # noqa: F401  (the shared fixtures)
@@ -25,8 +25,8 @@ SWAP = json.loads((ROOT / "planners" / "data" / "swap.json").read_text())
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("dashfleet"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 def open_fleet_form(pg, url: str) -> None:

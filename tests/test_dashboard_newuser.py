@@ -16,7 +16,7 @@ import re
 
 import pytest
 
-from servers import Process, wait_for
+from servers import STANDARD, Process, wait_for
 from test_dashboard import CORNER, OUTPUT, OVERSHOOT_ENV, Console, login, no_horizontal_overflow
 from test_dashboard import browser, page  # noqa: F401  (the shared fixtures)
 
@@ -46,14 +46,16 @@ UPPER = {"goal_reached": 1.0, "collided": 1.0, "spl": 1.0, "heading_error_rms_ra
          "barn_score": 0.5}
 
 
+#: test_dashboard.py's environment under a name of this module's (the two may share a testbed)
+OVERSHOOT = {**OVERSHOOT_ENV, "name": "newuser-overshoot"}
+
+
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("dashnew"))
-    with p.client() as c:
-        assert c.post("/api/v1/environments", json=OVERSHOOT_ENV).status_code == 201
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+def testbed(testbeds):
+    for p in testbeds.module(*STANDARD):
+        with p.client() as c:
+            assert c.post("/api/v1/environments", json=OVERSHOOT).status_code == 201
+        yield p
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +64,7 @@ def finished(testbed) -> dict:
     with testbed.client() as c:
         ok = c.post("/api/v1/experiments", json={**ROOM_JOB, "modes": ["sim", "twb"], "repetitions": 2, "seed": 4})
         # the field robot overshoots the path's corner into a block: the experiment fails, and says why
-        bad = c.post("/api/v1/experiments", json={"environment": OVERSHOOT_ENV["name"], "modes": ["twb"], **CORNER,
+        bad = c.post("/api/v1/experiments", json={"environment": OVERSHOOT["name"], "modes": ["twb"], **CORNER,
                                                   "path": [CORNER["start"], [0.9, 0.69], CORNER["goal"]]})
         assert ok.status_code == 202 and bad.status_code == 202, (ok.text, bad.text)
         done = {"ok": wait_for(c, ok.json()["id"], timeout=120), "bad": wait_for(c, bad.json()["id"], timeout=120)}
@@ -225,7 +227,7 @@ def test_the_submit_toast_follows_the_experiment_and_leaves_nothing_stale(page, 
 
 
 @pytest.fixture
-def slow_testbed(tmp_path_factory):
+def slow_testbed(tmp_path_factory):  # the only module at ten times live speed: nothing to share it with
     """At ten times live speed the gripper, placing and planning take long enough to be seen (at 'max' a run's
     steps can all arrive within one frame of the browser)."""
     p = Process(["up", "--time-scale", "10", "--sim-robots", "1"], tmp_path_factory.mktemp("dashslow"))
@@ -233,6 +235,7 @@ def slow_testbed(tmp_path_factory):
     assert p.stop() == 0, p.output()
 
 
+@pytest.mark.slow
 def test_a_sub_field_shows_its_runs_status_as_the_queue_does(browser, slow_testbed):  # noqa: F811
     """The sub-field said "building" while the queue said "placing": the field page now shows the run's status."""
     from playwright.sync_api import expect

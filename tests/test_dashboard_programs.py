@@ -14,7 +14,7 @@ import base64
 
 import pytest
 
-from servers import Process, wait_for
+from servers import wait_for
 from test_dashboard import OUTPUT, TABLET, Console, login, no_horizontal_overflow, submit_and_wait
 from test_dashboard import browser, page  # noqa: F401  (the shared fixtures)
 
@@ -45,13 +45,11 @@ OPEN = {"name": "open", "size": [1.8, 1.8], "blocks": []}  # nothing in the way 
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2", "--enable-uploads"], tmp_path_factory.mktemp("dashprog"))
-    with p.client() as c:
-        assert c.post("/api/v1/environments", json=OPEN).status_code == 201
-    yield p
-    assert p.stop() == 0, p.output()
-    assert "Traceback" not in p.output(), p.output()
+def testbed(testbeds):  # its own: uploads enabled
+    for p in testbeds.own("up", "--time-scale", "max", "--sim-robots", "2", "--enable-uploads"):
+        with p.client() as c:
+            assert c.post("/api/v1/environments", json=OPEN).status_code == 201
+        yield p
 
 
 def fact(pg, name: str):

@@ -8,6 +8,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from twb.datadir import GITIGNORE, make_data_dir
 
 
@@ -15,6 +17,7 @@ def git(repo, *args: str) -> str:
     return subprocess.run(["git", "-C", str(repo), *args], capture_output=True, text=True, check=True).stdout
 
 
+@pytest.mark.slow
 def test_a_new_data_dir_keeps_itself_out_of_git(tmp_path):
     repo = tmp_path / "my-project"
     repo.mkdir()

@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.mark.skipif(shutil.which("docker-compose") is None,
                     reason="docker-compose is not installed (Debian: apt-get install --no-install-recommends docker-compose)")
+@pytest.mark.slow
 def test_compose_file_is_valid():
     out = subprocess.run(["docker-compose", "-f", "docker-compose.yml", "config"], cwd=ROOT, capture_output=True,
                          text=True, env={**os.environ, "TWB_TOKEN": "compose-test-token"}, timeout=60)
@@ -46,6 +47,7 @@ def compose_commands() -> dict[str, list[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_compose_agent_commands_register_on_their_subfields(tmp_path):
     cmds = compose_commands()
     assert set(cmds) == {"server", "field-1", "field-2", "field-3", "field-4", "sim"}

@@ -186,6 +186,7 @@ def documented_metrics(expected: list[str]) -> dict[str, float]:
     return out
 
 
+@pytest.mark.slow
 def test_readme_without_a_server(shell):
     section = markdown_section(ROOT / "README.md", "## Without a server")
     steps = console_steps(fenced_blocks(section, "console")[0])
@@ -210,6 +211,7 @@ def test_readme_without_a_server(shell):
     assert planned[0] == "t,x,y,theta" and not any(line.startswith("#") for line in planned)
 
 
+@pytest.mark.slow
 def test_sdk_send_path_example(shell):
     section = markdown_section(ROOT / "docs" / "sdk.md", "## The raw way: a path over TCP")
     agent = console_steps(fenced_blocks(section, "console")[0])

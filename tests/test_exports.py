@@ -29,7 +29,7 @@ from server.export import ExportFormat, Names, RobotTrack, RunRecord, quaternion
 from server.export.convert import write_export
 from server.export.layout import flat_metrics, log_level
 from server.export.rosbag2_file import typestore
-from servers import TOKEN, serve, wait_for
+from servers import STANDARD, TOKEN, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 FLEET = json.loads((ROOT / "examples" / "fleet" / "swap-prioritized.json").read_text())
@@ -41,8 +41,8 @@ SIDE = {"name": "export-movers", "size": [1.8, 1.8],
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("exports"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")
@@ -351,14 +351,14 @@ def test_twb_export_writes_the_file(testbed, twb, single, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def bare(tmp_path_factory):
+def bare(testbeds, tmp_path_factory):
     """A `twb server` that cannot import the export packages (stand-ins that raise ImportError shadow them)."""
     stubs = tmp_path_factory.mktemp("no-export-extra")
     for name in ("foxglove", "rosbags"):
         (stubs / name).mkdir()
         (stubs / name / "__init__.py").write_text(f"raise ImportError('{name} is not installed (test stand-in)')\n")
     path = os.pathsep.join([str(stubs), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    yield from serve(["server", "--port", "0"], tmp_path_factory.mktemp("bare"), env={"PYTHONPATH": path})
+    yield from testbeds.own("server", "--port", "0", env={"PYTHONPATH": path})
 
 
 @pytest.mark.parametrize("fmt, missing", [("mcap", "foxglove-sdk"), ("rosbag2", "rosbags")])

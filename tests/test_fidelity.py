@@ -35,6 +35,7 @@ REDUCED = {"name": "reduced", "environments": ["room"], "plans": ["A", "B"], "pl
            "repetitions": 1, "modes": ["sim", "twb"]}
 
 
+@pytest.mark.slow
 def test_a_reduced_study_checks_every_claim_as_the_offline_runs_do(twb, tmp_path):
     """Room A and B, FMM, FM² and PRM, one repetition (12 runs) on an embedded testbed at maximum speed.
 

@@ -148,6 +148,7 @@ MOVING = {"name": "one-way-moving", "size": [1.8, 1.8], "blocks": [],
                                 "repeat": "pingpong", "delay_s": 0.5}]}
 
 
+@pytest.mark.slow
 async def test_a_field_agents_run_and_the_same_run_as_a_task_meet_the_same_obstacle_robot(tmp_path):
     """The agent's field robot drives its obstacle robot live; the server replays it for the metrics.  The same
     run computed as a task (profile overrides equal to the shipped values) gives the same collision, poses and

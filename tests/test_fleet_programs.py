@@ -20,7 +20,7 @@ import pytest
 from client_sdk import Client
 from contract.params import robot_params
 from server.sandbox.outcome import explain_fleet, robots_phrase
-from servers import serve, wait_for
+from servers import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "uploads.md"
@@ -60,9 +60,8 @@ def b64(text: str) -> str:
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "4", "--enable-uploads"],
-                     tmp_path_factory.mktemp("fleet-programs"), env=LIMITS)
+def testbed(testbeds):  # its own: uploads, four simulated robots, the programs' limits
+    yield from testbeds.own("up", "--time-scale", "max", "--sim-robots", "4", "--enable-uploads", env=LIMITS)
 
 
 @pytest.fixture(scope="module")

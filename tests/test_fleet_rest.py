@@ -21,7 +21,7 @@ from contract.params import robot_params
 from server.core.settings import Settings
 from robot_agent.engine import jobs
 from server.pipeline.fleet import fleet_failure, fleet_timeout_s
-from servers import serve, submit_watched, wait_for
+from servers import STANDARD, submit_watched, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 RADIUS = robot_params().collision_radius_m
@@ -31,8 +31,8 @@ TWO = [{"start": [0.3, 0.3], "goal": [1.5, 1.5]}, {"start": [1.5, 0.3], "goal": 
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("fleet"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,7 @@ def brute_force_distance(env, pts, n=4000):
     return np.min(np.hypot(pts[:, None, 0] - outline[None, :, 0], pts[:, None, 1] - outline[None, :, 1]), axis=1)
 
 
+@pytest.mark.slow
 def test_exact_distances_match_a_dense_outline_on_random_points():
     env = load_environment("blocks")  # includes a block turned 45 degrees
     rng = np.random.default_rng(1)

@@ -17,7 +17,6 @@ import time
 import httpx
 import pytest
 
-from servers import serve
 
 HEAD_TIMEOUT_S = 3.0
 PER_PEER = 200
@@ -27,16 +26,15 @@ HALF = b"GET /health HTTP/1.1\r\nHost: x\r\n"  # the blank line that ends the he
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
+def testbed(testbeds):  # its own: short header timeouts, few connections per peer
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     need = len(PEERS) * EACH + 500
     if soft < need:
         if hard != resource.RLIM_INFINITY and hard < need:
             pytest.skip(f"this test needs {need} open files; the hard limit is {hard}")
         resource.setrlimit(resource.RLIMIT_NOFILE, (need, hard))
-    yield from serve(["up", "--sim-robots", "1"], tmp_path_factory.mktemp("flood"),
-                     env={"TWB_HTTP_HEADER_TIMEOUT_S": str(HEAD_TIMEOUT_S),
-                          "TWB_HTTP_MAX_CONNECTIONS_PER_PEER": str(PER_PEER)})
+    yield from testbeds.own("up", "--sim-robots", "1", env={"TWB_HTTP_HEADER_TIMEOUT_S": str(HEAD_TIMEOUT_S),
+                                                            "TWB_HTTP_MAX_CONNECTIONS_PER_PEER": str(PER_PEER)})
 
 
 async def half_open(source: str, port: int) -> tuple[asyncio.StreamReader, asyncio.StreamWriter, float]:

@@ -35,6 +35,7 @@ def _uv() -> list[str] | None:
     return None
 
 
+@pytest.mark.slow
 def test_the_server_runs_from_an_installed_wheel(tmp_path):
     uv = _uv()
     if uv is None:

@@ -38,6 +38,7 @@ def conflicts(configs: np.ndarray, nbr: np.ndarray) -> list[str]:
     return out
 
 
+@pytest.mark.slow
 def test_the_circle_swap_prioritized_cannot_plan_is_planned_and_driven():
     """32 robots on a circle of 1.5 m round the full field's centre, each bound for the antipodal point:
     prioritized planning gives up at robot 28; LaCAM plans it on the 0.15 m grid, with no vertex or edge

@@ -7,6 +7,7 @@ import signal
 import time
 from pathlib import Path
 
+import pytest
 from servers import Process, wait_for
 
 ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.3, "h": 0.3}]}
@@ -41,6 +42,7 @@ def alive(pid: int) -> bool:
     return state != "Z"
 
 
+@pytest.mark.slow
 def test_worker_processes_die_with_a_killed_server(tmp_path):
     p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
     try:
@@ -60,6 +62,7 @@ def test_worker_processes_die_with_a_killed_server(tmp_path):
         time.sleep(0.2)
 
 
+@pytest.mark.slow
 def test_ctrl_c_mid_run_ends_it_interrupted_and_retries_nothing(tmp_path):
     # time scale 1: each run drives ~8 s of wall time, so both are still driving at the stop even when one
     # starts seconds after the other on a loaded machine (at 2, one finished first once in a full suite run)
@@ -101,6 +104,7 @@ def test_ctrl_c_mid_run_ends_it_interrupted_and_retries_nothing(tmp_path):
         resumed.stop()
 
 
+@pytest.mark.slow
 def test_a_stopped_testbed_leaves_no_process_behind(tmp_path):
     p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path)
     kids = descendants(p.proc.pid)
@@ -111,6 +115,7 @@ def test_a_stopped_testbed_leaves_no_process_behind(tmp_path):
         time.sleep(0.2)
 
 
+@pytest.mark.slow
 def test_a_testbed_started_by_a_program_ends_when_the_program_is_killed(tmp_path):
     """`twb study --embedded` (or a test) starts a testbed through LocalTestbed: kill -9 of the program
     must not leave the testbed, its robots or its workers behind."""
@@ -134,6 +139,7 @@ def test_a_testbed_started_by_a_program_ends_when_the_program_is_killed(tmp_path
 
 
 
+@pytest.mark.slow
 def test_an_agent_stops_on_ctrl_c_and_sigterm_even_when_started_with_ctrl_c_ignored():
     """A background job of a script starts with SIGINT ignored: `twb agent` must still stop on Ctrl-C (and on
     SIGTERM, flushing what it has), not hang until killed."""
@@ -169,6 +175,7 @@ def _pool_workers(server_pid: int) -> list[int]:
     return out
 
 
+@pytest.mark.slow
 def test_a_killed_planning_worker_is_replaced_and_costs_one_retry(tmp_path):
     """SIGKILL one worker (what the out-of-memory killer does): the broken pool is replaced, the job that met
     it ends its try as a testbed error and is retried, and every later job plans as before."""
@@ -197,6 +204,7 @@ def test_a_killed_planning_worker_is_replaced_and_costs_one_retry(tmp_path):
     assert "Traceback" not in p.output(), p.output()
 
 
+@pytest.mark.slow
 def test_a_stop_during_start_up_ends_everything_at_once(tmp_path):
     """SIGTERM while the first start compiles the simulation kernels (a fresh kernel cache: the longest
     start-up there is, up to minutes on a busy machine): the process and its workers end at once instead of

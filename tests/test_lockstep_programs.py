@@ -47,6 +47,7 @@ def drive(tmp_path: Path, scale: str) -> tuple[dict, dict[str, np.ndarray]]:
     return exp, poses
 
 
+@pytest.mark.slow  # three real testbeds, one after the other
 def test_a_controller_program_gives_the_same_poses_at_time_scale_1_5_and_max(tmp_path):
     runs = {scale: drive(tmp_path, scale) for scale in ("1", "5", "max")}
     for scale, (exp, _) in runs.items():

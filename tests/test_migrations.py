@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.config import Config
@@ -41,6 +43,7 @@ def test_a_checkout_migrates_from_its_top_level_alembic_directory():
     assert not (ROOT / "server" / "migrations").exists()
 
 
+@pytest.mark.slow
 def test_alembic_upgrade_head_from_the_repository_root(tmp_path):
     """The command line as docs/server.md shows it: alembic.ini at the root, the URL from TWB_DATABASE_URL."""
     from alembic.script import ScriptDirectory

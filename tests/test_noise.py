@@ -11,7 +11,7 @@ import pytest
 from client_sdk.study import StudySpecError, load_spec, noise_spec
 from contract.overrides import OverrideError, apply_overrides, check_overrides
 from contract.robot_profile import load_profile
-from servers import Process, wait_for
+from servers import STANDARD, wait_for
 from sdk_helpers import invoke
 
 PROBLEM = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fmm",
@@ -76,10 +76,8 @@ def test_the_noise_study_labels_default_to_the_overrides():
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path_factory.mktemp("noise-tb"))
-    yield p
-    assert p.stop() == 0, p.output()
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)  # the shared one: its second simulated robot changes nothing here
 
 
 @pytest.mark.parametrize("overrides, modes, message", [

@@ -31,7 +31,7 @@ from server.scheduler import Assignment
 from server.status import RunStatus
 from server.store.poses import obstacle_poses, run_poses
 
-from servers import TOKEN, serve, wait_for
+from servers import TOKEN, wait_for
 from test_dashboard import browser, page  # noqa: F401  (the shared fixtures)
 from test_dashboard import canvas_geometry, count_pixels, login, world_to_page
 from test_pipeline import add_experiment, run_and_store, running
@@ -87,6 +87,7 @@ def _off_exact(tracks: dict, t_zero: float, env: dict = SIDE) -> list[np.ndarray
 # --------------------------------------------------------------------------- in-process, both databases
 
 
+@pytest.mark.slow
 async def test_a_field_run_stores_its_obstacle_robots_with_its_end_and_nothing_else_changes(tmp_path, database_url):
     """On SQLite and on PostgreSQL (its COPY path): the agent's field run stores the obstacle robots the server
     replayed for its metrics, bit for bit, and they give its obstacle metrics again; they lag their exact tracks
@@ -176,8 +177,10 @@ def test_the_exact_tracks_are_the_formulas_with_the_heading_they_move_in():
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path_factory.mktemp("obstacles"))
+def testbed(testbeds):
+    # its own: the field page's legend names the last field run of every sub-field, and on the shared testbed
+    # other modules' runs (without moving obstacles) are the last on the sub-fields this module does not use
+    yield from testbeds.own("up", "--time-scale", "max", "--sim-robots", "1")
 
 
 @pytest.fixture(scope="module")

@@ -484,6 +484,7 @@ def test_appending_to_omplss_real_database_and_ompls_script_appending_to_ours(st
     assert query(ours, "SELECT count(DISTINCT name), count(DISTINCT version) FROM experiments") == [(1, 1)]
 
 
+@pytest.mark.slow
 def test_planner_arena_loads_and_plots_both(study, ompl_db, tmp_path):
     pytest.importorskip("plannerarena", reason="the plannerarena package is not installed (pip install -e '.[ompl]')")
     import matplotlib

@@ -15,7 +15,7 @@ import pytest
 
 from planners import DEFAULT_PLANNING_MARGIN, DEFAULT_ROBOT_RADIUS, PlanningError, parse_environment, plan_path
 from server.store.experiments import planner_seed, run_seed
-from servers import Process, serve, wait_for
+from servers import STANDARD, Process, wait_for
 
 START, GOAL = [0.3, 0.3, 0.0], [1.5, 1.5, 1.5708]
 PRM = {"environment": "room", "start": START, "goal": GOAL, "planner": "prm", "modes": ["sim", "twb"],
@@ -32,8 +32,8 @@ TIMED = {"planning_time_s", "planning_cpu_s", "planning_repeats", "planning_load
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("plans"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")
@@ -200,6 +200,7 @@ def test_a_randomised_planner_that_fails_one_repetition_fails_that_repetition_on
     assert metrics["outcomes"]["sim"]["counts"].get("planning") == list(expected.values()).count(False)
 
 
+@pytest.mark.slow
 def test_the_same_randomised_job_gives_the_same_paths_on_sqlite_and_postgresql(postgres, tmp_path):
     job = {**PRM, "repetitions": 2, "seed": 4}
     found = {}

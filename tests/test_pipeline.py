@@ -118,6 +118,7 @@ async def test_a_collision_fails_the_run_and_it_is_still_measured(tmp_path, data
 WALL = {"name": "wall", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y": 0.9, "w": 0.06, "h": 1.8}]}
 
 
+@pytest.mark.slow
 async def test_no_path_of_a_deterministic_planner_fails_the_whole_experiment_and_is_not_planned_twice(tmp_path):
     async with running(tmp_path) as tb:
         exp_id, run_id = add_experiment(tb, env=WALL, goal=(1.5, 0.3, 0.0), mode="sim")
@@ -170,6 +171,7 @@ async def test_too_few_tracker_poses_is_the_testbeds_fault(tmp_path):
         assert end.status is RunStatus.ERROR and end.error.startswith("cannot compute metrics: only 0 pose(s)")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stopping", [False, True])
 async def test_a_cancelled_run_ends_cancelled_or_interrupted_and_keeps_its_log(tmp_path, stopping):
     async with running(tmp_path, time_scale=2.0) as tb:
@@ -241,6 +243,7 @@ MOVING = {**ONE_BLOCK, "name": "one-block-moving",
 
 @pytest.mark.parametrize("through, controller", [("", "schema"), ("block", "schema"), ("obstacle", "schema"),
                                                 ("", "kanayama"), ("", "regulated_pure_pursuit")])
+@pytest.mark.slow
 async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, through, controller):
     """The same run on the agent's robot and as one compute task (the Ray pool's code path, here on the
     worker processes): the same outcome, where it stopped, poses (bit for bit) and metrics (1e-9); with any
@@ -290,6 +293,7 @@ async def test_a_run_as_an_engine_task_gives_what_an_agent_gives(tmp_path, throu
             assert ea.error == "collision: the robot hit moving obstacle 0 (the environment's moving_obstacles[0])"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("planner", ["fmm", "st_astar"])
 async def test_the_crossing_disc_fails_an_uncoordinated_run_and_not_a_space_time_one(tmp_path, planner):
     """Moving obstacles (docs/planners.md, "Moving obstacles"): plan A of the built-in `crossing` on the agent's
@@ -321,6 +325,7 @@ async def test_the_crossing_disc_fails_an_uncoordinated_run_and_not_a_space_time
 
 
 
+@pytest.mark.slow
 async def test_a_replanning_run_counts_its_replans_on_the_agent_and_as_a_task(tmp_path):
     """Replanning (docs/controllers.md, "Replanning"): fmm's path of `crossing` A with regulated pure pursuit
     replanning, on the agent's robot and as an engine task: both reach the goal around the disc, log the EV,REPLAN

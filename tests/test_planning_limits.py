@@ -7,6 +7,7 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 from servers import Process, wait_for
 
 WORKER = textwrap.dedent("""
@@ -34,12 +35,14 @@ def _worker(job: str, memory: int = 0, deadline: float = 0.0) -> str:
     return out.stdout
 
 
+@pytest.mark.slow
 def test_an_allocation_past_the_memory_cap_is_the_jobs_failure():
     out = _worker("np.ones((4000, 40000))", memory=1024)  # 1.2 GB against a 1 GiB data segment
     assert "LIMIT the planning memory limit of 1024 MiB per worker was reached" in out, out
     assert "choose coarser planner parameters" in out and "NEXT " in out
 
 
+@pytest.mark.slow
 def test_a_plan_past_the_deadline_is_stopped_and_the_worker_goes_on():
     out = _worker("plan_path('room', [0.3, 0.3], [1.5, 1.5], 'prm', params={'samples': 200000, 'k': 100})",
                   deadline=0.3)
@@ -47,6 +50,7 @@ def test_a_plan_past_the_deadline_is_stopped_and_the_worker_goes_on():
     assert "NEXT " in out
 
 
+@pytest.mark.slow
 def test_the_server_fails_a_plan_past_its_deadline_as_planning(tmp_path):
     p = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path, env={"TWB_PLANNING_TIMEOUT_S": "0.3"})
     try:

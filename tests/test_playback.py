@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from server.pipeline.playback import Playback, play
-from servers import EventListener, serve, submit_watched, wait_for
+from servers import EventListener, submit_watched, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -91,8 +91,8 @@ TWO = {"environment": "swap", "planner": "prioritized", "modes": ["twb"], "field
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "4", "--sim-robots", "1"], tmp_path_factory.mktemp("playback"))
+def testbed(testbeds):  # its own: at four times live speed, the playback's timing is measured
+    yield from testbeds.own("up", "--time-scale", "4", "--sim-robots", "1")
 
 
 @pytest.fixture(scope="module")

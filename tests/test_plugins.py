@@ -17,7 +17,7 @@ from contract.plugins import LoadError
 from planners import (Planner, PlanningError, UnknownPlanner, available_planners, get_planner, plan_path,
                       register_planner)
 from planners import registry
-from servers import TOKEN, serve
+from servers import TOKEN
 
 PLUGIN = textwrap.dedent(
     '''
@@ -149,6 +149,7 @@ def test_a_broken_plugin_gives_a_clear_error(plugin_dist):
         get_planner("broken")
 
 
+@pytest.mark.slow
 def test_plugin_from_the_command_line(plugin_dist, twb):
     env = {"PYTHONPATH": str(plugin_dist)}
     out = twb("plan", "--env", "room", "--start", "0.3,0.3", "--goal", "0.6,0.5", "--planner", "straight", env=env)
@@ -201,6 +202,7 @@ def _twb_with(python: Path, *args: str, env: dict | None = None):
                           env={**os.environ, **(env or {})})
 
 
+@pytest.mark.slow
 def test_plugins_install_goes_into_the_interpreter_running_twb(scratch_venv, twb):
     import shutil
 
@@ -219,6 +221,7 @@ def test_plugins_install_goes_into_the_interpreter_running_twb(scratch_venv, twb
     assert "shortcut" not in twb("planners").stdout
 
 
+@pytest.mark.slow
 def test_without_uv_or_pip_install_says_what_to_do(scratch_venv, tmp_path):
     import os
 
@@ -229,6 +232,7 @@ def test_without_uv_or_pip_install_says_what_to_do(scratch_venv, tmp_path):
     assert "uv is not on PATH and this Python has no pip" in r.stderr and "ensurepip" in r.stderr
 
 
+@pytest.mark.slow
 def test_plugins_list_names_the_ones_that_fail_and_says_to_restart(plugin_dist, twb):
     r = twb("plugins", "list", env={"PYTHONPATH": str(plugin_dist)})
     assert r.returncode == 1
@@ -342,10 +346,10 @@ def test_the_older_defaults_dict_declares_the_same_params():
 
 
 @pytest.fixture(scope="module")
-def plugin_server(tmp_path_factory):
-    """`twb server` whose Python sees the test distribution (PYTHONPATH), as after installing it."""
+def plugin_server(testbeds, tmp_path_factory):
+    """`twb server` whose Python sees the test distribution (PYTHONPATH), as after installing it (its own)."""
     dist = write_plugin_dist(tmp_path_factory.mktemp("dist"))
-    yield from serve(["server"], tmp_path_factory.mktemp("server"), env={"PYTHONPATH": str(dist)})
+    yield from testbeds.own("server", env={"PYTHONPATH": str(dist)})
 
 
 def test_the_listings_show_each_plugin_that_does_not_load_with_its_error(plugin_server):

@@ -18,6 +18,7 @@ ONE_BLOCK = {"name": "one-block", "size": [1.8, 1.8], "blocks": [{"x": 0.9, "y":
 SLOW_JOB = {"environment": "one-block", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0], "planner": "fmm"}
 
 
+@pytest.mark.slow
 def test_a_job_runs_end_to_end_on_postgresql(postgres, tmp_path):
     url = postgres.database()
     p = Process(["up", "--time-scale", "max", "--sim-robots", "2", "--database-url", url], tmp_path)
@@ -35,6 +36,7 @@ def test_a_job_runs_end_to_end_on_postgresql(postgres, tmp_path):
         assert p.stop() == 0, p.output()
 
 
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_poses_on_sqlite_and_postgresql(postgres, tmp_path):
     job = {**JOB, "modes": ["twb"], "repetitions": 1, "seed": 42}
     found = {}
@@ -54,6 +56,7 @@ def test_the_same_seed_gives_the_same_poses_on_sqlite_and_postgresql(postgres, t
         {k: v for k, v in mb.items() if k != "planning_time_s"}
 
 
+@pytest.mark.slow
 def test_the_database_going_away_mid_run_loses_nothing(postgres, tmp_path):
     """Kill PostgreSQL while runs drive: the API answers 503, the runs in flight are queued again once the
     database is back, and the experiment completes; nothing completed before is lost."""
@@ -102,6 +105,7 @@ def pg_server(postgres, tmp_path_factory):
     assert "Traceback" not in p.output(), p.output()
 
 
+@pytest.mark.slow
 def test_two_requests_cancelling_the_same_experiment(pg_server):
     with pg_server.client() as c:
         ids = [c.post("/api/v1/experiments", json={**JOB, "modes": ["sim"]}).json()["id"] for _ in range(6)]
@@ -125,6 +129,7 @@ def test_two_requests_cancelling_the_same_experiment(pg_server):
             assert e["status"] == "cancelled" and {r["status"] for r in e["runs"]} == {"cancelled"}
 
 
+@pytest.mark.slow
 def test_tracker_batches_from_many_clients_at_once(pg_server):
     with pg_server.client() as admin:
         token = admin.post("/api/v1/users/admin/tokens", params={"kind": "agent"}).json()["token"]

@@ -58,6 +58,7 @@ def test_sixteen_robots_cross_the_field():
     assert len(plan.paths) == 16 and min_separation(plan.paths) >= 2 * (RADIUS + 0.02)
 
 
+@pytest.mark.slow
 def test_bad_fleets_are_refused_naming_the_robots():
     with pytest.raises(PlanningError, match="robots 0 and 1 have starts 0.050 m apart"):
         plan_prioritized(DOOR, [[0.3, 0.5], [0.35, 0.5]], [[1.5, 0.5], [1.5, 0.2]])

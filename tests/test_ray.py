@@ -22,8 +22,6 @@ import numpy as np
 import pytest
 from servers import Process, wait_for
 
-pytest.importorskip("ray", reason="Ray is an optional extra (make test installs it with the dev extra)")
-
 JOBS = [
     {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fmm",
      "modes": ["sim"], "repetitions": 2, "seed": 42, "jitter": {"xy_m": 0.01, "theta_rad": 0.05}},
@@ -66,7 +64,8 @@ def _close(a: object, b: object, key: str = "") -> None:
         assert a == b, (key, a, b)
 
 
-def test_a_run_on_ray_equals_the_same_run_on_a_local_agent(postgres, tmp_path):
+@pytest.mark.slow
+def test_a_run_on_ray_equals_the_same_run_on_a_local_agent(ray, postgres, tmp_path):
     """Local agents on SQLite against Ray tasks on PostgreSQL: the same outcomes, poses and metrics."""
     local = Process(["up", "--time-scale", "max", "--sim-robots", "1"], tmp_path / "local")
     try:
@@ -133,7 +132,7 @@ def _head_of(server_pid: int) -> int:
 
 
 @pytest.fixture(scope="module")
-def paused_ray(tmp_path_factory):
+def paused_ray(ray, tmp_path_factory):
     """`twb server` with a local Ray cluster of one CPU whose simulation tasks pause 3 s before simulating
     (TWB_FAULT_SIM_PAUSE_S), so that a test can kill a worker in the middle of a run."""
     p = Process(["server", "--time-scale", "max", "--sim-engine", "ray", "--ray-cpus", "1"],
@@ -142,6 +141,7 @@ def paused_ray(tmp_path_factory):
     p.stop()
 
 
+@pytest.mark.slow
 def test_a_killed_ray_worker_ends_the_run_error_and_it_is_retried_once(paused_ray):
     with paused_ray.client() as c:
         exp = c.post("/api/v1/experiments", json={**JOBS[0], "repetitions": 1}).json()
@@ -157,6 +157,7 @@ def test_a_killed_ray_worker_ends_the_run_error_and_it_is_retried_once(paused_ra
     assert run["robot_id"].startswith("ray-") and run["metrics"]["execution_time_s"] > 0
 
 
+@pytest.mark.slow
 def test_the_local_ray_cluster_ends_with_a_killed_server(paused_ray):
     pgid = _head_of(paused_ray.proc.pid)
     assert len(_processes_of_group(pgid)) >= 3  # the head, Ray's GCS and raylet at least
@@ -168,7 +169,7 @@ def test_the_local_ray_cluster_ends_with_a_killed_server(paused_ray):
         time.sleep(0.2)
 
 
-def test_an_unreachable_ray_address_is_one_clear_line(twb, tmp_path):
+def test_an_unreachable_ray_address_is_one_clear_line(ray, twb, tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -181,6 +182,7 @@ def test_an_unreachable_ray_address_is_one_clear_line(twb, tmp_path):
     assert bad.returncode == 2 and "expected host:port of the Ray head" in bad.stderr
 
 
+@pytest.mark.slow
 def test_without_ray_the_server_says_how_to_install_it(tmp_path):
     import subprocess
 

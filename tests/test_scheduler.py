@@ -332,6 +332,7 @@ def replay(sc: Scenario, paths: dict[str, int]) -> None:
             assert fleet_answers(new) == fleet_answers(ref)
 
 
+@pytest.mark.slow
 def test_same_assignments_and_estimates_as_the_reference_on_random_scenarios():
     paths = {"by kind": 0, "events": 0}
     for seed in range(400):

@@ -27,15 +27,15 @@ from client_sdk import (
     send_path,
 )
 from sdk_helpers import agent_process
-from servers import serve
+from servers import STANDARD
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 1, "seed": 3}
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("sdk"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")
@@ -199,6 +199,7 @@ def agent_port():
         yield port
 
 
+@pytest.mark.slow
 def test_send_path_raw_tcp(agent_port):
     path = np.array([[0.1, 0.1], [0.5, 0.1], [0.5, 0.6]])
     r = send_path("127.0.0.1", agent_port, path, follow=True, timeout=10)
@@ -211,6 +212,7 @@ def test_send_path_raw_tcp(agent_port):
         send_path("127.0.0.1", agent_port, [[0, 0], [np.nan, 1]])
 
 
+@pytest.mark.slow
 def test_send_path_with_a_secret_to_a_robot_with_a_control_key():
     key = "sdk-control-key-0001"
     path = [[0.1, 0.1], [0.5, 0.1]]

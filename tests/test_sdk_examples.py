@@ -23,6 +23,7 @@ def agent_port():
         yield port
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
 def test_c_planner_drives_a_real_agent(agent_port, tmp_path):
     exe = tmp_path / "ttp_planner"
@@ -39,6 +40,7 @@ def test_c_planner_drives_a_real_agent(agent_port, tmp_path):
     assert r.returncode == 1 and r.stdout.splitlines()[-1].startswith("ERR,RANGE,")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
 def test_bash_planner_sends_a_twb_plan_path(agent_port):
     ttp = subprocess.run([str(TWB), "plan", "--env", "room", "--plan", "A", "--planner", "fm2", "--format", "ttp"],
@@ -53,6 +55,7 @@ def test_bash_planner_sends_a_twb_plan_path(agent_port):
     assert r.returncode == 1 and "ERR,SYNTAX," in r.stdout
 
 
+@pytest.mark.slow
 def test_plugin_planner_plans_and_declares_its_entry_point():
     meta = tomllib.loads((EXAMPLES / "planner_plugin" / "pyproject.toml").read_text())
     target = meta["project"]["entry-points"]["teleworkbench.planners"]["shortcut"]

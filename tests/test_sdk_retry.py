@@ -18,7 +18,6 @@ import pytest
 
 from client_sdk import AsyncClient, Client, RateLimited, Unauthorized, Unavailable
 from client_sdk._base import retry_after
-from servers import serve
 
 USER = {"id": 1, "name": "ada", "is_admin": False, "created_at": "2026-01-02T03:04:05Z"}
 Answer = tuple[int, dict[str, str], Any]
@@ -124,9 +123,9 @@ def test_retry_after_values(value, seconds):
 
 
 @pytest.fixture(scope="module")
-def strict_server(tmp_path_factory):
-    """`twb server` that answers 429 after one unknown token per minute from a client."""
-    yield from serve(["server"], tmp_path_factory.mktemp("limited"), env={"TWB_AUTH_FAILURES_PER_MINUTE": "1"})
+def strict_server(testbeds):
+    """`twb server` that answers 429 after one unknown token per minute from a client (its own)."""
+    yield from testbeds.own("server", env={"TWB_AUTH_FAILURES_PER_MINUTE": "1"})
 
 
 def test_the_testbeds_limit_on_unknown_tokens_is_raised_with_its_retry_after(strict_server):

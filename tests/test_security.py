@@ -14,15 +14,15 @@ import pytest
 
 from server.access import event_for
 from server.core.security import Principal
-from servers import Process, serve, wait_for
+from servers import Process, wait_for
 
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim"], "repetitions": 1, "seed": 3}
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    yield from serve(["server"], tmp_path_factory.mktemp("secure"))
+def server(testbeds):
+    yield from testbeds.own("server")  # its own: the tests count its users' tokens and queued experiments
 
 
 def agent_token(server, user: str) -> str:
@@ -124,6 +124,7 @@ def test_numbers_beyond_64_bits_are_refused_not_crashed_on(server):
             assert r.status_code == 422, (path, r.status_code, r.text)
 
 
+@pytest.mark.slow
 def test_the_quota_holds_under_concurrent_submissions(tmp_path):
     server = Process(["server"], tmp_path, env={"TWB_MAX_QUEUED_PER_USER": "3"})  # no robots: all stay queued
     try:
@@ -165,6 +166,7 @@ def test_many_experiments_are_cancelled_in_one_request(server):
         admin.post(f"/api/v1/experiments/{others}/cancel")
 
 
+@pytest.mark.slow
 def test_unknown_tokens_are_limited_per_client(tmp_path):
     p = Process(["server"], tmp_path, env={"TWB_AUTH_FAILURES_PER_MINUTE": "5"})
     try:

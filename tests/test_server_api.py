@@ -7,11 +7,13 @@ from sqlalchemy import create_engine, text
 
 from servers import Process
 
+pytestmark = pytest.mark.slow  # every test here is against the real `twb server` of the module's fixture
+
 JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 1.5708], "planner": "fm2",
        "modes": ["sim", "twb"], "repetitions": 2, "seed": 3}
 
 
-@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+@pytest.fixture(scope="module", params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def server(request, tmp_path_factory):
     """`twb server` on each store: its SQLite default, and PostgreSQL (the session's, a fresh database)."""
     data = tmp_path_factory.mktemp("server")

@@ -21,7 +21,7 @@ from client_sdk.study import (
     plan_jobs,
 )
 from client_sdk import Environment, Plan
-from servers import Process
+from servers import STANDARD
 from sdk_helpers import invoke, study_process
 
 SMALL = {"name": "small", "environments": ["room"], "plans": ["A"], "planners": ["fmm", "fm2"],
@@ -29,10 +29,8 @@ SMALL = {"name": "small", "environments": ["room"], "plans": ["A"], "planners": 
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    p = Process(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("study-tb"))
-    yield p
-    assert p.stop() == 0, p.output()
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")
@@ -365,6 +363,7 @@ def test_unknown_environment_in_a_study(capsys, monkeypatch, testbed, tmp_path):
     assert r.returncode == 2 and "unknown environment 'atlantis'" in r.stderr and r.stderr.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_embedded_study(twb, tmp_path):
     """An embedded study whose environment is a file next to the study file (issue 32: "unknown environment
     'narrow.json'"), run from another directory."""

@@ -23,7 +23,7 @@ from client_sdk.study import (ARENA, DISCS, FLEET, FLEET_DISCS, StudySpec, Study
 from client_sdk.study._fleet import SEPARATION_M, circle_robots
 from client_sdk.study._report import report_html
 from client_sdk.study._fleet_results import FLEET_KINDS, fleet_outcome, fleet_row
-from servers import serve
+from servers import STANDARD
 from sdk_helpers import invoke, study_process
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -211,8 +211,8 @@ def test_a_fleet_row_renames_the_robot_share_and_lists_each_robot():
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory):
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "2"], tmp_path_factory.mktemp("fleet-study-tb"))
+def testbed(testbeds):
+    yield from testbeds.module(*STANDARD)
 
 
 @pytest.fixture(scope="module")

@@ -54,6 +54,7 @@ def test_progress_gives_runs_per_second_and_the_time_left(monkeypatch):
     assert line.startswith("study sweep: 700/1000 runs, ") and "runs/s, ETA " in line and "failed 10" in line
 
 
+@pytest.mark.slow
 def test_a_sim_sweep_streams_its_results_to_disk_paced_by_the_queue_quota(tmp_path):
     """8 experiments through a testbed that lets a user queue 3: the study goes in as its experiments finish."""
     tb = Process(["up", "--time-scale", "max", "--sim-robots", "4"], tmp_path / "tb",

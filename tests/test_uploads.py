@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from servers import Process, serve, wait_for
+from servers import Process, wait_for
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "uploads.md"
 ROOT = Path(__file__).resolve().parent.parent
@@ -47,10 +47,9 @@ def sandbox_processes() -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def testbed(tmp_path_factory, sandbox_isolation):
+def testbed(testbeds, sandbox_isolation):
     """The batch tries escapes that only the sandbox's namespaces stop: it needs them (conftest.py)."""
-    yield from serve(["up", "--time-scale", "max", "--sim-robots", "16", "--enable-uploads"],
-                     tmp_path_factory.mktemp("uploads"), env=LIMITS)
+    yield from testbeds.own("up", "--time-scale", "max", "--sim-robots", "16", "--enable-uploads", env=LIMITS)
 
 
 @pytest.fixture(scope="module")
@@ -364,6 +363,7 @@ def test_a_stochastic_program_runs_once_per_repetition_with_its_planner_seed(cli
     assert len({repr(r["planned_path"]) for r in ran}) == 2  # the seeds of repetitions 1-3 are even, even, odd
 
 
+@pytest.mark.slow
 def test_uploads_are_refused_unless_enabled(tmp_path, twb):
     p = Process(["server"], tmp_path)
     try:
@@ -432,6 +432,7 @@ def test_sdk_and_cli_upload_and_submit(testbed, client, tmp_path, twb):
     assert r.returncode != 0 and r.stderr.strip().endswith("missing.py") and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_a_static_binary_of_a_megabyte_or_two_fits_the_default_limit(tmp_path):
     """The docs recommend static binaries; a stripped static C planner is about 1.1 MB."""
     import base64
