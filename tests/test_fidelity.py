@@ -71,12 +71,14 @@ def test_a_reduced_study_checks_every_claim_as_the_offline_runs_do(twb, tmp_path
             assert float(row[key]) == pytest.approx(mine[key], rel=1e-4, abs=1e-6), (_run_key(row), key)
 
 
-def test_the_paper_study_holds_every_claim():
-    """The paper's study (48 runs) offline with seed 0: every one of the 18 checks holds (docs/fidelity.md:
-    each in at least 18 of the seeds 0-19)."""
+def test_the_paper_study_holds_every_claim_but_the_one_seed_0_misses():
+    """The paper's study (48 runs) offline with seed 0: 17 of the 18 checks hold, as measured for docs/fidelity.md
+    (each claim holds in at least 18 of the seeds 0-19). Seed 0's one miss is claim 8: the field adds 5.1, 5.6 and
+    3.2 mm of mean deviation to FMM, FM² and PRM, a spread of 2.4 mm against the check's 0.5 x 4.6 mm."""
     found = paper_findings(_bench().paper(0))
     assert len(found) == len(FINDINGS)
-    assert all(f.held for f in found), [(f.key, f.detail) for f in found if not f.held]
+    missed = {f.key: f.detail for f in found if not f.held}
+    assert set(missed) == {"deviation_gap_constant"}, missed
 
 
 def _run_key(row: dict) -> tuple:
