@@ -11,9 +11,11 @@ checks it as it checks a study the testbed ran (and the numbers are the same:
 
     python bench/fidelity.py paper --seeds 0-19            # held-counts of the nine findings, means
     python bench/fidelity.py varied --seeds 0-19           # on corridors, clutter, an open field, a zig-zag
+    python bench/fidelity.py generated --seeds 0-19        # random blocks and walls, new ones per seed
     python bench/fidelity.py paper --set field.tracker_latency_s=0   # with a profile change
     python bench/fidelity.py paper --main                  # the field robot as it was on e2c6fc3
     python bench/fidelity.py ablate --seeds 0-9            # one change at a time, driven and logged paths
+    python bench/fidelity.py predictivity --seeds 0 --figure docs/img/predictivity.png   # sim-to-field predictivity
 
 Output is JSON on stdout.  The figures of docs/fidelity.md: ``python bench/fidelity_figures.py --out docs/img``.  Profile changes are
 ``section.key=value`` (a top-level key without a section: ``max_accel_m_s2=1``).
@@ -37,6 +39,7 @@ import numpy as np  # noqa: E402
 
 from client_sdk.study import PlanSpec, StudyData, StudySpec, paper_findings, paper_spec, study_planner_seed  # noqa: E402
 from client_sdk.study._collect import flat_metrics  # noqa: E402
+from contract.controller_specs import select  # noqa: E402
 from contract.frames import field_layout  # noqa: E402
 from contract.params import robot_params  # noqa: E402
 from contract.protocol import decode_path, encode_path  # noqa: E402
@@ -84,6 +87,24 @@ def varied_environments() -> list[dict[str, Any]]:
     return [corridors, clutter, open_field, zigzag]
 
 
+def generated_environments(seed: int) -> list[dict[str, Any]]:
+    """Two 1.8 m environments drawn from ``seed``: *blocks-S* (8 to 14 blocks of random size, place and angle)
+    and *walls-S* (2 or 3 walls across the field, alternating sides, each leaving a gap of 0.3 to 0.5 m)."""
+    rng = np.random.default_rng(10_000 + seed)
+    blocks = {"name": f"blocks-{seed}", "size": [1.8, 1.8], "blocks": [
+        _block(*map(float, rng.uniform(0.25, 1.55, 2)), float(rng.uniform(0.05, 0.2)), float(rng.uniform(0.05, 0.2)),
+               float(rng.uniform(0, math.pi))) for _ in range(int(rng.integers(8, 15)))]}
+    n = int(rng.integers(2, 4))
+    walls = []
+    for k in range(n):
+        y = 1.8 * (k + 1) / (n + 1) + float(rng.uniform(-0.08, 0.08))
+        gap = float(rng.uniform(0.3, 0.5))
+        length = 1.8 - gap
+        x = length / 2 if k % 2 == 0 else 1.8 - length / 2
+        walls.append(_block(x, y, length, 0.06, float(rng.uniform(-0.1, 0.1))))
+    return [blocks, {"name": f"walls-{seed}", "size": [1.8, 1.8], "blocks": walls}]
+
+
 def random_plans(env_data: dict[str, Any], n: int, seed: int, min_dist: float = 0.9) -> list[dict[str, Any]]:
     """``n`` start/goal pairs drawn uniformly in free space at least ``min_dist`` apart; the start faces
     the goal, the goal's heading is random."""
@@ -114,8 +135,10 @@ def profile_with(overrides: Optional[dict[str, float]] = None, name: str = "bebo
 
 
 def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backend: str, seed: int, params: Any,
-          truth: bool = False) -> tuple[np.ndarray, Optional[float], Optional[float], str, Optional[np.ndarray]]:
-    """Drive ``path`` from ``start`` at rest with run seed ``seed``.
+          truth: bool = False, controller: Any = None
+          ) -> tuple[np.ndarray, Optional[float], Optional[float], str, Optional[np.ndarray]]:
+    """Drive ``path`` from ``start`` at rest with run seed ``seed`` and ``controller`` (a
+    :func:`contract.controller_specs.select` selection; None: the motor schema).
 
     Returns the logged poses ``(N, 4)``, the times of START and of the end, ``DONE`` or the FAIL
     reason, and with ``truth`` the true poses ``(M, 4)`` of every step (one compiled step per call:
@@ -127,7 +150,7 @@ def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backen
     world.set_blocks(0, blocks.reshape(-1, 5))
     core = SimCore(params, make_backend(backend, 1, params), world)
     core.place(0, tuple(start))
-    core.set_path(0, path, path_key(seed))
+    core.set_path(0, path, path_key(seed), controller)
     t0 = t1 = None
     end = "?"
     true: list[list[float]] = []
@@ -171,14 +194,16 @@ def study_data(spec: StudySpec, overrides: Optional[dict[str, float]] = None, tr
     for name, env_data in envs.items():
         env = parse_environment(env_data)
         for plan_name, start, goal in _problems(env, spec):
-            for planner in spec.planners:
+            for planner, ctrl, config in spec.configurations():
                 eid = len(data.experiments) + 1
                 ident = {"study": spec.name, "experiment_id": eid, "environment": name, "plan": plan_name,
-                         "planner": planner.name}
+                         "planner": planner.name, "controller": ctrl.name if ctrl else "schema",
+                         "configuration": config}
+                sel = select(ctrl.name, ctrl.params) if ctrl else None
                 # the study's planner seed of this experiment, and each repetition's from it (as the testbed
                 # derives them): a randomised planner plans every repetition with its own; a deterministic one's
                 # path is the same for every seed, planned once here
-                base = study_planner_seed(spec.seed, planner.configuration, name, plan_name)
+                base = study_planner_seed(spec.seed, config, name, plan_name)
                 stochastic = get_planner(planner.name).stochastic
                 plans: dict[int, Any] = {}
                 failed: dict[int, str] = {}
@@ -210,7 +235,8 @@ def study_data(spec: StudySpec, overrides: Optional[dict[str, float]] = None, tr
                             rows.append({**ident, "run_id": rid, "mode": mode, "repetition": rep, "seed": seed,
                                          "status": "failed", "error": failed[rep], "t_start": None, "t_end": None})
                             continue
-                        poses, t0, t1, end, true = drive(env_data, wire, start, BACKEND[mode], seed, params, truth)
+                        poses, t0, t1, end, true = drive(env_data, wire, start, BACKEND[mode], seed, params, truth,
+                                                         sel)
                         row = {**ident, "run_id": rid, "mode": mode, "repetition": rep, "seed": seed,
                                "status": "completed" if end == "DONE" else "failed",
                                "error": "" if end == "DONE" else end.lower(), "t_start": t0, "t_end": t1}
@@ -275,6 +301,19 @@ def varied(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool 
         spec = StudySpec.from_json({"name": "varied", "environments": [env], "planners": list(PLANNERS),
                                     "plans": random_plans(env, plans_per_env, seed * 1000 + i),
                                     "repetitions": 2, "seed": seed}, "varied")
+        datas.append(study_data(spec, overrides, truth))
+    return merge(datas)
+
+
+def generated(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False,
+              plans_per_env: int = 3) -> StudyData:
+    """:func:`generated_environments` of ``seed``, ``plans_per_env`` random start/goal pairs each, FMM, FM² and
+    PRM, 2 repetitions: 72 runs."""
+    datas = []
+    for i, env in enumerate(generated_environments(seed)):
+        spec = StudySpec.from_json({"name": "generated", "environments": [env], "planners": list(PLANNERS),
+                                    "plans": random_plans(env, plans_per_env, seed * 1000 + 500 + i),
+                                    "repetitions": 2, "seed": seed}, "generated")
         datas.append(study_data(spec, overrides, truth))
     return merge(datas)
 
@@ -355,9 +394,13 @@ def corners(data: StudyData) -> dict[str, dict[str, float]]:
 
 def _one(job: tuple[str, int, dict[str, float], bool]) -> dict[str, Any]:
     kind, seed, overrides, truth = job
-    data = (paper if kind == "paper" else varied)(seed, overrides, truth)
+    data = {"paper": paper, "varied": varied, "generated": generated}[kind](seed, overrides, truth)
     found = paper_findings(data)
+    n = next(f.numbers for f in found if f.key == "field_ratios_worse")
+    strict = None if not n else bool(n.get("prm_twb_smoothness_ratio") is not None
+                                     and n["prm_twb_smoothness_ratio"] < n["prm_sim_smoothness_ratio"])
     return {"seed": seed, "held": {f.key: f.held for f in found}, "details": {f.key: f.detail for f in found},
+            "prm_kappa_ratio_field_below_sim": strict,
             "means": means(data), "corners": corners(data)}
 
 
@@ -382,7 +425,9 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
     failing = {r["seed"]: {k: r["details"][k] for k, v in r["held"].items() if not v} for r in results}
     shape = {p: {k: round(float(np.mean([r["corners"][p][k] for r in results if p in r["corners"]])), 2)
                  for k in results[0]["corners"][p]} for p in results[0]["corners"]}  # the seeds' mean
-    return {"seeds": [r["seed"] for r in results], "held": held, "failing": {s: f for s, f in failing.items() if f},
+    strict = sum(bool(r.get("prm_kappa_ratio_field_below_sim")) for r in results)
+    return {"seeds": [r["seed"] for r in results], "held": held, "prm_kappa_ratio_field_below_sim": strict,
+            "failing": {s: f for s, f in failing.items() if f},
             "means": avg, "computed_paths": shape}
 
 
@@ -442,15 +487,47 @@ def _overrides(items: Iterable[str]) -> dict[str, float]:
     return out
 
 
+def _predictivity(seed: int) -> list[dict[str, Any]]:
+    from client_sdk.study import predictivity, predictivity_spec
+
+    spec = StudySpec.from_json({**predictivity_spec().to_json(), "seed": seed}, "predictivity")
+    return [p.to_json() for p in predictivity(study_data(spec))]
+
+
+def predictivity_many(seeds: list[int], workers: int, figure: Optional[str] = None) -> dict[str, Any]:
+    """The predictivity study (12 planner x controller configurations, 192 runs) per seed: the table of
+    :func:`client_sdk.study.predictivity`, and the mean over the seeds; ``figure``: the first seed's figure."""
+    from client_sdk.study import MetricPredictivity
+    from client_sdk.study._predictivity import figure_predictivity
+
+    if workers <= 1:
+        per_seed = [_predictivity(s) for s in seeds]
+    else:
+        with ProcessPoolExecutor(workers) as ex:
+            per_seed = list(ex.map(_predictivity, seeds))
+    if figure:
+        figure_predictivity([MetricPredictivity(**m) for m in per_seed[0]]).savefig(figure, dpi=110)
+    mean = {}
+    for i, m in enumerate(per_seed[0]):
+        mean[m["metric"]] = {k: (round(float(np.mean([ps[i][k] for ps in per_seed if ps[i][k] is not None])), 3)
+                                 if any(ps[i][k] is not None for ps in per_seed) else None)
+                             for k in ("spearman", "spearman_within", "flipped")}
+    return {"seeds": seeds, "mean": mean, "per_seed": dict(zip(map(str, seeds), per_seed))}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("what", choices=["paper", "varied", "ablate"])
+    ap.add_argument("what", choices=["paper", "varied", "generated", "ablate", "predictivity"])
     ap.add_argument("--seeds", default="0-19")
     ap.add_argument("--set", action="append", default=[], help="profile change section.key=value")
     ap.add_argument("--main", action="store_true", help="the field robot as on e2c6fc3 (before this work)")
     ap.add_argument("--truth", action="store_true", help="also the true (driven) paths' ratios (slower)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--figure", help="predictivity: write the first seed's figure here")
     a = ap.parse_args()
+    if a.what == "predictivity":
+        print(json.dumps(predictivity_many(_seeds(a.seeds), a.workers, a.figure), indent=1))
+        return
     if a.what == "ablate":
         print(json.dumps(ablate(_seeds(a.seeds), a.workers), indent=1))
         return

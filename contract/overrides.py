@@ -29,6 +29,7 @@ OVERRIDE_LIMITS: dict[str, tuple[float, float]] = {
     "motor_time_constant_s": (0.0, 2.0),
     "wheel_noise_rel": (0.0, 1.0),
     "wheel_noise_abs_m_s": (0.0, 0.1),
+    "wheel_noise_corr_s": (0.0, 2.0),
     "wheel_gain_mean": (0.1, 2.0),
     "wheel_bias_sigma": (0.0, 0.5),
     "dead_band_m_s": (0.0, 0.1),

@@ -69,6 +69,7 @@ class FieldParams:
     motor_time_constant_s: float = 0.0
     wheel_noise_rel: float = 0.0
     wheel_noise_abs_m_s: float = 0.0
+    wheel_noise_corr_s: float = 0.0
     wheel_gain_mean: float = 0.0
     wheel_bias_sigma: float = 0.0
     dead_band_m_s: float = 0.0

@@ -208,7 +208,10 @@ def test_core_follows_a_path_to_the_goal(backend):
     assert [i for k, i in kinds if k == "WP"] == [0, 1, 2]
     tol = C.goal_tolerance_m + (0.0 if backend == "ideal" else 0.02)
     assert math.hypot(*(core.backend.pose[0, :2] - path[-1, :2])) < tol
-    assert abs(wrap_angle(np.array([core.backend.pose[0, 2] - math.pi]))[0]) < C.angle_tolerance_rad + 0.1
+    # the field robot's lagging motors turn on after the align command stops: about the slowest align rate times
+    # the motors' time constant (0.6 rad/s x 0.25 s = 0.15 rad on the BeBot)
+    coast = 0.0 if backend == "ideal" else C.min_turn_rate_rad_s * P.field.motor_time_constant_s
+    assert abs(wrap_angle(np.array([core.backend.pose[0, 2] - math.pi]))[0]) < C.angle_tolerance_rad + 0.1 + coast
 
 
 class _Foreign(Backend):

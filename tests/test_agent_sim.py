@@ -76,15 +76,16 @@ async def test_field_backend_is_worse_than_ideal_on_sharp_corners():
     ideal = await _runs("ideal")
     field = await _runs("field")
     # ideal runs are identical (no noise); every field seed must be worse, with a clear margin; the field
-    # robot overshoots the corners a little, so it drives a little further, but it does not weave around
-    # the path (a weaving robot drove 5-10 % further; docs/fidelity.md)
+    # robot overshoots the corners, so it drives further (since issue 33, whose BeBot lags 0.25 s behind a
+    # steering lead tuned for 0.12 s, accelerates at 0.3 m/s² and slips for 0.1 s at a time: about 3 %, before
+    # up to 3 %), but it does not weave around the path (a weaving robot drove 5-10 % further; docs/fidelity.md)
     assert len({round(r["length"], 9) for r in ideal}) == 1
     base = ideal[0]
     for f in field:
-        assert 1.005 * base["length"] < f["length"] < 1.03 * base["length"], (f, base)
+        assert 1.005 * base["length"] < f["length"] < 1.045 * base["length"], (f, base)
         assert f["deviation"] > 1.3 * base["deviation"], (f, base)
         assert f["speed"] < 0.97 * base["speed"], (f, base)
-        assert f["overshoot"] > base["overshoot"] + 0.005, (f, base)
+        assert f["overshoot"] > base["overshoot"] + 0.003, (f, base)  # 4.4 mm on one seed; the margin was 5 mm before issue 33
 
 
 async def test_collision_with_a_block():

@@ -36,24 +36,30 @@ REDUCED = {"name": "reduced", "environments": ["room"], "plans": ["A", "B"], "pl
 
 
 @pytest.mark.slow
-def test_a_reduced_study_reproduces_the_nine_findings(twb, tmp_path):
+def test_a_reduced_study_checks_every_claim_as_the_offline_runs_do(twb, tmp_path):
     """Room A and B, FMM, FM² and PRM, one repetition (12 runs) on an embedded testbed at maximum speed.
 
-    bench/fidelity.py runs the same study offline for seeds 0-19: every finding holds in at least 19;
-    the paper's full study holds all nine in all 20 (docs/fidelity.md)."""
+    Twelve runs are too few for every claim (one run per planner and mode): on seed 0, 16 of the 18 hold —
+    FMM's field run deviates 7 mm more than its simulated one, PRM's 3 mm (not "almost constant"), and PRM's
+    field length ratio is 0.996.  bench/fidelity.py runs the paper's study (48 runs) offline for seeds 0-19:
+    every claim holds in at least 18 (docs/fidelity.md); :func:`test_the_paper_study_holds_every_claim`."""
     spec = tmp_path / "reduced.json"
     spec.write_text(json.dumps(REDUCED))
     out = tmp_path / "out"
     r = twb("study", str(spec), "--embedded", "--out", str(out), "--no-progress", "--seed", "0", timeout=300)
     assert r.returncode == 0, r.stderr
     assert "study reduced: 12/12 runs completed" in r.stdout
-    assert "The paper's findings on this study: 9 of 9 held" in r.stdout
+    n = len(FINDINGS)
+    assert f"The paper's findings on this study: {n - 2} of {n} held" in r.stdout
+    assert "Sim-to-field predictivity, 3 configurations" in r.stdout
+    assert (out / "predictivity.md").is_file() and (out / "predictivity.png").is_file()
     doc = json.loads((out / "findings.json").read_text())
     assert [f["key"] for f in doc["findings"]] == list(FINDINGS)
-    assert doc["held"] == doc["applicable"] == 9, [(f["key"], f["detail"]) for f in doc["findings"] if not f["held"]]
+    assert doc["applicable"] == n and doc["held"] == n - 2
+    assert [f["key"] for f in doc["findings"] if not f["held"]] == ["deviation_gap_constant", "field_length_ratio_above_1"]
     assert json.loads((out / "study.json").read_text())["spec"]["seed"] == 0
     md = (out / "findings.md").read_text()
-    assert md.count("| held |") == 9 and "Path length deviation shows similar results" in md
+    assert md.count("| held |") == n - 2 and "Path length deviation shows similar results" in md
     # bench/fidelity.py's offline runs are these runs: the same metrics, run for run
     offline = {_run_key(r): r for r in _bench().study_data(StudySpec.from_json(REDUCED, "reduced")).rows}
     with open(out / "runs.csv", newline="") as f:
@@ -63,6 +69,16 @@ def test_a_reduced_study_reproduces_the_nine_findings(twb, tmp_path):
         mine = offline[_run_key(row)]
         for key in ("length_m", "smoothness_rad", "deviation_mean_m", "clearance_min_m", "execution_time_s"):
             assert float(row[key]) == pytest.approx(mine[key], rel=1e-4, abs=1e-6), (_run_key(row), key)
+
+
+def test_the_paper_study_holds_every_claim_but_the_one_seed_0_misses():
+    """The paper's study (48 runs) offline with seed 0: 17 of the 18 checks hold, as measured for docs/fidelity.md
+    (each claim holds in at least 18 of the seeds 0-19). Seed 0's one miss is claim 8: the field adds 5.1, 5.6 and
+    3.2 mm of mean deviation to FMM, FM² and PRM, a spread of 2.4 mm against the check's 0.5 x 4.6 mm."""
+    found = paper_findings(_bench().paper(0))
+    assert len(found) == len(FINDINGS)
+    missed = {f.key: f.detail for f in found if not f.held}
+    assert set(missed) == {"deviation_gap_constant"}, missed
 
 
 def _run_key(row: dict) -> tuple:
@@ -88,7 +104,7 @@ def test_offline_a_planning_failure_fails_the_experiment_as_the_testbed_does():
     assert exp["status"] == "failed" and exp["error"].startswith("planning failed: ") and exp["planned_path"] is None
     assert [(r["mode"], r["status"], r["error"]) for r in data.rows] == [("sim", "failed", exp["error"]),
                                                                          ("twb", "failed", exp["error"])] * 2
-    assert [f.held for f in paper_findings(data)] == [None] * 9
+    assert [f.held for f in paper_findings(data)] == [None] * len(FINDINGS)
 
 
 def test_offline_a_randomised_planner_fails_the_repetitions_its_seeds_find_no_path_for():
@@ -131,12 +147,14 @@ def test_offline_varied_environments_and_their_random_problems():
 
 # ---------------------------------------------------------------- the checks, on synthetic data
 
-#: per planner: computed length, clearance, κ'; per mode: length ratio, κ', deviation, time, speed, clearance
+#: per planner: computed length, clearance, κ'; per mode: length ratio, κ' ratio (PRM's on the field: its own),
+#: deviation, maximum deviation, seconds per planned metre, speed, clearance drop
 _PLANNED = {"fmm": (1.9, 0.07, 0.14), "fm2": (2.4, 0.15, 0.13), "prm": (2.1, 0.07, 0.25)}
-_MODES = {"sim": dict(length_ratio=0.99, smooth=0.95, deviation_mean_m=0.003, execution_time_s=12.0,
+_MODES = {"sim": dict(length_ratio=0.99, smooth=0.95, deviation_mean_m=0.003, deviation_max_m=0.02, s_per_m=6.0,
                       average_speed_m_s=0.17, clearance_drop=0.0),
-          "twb": dict(length_ratio=1.0, smooth=1.0, deviation_mean_m=0.007, execution_time_s=14.0,
+          "twb": dict(length_ratio=1.01, smooth=1.05, deviation_mean_m=0.007, deviation_max_m=0.025, s_per_m=7.0,
                       average_speed_m_s=0.15, clearance_drop=0.004)}
+_PRM_FIELD_SMOOTH = 0.9  # PRM's T κ' ratio: below 1, below S's 0.95, and closer to S than the others' 1.05
 
 
 def _study(change=None) -> StudyData:
@@ -152,13 +170,16 @@ def _study(change=None) -> StudyData:
         experiments.append({"experiment_id": eid, "environment": "room", "plan": plan, "planner": planner})
         for mode, m in _MODES.items():
             rid += 1
-            smooth = m["smooth"] * (0.7 if planner == "prm" and mode == "twb" else 1.0)
+            smooth = _PRM_FIELD_SMOOTH if planner == "prm" and mode == "twb" else m["smooth"]
+            clear = planned["planned_clearance_min_m"] - m["clearance_drop"]
             row = {"experiment_id": eid, "run_id": rid, "environment": "room", "plan": plan, "planner": planner,
                    "mode": mode, "repetition": 1, "status": "completed", **planned,
-                   "length_ratio": m["length_ratio"], "smoothness_rad": smooth * planned["planned_smoothness_rad"],
-                   "deviation_mean_m": m["deviation_mean_m"], "execution_time_s": m["execution_time_s"],
-                   "average_speed_m_s": m["average_speed_m_s"],
-                   "clearance_min_m": planned["planned_clearance_min_m"] - m["clearance_drop"]}
+                   "length_ratio": m["length_ratio"], "length_m": m["length_ratio"] * planned["planned_length_m"],
+                   "smoothness_rad": smooth * planned["planned_smoothness_rad"],
+                   "deviation_mean_m": m["deviation_mean_m"], "deviation_max_m": m["deviation_max_m"],
+                   "execution_time_s": m["s_per_m"] * planned["planned_length_m"],
+                   "average_speed_m_s": m["average_speed_m_s"], "clearance_min_m": clear,
+                   "clearance_ratio": clear / planned["planned_clearance_min_m"]}
             if change:
                 change(planner, mode, row)
             rows.append(row)
@@ -176,11 +197,14 @@ def test_every_finding_holds_on_data_made_to_hold_them():
     assert [f.key for f in found] == list(FINDINGS)
     assert all(f.held is True for f in found), [(f.key, f.detail) for f in found if not f.held]
     by = {f.key: f for f in found}
-    assert by["length_similar"].numbers == {"fmm_sim_length_ratio": 0.99, "fmm_twb_length_ratio": 1.0,
-                                            "fm2_sim_length_ratio": 0.99, "fm2_twb_length_ratio": 1.0,
-                                            "prm_sim_length_ratio": 0.99, "prm_twb_length_ratio": 1.0}
-    assert by["prm_smoother_on_field"].numbers["prm_twb_smoothness_ratio"] == pytest.approx(0.7)
-    assert by["field_less_clearance"].numbers["mean_difference_m"] == pytest.approx(-0.004)
+    assert by["length_similar"].numbers == {"fmm_sim_length_ratio": 0.99, "fmm_twb_length_ratio": 1.01,
+                                            "fm2_sim_length_ratio": 0.99, "fm2_twb_length_ratio": 1.01,
+                                            "prm_sim_length_ratio": 0.99, "prm_twb_length_ratio": 1.01}
+    assert by["prm_smoother_on_field"].numbers["prm_twb_smoothness_ratio"] == pytest.approx(0.9)
+    assert by["field_less_clearance"].numbers["prm_twb_clearance_min_m"] == pytest.approx(0.066)
+    assert by["field_length_ratio_above_1"].numbers == {"fmm_twb_length_ratio": 1.01, "fm2_twb_length_ratio": 1.01,
+                                                        "prm_twb_length_ratio": 1.01}
+    assert by["deviations_differ_across_planners"].numbers["differ_in"] == ["clearance_min_m", "smoothness_rad"]
 
 
 def _set(planner_or_all, mode, **values):
@@ -197,24 +221,53 @@ def _both(*changes):
     return change
 
 
-@pytest.mark.parametrize("key, change", [
+@pytest.mark.parametrize("keys, change", [
     ("fmm_shortest", _set("prm", "planned", planned_length_m=1.8)),
     ("fm2_safest", _set("fmm", "planned", planned_clearance_min_m=0.15)),
     ("prm_sharpest", _set("fm2", "planned", planned_smoothness_rad=0.3)),
-    ("sim_follows_plan", _set("fm2", "sim", length_ratio=1.04)),
-    ("sim_follows_plan", _both(_set("prm", "sim", deviation_mean_m=0.011), _set("prm", "twb", deviation_mean_m=0.02))),
+    # the simulated robot drives longer than its plan: also no longer shorter than the field robot (Fig. 7)
+    (("sim_follows_plan", "field_ratios_worse"), _set("fm2", "sim", length_ratio=1.04)),
+    ("sim_follows_plan", _both(_set("prm", "sim", deviation_mean_m=0.011), _set("prm", "twb", deviation_mean_m=0.015))),
     ("field_slower", _set("fmm", "twb", execution_time_s=11.0)),
     ("field_slower", _set("prm", "twb", average_speed_m_s=0.18)),
-    ("field_deviates_more", _set("fm2", "twb", deviation_mean_m=0.002)),
-    ("length_similar", _set("prm", "twb", length_ratio=1.05)),  # 1.05 − 0.99 > 0.05: the failure on main
-    ("prm_smoother_on_field", _set("prm", "twb", smoothness_rad=0.26)),  # ratio > 1: the wobbly field robot
-    ("prm_smoother_on_field", _set("fm2", "twb", smoothness_rad=0.05)),  # not the lowest ratio
-    ("field_less_clearance", _set("all", "twb", clearance_min_m=0.2)),
+    ("slowdown_differs", _both(_set("fmm", "twb", execution_time_s=13.4), _set("fm2", "twb", execution_time_s=16.4),
+                               _set("prm", "twb", execution_time_s=14.6))),  # 2 s slower each
+    # a planner whose field robot deviates less cannot have an almost constant gap with the others
+    (("field_deviates_more", "deviation_gap_constant"), _set("fm2", "twb", deviation_mean_m=0.002)),
+    ("deviation_gap_constant", _set("prm", "twb", deviation_mean_m=0.012)),  # gaps 4, 4, 9 mm
+    ("field_less_clearance", _set("prm", "twb", clearance_min_m=0.07)),  # one planner's is enough
+    ("length_similar", _both(_set("prm", "twb", length_ratio=1.05), _set("prm", "sim", length_ratio=0.98))),
+    ("smoothness_not_reproduced", _both(_set("fm2", "twb", smoothness_rad=0.13),  # FM²'s ratio 1: reproduced
+                                        _set("prm", "twb", smoothness_rad=0.25 * 0.93))),
+    ("prm_least_smoothness_difference", _set("fmm", "sim", smoothness_rad=0.14 * 1.04)),  # FMM's 0.01 apart
+    ("field_length_ratio_above_1", _set("prm", "twb", length_ratio=0.995)),  # the failure on main
+    ("prm_smoother_on_field", _both(_set("prm", "sim", smoothness_rad=0.25 * 1.1),  # T 1.05 < S 1.1, not < 1
+                                    _set("prm", "twb", smoothness_rad=0.25 * 1.05))),
+    # FM²'s T ratio below PRM's: then also below 1 and below its S ratio
+    (("prm_smoother_on_field", "smoothness_not_reproduced", "field_ratios_worse"),
+     _set("fm2", "twb", smoothness_rad=0.13 * 0.85)),
+    ("field_overshoots_more", _set("fm2", "twb", deviation_max_m=0.019)),
+    ("field_paths_longer", _set("prm", "twb", length_m=2.0)),
 ])
-def test_each_finding_fails_when_its_comparison_does(key, change):
+def test_each_finding_fails_when_its_comparison_does(keys, change):
+    keys = (keys,) if isinstance(keys, str) else keys
     held = _held(_study(change))
-    assert held[key] is False
-    assert all(v for k, v in held.items() if k != key), held
+    assert all(held[k] is False for k in keys), held
+    assert all(v for k, v in held.items() if k not in keys), held
+
+
+def test_a_field_that_changes_every_planner_alike_fails_the_planner_dependence():
+    """A field whose metrics are the simulation's times one factor, the same for every planner, except PRM's κ'
+    (which goes the other way): one metric whose gaps differ is not enough, finding 18 fails; the data made to
+    hold every finding (its clearance drop, 4 mm, a different share of each planner's clearance) holds it."""
+    def alike(planner, mode, row):
+        if mode == "twb":
+            factor = {"smoothness_rad": 1.05 / 0.95, "clearance_min_m": 0.95, "execution_time_s": 7 / 6}
+            for k, f in factor.items():
+                row[k] = row[k] * f if k != "clearance_min_m" else row["planned_clearance_min_m"] * f
+    held = _held(_study(alike))
+    assert held["deviations_differ_across_planners"] is False
+    assert _held(_study())["deviations_differ_across_planners"] is True
 
 
 def test_length_similar_just_inside_the_threshold():
@@ -226,14 +279,15 @@ def test_findings_need_their_planners_and_modes():
     no_prm.rows = [r for r in no_prm.rows if r["planner"] != "prm"]
     held = _held(no_prm)
     assert held["fmm_shortest"] is held["prm_sharpest"] is held["prm_smoother_on_field"] is None
-    assert held["length_similar"] is True
+    assert held["length_similar"] is True and held["field_length_ratio_above_1"] is True
+    assert held["prm_least_smoothness_difference"] is None
     sim_only = _study()
     sim_only.rows = [r for r in sim_only.rows if r["mode"] == "sim"]
     held = _held(sim_only)
     assert held["sim_follows_plan"] is True and held["fm2_safest"] is True
-    for key in ("field_slower", "field_deviates_more", "length_similar", "prm_smoother_on_field",
-                "field_less_clearance"):
-        assert held[key] is None, key
+    for key in FINDINGS:
+        if key not in ("fmm_shortest", "fm2_safest", "prm_sharpest", "sim_follows_plan"):
+            assert held[key] is None, key
     failed = _study()
     for r in failed.rows:
         r["status"] = "failed"
@@ -244,12 +298,14 @@ def test_findings_files(tmp_path):
     data = _study(_set("prm", "twb", length_ratio=1.17))
     found = write_findings(data, tmp_path)
     doc = json.loads((tmp_path / "findings.json").read_text())
-    assert doc["held"] == 8 and doc["applicable"] == 9
-    assert doc["findings"][6]["key"] == "length_similar" and doc["findings"][6]["held"] is False
-    assert doc["findings"][6]["numbers"]["prm_twb_length_ratio"] == 1.17
+    n = len(FINDINGS)
+    assert doc["held"] == n - 1 and doc["applicable"] == n
+    i = list(FINDINGS).index("length_similar")
+    assert doc["findings"][i]["key"] == "length_similar" and doc["findings"][i]["held"] is False
+    assert doc["findings"][i]["numbers"]["prm_twb_length_ratio"] == 1.17
     md = (tmp_path / "findings.md").read_text()
     assert md == findings_markdown(found)
-    assert "8 of 9 applicable findings held" in md and md.count("| NOT held |") == 1
+    assert f"{n - 1} of {n} applicable findings held" in md and md.count("| NOT held |") == 1
     assert "prm S 0.990 T 1.170" in md
 
 
@@ -305,9 +361,11 @@ def test_without_compensation_the_robot_acts_on_the_old_pose():
     assert lag.max() > 0.015  # about speed x 0.1 s, plus the hold between frames
 
 
-def test_the_controller_steers_by_the_pose_predicted_one_motor_time_constant_ahead():
+def test_the_controller_steers_by_the_pose_predicted_its_lead_ahead():
+    """The lead is the motor time constant the controller was tuned for (0.12 s); the shipped motors lag more
+    (0.25 s: the field robot overshoots corners, docs/fidelity.md)."""
     _, belief, ctl, b = _track_belief(_exact_profile(), steps=60)
-    assert b.fg.lead == P.field.motor_time_constant_s
+    assert b.fg.lead == P.field.control_lead_s == 0.12 < P.field.motor_time_constant_s
     # the last step's odometry: the modelled tracks after the command of step 58
     v, w = tracks_to_body(b.odo[0, 0], b.odo[0, 1], P.wheel_base_m)
     steer = b.sense(np.array([60]), np.array([True]))[0][0]
@@ -404,14 +462,18 @@ def _zigzag(corners: int = 6, leg: float = 0.2, turn_deg: float = 60.0) -> np.nd
     return np.column_stack([p, heading])
 
 
-def test_the_field_robot_rounds_sharp_corners_more_than_the_ideal_one():
+def test_the_field_robot_cannot_follow_sharp_corners_and_overshoots_them():
+    """On 60° corners both robots drive smoother than the path (κ' 0.49); the field robot, whose motors lag
+    0.25 s behind a lead tuned for 0.12 s and whose tracks accelerate at 0.3 m/s², overshoots each corner: a path
+    1.5-4 % longer than the ideal robot's and as smooth (before issue 33 it cut them: 5 % smoother, as long)."""
     path = _zigzag()
     ideal = _drive("ideal", path, 0)[:, 1:3]
-    assert smoothness(ideal) < smoothness(path[:, :2])  # the follower's switch radius cuts corners
+    assert smoothness(ideal) < 0.7 * smoothness(path[:, :2])  # the follower's switch radius cuts corners
     for seed in range(4):
         field = _drive("field", path, seed)[:, 1:3]
-        assert smoothness(field) < 0.95 * smoothness(ideal), seed
-        assert abs(path_length(field) / path_length(ideal) - 1) < 0.02, seed
+        assert smoothness(field) < 0.75 * smoothness(path[:, :2]), seed
+        assert abs(smoothness(field) / smoothness(ideal) - 1) < 0.1, seed
+        assert 1.015 < path_length(field) / path_length(ideal) < 1.05, seed
 
 
 def test_the_ideal_robot_is_unchanged():

@@ -103,7 +103,7 @@ def calibration_figure(runs: list[Any], cal: Any, columns: int = 4):  # type: ig
         ax.set_title(run.name, fontsize=7)
         ax.tick_params(labelsize=6)
     v = cal.values
-    fig.suptitle(f"Calibration: {len(runs)} runs, RMS tracked - re-simulated {cal.rms_m * 1000:.1f} mm; "
+    fig.suptitle(f"Calibration: {len(runs)} runs, replay error {cal.rms_m * 100:.2f} cm RMS; "
                  f"motor lag {v['motor_time_constant_s']:.3f} s, gains {v['wheel_gain_mean']:.3f} "
                  f"± {v['wheel_bias_sigma']:.3f}, latency {v['tracker_latency_s']:.2f} s", fontsize=9)
     handles, labels = axes[0, 0].get_legend_handles_labels()
@@ -121,7 +121,7 @@ def calibrate(
 ) -> None:
     """Fit the field parameters of a robot profile (motor time constant, track gains and bias, wheel noise,
     tracker latency and noise) to the completed field runs of a study; writes the fitted profile with each
-    value's standard error and a figure of tracked against re-simulated paths (docs/fidelity.md, "Calibration")."""
+    value's 95 % bootstrap interval over the runs and a figure of tracked against re-simulated paths (docs/fidelity.md, "Calibration")."""
     from client_sdk.study import load_study
     from contract.robot_profile import profile_names
     from robot_agent.engine.calibration import FITTED
@@ -142,9 +142,12 @@ def calibrate(
     result["calibration"] = {
         "runs": len(recorded), "study": data.spec.name, "variant": variant, "seed": seed,
         "rms_residual_m": round(cal.rms_m, 6),
+        "replay_error_cm_rms": round(cal.rms_m * 100, 4),
         "values": {k: round(cal.values[k], 6) for k in FITTED},
-        "std_error": {k: round(cal.std[k], 6) for k in FITTED},
-        "method": "robot_agent/engine/calibration.py; docs/fidelity.md#calibration",
+        "std_error": {k: round(cal.std[k], 6) for k in FITTED if math.isfinite(cal.std[k])},
+        "interval_95": {k: [round(lo, 6), round(hi, 6)] for k, (lo, hi) in cal.interval.items()},
+        "method": "95 % intervals: a bootstrap over runs (runs sharing a seed resampled together); "
+                  "robot_agent/engine/calibration.py; docs/fidelity.md#calibration",
     }
     out = out or runs / "calibrated-profile.json"
     out.write_text(json.dumps(result, indent=1) + "\n")
@@ -152,6 +155,10 @@ def calibrate(
     calibration_figure(recorded, cal).savefig(figure, dpi=110)
     width = max(len(k) for k in FITTED)
     for k in FITTED:
-        typer.echo(f"{k:<{width}}  {cal.values[k]:.4g} ± {cal.std[k]:.2g}")
-    typer.echo(f"{len(recorded)} runs, RMS tracked - re-simulated {cal.rms_m * 1000:.2f} mm; profile {out}, "
-               f"figure {figure}")
+        lo_hi = cal.interval.get(k)
+        where = f"  [{lo_hi[0]:.4g}, {lo_hi[1]:.4g}]" if lo_hi else ""
+        typer.echo(f"{k:<{width}}  {cal.values[k]:.4g}{where}")
+    typer.echo("[95 % interval: a bootstrap over the runs; it covers run-to-run scatter, not a model's misfit "
+               "(docs/fidelity.md#calibration)]")
+    typer.echo(f"{len(recorded)} runs, replay error (fitted profile re-simulated against the runs) "
+               f"{cal.rms_m * 100:.2f} cm RMS; profile {out}, figure {figure}")

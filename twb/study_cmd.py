@@ -31,7 +31,7 @@ def embedded_testbed(data_dir: Path, *, sim_robots: int = 4, timeout: float = 30
 
 
 def study(
-    spec: Annotated[str, typer.Argument(help="'paper' (the paper's 48 runs), 'noise' (sensor noise and control inaccuracies, 80 field runs), 'controllers' (every built-in controller, 64 runs), 'fleet' (LaCAM vs prioritized vs uncoordinated FMM on 4 to 64 robots on the whole field, 60 runs), 'fleet-discs' (prioritized vs FMM on 2, 4, 8 robots among moving discs, 72 runs), 'planners' (every built-in planner, OMPL's when installed, on the paper's and three hard problems, 3 repetitions, simulation) or a study file (JSON; see docs/study.md).")],
+    spec: Annotated[str, typer.Argument(help="'paper' (the paper's 48 runs), 'noise' (sensor noise and control inaccuracies, 80 field runs), 'controllers' (every built-in controller, 64 runs), 'predictivity' (FMM, FM², PRM x every built-in controller, sim and field: does the simulation predict the field, 192 runs), 'fleet' (LaCAM vs prioritized vs uncoordinated FMM on 4 to 64 robots on the whole field, 60 runs), 'fleet-discs' (prioritized vs FMM on 2, 4, 8 robots among moving discs, 72 runs), 'planners' (every built-in planner, OMPL's when installed, on the paper's and three hard problems, 3 repetitions, simulation) or a study file (JSON; see docs/study.md).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory (created).")] = Path("study"),
     embedded: Annotated[bool, typer.Option("--embedded", help="Start a testbed of our own (twb up --time-scale max) in OUT/testbed and stop it after.")] = False,
     ompl: Annotated[Optional[Path], typer.Option("--ompl", help="Also write an OMPL benchmark database (Planner Arena) here; an existing one only with --ompl-append or --ompl-replace.")] = None,
@@ -75,6 +75,7 @@ def study(
     _write(data, out, ompl, ompl_mode, progress)
     code = _outcome_line(data, study_spec, time.monotonic() - t0, out)
     _print_findings(data, out)
+    _print_predictivity(data, out)
     if code:
         raise typer.Exit(code)
 
@@ -148,7 +149,7 @@ def _print_export(done, progress: bool = True) -> None:  # type: ignore[no-untyp
 
 def _write(data, out: Path, ompl: Optional[Path], ompl_mode: str, progress: bool) -> None:  # type: ignore[no-untyped-def]
     from client_sdk.study import export_ompl as _export
-    from client_sdk.study import write_findings, write_report
+    from client_sdk.study import write_findings, write_predictivity, write_report
 
     if data.directory is None or data.directory.resolve() != out.resolve():
         data.save(out)  # run_study wrote it there already as the experiments finished
@@ -156,6 +157,7 @@ def _write(data, out: Path, ompl: Optional[Path], ompl_mode: str, progress: bool
         typer.echo("writing summary, figures and report...", err=True)
     write_report(data, out)
     write_findings(data, out)  # none for a fleet: the paper's findings concern one robot's paths
+    write_predictivity(data, out)  # with two configurations in both modes (docs/fidelity.md, "Predictivity")
     if ompl is not None:
         done = _export(data, ompl, mode=ompl_mode)  # type: ignore[arg-type]
         _print_export(done, progress)
@@ -187,6 +189,30 @@ def _print_findings(data, out: Path) -> None:  # type: ignore[no-untyped-def]
     Console(width=max(Console().width, 120)).print(table)
 
 
+def _print_predictivity(data, out: Path) -> None:  # type: ignore[no-untyped-def]
+    """The sim-to-field predictivity as a table on stdout (a study with two configurations in both modes)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from client_sdk.study import PREDICTIVITY_METRICS, predictivity
+
+    if data.spec.fleet:
+        return
+    found = predictivity(data)
+    if not any(p.pairs for p in found):
+        return
+    n = max(p.configurations for p in found)
+    table = Table(title=f"Sim-to-field predictivity, {n} configurations ({out / 'predictivity.md'}; "
+                        "docs/fidelity.md#predictivity)", title_justify="left")
+    for col in ("metric", "Spearman ρ", "ρ within problems", "flipped", "pairs"):
+        table.add_column(col, overflow="fold")
+    for p in found:
+        table.add_row(PREDICTIVITY_METRICS.get(p.metric, p.metric),
+                      *("–" if v is None else f"{v:.2f}" for v in (p.spearman, p.spearman_within, p.flipped)),
+                      str(p.pairs))
+    Console(width=max(Console().width, 100)).print(table)
+
+
 def export_ompl(
     study_dir: Annotated[Path, typer.Argument(help="A study directory written by `twb study`.")],
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="SQLite file (default: STUDY_DIR/study.db).")] = None,
@@ -208,10 +234,11 @@ def export_ompl(
     mode = _ompl_mode(path, append, replace)
     data = load_study(study_dir)
     if report:
-        from client_sdk.study import write_findings
+        from client_sdk.study import write_findings, write_predictivity
 
         write_report(data, study_dir)
         write_findings(data, study_dir)
+        write_predictivity(data, study_dir)
     done = _export(data, path, mode=mode, experiment=_experiment_names(experiment), version=version)  # type: ignore[arg-type]
     _print_export(done)
     kept = f" (kept its {done.runs_before} runs)" if done.runs_before else ""

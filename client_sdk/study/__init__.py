@@ -26,15 +26,17 @@ from ._figure_set import make_figures
 from ._figures import figure_metrics, figure_outcomes, figure_paths, figure_ratios, save_figures
 from ._limits import StudyRefused, check_study
 from ._findings import FINDINGS, Finding, findings_json, findings_markdown, paper_findings, write_findings
+from ._predictivity import (PREDICTIVITY_METRICS, MetricPredictivity, predictivity, predictivity_json,
+                            predictivity_markdown, write_predictivity)
 from ._ompl import OmplExport, OmplExportError, PlannerStatus, export_ompl
 from ._outcomes import OutcomeSummary, outcome_table
 from ._report import summary_markdown, write_report
 from ._fleet import Circle, circle_robots
 from ._fleet_figures import figure_fleet_metrics, figure_fleet_paths
 from ._fleet_results import FLEET_METRICS, FleetGroup, fleet_groups
-from ._spec import (ARENA, CONTROLLERS, DISCS, FLEET, FLEET_DISCS, NOISE, PAPER, ControllerChoice, PlannerSpec, PlanSpec,
+from ._spec import (ARENA, CONTROLLERS, DISCS, FLEET, FLEET_DISCS, NOISE, PAPER, PREDICTIVITY, ControllerChoice, PlannerSpec, PlanSpec,
                     ProfileSpec, StudySpec, StudySpecError, controllers_spec, fleet_discs_spec, fleet_spec, load_spec,
-                    noise_spec, paper_spec)
+                    noise_spec, paper_spec, predictivity_spec)
 from ._verdict import Answer, which_is_better
 
 __all__ = sorted(
@@ -63,6 +65,8 @@ __all__ = sorted(
         "NOISE",
         "PAPER",
         "CONTROLLERS",
+        "PREDICTIVITY",
+        "predictivity_spec",
         "ControllerChoice",
         "controllers_spec",
         "PlanSpec",
@@ -101,6 +105,12 @@ __all__ = sorted(
         "summary_markdown",
         "which_is_better",
         "write_findings",
+        "PREDICTIVITY_METRICS",
+        "MetricPredictivity",
+        "predictivity",
+        "predictivity_json",
+        "predictivity_markdown",
+        "write_predictivity",
         "write_report",
     ]
 )

@@ -50,9 +50,9 @@ from planners.compared import configuration_name
 from ._fleet import MAX_ROBOTS, MAX_ROBOTS_SUB, Circle, is_pose, parse_circle, parse_robots
 from ._fleet import finite as _finite
 
-__all__ = ["ARENA", "CONTROLLERS", "DISCS", "FLEET", "FLEET_DISCS", "FLEET_PLANNER", "FLEET_PLANNERS", "JITTER_LIMITS", "NOISE", "PAPER", "READY", "ControllerChoice",
+__all__ = ["ARENA", "CONTROLLERS", "DISCS", "FLEET", "FLEET_DISCS", "FLEET_PLANNER", "FLEET_PLANNERS", "JITTER_LIMITS", "NOISE", "PAPER", "PREDICTIVITY", "READY", "ControllerChoice",
            "PlannerSpec", "PlanSpec", "ProfileSpec", "StudySpec", "StudySpecError", "controllers_spec", "fleet_discs_spec", "fleet_spec",
-           "load_spec", "noise_spec", "paper_spec"]
+           "load_spec", "noise_spec", "paper_spec", "predictivity_spec"]
 
 _KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter",
          "profiles", "controllers"}
@@ -513,6 +513,29 @@ def controllers_spec() -> StudySpec:
     return StudySpec.from_json(CONTROLLERS, "controllers")
 
 
+#: The ready predictivity study: FMM, FM² and PRM x every built-in controller (12 configurations) x both paper
+#: environments x plans A, B x 2 repetitions x sim and field (192 runs; docs/fidelity.md, "Predictivity":
+#: `twb study predictivity --embedded` writes predictivity.md, .json and .png).
+PREDICTIVITY: dict[str, Any] = {
+    "name": "predictivity",
+    "description": "Does the simulation predict the field? FMM, FM² and PRM, each tracked by the motor schema, pure "
+                   "pursuit, regulated pure pursuit and Kanayama's controller (12 configurations), both paper "
+                   "environments, plans A and B, 2 repetitions, simulation and emulated field (192 runs)",
+    "environments": ["room", "blocks"],
+    "plans": ["A", "B"],
+    "planners": ["fmm", "fm2", "prm"],
+    "controllers": ["schema", "pure_pursuit", "regulated_pure_pursuit", "kanayama"],
+    "repetitions": 2,
+    "modes": ["sim", "twb"],
+    "seed": 0,
+}
+
+
+def predictivity_spec() -> StudySpec:
+    """The ready predictivity study (192 runs)."""
+    return StudySpec.from_json(PREDICTIVITY, "predictivity")
+
+
 #: An empty sub-field with two discs crossing its middle (inside a circle of radius 0.6 m around the centre, so
 #: every robot of the fleet study starts and ends clear of them): the fleet study's obstacle scenario.
 DISCS: dict[str, Any] = {
@@ -611,13 +634,13 @@ def planners_spec() -> StudySpec:
 
 
 #: the ready studies by name (``twb study NAME``)
-READY = {"paper": paper_spec, "noise": noise_spec, "controllers": controllers_spec, "fleet": fleet_spec,
-         "fleet-discs": fleet_discs_spec, "planners": planners_spec}
+READY = {"paper": paper_spec, "noise": noise_spec, "controllers": controllers_spec, "predictivity": predictivity_spec,
+         "fleet": fleet_spec, "fleet-discs": fleet_discs_spec, "planners": planners_spec}
 
 
 def load_spec(source: str | Path) -> StudySpec:
-    """A ready study by name (:data:`READY`: ``"paper"``, ``"noise"``, ``"controllers"``, ``"fleet"``,
-    ``"fleet-discs"``, ``"planners"``) or a study
+    """A ready study by name (:data:`READY`: ``"paper"``, ``"noise"``, ``"controllers"``, ``"predictivity"``,
+    ``"fleet"``, ``"fleet-discs"``, ``"planners"``) or a study
     file (``.json``; ``.yaml``/``.yml`` if PyYAML is installed)."""
     if str(source) in READY:
         return READY[str(source)]()

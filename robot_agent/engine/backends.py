@@ -250,7 +250,7 @@ class FieldBackend(Emulated):
         for i in np.flatnonzero(mask):
             self.keys[i] = keys[i]
             field_begin(int(i), self.keys[i], bool(from_rest[i]), self.pose, self.belief, self.ctl, self.gain,
-                        self.ring_ok, self.odo, self.odo_ring, self.bias, self.fg)
+                        self.ring_ok, self.odo, self.odo_ring, self.bias, self.noise, self.fg)
 
     def sense(self, step: np.ndarray, moving: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         seen, meas = _field_sense_all(np.asarray(step, dtype=np.int64), self.keys, self.pose, self.belief, self.ctl,

@@ -20,10 +20,21 @@ The field robot's effects (docs/fidelity.md, "The emulated field robot") are fit
    of the noise (the recorded residual is smaller than the noise makes it), so the statistic is corrected by
    the share stage 1 absorbs in runs simulated with the first estimate, and solved again.
 
-Uncertainties: the motor time constant's from the fit's Jacobian (residuals along a run are correlated, so it
-is a lower bound); the tracker latency's from the profile of the fit over the grid (the steps whose fit is
-within one unit of chi-square, at least half a step); the gains' and the jitter's from a bootstrap over
-runs (over groups of runs that share a seed); the wheel noise's by the delta method from the statistic's spread over runs and simulations.
+Uncertainties: one method for every parameter, a bootstrap over runs (Efron and Tibshirani 1993, ch. 6;
+resampling whole runs keeps the correlation of the residuals along a run; runs that share a seed are resampled
+together), :data:`_BOOTSTRAP` resamples, the 2.5 and 97.5 percentiles as the 95 % interval and the standard
+deviation as the standard error.  Each resample re-estimates every parameter from the runs it drew:
+
+- the gains' mean and spread, and the jitter, from those runs' values;
+- the tracker latency: the grid step whose summed cost over those runs is least (each run's cost is kept per step);
+- the motor time constant by one Gauss-Newton step from the full fit with those runs' residuals and Jacobian
+  (a linearised bootstrap: the full fit's optimum moved by what the resample changes);
+- the wheel noise through the slope of the method of moments (the resampled statistic mapped to the noise),
+  plus the spread of the simulated statistic.
+
+The interval says how much the estimate would move with other runs of the same kind, not how far a misfitting
+model is from the truth: ``bench/calibration_coverage.py`` measures how often it covers the true values on runs
+emulated with known profiles (docs/fidelity.md, "Calibration").
 """
 
 from __future__ import annotations
@@ -86,6 +97,8 @@ class Calibration:
     resimulated: list[np.ndarray]
     rms_m: float
     latency_cost: dict[float, float] = field(default_factory=dict)
+    #: the 95 % bootstrap interval (low, high) of each of :data:`FITTED` (absent: fewer than 2 groups of runs)
+    interval: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def _quiet_profile(base: Mapping[str, Any], tau: float, latency: float) -> dict[str, Any]:
@@ -155,15 +168,6 @@ def _refit_gains(run: RecordedRun, quiet: Mapping[str, Any], g0: np.ndarray, pos
     return _simulate(run, quiet, (float(g[0]), float(g[1])), 0)
 
 
-def _std_from_jacobian(res: Any, index: int) -> float:
-    """Standard error of parameter ``index`` of a least_squares result: s^2 (J^T J)^-1."""
-    m, n = res.jac.shape
-    s2 = 2.0 * res.cost / max(m - n, 1)
-    jac = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)
-    cov = np.linalg.pinv(jac.T @ jac) * s2
-    return float(math.sqrt(max(cov[index, index], 0.0)))
-
-
 def _jitter_sigma(d2: np.ndarray) -> float:
     """Standard deviation of white jitter from its second differences (variance 6 s^2), robustly (MAD)."""
     if len(d2) == 0:
@@ -187,14 +191,39 @@ def _increments(res: np.ndarray, t: np.ndarray) -> float:
     return float(np.mean(np.sum(d * d, axis=1)))
 
 
-def _bootstrap(per_run: list[Any], groups: list[list[int]], stat: Any, rng: np.random.Generator) -> float:
-    """Standard deviation of ``stat`` (of a list of per-run values) over resamplings, with replacement, of the
-    run ``groups`` (indices into ``per_run``; runs that share their random draws are resampled together)."""
-    n = len(groups)
-    if n < 2:
-        return float("nan")
-    vals = [stat([per_run[i] for k in rng.integers(0, n, n) for i in groups[k]]) for _ in range(_BOOTSTRAP)]
-    return float(np.std(vals, ddof=1))
+def _bootstrap_fit(groups: list[list[int]], res: Any, sizes: list[int], gains: np.ndarray,
+                   d2: list[tuple[np.ndarray, np.ndarray]], run_costs: np.ndarray, dt: float, w_data: np.ndarray,
+                   absorbed: float, rel: float, slope: float, sim_sd: float, ratio: float,
+                   rng: np.random.Generator) -> dict[str, list[float]]:
+    """Every fitted parameter re-estimated on :data:`_BOOTSTRAP` resamplings, with replacement, of the run
+    ``groups`` (the module docstring says how); empty lists with fewer than 2 groups."""
+    out: dict[str, list[float]] = {k: [] for k in FITTED}
+    if len(groups) < 2:
+        return out
+    jac = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)
+    ends = np.cumsum([0, *[2 * n for n in sizes]])
+    normal = [jac[ends[i]:ends[i + 1]].T @ jac[ends[i]:ends[i + 1]] for i in range(len(sizes))]
+    grad = [jac[ends[i]:ends[i + 1]].T @ res.fun[ends[i]:ends[i + 1]] for i in range(len(sizes))]
+    target = float(w_data.mean()) / absorbed
+    for _ in range(_BOOTSTRAP):
+        idx = [i for k in rng.integers(0, len(groups), len(groups)) for i in groups[k]]
+        mult = np.bincount(idx, minlength=len(sizes))
+        a = sum(m * normal[i] for i, m in enumerate(mult) if m)
+        g = sum(m * grad[i] for i, m in enumerate(mult) if m)
+        step = -np.linalg.pinv(a) @ g
+        out["motor_time_constant_s"].append(float(res.x[0] + step[0]))
+        gs = gains[idx]
+        out["wheel_gain_mean"].append(float(gs.mean()))
+        out["wheel_bias_sigma"].append(float(gs.ravel().std(ddof=1)))
+        out["tracker_latency_s"].append(float(np.argmin(run_costs[:, idx].sum(axis=1)) * dt))
+        out["tracker_noise_xy_m"].append(_jitter_sigma(np.concatenate([d2[i][0] for i in idx])))
+        out["tracker_noise_theta_rad"].append(_jitter_sigma(np.concatenate([d2[i][1] for i in idx])))
+        t_b = float(w_data[idx].mean()) / absorbed
+        r_b = max(rel + ((t_b - target) / slope if slope > 0 else 0.0) + rng.normal(0.0, sim_sd / slope if slope > 0
+                                                                                   else 0.0), 0.0)
+        out["wheel_noise_rel"].append(r_b)
+        out["wheel_noise_abs_m_s"].append(r_b * ratio)
+    return out
 
 
 def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DEFAULT_PROFILE, *,
@@ -214,17 +243,14 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
     # stage 1: tracks and lag at the profile's latency, then the latency over the grid, then again there
     res = _fit_tracks(runs, base, f0["tracker_latency_s"], x0)
     costs: dict[float, float] = {}
+    run_costs = np.zeros((_MAX_LATENCY_STEPS + 1, len(runs)))  # per grid step and run: its sum of squares
     for d in range(_MAX_LATENCY_STEPS + 1):
         prof = _quiet_profile(base, float(res.x[0]), d * dt)
-        costs[round(d * dt, 6)] = float(sum(
-            np.sum(_residual(run.poses, _simulate(run, prof, (res.x[1 + 2 * i], res.x[2 + 2 * i]), 0))[:, :2] ** 2)
-            for i, run in enumerate(runs)))
+        run_costs[d] = [np.sum(_residual(run.poses, _simulate(run, prof, (res.x[1 + 2 * i], res.x[2 + 2 * i]),
+                                                              0))[:, :2] ** 2) for i, run in enumerate(runs)]
+        costs[round(d * dt, 6)] = float(run_costs[d].sum())
     latency = min(costs, key=lambda k: costs[k])
     res = _fit_tracks(runs, base, latency, res.x)
-    m, n = res.fun.size, res.x.size
-    s2 = 2.0 * res.cost / max(m - n, 1)
-    within = [lat for lat, c in costs.items() if (c - min(costs.values())) / s2 <= 1.0]
-    latency_std = max(dt / 2, (max(within) - min(within)) / 2)
     tau = float(res.x[0])
     gains = res.x[1:].reshape(-1, 2)
     fitted = {**base, "field": {**f0, "motor_time_constant_s": tau, "tracker_latency_s": latency}}
@@ -274,8 +300,6 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
     rel = float(wres.x[0])
     sims = w_sim(rel)
     slope = abs(float(wres.jac[0, 0])) * target
-    w_var = w_data.var(ddof=1) / len(runs) + sims.mean(axis=1).var(ddof=1) / _REPLICATES
-    rel_std = float(math.sqrt(w_var) / slope) if slope > 0 else float("inf")
     values = {
         "motor_time_constant_s": tau,
         "wheel_gain_mean": float(gains.mean()),
@@ -286,22 +310,15 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
         "tracker_noise_xy_m": sigma_xy,
         "tracker_noise_theta_rad": sigma_th,
     }
-    per_run_gains = list(gains)
     by_group: dict[str, list[int]] = {}
     for i, run in enumerate(runs):
         by_group.setdefault(run.group or f"#{i}", []).append(i)
-    groups = list(by_group.values())
-    std = {
-        "motor_time_constant_s": _std_from_jacobian(res, 0),
-        "wheel_gain_mean": _bootstrap(per_run_gains, groups, lambda gs: float(np.mean(gs)), rng),
-        "wheel_bias_sigma": _bootstrap(per_run_gains, groups, lambda gs: float(np.ravel(gs).std(ddof=1)), rng),
-        "wheel_noise_rel": rel_std,
-        "wheel_noise_abs_m_s": rel_std * ratio,
-        "tracker_latency_s": latency_std,
-        "tracker_noise_xy_m": _bootstrap([p for p, _ in d2], groups, lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
-        "tracker_noise_theta_rad": _bootstrap([a for _, a in d2], groups, lambda ps: _jitter_sigma(np.concatenate(ps)), rng),
-    }
+    boot = _bootstrap_fit(list(by_group.values()), res, [len(r.poses) for r in runs], gains, d2, run_costs, dt,
+                          w_data, absorbed, rel, slope, float(math.sqrt(sims.mean(axis=1).var(ddof=1) / _REPLICATES)),
+                          ratio, rng)
+    std = {k: float(np.std(v, ddof=1)) if len(v) > 1 else float("nan") for k, v in boot.items()}
+    interval = {k: (float(np.percentile(v, 2.5)), float(np.percentile(v, 97.5))) for k, v in boot.items() if len(v) > 1}
     out_profile = apply_overrides(base, {k: min(max(v, OVERRIDE_LIMITS[k][0]), OVERRIDE_LIMITS[k][1])
                                          for k, v in values.items()})
     rms = float(math.sqrt(np.mean(np.concatenate([np.sum(r[:, :2] ** 2, axis=1) for r in residuals]))))
-    return Calibration(values, std, out_profile, gains, resim, rms, costs)
+    return Calibration(values, std, out_profile, gains, resim, rms, costs, interval)

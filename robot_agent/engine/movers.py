@@ -115,7 +115,7 @@ def reset_mover(m: int, key: np.uint64, par: np.ndarray, pts: np.ndarray, count:
     tracks[m, 0] = tracks[m, 1] = 0.0
     ring_pos[m] = 0
     keys[m] = key
-    field_begin(m, key, True, pose, belief, ctl, gain, ring_ok, odo, odo_ring, bias, fg)
+    field_begin(m, key, True, pose, belief, ctl, gain, ring_ok, odo, odo_ring, bias, noise, fg)
 
 
 @kernel

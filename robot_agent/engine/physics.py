@@ -68,6 +68,7 @@ class FieldGains(NamedTuple):
     bias_wavenumber: float  #: 1 / its correlation length (1/m)
     predict: int  #: steps over which the localisation projects each fix forward (latency compensation)
     lead: float  #: how far ahead (s) of its belief the controller's pose is predicted
+    slip_rho: float  #: per-step autocorrelation of the track slip (exp(-dt / wheel_noise_corr_s); 0: white)
 
 
 def field_gains(p: RobotParams) -> FieldGains:
@@ -79,7 +80,8 @@ def field_gains(p: RobotParams) -> FieldGains:
                       f.tracker_dropout_prob, f.tracker_noise_xy_m, f.tracker_noise_theta_rad, p.wheel_base_m,
                       f.wheel_noise_rel, f.wheel_noise_abs_m_s, f.wheel_gain_mean, f.wheel_bias_sigma,
                       f.dead_band_m_s, p.max_accel_m_s2 * p.dt, alpha, p.dt, f.tracker_bias_xy_m, k,
-                      int(round(f.latency_compensation_s / p.dt)), f.control_lead_s)
+                      int(round(f.latency_compensation_s / p.dt)), f.control_lead_s,
+                      math.exp(-p.dt / f.wheel_noise_corr_s) if f.wheel_noise_corr_s > 0 else 0.0)
 
 
 IDEAL, FIELD = 0, 1  #: which physics the compiled loop applies to a fleet (``Emulated.kind``)
@@ -106,10 +108,12 @@ def ideal_actuate(i: int, v: float, w: float, pose: np.ndarray, dt: float) -> No
 @kernel
 def field_begin(i: int, key: np.uint64, from_rest: bool, pose: np.ndarray, belief: np.ndarray, ctl: np.ndarray,
                 gain: np.ndarray, ring_ok: np.ndarray, odo: np.ndarray, odo_ring: np.ndarray, bias: np.ndarray,
-                fg: FieldGains) -> None:
+                noise: np.ndarray, fg: FieldGains) -> None:
     """A path with noise ``key`` starts for robot ``i``: draw its track gains and the tracker's
-    bias field (``bias`` ``(N, 2 * BIAS_FEATURES, 3)``); a robot that was at rest gets a fresh
-    tracker measurement as its belief (the tracker was watching it) and odometry at rest."""
+    bias field (``bias`` ``(N, 2 * BIAS_FEATURES, 3)``), start its track slip (``noise[i]``) at 0 (a
+    run replays from its own seed alone); a robot that was at rest gets a fresh tracker measurement
+    as its belief (the tracker was watching it) and odometry at rest."""
+    noise[i, 0] = noise[i, 1] = 0.0
     z0, z1, z2, z3, z4, _ = _six_normals(key, RUN_COUNTER, np.empty(6))
     gain[i, 0] = fg.gain_mean + fg.bias_sigma * z0
     gain[i, 1] = fg.gain_mean + fg.bias_sigma * z1
@@ -160,11 +164,18 @@ def field_sense(i: int, step: int, key: np.uint64, pose: np.ndarray, belief: np.
     Writes the measurement (pose plus the tracker's bias and jitter, ``meas``
     ``(3,)``), puts it in flight (``ring`` ``(N, delay + 1, 3)``), updates
     ``belief[i]`` (:func:`localise`) with the measurement that arrives now, and
-    keeps this step's track noise in ``noise[i]`` for :func:`field_actuate`.
+    keeps this step's track slip in ``noise[i]`` for :func:`field_actuate`: standard normal, white
+    from step to step or, with ``wheel_noise_corr_s``, a first-order autoregressive process of that
+    correlation time (slip changes with the surface patch a track is on, not every 20 ms).
     """
     u = np.empty(_SENSE_CHANNELS)
     z0, z1, z2, z3, z4, _ = _six_normals(key, step, u)
-    noise[i, 0], noise[i, 1] = z3, z4
+    if fg.slip_rho > 0.0:
+        keep = math.sqrt(1.0 - fg.slip_rho * fg.slip_rho)
+        noise[i, 0] = fg.slip_rho * noise[i, 0] + keep * z3
+        noise[i, 1] = fg.slip_rho * noise[i, 1] + keep * z4
+    else:
+        noise[i, 0], noise[i, 1] = z3, z4
     frame = (step * fg.camera_rate) // fg.control_rate != ((step - 1) * fg.camera_rate) // fg.control_rate
     ok = frame and u[6] >= fg.dropout
     bx, by = tracker_bias(i, pose[i, 0], pose[i, 1], bias, fg)
