@@ -43,6 +43,7 @@ from contract.controller_specs import select  # noqa: E402
 from contract.frames import field_layout  # noqa: E402
 from contract.params import robot_params  # noqa: E402
 from contract.protocol import decode_path, encode_path  # noqa: E402
+from contract.vocabulary import run_outcome  # noqa: E402
 from contract.robot_profile import load_profile  # noqa: E402
 from planners import (PlanningError, distance_to_obstacles, get_planner, load_environment,  # noqa: E402
                       parse_environment, plan_path)
@@ -268,6 +269,8 @@ def study_data(spec: StudySpec, overrides: Optional[dict[str, float]] = None, tr
                 if stochastic:  # every repetition's own plan, as the study's collector keeps them
                     data.experiments[-1]["repetition_paths"] = {str(k): np.round(v.path, 6).tolist()
                                                                 for k, v in plans.items() if v is not None}
+    for row in data.rows:  # how each run ended, by the testbed's rule (the bench records no failure kind)
+        row.setdefault("outcome", run_outcome(row["status"], row.get("failure")))
     return data
 
 

@@ -19,8 +19,10 @@ recomputing it.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 
@@ -33,7 +35,7 @@ from .environment import Environment, load_environment
 from .geometry import block_corners, distance_to_obstacles, segment_clearance
 from .grid import config_space
 
-__all__ = ["HARD", "PAPER", "PROBLEM_CLEARANCE", "Problem", "generate_environments", "problems",
+__all__ = ["HARD", "PAPER", "PROBLEM_CLEARANCE", "Problem", "generate_environments", "problems", "stored_optimum",
            "visibility_optimum"]
 
 #: the clearance (m) the problems are posed for: the BeBot's radius plus the planning margin
@@ -110,6 +112,22 @@ def problems(names: tuple[str, ...] | None = None) -> list[Problem]:
         pl = env.plan(plan or "A")
         out.append(Problem(key, env, pl.start, pl.goal, float(stored[key])))
     return out
+
+
+@functools.cache
+def _every_problem() -> tuple[Problem, ...]:
+    """Every problem whose optimum is stored (each environment's plan A and plan B)."""
+    return tuple(problems(tuple(_load("optima"))))
+
+
+def stored_optimum(env: Environment, start: Sequence[float], goal: Sequence[float]) -> float | None:
+    """The stored optimum (m) of the problem posed by ``env`` (the same size and blocks as a problem of the set),
+    ``start`` and ``goal`` (x, y within 1 mm of its own; m); None for any other problem."""
+    for p in _every_problem():
+        if (p.env.size == env.size and p.env.blocks == env.blocks
+                and math.dist(p.start[:2], start[:2]) < 1e-3 and math.dist(p.goal[:2], goal[:2]) < 1e-3):
+            return p.optimum_m
+    return None
 
 
 def _both_ways(a: list[float], b: list[float]) -> list[dict]:

@@ -175,3 +175,55 @@ def test_the_planner_study_has_every_planner_and_the_hard_problems():
     for name in ("narrow-B", "clutter-B", "zigzag-B"):
         (p,) = problems((name,))
         assert p.optimum_m == PROBLEMS[name.split("-")[0]].optimum_m
+
+
+def test_a_problem_of_the_set_is_known_by_its_content_not_its_name():
+    from planners.problems import _load, stored_optimum
+
+    room = load_environment("room")
+    assert stored_optimum(room, room.plan("B").start, room.plan("B").goal) == PROBLEMS["room-B"].optimum_m
+    assert stored_optimum(room, (0.3, 0.3), (1.0, 1.0)) is None  # another start and goal
+    narrow = _load("narrow")
+    env = load_environment(narrow)
+    plan = env.plan("A")
+    assert stored_optimum(env, plan.start, plan.goal) == PROBLEMS["narrow"].optimum_m
+    other = load_environment({**narrow, "blocks": narrow["blocks"][:-1]})  # "narrow", one block fewer
+    assert stored_optimum(other, plan.start, plan.goal) is None
+
+
+def test_the_study_report_tabulates_each_planner_against_each_problems_optimum():
+    """A small planner study (FMM and A* on room A and the narrow passage, plans A and B, two repetitions),
+    run offline as the testbed runs it: the report's problem-set table has a row per problem and planner with
+    the stored optimum, every plan found, and lengths just above the optimum (never below it by more than the
+    clearance the grid planners give up: docs/planners.md, "Clearance")."""
+    import sys
+    from pathlib import Path
+
+    from client_sdk.study import StudySpec, summary_markdown
+    from planners.problems import _load
+
+    root = str(Path(__file__).resolve().parents[1])
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    import bench.fidelity
+
+    spec = StudySpec.from_json({"name": "mini-planners", "environments": ["room", _load("narrow")],
+                                "plans": ["A", "B"], "planners": ["fmm", "astar"], "repetitions": 2,
+                                "modes": ["sim"], "seed": 0}, "mini-planners")
+    text = summary_markdown(bench.fidelity.study_data(spec))
+    head = "## Planners per problem of the problem set"
+    assert head in text
+    table = text.split(head, 1)[1].split("\n## ", 1)[0]
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in table.splitlines() if line.startswith("| ")]
+    header, body = rows[0], rows[1:]
+    assert header[:5] == ["environment", "plan", "configuration", "optimum (m)", "planned"]
+    assert sorted((r[0], r[1], r[2]) for r in body) == sorted(
+        (e, p, c) for e in ("room", "narrow") for p in ("A", "B") for c in ("fmm", "astar"))
+    col = {h: i for i, h in enumerate(header)}
+    for r in body:
+        key = f"{r[0]}-{r[1]}" if r[0] == "room" else ("narrow" if r[1] == "A" else "narrow-B")
+        assert float(r[col["optimum (m)"]]) == pytest.approx(problems((key,))[0].optimum_m, abs=5e-4)
+        assert r[col["planned"]] == "2 of 2"
+        ratio = float(r[col["length / optimum"]].split()[0])
+        assert 0.99 < ratio < 1.15, r
+        assert float(r[col["turning (rad)"]].split()[0]) > 0

@@ -9,6 +9,8 @@ from typing import Any, Optional
 
 from contract.vocabulary import JUDGED
 from planners.compared import FLEET_METHOD, METHOD
+from planners.environment import InvalidEnvironment, load_environment
+from planners.problems import stored_optimum
 
 from ._compare import COMPARISON_COLUMNS, Comparisons
 from ._data import StudyData, write_csv_rows
@@ -149,6 +151,9 @@ def summary_tables(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = N
     tables.append(("Computed (planned) paths per configuration: one plan per experiment and repetition (both "
                    "modes drive it); planning time: the median wall time of the planner call in a warmed worker",
                    ["configuration", "plans"] + [h for _, h in PLANNED_METRICS], body))
+    problem_set = planners_per_problem(data)
+    if problem_set is not None:
+        tables.append(problem_set)
     if data.direct:
         body = [[p, str(sum(d["configuration"] == p for d in data.direct))] +
                 [_fmt([d.get(k) for d in data.direct if d["configuration"] == p]) for k, _ in DIRECT_METRICS]
@@ -170,6 +175,55 @@ def summary_tables(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = N
     tables.append(("Per problem (outcomes: successes of runs, then the failures; means over completed runs)",
                    header, body))
     return tables
+
+
+def _optima(data: StudyData) -> dict[Any, float]:
+    """The stored optimum (m) of every experiment of ``data`` that poses a problem of the problem set
+    (:func:`planners.problems.stored_optimum`), by experiment id."""
+    envs = {}
+    for item in data.spec.environments:
+        try:
+            env = load_environment(item)
+        except (InvalidEnvironment, OSError):
+            continue
+        envs[env.name] = env
+    out = {}
+    for e in data.experiments:
+        env = envs.get(e["environment"])
+        if env is not None and e.get("start") is not None and e.get("goal") is not None:
+            best = stored_optimum(env, e["start"], e["goal"])
+            if best is not None:
+                out[e["experiment_id"]] = best
+    return out
+
+
+def planners_per_problem(data: StudyData) -> Optional[tuple[str, list[str], list[list[str]]]]:
+    """The planners on each problem of the problem set (``twb study planners``; docs/planners.md): how many
+    repetitions found a plan, and the planned paths' length, length / the stored optimum, minimum clearance,
+    total turning (AOL × length) and planning time, mean ± std over the plans. None when no experiment poses
+    a problem of the set."""
+    optima = _optima(data)
+    if not optima:
+        return None
+    body = []
+    for e in data.experiments:
+        if e["experiment_id"] not in optima:
+            continue
+        best = optima[e["experiment_id"]]
+        plans = list({r.get("repetition"): r for r in data.rows if r["experiment_id"] == e["experiment_id"]
+                      and r.get("planned_length_m") is not None}.values())
+        lengths = [r["planned_length_m"] for r in plans]
+        turning = [r["planned_aol_rad_per_m"] * r["planned_length_m"] for r in plans
+                   if r.get("planned_aol_rad_per_m") is not None]
+        body.append([e["environment"], e["plan"], e["configuration"], f"{best:.3f}",
+                     f"{len(plans)} of {data.spec.repetitions}", _fmt(lengths), _fmt([v / best for v in lengths]),
+                     _fmt([r.get("planned_clearance_min_m") for r in plans]), _fmt(turning),
+                     _fmt([r.get("planning_time_s") for r in plans])])
+    return ("Planners per problem of the problem set: the planned paths (one per repetition; mean ± std over "
+            "those found) against the problem's stored optimum, the shortest path keeping 0.065 m from every "
+            "block by the exact distance (docs/planners.md)",
+            ["environment", "plan", "configuration", "optimum (m)", "planned", "length (m)", "length / optimum",
+             "min clearance (m)", "turning (rad)", "planning time (s)"], body)
 
 
 def _outcome_cell(rows: list[dict[str, Any]], exp: dict[str, Any]) -> str:
