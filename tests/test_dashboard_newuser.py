@@ -12,7 +12,9 @@ queue does.  Screenshots at both widths go to ``tests/output/dashboard/`` (``w14
 
 from __future__ import annotations
 
+import json
 import re
+from pathlib import Path
 
 import pytest
 
@@ -21,6 +23,8 @@ from test_dashboard import CORNER, OUTPUT, OVERSHOOT_ENV, Console, login, no_hor
 from test_dashboard import browser, page  # noqa: F401  (the shared fixtures)
 
 WIDTHS = (1440, 1024)
+#: the built-in room as a user's environment (given a name of its own below)
+ROOM_ENV_LONG = json.loads((Path(__file__).resolve().parents[1] / "planners" / "data" / "room.json").read_text())
 ROOM_JOB = {"environment": "room", "start": [0.3, 0.3, 0.0], "goal": [1.5, 1.5, 0.0], "planner": "fm2"}
 TOAST_LOG = """() => {
   window.toastLog = [];
@@ -68,8 +72,14 @@ def finished(testbed) -> dict:
         # the field robot overshoots the path's corner into a block: the experiment fails, and says why
         bad = c.post("/api/v1/experiments", json={"environment": OVERSHOOT["name"], "modes": ["twb"], **CORNER,
                                                   "path": [CORNER["start"], [0.9, 0.69], CORNER["goal"]]})
-        assert ok.status_code == 202 and bad.status_code == 202, (ok.text, bad.text)
-        done = {"ok": wait_for(c, ok.json()["id"], timeout=120), "bad": wait_for(c, bad.json()["id"], timeout=120)}
+        # the longest names the API takes: the lists must wrap them, not scroll sideways
+        long_env = {**ROOM_ENV_LONG, "name": "a-" + "long-environment-name-" * 2 + "x" * 18}
+        assert len(long_env["name"]) == 64 and c.post("/api/v1/environments", json=long_env).status_code == 201
+        long = c.post("/api/v1/experiments", json={**ROOM_JOB, "environment": long_env["name"], "modes": ["sim"],
+                                                   "planner": "theta_star"})
+        assert ok.status_code == 202 and bad.status_code == 202 and long.status_code == 202, (ok.text, bad.text, long.text)
+        done = {"ok": wait_for(c, ok.json()["id"], timeout=120), "bad": wait_for(c, bad.json()["id"], timeout=120),
+                "long": wait_for(c, long.json()["id"], timeout=120)}
         done["metrics"] = c.get(f"/api/v1/experiments/{done['ok']['id']}/metrics").json()
     assert done["ok"]["status"] == "completed" and done["bad"]["status"] == "failed", done
     return done
