@@ -24,7 +24,7 @@ run: $(STAMP)
 # Two workers (CI has two cores); --dist loadfile keeps a test file on one worker, so a module's
 # testbed fixture starts once.  One file alone: $(PY) -m pytest tests/test_x.py
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --dist loadfile
+	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder  # in tests/conftest.py's order: longest first
 
 # The inner loop: everything but the tests marked browser, postgres, ray or slow (pyproject.toml; tests/conftest.py
 # marks them): no Chromium, PostgreSQL or Ray needed, no testbed process started.  Under 2 minutes on 2 cores.
