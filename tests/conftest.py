@@ -65,8 +65,8 @@ MARKED_FIXTURES = {"browser": "browser", "postgres": "postgres", "ray": "ray", "
 
 
 #: the modules that take longest (``pytest --durations``, 2 cores), longest first: they run first, so that the
-#: parallel workers (``-n 2 --dist loadfile``, which hands out modules in collection order) end together
-#: instead of one of them finishing a long module alone
+#: parallel workers end together instead of one of them finishing a long module alone (``make test`` runs
+#: ``-n 2 --dist loadfile --no-loadscope-reorder``: without that flag xdist sorts modules by test count instead)
 LONGEST_FIRST = ("test_api_fuzz", "test_testbed", "test_lifecycle", "test_controller_programs", "test_study",
                  "test_ray", "test_postgres", "test_dashboard", "test_uploads", "test_agent_hosts",
                  "test_lockstep_programs", "test_docs_commands", "test_dashboard_newuser", "test_controller_flood",
