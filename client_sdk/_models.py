@@ -581,13 +581,15 @@ class ObstacleTracks:
 
 @dataclass
 class Subfield(_FromJson):
-    """One of the four 1.8 m sub-fields: state, environment built on it, robot, current run."""
+    """One of the four 1.8 m sub-fields: state, environment built on it, robot, current run and the last run
+    since the testbed started (yours only)."""
 
     id: int
     state: str
     environment: Optional[str] = None
     robot_id: Optional[str] = None
     run_id: Optional[int] = None
+    last_run_id: Optional[int] = None
     origin: list[float] = _field(default_factory=list)
     size: list[float] = _field(default_factory=list)
 

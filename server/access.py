@@ -69,7 +69,10 @@ def event_for(user: Principal, event: dict[str, Any]) -> Optional[dict[str, Any]
     kind = event.get("type")
     if kind in ("experiment", "run") or (kind == "pose" and event.get("run_id") is not None):
         return event if mine else None
-    shown = {k: v for k, v in event.items() if k != "owner_id"}
-    if kind == "subfield" and not mine and shown["subfield"].get("run_id") is not None:
-        shown["subfield"] = {**shown["subfield"], "run_id": None}
+    shown = {k: v for k, v in event.items() if k not in ("owner_id", "last_owner_id")}
+    if kind == "subfield":
+        hide = {k: None for k, its in (("run_id", mine), ("last_run_id", event.get("last_owner_id") == user.id))
+                if not its and shown["subfield"].get(k) is not None}
+        if hide:
+            shown["subfield"] = {**shown["subfield"], **hide}
     return shown

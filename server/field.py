@@ -56,6 +56,11 @@ class FieldState:
         self._tokens: dict[str, Optional[int]] = {}
         #: the owner of the run on each sub-field (for who may see which run is there)
         self.subfield_owner: dict[int, Optional[int]] = {}
+        #: the owner of each sub-field's last run since the start (who may see which run drove there last)
+        self.last_owner: dict[int, Optional[int]] = {}
+        #: called with a field robot that joined or answers again: where it stands is to be looked up
+        #: (``(robot_id, host, port, control key)``; :class:`server.locate.Locator`)
+        self.on_join: Optional[Callable[[str, str, int, Optional[str]], None]] = None
 
     # ------------------------------------------------------------------ any thread
 
@@ -124,7 +129,12 @@ class FieldState:
         self.built.pop(rid, None)
         self.offline_reason.pop(rid, None)
         self._broker.publish({"type": "robot", "robot_id": rid})
+        self._joined(slot)
         return slot
+
+    def _joined(self, slot: RobotSlot) -> None:
+        if self.on_join is not None and slot.pool == "field" and not slot.engine:
+            self.on_join(slot.robot_id, slot.host, slot.port, self.keys.get(slot.robot_id))
 
     def add_engine_slots(self, engine: str, n: int) -> list[RobotSlot]:
         """``n`` simulation slots of a compute engine (``{engine}-1`` ...): whole-field ideal robots that are
@@ -149,6 +159,7 @@ class FieldState:
         self.moving.add(robot_id)  # its world is unknown
         self.offline_reason.pop(robot_id, None)
         self._broker.publish({"type": "robot", "robot_id": robot_id})
+        self._joined(self.robots[robot_id])
 
     async def probe_offline(self) -> list[str]:
         """Try the idle offline robots; the ones that answer are back online (returned)."""
@@ -180,11 +191,13 @@ class FieldState:
             setattr(slot, key, v)
         if "run_id" in fields:
             self.subfield_owner[k] = owner_id if slot.run_id is not None else None
+            if slot.run_id is not None:
+                slot.last_run_id, self.last_owner[k] = slot.run_id, owner_id
         robot = self.field_robot(k)
         state, environment, run_id = str(slot.state), slot.environment, slot.run_id
         robot_id = robot.robot_id if robot else None
         self._broker.publish({"type": "subfield", "owner_id": self.subfield_owner.get(k),
-                              "subfield": self.subfield_view(k).model_dump(mode="json")})
+                              "last_owner_id": self.last_owner.get(k), "subfield": self.subfield_view(k).model_dump(mode="json")})
 
         def save() -> None:
             with self._sessions.begin() as s:
@@ -205,6 +218,7 @@ class FieldState:
             state = SubfieldState.OFFLINE
         return SubfieldPublic(id=k, state=state, environment=slot.environment,
                               robot_id=robot.robot_id if robot else None, run_id=slot.run_id,
+                              last_run_id=slot.last_run_id,
                               origin=list(SUBFIELD_ORIGINS[k]), size=list(SUBFIELD_SIZE))
 
     def subfield_views(self) -> list[SubfieldPublic]:

@@ -109,6 +109,8 @@ class SubfieldSlot:
     state: str = SubfieldState.IDLE
     environment: Optional[str] = None
     run_id: Optional[int] = None
+    #: the last run that drove on it since the testbed started
+    last_run_id: Optional[int] = None
 
 
 @dataclass

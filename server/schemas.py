@@ -919,6 +919,9 @@ class SubfieldPublic(Public):
     environment: Optional[str]
     robot_id: Optional[str]
     run_id: Optional[int]
+    last_run_id: Optional[int] = Field(default=None, description=(
+        "The last run that drove on the sub-field since the testbed started (the one under way, or the one "
+        "whose robot and environment it still shows), if it is yours; null after a restart."))
     origin: list[float]
     size: list[float]
 

@@ -5,7 +5,7 @@ API routes reach its services through dependencies (``server.api.deps``).
 It holds no logic of its own beyond wiring, start-up and shutdown::
 
     store (SQLAlchemy) ── broker (live events) ── finished views (response cache)
-    field (robots, sub-fields) ── tracker (pose windows) ── worker pool or Ray ── sandbox
+    field (robots, sub-fields) ── tracker (pose windows) ── locator ── worker pool or Ray ── sandbox
     recorder ── paths ── run services ── dispatcher (queue → runs)
     embedded robots (``twb up`` only)
 
@@ -28,6 +28,7 @@ from .core.settings import Settings
 from .dispatch import Dispatcher, pending_of
 from .embedded import EmbeddedField
 from .field import FieldState
+from .locate import Locator
 from .pipeline.paths import PathService
 from .pipeline.pool import WorkerPool
 from .pipeline.ray_pool import RayPool
@@ -66,6 +67,9 @@ class Testbed:
         self.views = FinishedViews()
         self.field = FieldState(self.sessions, self.broker)
         self.tracker = PoseRouter(self.sessions, self.broker, self.field.origin_of)
+        #: where a field robot stands when it joins, asked of its tracker (not the last session's logs)
+        self.locator = Locator(self.tracker.place)
+        self.field.on_join = self.locator.locate
         #: planning and metrics, off the loop: worker processes, or Ray tasks (then simulation runs too)
         self.pool: WorkerPool | RayPool = (
             RayPool(address=settings.ray_address, cpus=settings.ray_cpus, slots=settings.ray_slots,
@@ -116,6 +120,7 @@ class Testbed:
     async def stop(self) -> None:
         """Stop: runs under way end ``interrupted``; queued runs stay queued for the next start."""
         await self.dispatcher.stop()
+        await self.locator.stop()
         if self.embedded is not None:
             await self.embedded.stop()
         await asyncio.to_thread(self.pool.stop)

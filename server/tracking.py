@@ -77,6 +77,19 @@ class PoseRouter:
         """The robot's last tracked pose ``[t, x, y, theta]`` in field coordinates, if any."""
         return self._last_pose.get(robot_id)
 
+    def place(self, robot_id: str, pose: tuple[float, float, float, float]) -> None:
+        """Where the tracker sees ``robot_id`` when it joins, ``(t, x, y, theta)`` in its own frame (s, m, rad):
+        its last pose from now on, published live, unless a run's window is open on it (the run's poses
+        are newer). Not stored, and no waiter is woken: it is no run's pose."""
+        with self._lock:
+            if robot_id in self._windows:
+                return
+        t, x, y, a = pose
+        ox, oy = self._origin_of(robot_id)
+        self._last_pose[robot_id] = [t, x + ox, y + oy, a]
+        self._broker.publish({"type": "pose", "robot_id": robot_id, "run_id": None, "owner_id": None,
+                              "t": t, "x": x + ox, "y": y + oy, "theta": a})
+
     async def wait_for_time(self, robot_id: str, t: float, timeout_s: float) -> bool:
         """Wait until a pose of ``robot_id`` at experiment time >= ``t`` has arrived (or time out)."""
         loop = asyncio.get_running_loop()

@@ -200,6 +200,11 @@ ADMIN = Principal(id=1, name="admin", is_admin=True, kind="admin")
      {"type": "subfield", "subfield": {"id": 2, "run_id": None}}),
     ({"type": "subfield", "owner_id": 7, "subfield": {"id": 2, "run_id": 5}},
      {"type": "subfield", "subfield": {"id": 2, "run_id": 5}}),
+    # the last run since the start: named only to its owner, whoever's run is there now
+    ({"type": "subfield", "owner_id": None, "last_owner_id": 8, "subfield": {"id": 2, "run_id": None, "last_run_id": 4}},
+     {"type": "subfield", "subfield": {"id": 2, "run_id": None, "last_run_id": None}}),
+    ({"type": "subfield", "owner_id": None, "last_owner_id": 7, "subfield": {"id": 2, "run_id": None, "last_run_id": 4}},
+     {"type": "subfield", "subfield": {"id": 2, "run_id": None, "last_run_id": 4}}),
     ({"type": "robot", "robot_id": "f"}, {"type": "robot", "robot_id": "f"}),
 ])
 def test_the_live_stream_shows_a_user_only_what_is_theirs(event, shown):

@@ -363,4 +363,7 @@ def test_a_user_follows_only_their_own_runs_live(testbed, client):
     assert not [e for e in seen if e["event"] in ("run", "experiment")]
     assert not [e for e in seen if e["event"] == "pose" and e["run_id"] is not None]
     assert not [e for e in seen if "owner_id" in e]
-    assert all(e["subfield"]["run_id"] is None for e in seen if e["event"] == "subfield")
+    assert all(e["subfield"]["run_id"] is None and e["subfield"]["last_run_id"] is None
+               for e in seen if e["event"] == "subfield")
+    with testbed.client(token=user) as c:
+        assert all(s["run_id"] is None and s["last_run_id"] is None for s in c.get("/api/v1/subfields").json()["data"])

@@ -18,10 +18,17 @@ router = APIRouter(tags=["field"], responses=AUTHENTICATED)
 
 @router.get("/subfields", response_model=Page[SubfieldPublic])
 async def list_subfields(user: CurrentUser, testbed: TestbedDep) -> Page[SubfieldPublic]:
-    """The four 1.8 m sub-fields: state, environment built, robot, current run (if it is yours)."""
+    """The four 1.8 m sub-fields: state, environment built, robot, current and last run (if they are yours)."""
     field = testbed.field
-    data = [v if user.is_admin or field.subfield_owner.get(v.id) == user.id else v.model_copy(update={"run_id": None})
-            for v in field.subfield_views()]
+
+    def shown(v: SubfieldPublic) -> SubfieldPublic:
+        if user.is_admin:
+            return v
+        hide = {k: None for k, owner in (("run_id", field.subfield_owner.get(v.id)),
+                                         ("last_run_id", field.last_owner.get(v.id))) if owner != user.id}
+        return v.model_copy(update=hide) if hide else v
+
+    data = [shown(v) for v in field.subfield_views()]
     return Page(data=data, count=len(data))
 
 

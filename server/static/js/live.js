@@ -147,15 +147,15 @@ export class FieldPage {
       }
     }
     const robots = [];
+    const unknown = []; // field robots the testbed has not seen since it started: not drawn
     for (const r of st.robots) {
       if (r.pool !== "field") continue;
       const p = st.poses.get(r.robot_id);
-      if (!p) continue;
-      robots.push({ x: p.x, y: p.y, theta: p.theta, label: r.robot_id + (p.source === "home" ? " (start-up)" : ""),
-                    ghost: p.source === "home" || r.status === "offline" });
+      if (!p) unknown.push(r.robot_id + (r.status === "offline" ? " (offline)" : ""));
+      else robots.push({ x: p.x, y: p.y, theta: p.theta, label: r.robot_id, ghost: r.status === "offline" });
     }
     robots.push(...fleet);
-    this.describe(robots);
+    this.describe(robots, unknown);
     this.sayObstacles(tracked, exact);
     return { subfields, blocks, plannedBlocks, paths, markers, robots, obstacles, obstacleTracks };
   }
@@ -180,9 +180,10 @@ export class FieldPage {
   }
 
   /** The canvas's text alternative: what a sighted user sees on it. */
-  describe(robots) {
+  describe(robots, unknown) {
     const parts = this.store.subfields.map((sf) => `sub-field ${sf.id} ${this.shownState(sf)}${sf.environment ? ` with ${sf.environment}` : ""}`);
     const rs = robots.map((r) => `${r.label} at (${r.x.toFixed(2)}, ${r.y.toFixed(2)}) m heading ${Math.round((r.theta * 180) / Math.PI)}°`);
+    if (unknown.length) rs.push(`${unknown.join(", ")} where unknown`);
     const text = `Field 3.6 by 3.6 m: ${parts.join("; ")}. Robots: ${rs.join("; ") || "none known"}.`;
     const c = this.map.canvas;
     if (c.getAttribute("aria-label") !== text) c.setAttribute("aria-label", text);

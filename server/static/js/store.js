@@ -13,8 +13,6 @@ import { TERMINAL, report } from "./dom.js";
 
 export const SUBFIELD_SIZE = [1.8, 1.8];
 export const FIELD_SIZE = [3.6, 3.6];
-/** Where a robot stands after start-up, in its own frame (docs/protocol.md). */
-const HOME = [0.1, 0.1, 0];
 const MAX_TRACE = 20000; // points of one live trace
 const MAX_TRACES = 64;
 const MAX_DETAILS = 200;
@@ -33,12 +31,15 @@ export class Store extends EventTarget {
     this.details = new Map(); // experiment id -> ExperimentPublic
     this.runs = new Map(); // run id -> RunPublic
     this.programs = new Map(); // program id -> ProgramPublic (names for the lists)
-    this.poses = new Map(); // robot id -> {x, y, theta, t, run_id, source: live|log|home}
+    // robot id -> {x, y, theta, t, run_id, source: live (an event) | log (its run's stored poses) | server (where
+    // the testbed last saw it: /robots)}; a field robot the testbed has not seen since it started is absent
+    this.poses = new Map();
+    this.poseToldAt = new Map(); // robot id -> when a live pose event last told where it is (performance.now())
     // run id -> {robot_id, points: [[x, y]] field frame, exact, t0, t1 (s, first and last pose time seen);
     // a multi-robot run's: robots, one {points, last: {x, y, theta}} per robot; a stored field run's: obstacles,
     // its obstacle robots' tracks [{radius, poses}] field frame, or null}
     this.traces = new Map();
-    this.subfieldRun = new Map(); // sub-field id -> latest run id seen on it
+    this.subfieldRun = new Map(); // sub-field id -> its latest run since the testbed started (that the user may see)
     // when an event last told a run's or a sub-field's state (performance.now()): an API answer asked for
     // before that is older than what the dashboard shows, and does not overwrite it
     this.runToldAt = new Map();
@@ -57,8 +58,7 @@ export class Store extends EventTarget {
   }
 
   start() {
-    // robots' last positions are looked up in the experiments: load those first
-    this.experimentsReady = this.refreshExperiments();
+    this.refreshExperiments();
     this.refreshField();
     this.stream.start();
     this.timers.push(setInterval(() => this.poll(), 2000));
@@ -113,10 +113,10 @@ export class Store extends EventTarget {
       const [subs, robots] = await Promise.all([this.api.get("/api/v1/subfields"), this.api.get("/api/v1/robots")]);
       this.subfields = subs.data.map((sf) => this.newer(this.subfieldToldAt, asked, sf, this.subfields.find((s) => s.id === sf.id)));
       this.robots = robots.data;
-      for (const sf of this.subfields) if (sf.run_id != null) this.subfieldRun.set(sf.id, sf.run_id);
+      this.placeRobots(asked);
+      for (const sf of this.subfields) this.noteSubfieldRuns(sf);
       this.emit("field");
       await this.ensureRunning();
-      await this.resolveRobotPoses();
     } catch (err) {
       this.failed(err, "Field");
     }
@@ -251,9 +251,6 @@ export class Store extends EventTarget {
     const [ox, oy] = this.originOf(run.robot_id);
     const obstacles = obs && !obs.exact
       ? obs.obstacles.map((o) => ({ radius: o.radius, poses: o.poses.map(([t, x, y, a]) => [t, x + ox, y + oy, a]) })) : null;
-    if (run.mode === "twb" && run.subfield != null && (this.subfieldRun.get(run.subfield) ?? -1) < runId) {
-      this.subfieldRun.set(run.subfield, runId);
-    }
     const times = { t0: res.poses[0]?.[0] ?? null, t1: res.poses[res.poses.length - 1]?.[0] ?? null };
     if ((res.columns || []).includes("robot")) {
       // a multi-robot run: its robots' paths and where each ended; the field robot itself did not move
@@ -271,12 +268,11 @@ export class Store extends EventTarget {
     if (!old || old.points.length <= points.length) this.traces.set(runId, { robot_id: run.robot_id, points, exact: true, obstacles, ...times });
     this.prune();
     const last = res.poses[res.poses.length - 1];
-    if (last && this.isFieldRobot(run.robot_id)) {
-      const cur = this.poses.get(run.robot_id);
-      if (!cur || cur.source === "home" || (cur.run_id ?? -1) <= runId) {
-        this.poses.set(run.robot_id, { x: last[1] + ox, y: last[2] + oy, theta: last[3], t: last[0], run_id: runId,
-                                       source: cur && cur.source === "live" && cur.run_id === runId ? "live" : "log" });
-      }
+    const cur = this.poses.get(run.robot_id);
+    if (last && this.isFieldRobot(run.robot_id) && cur && cur.run_id === runId) {
+      // the run's exact last pose replaces the sampled live one (an older run's says nothing of where it is now)
+      this.poses.set(run.robot_id, { x: last[1] + ox, y: last[2] + oy, theta: last[3], t: last[0], run_id: runId,
+                                     source: "log" });
     }
     this.emit("field");
   }
@@ -294,36 +290,33 @@ export class Store extends EventTarget {
     }
   }
 
-  /** Field robots never seen moving: their last logged pose, else where they start up. */
-  async resolveRobotPoses() {
-    if (this.resolving) return;
-    this.resolving = true;
-    try {
-      await this.experimentsReady;
-      const missing = new Set(this.robots.filter((r) => r.pool === "field" && !this.poses.has(r.robot_id)).map((r) => r.robot_id));
-      if (!missing.size) return;
-      const recent = this.experiments.filter((e) => e.status !== "queued" && e.modes.includes("twb")).slice(0, 10);
-      for (const e of recent) {
-        if (!missing.size) break;
-        const d = await this.detail(e.id, { fresh: !TERMINAL.has(e.status) });
-        const runs = d.runs.filter((r) => r.mode === "twb" && missing.has(r.robot_id) && r.t_start != null)
-          .sort((a, b) => b.id - a.id);
-        for (const r of runs) {
-          if (!missing.has(r.robot_id)) continue;
-          await this.loadTrace(r.id);
-          if (this.poses.has(r.robot_id)) missing.delete(r.robot_id);
-        }
+  /** Field robots where the testbed last saw them (`/robots`, asked for at `asked`): the pose its tracker
+   * gave when the robot joined, or its last tracked one since; none known, not drawn.  A live event since
+   * `asked` is newer and stays. */
+  placeRobots(asked) {
+    for (const r of this.robots) {
+      if (r.pool !== "field" || (this.poseToldAt.get(r.robot_id) ?? -Infinity) > asked) continue;
+      const cur = this.poses.get(r.robot_id);
+      if (!r.last_pose) {
+        this.poses.delete(r.robot_id);
+        continue;
       }
-      for (const id of missing) {
-        if (this.poses.has(id)) continue;
-        const [ox, oy] = this.originOf(id);
-        this.poses.set(id, { x: HOME[0] + ox, y: HOME[1] + oy, theta: HOME[2], t: null, run_id: null, source: "home" });
+      const [t, x, y, theta] = r.last_pose;
+      if (cur && cur.t === t && cur.x === x && cur.y === y) continue; // the same pose: keep which run it was
+      this.poses.set(r.robot_id, { x, y, theta, t, run_id: null, source: "server" });
+    }
+  }
+
+  /** The runs sub-field `sf` names (under way, last since the start) as its latest; an ended one's stored
+   * trace is loaded once (a dashboard opened after it ended draws it too). */
+  noteSubfieldRuns(sf) {
+    for (const id of [sf.last_run_id, sf.run_id]) {
+      if (id == null || (this.subfieldRun.get(sf.id) ?? -1) > id) continue;
+      this.subfieldRun.set(sf.id, id);
+      if (id !== sf.run_id && !this.traces.has(id) && !this.traceAsked?.has(id)) {
+        (this.traceAsked ||= new Set()).add(id);
+        this.loadTrace(id).catch((err) => this.failed(err, "Poses"));
       }
-    } catch (err) {
-      this.failed(err, "Robot positions");
-    } finally {
-      this.resolving = false;
-      this.emit("field");
     }
   }
 
@@ -331,9 +324,9 @@ export class Store extends EventTarget {
   async followFieldRuns(id) {
     try {
       const d = await this.detail(id, { fresh: true });
+      const shown = new Set(this.subfieldRun.values()); // its runs on the field now (the sub-fields name them)
       for (const r of d.runs) {
-        if (r.mode !== "twb" || r.t_start == null || !r.robot_id) continue;
-        if (r.subfield != null && (this.subfieldRun.get(r.subfield) ?? -1) < r.id) this.subfieldRun.set(r.subfield, r.id);
+        if (r.mode !== "twb" || r.t_start == null || !r.robot_id || !shown.has(r.id)) continue;
         if (TERMINAL.has(r.status) && !this.traces.get(r.id)?.exact) await this.loadTrace(r.id);
       }
       this.emit("field");
@@ -356,6 +349,7 @@ export class Store extends EventTarget {
     if (ev.robot != null) return this.onFleetPose(ev);
     if (this.isFieldRobot(ev.robot_id)) {
       this.poses.set(ev.robot_id, { x: ev.x, y: ev.y, theta: ev.theta, t: ev.t, run_id: ev.run_id, source: "live" });
+      this.poseToldAt.set(ev.robot_id, performance.now());
     }
     if (ev.run_id != null) {
       let tr = this.traces.get(ev.run_id);
@@ -434,10 +428,8 @@ export class Store extends EventTarget {
     const i = this.subfields.findIndex((s) => s.id === sf.id);
     if (i >= 0) this.subfields[i] = sf;
     else this.subfields.push(sf);
-    if (sf.run_id != null) {
-      this.subfieldRun.set(sf.id, sf.run_id);
-      this.ensureRunning();
-    }
+    this.noteSubfieldRuns(sf);
+    if (sf.run_id != null) this.ensureRunning();
     this.emit("field");
   }
 }
