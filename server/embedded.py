@@ -63,8 +63,9 @@ class EmbeddedField:
     their closed-loop clock (``lockstep`` or ``free``, :mod:`robot_agent.host.lockstep`)."""
 
     def __init__(self, *, sim_robots: int = 4, seed: int = 0, time_scale: float = 1.0,
-                 clock: str = "lockstep") -> None:
+                 clock: str = "lockstep", lockstep_wait_s: float = 3.0) -> None:
         self.sim_robots, self.seed, self.time_scale, self.clock = sim_robots, seed, time_scale, clock
+        self.lockstep_wait_s = lockstep_wait_s
         self._hosts: list["AgentHost"] = []
         self._host_of: dict[str, "AgentHost"] = {}
 
@@ -85,7 +86,8 @@ class EmbeddedField:
         sink = _RouterSink(router)
         # their ports listen on 127.0.0.1 like any agent's: only the testbed (which knows the key) drives them
         key = secrets.token_hex(32)
-        common = {"time_scale": self.time_scale, "clock": self.clock, "seed": self.seed, "tracker_sink": sink,
+        common = {"time_scale": self.time_scale, "clock": self.clock, "lockstep_wait_s": self.lockstep_wait_s,
+                  "seed": self.seed, "tracker_sink": sink,
                   "advertise_host": "127.0.0.1", "control_key": key}
         self._hosts = [
             AgentHost(robots=4, backend="field", world="shared", robot_ids=[f"field-{k}" for k in range(1, 5)],

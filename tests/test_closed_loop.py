@@ -181,6 +181,27 @@ async def test_a_stated_compute_time_delays_the_answer_by_whole_control_periods(
         == {round(dt, 3)}
 
 
+async def test_a_silent_lockstep_controller_lapses_after_the_configured_wait(caplog):
+    """``lockstep_wait_s`` (``twb up/agent --lockstep-wait``, ``TWB_LOCKSTEP_WAIT_S``): a controller that stops
+    answering holds its robot's clock that many wall seconds, no fewer, then lapses; the watchdog stops the
+    robot."""
+    import logging
+    import time
+
+    caplog.set_level(logging.WARNING, logger="robot_agent.host")
+    async with running_agents(backend="ideal", lockstep_wait_s=0.4) as agents:
+        c = await LineClient.connect(agents.ports[0])
+        assert await c.ask("T,T,O,1,lockstep") == "OK,O"
+        assert await c.ask("T,T,V,100,0") == "OK,V"
+        answered = time.monotonic()  # from here on the controller is silent
+        lines = await c.until("EV,FAIL", timeout=30)
+        waited = time.monotonic() - answered
+        assert lines[-1].startswith("EV,FAIL,WATCHDOG,"), lines[-3:]
+        await c.close()
+    assert waited >= 0.4
+    assert any("did not answer a pose within 0.4 s" in r.getMessage() for r in caplog.records), caplog.text
+
+
 async def test_free_running_controllers_keep_the_wall_clock():
     """``T,T,O,1,free``: the clock does not wait for the answers (a controller that does not answer loses its robot
     to the watchdog after 0.5 s of experiment time, as before)."""

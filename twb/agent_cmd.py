@@ -57,6 +57,7 @@ def agent(
     advertise_host: Annotated[Optional[str], typer.Option(help="Host name the server should use to reach these robots (e.g. a container name) (default: --host).")] = None,
     control_key: Annotated[Optional[str], typer.Option(help="Robot-port control key of a standalone agent (16-128 printable ASCII characters, no , or ;): only connections that send T,T,A,KEY (or a lease it grants) may move the robots or build; T,T,Q stays open. Default: none, every connection may. With --server the key of each robot is the one the server derives from --token.", envvar="TWB_CONTROL_KEY")] = None,
     clock: Annotated[str, typer.Option(help="How the clock treats a closed-loop controller that subscribes with plain T,T,O,1: 'lockstep' waits for its answer to every pose (results independent of the time scale), 'free' runs on (docs/protocol.md, \"Lockstep\").", envvar="TWB_CLOCK")] = "lockstep",
+    lockstep_wait: Annotated[float, typer.Option(help="Wall seconds a lockstep clock waits for a controller's answer before it runs on without it (the controller has lapsed; docs/protocol.md, \"Lockstep\").", envvar="TWB_LOCKSTEP_WAIT_S", min=0.01, max=600)] = 3.0,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log every path and event.")] = False,
 ) -> None:
     """Run emulated robots speaking the T,T,P line protocol until Ctrl-C (logs on stderr)."""
@@ -91,7 +92,7 @@ def agent(
         robots=robots, backend=backend.value, profile=profile, host=host, port=port, time_scale=scale,
         seed=seed, robot_id=robot_id, world=world.value, area=_pair(area, "area"), origins=origins,
         tracker_sink=sink, server_url=server, token=token, advertise_host=advertise_host,
-        control_key=control_key or None, clock=clock,
+        control_key=control_key or None, clock=clock, lockstep_wait_s=lockstep_wait,
     )
 
     async def run() -> None:

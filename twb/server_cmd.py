@@ -211,6 +211,10 @@ def _clock(clock: Optional[str]) -> dict:
     return {"clock": clock}
 
 
+LOCKSTEP_WAIT_HELP = ("Wall seconds a lockstep clock waits for a closed-loop controller's answer before it runs on "
+                      "without it (default 3; also TWB_LOCKSTEP_WAIT_S).")
+
+
 def _uploads(enable: bool) -> dict:
     """Settings for --enable-uploads; without the flag TWB_UPLOADS_ENABLED decides."""
     return {"uploads_enabled": True} if enable else {}
@@ -242,19 +246,22 @@ def up(
     ray_address: Annotated[Optional[str], typer.Option(help=RAY_ADDRESS_HELP)] = None,
     ray_cpus: Annotated[Optional[int], typer.Option(help=RAY_CPUS_HELP, min=1)] = None,
     clock: Annotated[Optional[str], typer.Option(help=CLOCK_HELP)] = None,
+    lockstep_wait: Annotated[Optional[float], typer.Option(help=LOCKSTEP_WAIT_HELP, min=0.01, max=600)] = None,
 ) -> None:
     """The whole testbed on this machine: server (on SQLite unless told), four field robots, a simulation pool."""
     from server.embedded import EmbeddedField
 
     scale = parse_time_scale(time_scale)
     settings = _settings(data_dir, token, scale, **_uploads(enable_uploads), **_database(database_url),
-                         **_engine(sim_engine, ray_address, ray_cpus), **_clock(clock))
+                         **_engine(sim_engine, ray_address, ray_cpus), **_clock(clock),
+                         **({"lockstep_wait_s": lockstep_wait} if lockstep_wait is not None else {}))
     on_ray = settings.sim_engine == "ray"
     # nothing else shows until the banner: the robots' kernels load first (numba compiles them once)
     typer.echo("twb: starting the testbed (the first start after installing compiles the simulation kernels: "
                "about 12 s, up to a minute on a busy machine)", err=True)
     testbed, admin = _open(settings, embedded=EmbeddedField(sim_robots=0 if on_ray else sim_robots, seed=seed,
-                                                            time_scale=scale, clock=settings.clock))
+                                                            time_scale=scale, clock=settings.clock,
+                                                            lockstep_wait_s=settings.lockstep_wait_s))
 
     async def ready(url: str):  # type: ignore[no-untyped-def]
         shown = "max" if math.isinf(scale) else f"{scale:g}x"

@@ -29,6 +29,10 @@ class Settings(BaseSettings):
     clock: Literal["lockstep", "free"] = Field(default="lockstep", description=(
         "How a robot's clock treats a closed-loop controller (docs/protocol.md, \"Lockstep\"): 'lockstep' waits for "
         "its answer to every pose (results independent of the time scale and the host's speed), 'free' runs on."))
+    lockstep_wait_s: float = Field(default=3.0, gt=0, le=600, description=(
+        "Wall seconds a lockstep clock waits for a controller's answer before it runs on without it (the "
+        "controller has lapsed; its robot's watchdog stops it after 0.5 s of experiment time). Raise it for "
+        "controllers slower than that on a loaded host."))
     max_body_bytes: int = Field(default=12 << 20, gt=0, description=(
         "Largest accepted request body (at least what an upload of the largest program takes, base64)."))
     # the API's HTTP connections (docs/security.md, "HTTP connections")
