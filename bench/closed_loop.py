@@ -18,7 +18,10 @@ first version of this benchmark look hung).  The host's CPU (user + system, from
 Prints JSON: the host's share of one core per phase (medians), ratios to the baselines (medians over
 rounds) and the closed loop's cost over idle (target for 64 robots: at most 10% of a core).
 
-    python bench/closed_loop.py [--robots 64] [--seconds 8] [--rounds 3]
+    python bench/closed_loop.py [--robots 64] [--seconds 8] [--rounds 3] [--clock lockstep|free]
+
+``--clock``: the agent's clock for the subscribed connections (``twb agent --clock``; lockstep, the default since
+issue 32, holds each robot's clock until its controller answered every pose).
 """
 
 from __future__ import annotations
@@ -108,9 +111,10 @@ async def _measure(host: AgentProcess, seconds: float, rounds: int) -> Phases:
 
 def main() -> None:
     ap = live_arguments(__doc__, seconds=8.0)
+    ap.add_argument("--clock", choices=("lockstep", "free"), default="lockstep")
     args = ap.parse_args()
     with AgentProcess(["--robots", str(args.robots), "--backend", "field", "--area", "3.6,3.6",
-                       "--time-scale", "1"]) as host:
+                       "--time-scale", "1", "--clock", args.clock]) as host:
         phases = asyncio.run(_measure(host, args.seconds, args.rounds))
     results = phases.rows("idle", robots=args.robots)
     results[-1]["ratio_to_paths"] = phases.ratio("closed_loop", "paths")
@@ -118,7 +122,8 @@ def main() -> None:
     results.append({"name": "closed_loop_cost", "robots": args.robots, "core_share": round(cost, 4),
                     "over_paths": round(phases.diff("closed_loop", "paths"), 4), "target": TARGET,
                     "met": cost <= TARGET})
-    report("closed_loop", results, seconds=args.seconds, rounds=args.rounds, time_scale=1.0, backend="field")
+    report("closed_loop", results, seconds=args.seconds, rounds=args.rounds, time_scale=1.0, backend="field",
+           clock=args.clock)
 
 
 if __name__ == "__main__":
