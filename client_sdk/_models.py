@@ -219,9 +219,13 @@ class Run(_FromJson):
     planning_cpu_s: Optional[float] = None
     planning_repeats: Optional[int] = None
     planning_load: Optional[float] = None
+    #: an anytime planner's best path length so far against its planning time, ``(K, 2)`` (s, m), of its
+    #: repetition's planning (OMPL's planners); None: the planner reports none
+    planning_progress: Optional[np.ndarray] = None
 
     _conv = {"created_at": _dt, "started_at": _dt, "finished_at": _dt,
-             "planned_path": lambda p: np.asarray(p, dtype=float).reshape(-1, 3)}
+             "planned_path": lambda p: np.asarray(p, dtype=float).reshape(-1, 3),
+             "planning_progress": lambda p: np.asarray(p, dtype=float).reshape(-1, 2)}
 
     @property
     def finished(self) -> bool:

@@ -197,6 +197,9 @@ class Run(Base):
     planning_cpu_s: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
     planning_repeats: Mapped[Optional[int]] = mapped_column(Integer, nullable=True)
     planning_load: Mapped[Optional[float]] = mapped_column(Float, nullable=True)
+    #: an anytime planner's best path length so far against its planning time, ``[[t_s, length_m], ...]``, of
+    #: the repetition's own planning (OMPL's progress properties); None: the planner reports none
+    planning_progress: Mapped[Optional[list[Any]]] = mapped_column(JSON, nullable=True)
     attempt: Mapped[int] = mapped_column(Integer, default=1)
     #: how its robot's clock treated a closed-loop controller: ``lockstep`` or ``free`` (None: before migration 0015)
     clock: Mapped[Optional[str]] = mapped_column(String(8), nullable=True)

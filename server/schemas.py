@@ -459,6 +459,9 @@ class RunPublic(FromRow):
     planning_repeats: Optional[int] = Field(default=None, description="How many calls the planning times are the median of.")
     planning_load: Optional[float] = Field(default=None, description=(
         "The machine's 1-minute load average per CPU when the planning was timed."))
+    planning_progress: Optional[list[list[float]]] = Field(default=None, description=(
+        "An anytime planner's best path length so far against its planning time, [[t s, length m], ...], of this "
+        "run's repetition (OMPL's planners; the curve of Planner Arena's progress page); null: none reported."))
     attempt: int
     clock: Optional[str] = Field(default=None, description=(
         "How its robot's clock treated a closed-loop controller: `lockstep` (the clock waited for the controller's "

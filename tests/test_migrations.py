@@ -1,6 +1,7 @@
 """Alembic migrations: they build exactly the models' schema and keep data across upgrades; they live at the
 repository's top level (alembic/) and `alembic upgrade head` from there builds the schema too."""
 
+import json
 import os
 import sqlite3
 import subprocess
@@ -88,7 +89,7 @@ def test_upgrade_from_the_first_revision_keeps_data(tmp_path):
     con = sqlite3.connect(tmp_path / "db.sqlite")
     assert con.execute("select name from users").fetchall() == [("old",)]
     assert con.execute("select t, t_estimated, line from messages").fetchall() == [(1.5, 0, "T,T,Q")]
-    assert con.execute("select version_num from alembic_version").fetchall() == [("0015",)]
+    assert con.execute("select version_num from alembic_version").fetchall() == [("0016",)]
 
 
 def _old_run(c, mode: str) -> None:  # type: ignore[no-untyped-def]
@@ -266,6 +267,31 @@ def test_run_clock_migration_up_and_down(database_url):
     command.downgrade(cfg, "0014")
     engine = make_engine(database_url)
     assert not {"clock", "time_scale"} & {c["name"] for c in inspect(engine).get_columns("runs")}
+    with engine.begin() as c:
+        assert c.execute(text("select count(*) from runs")).scalar() == 1
+    engine.dispose()
+
+
+def test_run_planning_progress_migration_up_and_down(database_url):
+    """0016 on both databases: old runs have no planning progress of their own (NULL); a curve is written and read
+    back as JSON; the downgrade drops the column and keeps the runs."""
+    from sqlalchemy import inspect, text
+
+    cfg = config(database_url)
+    command.upgrade(cfg, "0015")
+    engine = make_engine(database_url)
+    with engine.begin() as c:
+        _old_run(c, "twb")
+    command.upgrade(cfg, "0016")
+    with engine.begin() as c:
+        assert c.execute(text("select planning_progress from runs where id = 7")).one() == (None,)
+        c.execute(text("update runs set planning_progress = :p where id = 7"), {"p": "[[0.01, 2.5], [0.2, 2.31]]"})
+        got = c.execute(text("select planning_progress from runs where id = 7")).scalar()
+        assert (json.loads(got) if isinstance(got, str) else got) == [[0.01, 2.5], [0.2, 2.31]]
+    engine.dispose()
+    command.downgrade(cfg, "0015")
+    engine = make_engine(database_url)
+    assert "planning_progress" not in {c["name"] for c in inspect(engine).get_columns("runs")}
     with engine.begin() as c:
         assert c.execute(text("select count(*) from runs")).scalar() == 1
     engine.dispose()

@@ -133,6 +133,20 @@ def test_one_row_per_run_with_its_own_planning_time_and_planned_length(study, tm
     assert query(tmp_path / "s.db", "SELECT count(*) FROM progress") == [(0,)]  # twb's planners are not anytime
 
 
+def test_an_anytime_planners_runs_carry_their_repetitions_progress(tmp_path):
+    """Progress rows (OMPL's ``time``, ``best_cost``) for each run of a planner that reported its best length over
+    its planning time: its repetition's curve (``study.json``'s ``repetition_progress``), both modes."""
+    data = make_study(name="anytime")
+    curves = {"1": [[0.01, 2.4], [0.05, 2.2], [0.2, 2.1]], "2": [[0.02, 2.5], [0.3, 2.05]]}
+    data.experiments[1]["repetition_progress"] = curves  # prm's, as if it were an anytime planner
+    done = export_ompl(data, tmp_path / "p.db")
+    got = query(tmp_path / "p.db", "SELECT r.twb_run_id, p.time, p.best_cost FROM progress p "
+                                   "JOIN runs r ON r.id = p.runid ORDER BY 1, 2")
+    want = sorted((r["run_id"], t, c) for r in data.rows if r["experiment_id"] == 2
+                  for t, c in curves.get(str(r["repetition"]), []))
+    assert got == want and done["progress"] == len(want) == 10  # 2 modes x (3 + 2) points
+
+
 def test_status_is_the_planners_result_in_omplss_codes_and_the_outcome_its_own_enum(study, tmp_path):
     assert [s.name for s in PlannerStatus] == list(OMPL_STATUS_NAMES)
     assert [s.value for s in PlannerStatus] == list(range(10))

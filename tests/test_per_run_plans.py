@@ -119,12 +119,18 @@ def test_the_built_in_ompl_planners_and_theta_star_plan_jobs(client):
     exp = run_job(client, job)
     assert exp["status"] == "completed", exp["error"]
     assert exp["planner_stochastic"] is True
-    paths = {}
+    paths, progress = {}, {}
     for rep, modes in by_repetition(exp).items():
         sim = modes["sim"]
         assert sim["planned_path"] == np.round(offline(job, "room", sim["planner_seed"]).path, 6).tolist(), rep
         paths[rep] = sim["planned_path"]
+        # its own planning's progress (OMPL's best length over its planning time), not repetition 1's
+        curve = np.array(sim["planning_progress"])
+        assert curve.ndim == 2 and curve.shape[1] == 2 and (curve[:, 0] >= 0).all(), sim["planning_progress"]
+        assert (np.diff(curve[:, 1]) <= 0).all() and (np.diff(curve[:, 0]) >= 0).all()
+        progress[rep] = curve[-1, 1]
     assert len({repr(p) for p in paths.values()}) == 3
+    assert len(set(progress.values())) == 3, progress  # three plans, three best lengths
     theta = run_job(client, {**FMM, "planner": "theta_star", "modes": ["sim"], "repetitions": 1})
     assert theta["status"] == "completed" and theta["planner_stochastic"] is False
 
@@ -141,6 +147,7 @@ def test_a_deterministic_planner_drives_one_path_timed_again_for_every_repetitio
         assert modes["sim"]["planning_time_s"] == modes["twb"]["planning_time_s"]  # the repetition's timing
     assert all(t > 0 for t in times) and len(set(times)) > 1, times  # each repetition timed by itself
     for r in runs:
+        assert r["planning_progress"] is None  # not an anytime planner: no progress
         assert r["planning_cpu_s"] > 0 and 1 <= r["planning_repeats"] <= 5
         assert r["planning_load"] is not None and r["planning_load"] >= 0
         # repeated while the calls together took under 50 ms: a first call that alone took more is one timing

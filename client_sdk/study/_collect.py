@@ -356,6 +356,11 @@ def _experiment_entry(job: StudyJob, exp: Optional[Experiment]) -> dict[str, Any
         # a randomised planner: every repetition's own plan (``planned_path`` is repetition 1's)
         entry["repetition_paths"] = {str(r.repetition): r.planned_path.tolist() for r in exp.runs
                                      if r.planned_path is not None and len(r.planned_path)}
+    progress = {str(r.repetition): r.planning_progress.tolist() for r in (exp.runs if exp is not None else [])
+                if r.planning_progress is not None and len(r.planning_progress)}
+    if progress:
+        # an anytime planner's best length over its planning time, each repetition's ([[t_s, length_m], ...])
+        entry["repetition_progress"] = progress
     if robots:
         # a fleet: every robot's start and goal, and the path planned for each (None where planning failed)
         entry["robots"] = robots

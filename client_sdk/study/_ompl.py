@@ -15,9 +15,11 @@ appended to one OMPL's tools wrote, and Planner Arena plots twb's planners next 
   planned path's, as ``PathGeometric`` computes them) — and twb's own under ``twb_`` names: how the run
   ended (``twb_outcome``, an enum of its own) and every metric of ``runs.csv`` (``twb_length_m`` is the
   driven path's length, ``twb_smoothness_rad`` twb's κ′, ...);
-- no *progress* rows: OMPL's progress properties are an anytime planner's (its best cost over its
-  planning time); twb's own planners are not anytime and report none, and the testbed does not keep the
-  progress its built-in OMPL planners report (``plan_path``'s ``info["progress"]``) with their runs yet.
+- *progress* rows (``time``, ``best_cost``: OMPL's progress properties, the curve of Planner Arena's
+  progress page) for the runs of an anytime planner: the best path length so far (m) against its
+  planning time (s) that the built-in OMPL planners report for each repetition (``study.json``'s
+  ``repetition_progress``, from each run's ``planning_progress``); twb's own planners are not anytime
+  and have none.
 """
 
 from __future__ import annotations
@@ -560,8 +562,19 @@ def _write(data: StudyData, con: sqlite3.Connection, path: Path, exists: bool,
     cols = list(types)
     sql = (f"INSERT INTO runs (experimentid, plannerid, {', '.join(f'{chr(34)}{k}{chr(34)}' for k in cols)}) "
            f"VALUES ({', '.join('?' * (len(cols) + 2))})")
+    curves = {e["experiment_id"]: e.get("repetition_progress") or {} for e in data.experiments}
+    if any(curves.values()) and "best_cost" not in _columns(c, "progress"):
+        c.execute('ALTER TABLE progress ADD "best_cost" REAL')
     for r, v in zip(data.rows, values):
         c.execute(sql, (exp_ids[(r["environment"], r["plan"])], planner_ids[(r["configuration"], r["mode"])],
                         *(_sql_value(v.get(k)) for k in cols)))
         counts["runs"] += 1
+        curve = curves.get(r.get("experiment_id"), {}).get(str(r.get("repetition")))
+        if curve:
+            runid = int(c.lastrowid or 0)
+            # one row per time (OMPL's primary key): the best length at each time the planner reported
+            points = {float(t): float(cost) for t, cost in curve}
+            c.executemany('INSERT INTO progress (runid, time, "best_cost") VALUES (?, ?, ?)',
+                          [(runid, t, cost) for t, cost in sorted(points.items())])
+            counts["progress"] += len(points)
     return OmplExport(path=path, version=ver, experiments=names, rows=counts, runs_before=runs_before, notes=notes)

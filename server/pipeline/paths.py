@@ -73,7 +73,8 @@ _WATCHDOG_GRACE_S = 30.0
 LineLog = Callable[[str, str, Optional[float], bool], None]
 
 #: the plan columns of a run (:meth:`Plan.run_fields`)
-_RUN_PLAN = ("planned_path", "planning_time_s", "planning_cpu_s", "planning_repeats", "planning_load")
+_RUN_PLAN = ("planned_path", "planning_time_s", "planning_cpu_s", "planning_repeats", "planning_load",
+             "planning_progress")
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,8 @@ class Plan:
     planning_repeats: Optional[int] = None
     planning_load: Optional[float] = None
     note: Optional[str] = None
+    #: an anytime planner's best length so far against its planning time, ``[[t_s, length_m], ...]``
+    planning_progress: Optional[list[list[float]]] = None
 
     def run_fields(self) -> dict[str, Any]:
         """The run's columns of this plan (stored with each run that drives it)."""
@@ -193,7 +196,8 @@ class PathService:
             # a run of the repetition that had it made before a restart: its sibling drives the same plan
             had = next((r for r in rows if r.planned_path is not None), None)
             return exp, None if had is None else Plan(had.planned_path, had.planning_time_s, None,
-                                                      had.planning_cpu_s, had.planning_repeats, had.planning_load)
+                                                      had.planning_cpu_s, had.planning_repeats, had.planning_load,
+                                                      planning_progress=had.planning_progress)
 
         exp, had = await asyncio.to_thread(load)
         stochastic = bool(exp.planner_stochastic)
@@ -214,7 +218,7 @@ class PathService:
         except PlanningError as exc:
             raise RunFailed(f"planning failed: {exc}", FailureKind.PLANNING, whole_experiment=not stochastic) from None
         plan = Plan(r["path"], r["planning_time_s"], None, r.get("planning_cpu_s"), r.get("planning_repeats"),
-                    r.get("planning_load"))
+                    r.get("planning_load"), planning_progress=(r.get("info") or {}).get("progress") or None)
         if not stochastic:  # the experiment's one path: the same every time, and the one every run drives
             one = self._paths.get(exp.id)
             if one is None and exp.planned_path is not None:
