@@ -76,6 +76,7 @@ def study(
     code = _outcome_line(data, study_spec, time.monotonic() - t0, out)
     _print_findings(data, out)
     _print_predictivity(data, out)
+    _print_difficulty(data, out)
     if code:
         raise typer.Exit(code)
 
@@ -215,6 +216,32 @@ def _print_predictivity(data, out: Path) -> None:  # type: ignore[no-untyped-def
                       *("–" if v is None else f"{v:.2f}" for v in (p.spearman, p.spearman_within, p.flipped)),
                       str(p.pairs))
     Console(width=max(Console().width, 100)).print(table)
+
+
+def _print_difficulty(data, out: Path) -> None:  # type: ignore[no-untyped-def]
+    """A world set's success against difficulty as a table on stdout (summary.md has it too)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from client_sdk.study._worlds import difficulty_table
+
+    found = difficulty_table(data)
+    if found is None:
+        return
+    _, header, body = found
+    short = {"distance to obstacle (m)": "dist. (m)", "visibility (m)": "visib. (m)", "dispersion": "disp.",
+             "characteristic dimension (m)": "char. dim. (m)", "tortuosity": "tort.", "configuration": "config.",
+             "worlds / runs": "worlds/runs", "mean success": "success"}
+    header = [short.get(h, h) for h in header]
+    ws = data.spec.worlds
+    table = Table(title=f"Success against difficulty: Spearman ρ (p) over the {len(ws['worlds'])} worlds of "
+                        f"{ws['index']}, split {ws['split']} ({out / 'summary.md'}; fig9_difficulty.png)",
+                  title_justify="left")
+    for col in header:
+        table.add_column(col, overflow="fold")
+    for row in body:
+        table.add_row(*row)
+    Console(width=max(Console().width, 120)).print(table)
 
 
 def export_ompl(

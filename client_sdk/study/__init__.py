@@ -38,11 +38,16 @@ from ._spec import (ARENA, CONTROLLERS, DISCS, FLEET, FLEET_DISCS, NOISE, PAPER,
                     ProfileSpec, StudySpec, StudySpecError, controllers_spec, fleet_discs_spec, fleet_spec, load_spec,
                     noise_spec, paper_spec, predictivity_spec)
 from ._verdict import Answer, which_is_better
+from ._worlds import DIFFICULTY_METRICS, DifficultyCorrelation, difficulty_correlations, figure_difficulty
 
 __all__ = sorted(
     [
         "Answer",
         "Circle",
+        "DIFFICULTY_METRICS",
+        "DifficultyCorrelation",
+        "difficulty_correlations",
+        "figure_difficulty",
         "ARENA",
         "DISCS",
         "FLEET",

@@ -19,6 +19,7 @@ from ._figures import mean_std, save_figures
 from ._fleet_tables import fleet_tables, write_fleet_csvs
 from ._outcomes import OutcomeSummary
 from ._verdict import METRIC_WORDS, Answer, which_is_better
+from ._worlds import difficulty_table
 
 __all__ = ["SUMMARY_METRICS", "comparison_rows", "outcome_rows", "summary_markdown", "summary_tables",
            "which_is_better_markdown", "write_report"]
@@ -154,6 +155,9 @@ def summary_tables(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = N
     problem_set = planners_per_problem(data)
     if problem_set is not None:
         tables.append(problem_set)
+    difficulty = difficulty_table(data)
+    if difficulty is not None:
+        tables.append(difficulty)
     if data.direct:
         body = [[p, str(sum(d["configuration"] == p for d in data.direct))] +
                 [_fmt([d.get(k) for d in data.direct if d["configuration"] == p]) for k, _ in DIRECT_METRICS]
@@ -337,6 +341,9 @@ _CAPTIONS = {
     "fig8_paths": "Fig. 8 — computed (dashed), simulated (blue) and field (red) paths over each environment; failed "
                   "runs in orange up to where they stopped, ✕ marking the spot; moving obstacles on their exact "
                   "tracks (dotted) over the panel's longest run.",
+    "fig9_difficulty": "Success against difficulty — each world's success rate (counted runs) against each of its "
+                       "difficulty metrics, a series per configuration and mode (field filled, simulation hollow); "
+                       "Spearman's rho over the worlds in the legend.",
     "fig6_fleet_metrics": "Fleet metrics against the number of robots, per environment: the share of runs in which "
                           "every robot arrived (Wilson 95% interval), the makespan over the completed runs and the "
                           "closest approach of two robots over every measured run (Student-t 95% intervals); a "

@@ -34,6 +34,12 @@ controller).  ``profiles`` lists variants of the field robot: field parameters o
 for none); each configuration is then compared per variant, as
 ``fmm · noiseless``.  Every combination environment x plan x planner (x controller x profile
 variant) is one experiment with ``repetitions`` runs per mode.
+
+``worlds`` takes a generated world set (``twb worlds generate``; docs/gymnasium.md, "World sets"):
+``"worlds": "worlds-cave-0/index.json"`` or ``{"index": "...", "split": "test"}`` (``train``, ``test``
+or ``all``, the default), read relative to the study file: the split's worlds join ``environments``
+(which may then be omitted) and the spec keeps each world's split and difficulty metrics, which the
+report relates to success (:mod:`._worlds`).
 """
 
 from __future__ import annotations
@@ -55,6 +61,7 @@ __all__ = ["ARENA", "CONTROLLERS", "DISCS", "FLEET", "FLEET_DISCS", "FLEET_PLANN
            "load_spec", "noise_spec", "paper_spec", "predictivity_spec"]
 
 _KEYS = {"name", "description", "environments", "plans", "planners", "repetitions", "modes", "seed", "field", "jitter",
+         "worlds",
          "profiles", "controllers"}
 _PLANNER_KEYS = {"name", "params", "label", "waypoints"}
 _CONTROLLER_KEYS = {"name", "params", "label"}
@@ -186,6 +193,8 @@ class StudySpec:
     jitter: Optional[dict[str, float]] = None
     profiles: Optional[list[ProfileSpec]] = None
     controllers: Optional[list[ControllerChoice]] = None
+    #: a world set's ``{"index": path, "split": train|test|all, "worlds": {name: {"split", "difficulty"}}}``
+    worlds: Optional[dict[str, Any]] = None
 
     def environment_names(self) -> list[str]:
         return [e if isinstance(e, str) else e["name"] for e in self.environments]
@@ -209,6 +218,8 @@ class StudySpec:
             del d["controllers"]
         else:
             d["controllers"] = [c.to_json() for c in self.controllers]
+        if self.worlds is None:
+            del d["worlds"]
         if self.plans is not None:
             d["plans"] = [p.to_json() for p in self.plans]
         return d
@@ -229,9 +240,12 @@ class StudySpec:
         unknown = sorted(set(data) - _KEYS)
         if unknown:
             raise bad(f"unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(_KEYS))})")
-        envs = data.get("environments")
-        if not isinstance(envs, list) or not envs:
+        worlds = _worlds(data.get("worlds"), bad)
+        envs = data.get("environments", [] if worlds is not None else None)
+        if not isinstance(envs, list) or not (envs or worlds):
             raise bad("`environments` must be a non-empty list of names or environment objects")
+        if worlds is not None and not envs:
+            raise bad(f"`worlds`: split {worlds['split']!r} of {worlds['index']} has no worlds")
         for i, e in enumerate(envs):
             if not (isinstance(e, str) and e) and not (isinstance(e, Mapping) and isinstance(e.get("name"), str)):
                 raise bad(f"environments[{i}] must be a name or an environment object with a `name`")
@@ -275,7 +289,7 @@ class StudySpec:
             raise bad("`name` must be a non-empty string")
         return cls(name=name, environments=list(envs), planners=pspecs, plans=plan_specs, repetitions=reps,
                    modes=list(modes), seed=seed, field=fld, description=str(data.get("description", "")),
-                   jitter=jitter, profiles=profiles, controllers=controllers)
+                   jitter=jitter, profiles=profiles, controllers=controllers, worlds=worlds)
 
     @property
     def runs_per_experiment(self) -> int:
@@ -664,7 +678,67 @@ def load_spec(source: str | Path) -> StudySpec:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise StudySpecError(f"{path}: invalid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
-    return StudySpec.from_json(_environment_files(data, path), str(path))
+    return StudySpec.from_json(_environment_files(_world_set(data, path), path), str(path))
+
+
+#: the splits a world set's index marks, and ``all``
+WORLD_SPLITS = ("train", "test", "all")
+
+
+def _world_set(data: Any, path: Path) -> Any:
+    """A study file's ``worlds`` (an index.json path, or ``{"index", "split"}``) read relative to the study file:
+    the split's worlds appended to ``environments`` as environment objects, and ``worlds`` replaced by what the
+    spec keeps of them (:func:`_worlds`)."""
+    ws = data.get("worlds") if isinstance(data, Mapping) else None
+    if ws is None:
+        return data
+    where = f"{path}: `worlds`"
+    given = ws if isinstance(ws, Mapping) else {"index": ws}
+    index, split = given.get("index"), given.get("split", "all")
+    if not isinstance(index, str) or not index or set(given) - {"index", "split"}:
+        raise StudySpecError(f"{where} must be a world set's index.json path or {{\"index\": PATH, \"split\": "
+                             f"\"train\"|\"test\"|\"all\"}}, got {ws!r}")
+    if split not in WORLD_SPLITS:
+        raise StudySpecError(f"{where}: split must be one of {', '.join(WORLD_SPLITS)}, got {split!r}")
+    f = path.parent / index
+    try:
+        doc = json.loads(f.read_text())
+        listed = doc["worlds"]
+    except OSError as exc:
+        raise StudySpecError(f"{where}: cannot read {f} (paths are relative to the study file; `twb worlds "
+                             f"generate` writes one): {exc.strerror or exc}") from None
+    except (json.JSONDecodeError, KeyError, TypeError):
+        raise StudySpecError(f"{where}: {f} is not a world set's index.json (`twb worlds generate` writes one)") \
+            from None
+    envs, kept = [], {}
+    for w in listed:
+        if split != "all" and w.get("split") != split:
+            continue
+        try:
+            envs.append(json.loads((f.parent / w["file"]).read_text()))
+        except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+            raise StudySpecError(f"{where}: world {w.get('name')!r} of {f}: cannot read its environment file: "
+                                 f"{getattr(exc, 'strerror', None) or exc}") from None
+        kept[w["name"]] = {"split": w.get("split"), "difficulty": w.get("difficulty") or {}}
+    return {**data, "environments": [*data.get("environments", []), *envs],
+            "worlds": {"index": index, "split": split, "worlds": kept}}
+
+
+def _worlds(ws: Any, bad: Any) -> Optional[dict[str, Any]]:
+    """The spec's record of a world set (what :func:`_world_set` made of a study file's ``worlds``)."""
+    if ws is None:
+        return None
+    if not (isinstance(ws, Mapping) and isinstance(ws.get("index"), str) and ws.get("split") in WORLD_SPLITS
+            and isinstance(ws.get("worlds"), Mapping)):
+        raise bad("`worlds` names a world set's index.json, which only a study file can (load_spec reads it "
+                  "relative to the file); in memory, give the worlds as `environments`")
+    for name, w in ws["worlds"].items():
+        diff = w.get("difficulty") if isinstance(w, Mapping) else None
+        if not isinstance(diff, Mapping) or not all(isinstance(v, (int, float)) for v in diff.values()):
+            raise bad(f"`worlds`: world {name!r} has no difficulty metrics")
+    return {"index": ws["index"], "split": ws["split"],
+            "worlds": {str(k): {"split": v.get("split"), "difficulty": dict(v["difficulty"])}
+                       for k, v in ws["worlds"].items()}}
 
 
 def _environment_files(data: Any, path: Path) -> Any:
