@@ -307,5 +307,8 @@ def warm_up() -> None:
     from .environment import load_environment
     from .grid import config_space
 
+    from .fm2 import band_shortcut
+
     space = config_space(load_environment({"name": "warm-up", "size": [0.2, 0.2], "blocks": []}), 0.0, 0.02)
     plan(space, np.array([0.03, 0.03]), np.array([0.17, 0.15]))
+    band_shortcut(space, np.array([[0.03, 0.03], [0.1, 0.05], [0.17, 0.15]]), 0.0)  # FM²'s chord search
