@@ -62,18 +62,19 @@ def smooth_descent(space: ConfigSpace, path: np.ndarray, passes: int) -> tuple[n
 
 
 def band_shortcut(space: ConfigSpace, path: np.ndarray, tolerance: float) -> tuple[np.ndarray, int]:
-    """``path`` ``(N, 2)`` (m) straightened inside the band of clearance it keeps; returns it and the corners cut.
+    """``path`` ``(N, 2)`` (m) straightened inside the band of clearance it keeps.
 
     In clutter the FM² descent follows the medial axis between the blocks: the speed map, a monotone function
     of the clearance, has a ridge with a kink there, so leaving the axis costs travel time to first order and
-    the geodesic weaves with every bend of the axis (one to two radians more turning than fmm's in the
-    problem set's clutter).  Here the path is first reduced to its corners (collision-aware
+    the geodesic weaves with every bend of the axis (5.8 rad of turning against fmm's 1.8 in the problem
+    set's clutter).  Here the path is first reduced to its corners (collision-aware
     Ramer-Douglas-Peucker, ``tolerance`` m), then, from the start, each corner is joined to the furthest later
     corner (at most :data:`SHORTCUT_WINDOW` ahead) whose chord keeps, by the exact distance to blocks and
     walls, at least the smaller of the clearances the path has at the chord's two ends, and is free in
     ``space`` (exact segment test).  So every point of the result is at least as far from obstacles as the
-    descent is at one end of the run it replaces: the path's smallest clearance is never lowered, and where
-    the descent keeps the saturation distance (open space) the chord does too.  The ends stay.
+    descent is at one end of the run it replaces: the path's smallest clearance is never lowered (below the
+    corners'), and where the descent keeps the saturation distance (open space) the chord does too.  The ends
+    stay.  Returns the kept corners ``(K, 2)`` (m) and how many corners were cut.
     """
     from ._band import band_chain  # numba loads with the first FM² plan (planners.fast_marching does too)
 
