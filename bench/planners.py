@@ -33,7 +33,8 @@ over the paper's four problems on 360 cells a side, FMM <= 0.25x and FM² <=
 
 Part 3 (``baselines``, issue 31), on the problem set of ``planners.problems`` (the paper's four, ``narrow``,
 ``clutter``, ``zigzag``; 1 cm grid, 0.065 m clearance, each problem's visibility-graph optimum stored) against
-the same-run baseline on that grid: ``fmm``, ``fm2``, ``astar``, ``prm`` (grown until connected, its defaults), ``prm_fixed`` (the paper's
+the same-run baseline on that grid: ``fmm``, ``fm2``, ``fm2_no_shortcut`` (``shortcut`` false: the smoothed descent,
+FM² before its band shortcut), ``astar``, ``prm`` (grown until connected, its defaults), ``prm_fixed`` (the paper's
 500 samples, ``grow`` false), ``prm_star`` and ``theta_star`` as ratios to the baseline (``Planner.solve``,
 PRM with a fresh roadmap and its own seed every call: a seed per round), with success and length / optimum
 over ``--seeds`` seeds; and every OMPL planner (when the ``ompl`` package is installed) over ``--seeds``
@@ -201,7 +202,8 @@ def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict]
         ompl_names = []
     from planners.geometry import polyline_min_clearance
 
-    ours = {"fmm": ("fmm", {}), "fm2": ("fm2", {}), "astar": ("astar", {}), "prm": ("prm", {}),
+    ours = {"fmm": ("fmm", {}), "fm2": ("fm2", {}), "fm2_no_shortcut": ("fm2", {"shortcut": False}),
+            "astar": ("astar", {}), "prm": ("prm", {}),
             "prm_fixed": ("prm", {"grow": False}), "prm_star": ("prm", {"prm_star": True}),
             "theta_star": ("theta_star", {})}
 
@@ -272,7 +274,10 @@ def run_baselines(runs: int, seeds: int, ompl_budget: float) -> tuple[list[dict]
                 c, t = shape(r.path)
                 clear.append(c)
                 turns.append(t)
-            med = (lambda xs: statistics.median(xs) if xs else None)
+
+            def med(xs: list[float]) -> float | None:
+                return statistics.median(xs) if xs else None
+
             row["planners"][name] = {
                 "success": f"{ok}/{seeds}", "budget_s": ompl_budget,
                 "first_solution_s": med(first), "first_solution_ratio": med(first) / base if first else None,

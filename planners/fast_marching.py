@@ -307,5 +307,10 @@ def warm_up() -> None:
     from .environment import load_environment
     from .grid import config_space
 
+    from ._band import band_chain
+
     space = config_space(load_environment({"name": "warm-up", "size": [0.2, 0.2], "blocks": []}), 0.0, 0.02)
     plan(space, np.array([0.03, 0.03]), np.array([0.17, 0.15]))
+    ny, nx = space.free.shape  # FM²'s chord search (planners.fm2.band_shortcut), on three corners and no block
+    band_chain(np.array([[0.03, 0.03], [0.1, 0.05], [0.17, 0.15]]), np.full(3, 0.03), np.zeros((0, 6)), 0.2, 0.2,
+               np.ascontiguousarray(space.free.ravel(), dtype=np.uint8), nx, ny, 1.0 / space.resolution, 64)

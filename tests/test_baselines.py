@@ -17,7 +17,9 @@ from planners import (
     plan_path,
 )
 from planners._segment import SegmentTest
-from planners.geometry import polyline_min_clearance
+from planners.fm2 import SHORTCUT_TOLERANCE
+from planners.geometry import distance_to_obstacles, polyline_clearance, polyline_min_clearance
+from planners.postprocess import simplify
 from planners.problems import PROBLEM_CLEARANCE, problems, visibility_optimum
 
 PROBLEMS = {p.name: p for p in problems()}
@@ -31,6 +33,11 @@ def _turning(path: np.ndarray) -> tuple[float, int]:
     a = np.arctan2(d[:, 1], d[:, 0])
     turn = np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi)
     return float(turn.sum()), int((turn > np.pi / 3).sum())
+
+
+def _length(path: np.ndarray) -> float:
+    """Length (m) of a polyline."""
+    return float(np.hypot(*np.diff(path[:, :2], axis=0).T).sum())
 
 
 def test_the_problems_clearance_is_the_testbeds():
@@ -140,18 +147,42 @@ def test_fm2_has_no_sawtooth(name):
     r = plan_path(p.env, p.start, p.goal, "fm2", **KW)
     assert _turning(r.path)[1] == 0 and _turning(r.raw_path)[1] == 0
     if name in ("narrow", "zigzag"):
-        raw = plan_path(p.env, p.start, p.goal, "fm2", params={"smooth": 0}, **KW)
+        raw = plan_path(p.env, p.start, p.goal, "fm2", params={"smooth": 0, "shortcut": False}, **KW)
         assert _turning(raw.path)[1] >= 10
 
 
-@pytest.mark.parametrize(("name", "params"), [("narrow", {}), ("clutter", {"saturation": 0.05})])
-def test_fm2_turns_at_most_twice_as_much_as_fmm(name, params):
-    """At the default saturation (0.2 m) FM² follows the middle between clutter's blocks, its purpose, and turns
-    about 3x as much as fmm there (docs/planners.md); with a 0.05 m band it stays within 2x."""
+@pytest.mark.parametrize("name", ["narrow", "clutter"])
+def test_fm2_turns_at_most_twice_as_much_as_fmm(name):
+    """At its defaults FM² turns at most twice as much as fmm (docs/planners.md, "FM² without the sawtooth"):
+    the descent weaves along the middle between clutter's blocks (3.2x fmm's turning there), the band shortcut
+    straightens it where a chord keeps the clearance the descent has at its ends."""
     p = PROBLEMS[name]
-    fm2 = plan_path(p.env, p.start, p.goal, "fm2", params=params, **KW)
+    fm2 = plan_path(p.env, p.start, p.goal, "fm2", **KW)
     fmm = plan_path(p.env, p.start, p.goal, "fmm", **KW)
     assert _turning(fm2.path)[0] <= 2 * _turning(fmm.path)[0]
+    if name == "clutter":  # without the shortcut: the weave along the medial axis
+        weave = plan_path(p.env, p.start, p.goal, "fm2", params={"shortcut": False}, **KW)
+        assert _turning(weave.path)[0] > 2.5 * _turning(fmm.path)[0]
+
+
+@pytest.mark.parametrize("name", list(PROBLEMS))
+def test_fm2_shortcut_stays_in_the_band(name):
+    """Every chord of FM²'s shortcut (a segment skipping corners of the descent) keeps, by the exact distance, the
+    smaller of the clearances the descent has at its ends; the shortcut never lowers the descent's smallest
+    clearance nor lengthens it."""
+    p = PROBLEMS[name]
+    before = plan_path(p.env, p.start, p.goal, "fm2", params={"shortcut": False}, **KW).raw_path
+    space = config_space(p.env, PROBLEM_CLEARANCE)
+    corners = before[simplify(before, SHORTCUT_TOLERANCE * space.resolution, space)]
+    after = plan_path(p.env, p.start, p.goal, "fm2", **KW).raw_path
+    on = np.flatnonzero((np.abs(corners[:, None, :] - after[None, :, :2]).max(axis=2) == 0).any(axis=1))
+    assert len(on) == len(after) and on[0] == 0 and on[-1] == len(corners) - 1  # a subset of the corners
+    chord = np.diff(on) >= 2
+    at = distance_to_obstacles(p.env, after)
+    assert np.all((polyline_clearance(p.env, after) >= np.minimum(at[:-1], at[1:]) - 1e-12)[chord])
+    assert chord.any()
+    assert polyline_min_clearance(p.env, after) >= polyline_min_clearance(p.env, corners)
+    assert _length(after) <= _length(corners) + 1e-12 and space.path_free(after)
 
 
 def test_compiled_batch_is_segments_free():
