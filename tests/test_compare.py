@@ -442,3 +442,20 @@ def test_fig6_tick_labels_of_four_configurations_do_not_overlap():
         assert len(boxes) == 4
         assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:])), [(b.x0, b.x1) for b in boxes]
         assert all("$" not in t.get_text() or "\\$" in t.get_text() for t in ax.get_xticklabels())
+
+
+def test_a_large_studys_summary_lists_its_comparisons_on_each_problem_only_in_the_csv(monkeypatch):
+    """Beyond MAX_PROBLEM_ROWS per-problem comparisons the report keeps the pooled ones and points to
+    comparisons.csv (the planner study's summary.md was 5,880 lines); a small study shows them all."""
+    from client_sdk.study import _report
+    from client_sdk.study._report import summary_tables
+
+    data = _problem_study({p: -0.1 for p in PROBLEMS}, seed=7)
+    comps = data.compare(["length_m"], n_resamples=199)
+    title, header, body = next(t for t in summary_tables(data, comparisons=comps) if t[0].startswith("Comparisons"))
+    where = [row[header.index("problem")] for row in body]
+    assert "all 6" in where and "env A" in where and len(body) == len(comps)
+    monkeypatch.setattr(_report, "MAX_PROBLEM_ROWS", 3)
+    title, header, body = next(t for t in summary_tables(data, comparisons=comps) if t[0].startswith("Comparisons"))
+    assert [row[header.index("problem")] for row in body] == ["all 6"] * len(body) and len(body) >= 1
+    assert f"the {sum(not c.pooled for c in comps)} comparisons on each problem: comparisons.csv" in title

@@ -69,12 +69,19 @@ def outcome_rows(outcomes: list[OutcomeSummary]) -> tuple[list[str], list[list[s
     return header, body
 
 
-def comparison_rows(comparisons: Comparisons) -> tuple[list[str], list[list[str]]]:
-    """The comparisons table (a − b), as strings."""
+#: per-problem comparison rows a report shows at most; a larger study's are in comparisons.csv only (the planner
+#: study's 12 planners on 7 problems made a summary.md of 5,880 lines, almost all of them per problem)
+MAX_PROBLEM_ROWS = 200
+
+
+def comparison_rows(comparisons: Comparisons, per_problem: bool = True) -> tuple[list[str], list[list[str]]]:
+    """The comparisons table (a − b), as strings; ``per_problem`` False: only those over all problems."""
     header = ["metric", "mode", "a", "b", "problem", "n a", "n b", "mean a", "mean b", "diff (a − b)", "95% CI",
               "test", "p", "p (Holm)", "effect size", "problems a/b better", "I²", "n for 80% power", "note"]
     body = []
     for c in comparisons:
+        if not (per_problem or c.pooled):
+            continue
         r, ci = c.result, c.confidence_interval()
         dec = 3 if c.metric == "success_rate" else METRIC_WORDS.get(c.metric, ("", "", 3))[2]
         num = (lambda v: "–" if not math.isfinite(v) else f"{v:.{dec}f}")  # noqa: E731
@@ -119,10 +126,13 @@ def summary_tables(data: StudyData, outcomes: Optional[list[OutcomeSummary]] = N
     tables = [("Outcomes per configuration and mode (success rate with its Wilson 95% interval over the counted "
                "runs: completed or failed; a testbed error is not the planner's)", *outcome_rows(outcomes))]
     if comparisons is not None and len(comparisons):
+        per_problem = sum(not c.pooled for c in comparisons)
+        shown = per_problem <= MAX_PROBLEM_ROWS or per_problem == len(comparisons)
         tables.append(("Comparisons: every pair, per mode and metric — over all problems (one observation per "
-                       "problem, t interval over problems; only with 3 or more problems) and on each problem "
-                       "(difference a − b, bootstrap 95% CI over its repetitions); Holm-adjusted p per metric and level",
-                       *comparison_rows(comparisons)))
+                       "problem, t interval over problems; only with 3 or more problems) and "
+                       + ("on each problem (difference a − b, bootstrap 95% CI over its repetitions)" if shown else
+                          f"(the {per_problem} comparisons on each problem: comparisons.csv)")
+                       + "; Holm-adjusted p per metric and level", *comparison_rows(comparisons, shown)))
     if data.spec.fleet:
         return tables + fleet_tables(data)
     header = ["configuration", "mode", "completed"] + [h for _, h in SUMMARY_METRICS]
