@@ -41,6 +41,23 @@ def points_free(free, nx, ny, inv_h, width, height, pts):
 
 
 @_jit
+def edge_free(free, nx, ny, inv_h, width, height, reach, ax, ay, bx, by):
+    """:func:`planners._segment.segment_free` of (ax, ay) -> (bx, by) (m), with a quick accept: ``reach[c]``
+    (cells) is a lower bound on the distance from any point of free cell ``c`` to any non-free cell, so a
+    segment shorter than ``reach`` of its two ends' cells together lies in two discs touching no non-free
+    cell, and every cell the exact test would look at is free."""
+    fx = math.floor(ax * inv_h)
+    fy = math.floor(ay * inv_h)
+    gx = math.floor(bx * inv_h)
+    gy = math.floor(by * inv_h)
+    if 0 <= fx < nx and 0 <= fy < ny and 0 <= gx < nx and 0 <= gy < ny:
+        r = reach[int(fy) * nx + int(fx)] + reach[int(gy) * nx + int(gx)]
+        if r > 0.0 and r > math.hypot((bx - ax) * inv_h, (by - ay) * inv_h):
+            return True
+    return segment_free(free, nx, ny, inv_h, width, height, ax, ay, bx, by)
+
+
+@_jit
 def _insert(bd, bi, cnt, d, j):
     """Insert distance ``d`` of point ``j`` into the ascending lists ``bd``/``bi`` holding ``cnt`` of at most
     ``len(bd)`` entries; returns the new count."""
@@ -151,7 +168,7 @@ def knn(pts, n, qs, k, width, height):
 
 
 @_jit
-def free_knn_edges(free, nx, ny, inv_h, width, height, pts, nb, offset):
+def free_knn_edges(free, nx, ny, inv_h, width, height, reach, pts, nb, offset):
     """The unique free edges ``(E, 2)`` (``i < j``) joining each query point ``offset + q`` of ``pts`` to its
     neighbours ``nb[q]`` (itself excepted): a pair of two query points that list each other is taken once."""
     nq, k = nb.shape
@@ -173,7 +190,7 @@ def free_knn_edges(free, nx, ny, inv_h, width, height, pts, nb, offset):
                     continue  # the pair came with j
             lo = min(i, j)
             hi = max(i, j)
-            if segment_free(free, nx, ny, inv_h, width, height, pts[lo, 0], pts[lo, 1], pts[hi, 0], pts[hi, 1]):
+            if edge_free(free, nx, ny, inv_h, width, height, reach, pts[lo, 0], pts[lo, 1], pts[hi, 0], pts[hi, 1]):
                 out[e, 0] = lo
                 out[e, 1] = hi
                 e += 1
@@ -181,7 +198,7 @@ def free_knn_edges(free, nx, ny, inv_h, width, height, pts, nb, offset):
 
 
 @_jit
-def query_path(free, nx, ny, inv_h, width, height, nodes, edges, sx, sy, gx, gy, k):
+def query_path(free, nx, ny, inv_h, width, height, reach, nodes, edges, sx, sy, gx, gy, k):
     """The shortest path from (sx, sy) to (gx, gy) (m) over the roadmap ``nodes`` ``(M, 2)`` / ``edges``
     ``(E, 2)``, with start and goal joined to their ``k`` nearest nodes and to each other where the segment is
     free: the point indices along it (start ``M``, goal ``M + 1``), or an empty array when they do not connect."""
@@ -210,11 +227,11 @@ def query_path(free, nx, ny, inv_h, width, height, nodes, edges, sx, sy, gx, gy,
                 cnt = _insert(bd, bi, cnt, d, j)
         for a in range(cnt):
             j = bi[a]
-            if segment_free(free, nx, ny, inv_h, width, height, pts[j, 0], pts[j, 1], px, py):
+            if edge_free(free, nx, ny, inv_h, width, height, reach, pts[j, 0], pts[j, 1], px, py):
                 extra[ne, 0] = j
                 extra[ne, 1] = m + s
                 ne += 1
-    if segment_free(free, nx, ny, inv_h, width, height, sx, sy, gx, gy):
+    if edge_free(free, nx, ny, inv_h, width, height, reach, sx, sy, gx, gy):
         extra[ne, 0] = m
         extra[ne, 1] = m + 1
         ne += 1

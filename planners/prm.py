@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 from .base import Param, Planner
 from .errors import NoPathFound
@@ -54,6 +55,10 @@ class _Kernels:
         self.args = (np.ascontiguousarray(space.free.ravel(), dtype=np.uint8), nx, ny, 1.0 / space.resolution,
                      float(space.env.width), float(space.env.height))
         self.free_fraction = max(float(space.free.mean()), 1e-3)
+        # per free cell, a lower bound (cells) on the distance from any of its points to any non-free cell
+        # (outside the field counts as non-free): centre-to-centre distance less two half-diagonals
+        centres = ndimage.distance_transform_edt(np.pad(space.free, 1, constant_values=False))[1:-1, 1:-1]
+        self.reach = np.ascontiguousarray((centres - (math.sqrt(2.0) + 1e-6)).ravel(), dtype=float)
         self.size = np.array([space.env.width, space.env.height])
 
     def is_free(self, pts: np.ndarray) -> np.ndarray:
@@ -65,14 +70,14 @@ class _Kernels:
         (themselves excepted)."""
         nodes = np.ascontiguousarray(nodes, dtype=float)
         nb = self.mod.knn(nodes, len(nodes), nodes[first:], k + 1, *self.args[4:])  # +1: a node's nearest is itself
-        return self.mod.free_knn_edges(*self.args, nodes, nb, first)
+        return self.mod.free_knn_edges(*self.args, self.reach, nodes, nb, first)
 
     def query(self, nodes: np.ndarray, edges: np.ndarray, start: np.ndarray, goal: np.ndarray,
               k: int) -> np.ndarray | None:
         """The shortest roadmap path start -> goal ``(N, 2)`` (m), start and goal joined to their ``k`` nearest
         nodes and each other; None when they do not connect."""
         nodes = np.ascontiguousarray(nodes, dtype=float)
-        order = self.mod.query_path(*self.args, nodes, np.ascontiguousarray(edges, dtype=np.int64),
+        order = self.mod.query_path(*self.args, self.reach, nodes, np.ascontiguousarray(edges, dtype=np.int64),
                                     float(start[0]), float(start[1]), float(goal[0]), float(goal[1]), k)
         if len(order) == 0:
             return None
