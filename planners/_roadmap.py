@@ -41,19 +41,47 @@ def points_free(free, nx, ny, inv_h, width, height, pts):
 
 
 @_jit
+def _reach_at(nx, ny, inv_h, reach, x, y):
+    """A lower bound (cells) on the distance from (x, y) (m) to any non-free cell: ``reach`` of its cell less
+    its distance from the cell's centre; -1 outside the grid."""
+    u = x * inv_h
+    v = y * inv_h
+    fx = math.floor(u)
+    fy = math.floor(v)
+    if 0 <= fx < nx and 0 <= fy < ny:
+        return reach[int(fy) * nx + int(fx)] - math.hypot(u - fx - 0.5, v - fy - 0.5)
+    return -1.0
+
+
+@_jit
 def edge_free(free, nx, ny, inv_h, width, height, reach, ax, ay, bx, by):
-    """:func:`planners._segment.segment_free` of (ax, ay) -> (bx, by) (m), with a quick accept: ``reach[c]``
-    (cells) is a lower bound on the distance from any point of free cell ``c`` to any non-free cell, so a
-    segment shorter than ``reach`` of its two ends' cells together lies in two discs touching no non-free
-    cell, and every cell the exact test would look at is free."""
-    fx = math.floor(ax * inv_h)
-    fy = math.floor(ay * inv_h)
-    gx = math.floor(bx * inv_h)
-    gy = math.floor(by * inv_h)
-    if 0 <= fx < nx and 0 <= fy < ny and 0 <= gx < nx and 0 <= gy < ny:
-        r = reach[int(fy) * nx + int(fx)] + reach[int(gy) * nx + int(gx)]
-        if r > 0.0 and r > math.hypot((bx - ax) * inv_h, (by - ay) * inv_h):
+    """:func:`planners._segment.segment_free` of (ax, ay) -> (bx, by) (m), with a quick accept.
+
+    ``reach[c]`` (cells) is a lower bound on the distance from the centre of free cell ``c`` to any non-free
+    cell, less its distance from the centre for a point in it (:func:`_reach_at`), so a piece of the segment no longer than the ``reach`` of its two ends' cells together lies in two
+    discs touching no non-free cell.  When the segment, or its halves, quarters or eighths (at least 4 cells
+    long) are all covered so, every cell the exact test would look at is free; otherwise the exact test decides.
+    """
+    length = math.hypot((bx - ax) * inv_h, (by - ay) * inv_h)  # cells
+    ra = _reach_at(nx, ny, inv_h, reach, ax, ay)
+    rb = _reach_at(nx, ny, inv_h, reach, bx, by)
+    if ra + rb > length:
+        return True
+    m = 2
+    while m <= 8 and length >= 4.0 * m:  # 2, 4, 8 equal pieces, each at least 4 cells long
+        piece = length / m
+        r0 = ra
+        covered = True
+        for i in range(1, m + 1):
+            t = i / m
+            r1 = rb if i == m else _reach_at(nx, ny, inv_h, reach, ax + (bx - ax) * t, ay + (by - ay) * t)
+            if r0 + r1 <= piece:
+                covered = False
+                break
+            r0 = r1
+        if covered:
             return True
+        m *= 2
     return segment_free(free, nx, ny, inv_h, width, height, ax, ay, bx, by)
 
 

@@ -55,10 +55,10 @@ class _Kernels:
         self.args = (np.ascontiguousarray(space.free.ravel(), dtype=np.uint8), nx, ny, 1.0 / space.resolution,
                      float(space.env.width), float(space.env.height))
         self.free_fraction = max(float(space.free.mean()), 1e-3)
-        # per free cell, a lower bound (cells) on the distance from any of its points to any non-free cell
-        # (outside the field counts as non-free): centre-to-centre distance less two half-diagonals
+        # per cell, a lower bound (cells) on the distance from its centre to any non-free cell (outside the
+        # field counts as non-free): the centre-to-centre distance less a half-diagonal
         centres = ndimage.distance_transform_edt(np.pad(space.free, 1, constant_values=False))[1:-1, 1:-1]
-        self.reach = np.ascontiguousarray((centres - (math.sqrt(2.0) + 1e-6)).ravel(), dtype=float)
+        self.reach = np.ascontiguousarray((centres - (math.sqrt(0.5) + 1e-6)).ravel(), dtype=float)
         self.size = np.array([space.env.width, space.env.height])
 
     def is_free(self, pts: np.ndarray) -> np.ndarray:
