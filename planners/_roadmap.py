@@ -364,3 +364,23 @@ def query_path(free, nx, ny, inv_h, width, height, reach, nodes, edges, sx, sy, 
         order[i] = v
         v = pred[v]
     return order
+
+
+_warm = False
+
+
+def warm() -> None:
+    """Load (or compile) every kernel once per process, on a tiny problem, so that a planner's time budget
+    does not pay for it."""
+    global _warm
+    if _warm:
+        return
+    free = np.ones(4, dtype=np.uint8)
+    reach = np.ones(4)
+    pts = np.array([[0.5, 0.5], [1.5, 1.5], [0.5, 1.5]])
+    args = (free, 2, 2, 1.0, 2.0, 2.0)
+    points_free(*args, pts)
+    nb = knn(pts, 3, pts, 2, 2.0, 2.0)
+    edges = free_knn_edges(*args, reach, pts, nb, 0)
+    query_path(*args, reach, pts, edges, 0.25, 0.25, 1.75, 1.75, 2)
+    _warm = True

