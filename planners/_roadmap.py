@@ -57,7 +57,7 @@ def _reach_at(nx, ny, inv_h, reach, x, y):
 def edge_free(free, nx, ny, inv_h, width, height, reach, ax, ay, bx, by):
     """:func:`planners._segment.segment_free` of (ax, ay) -> (bx, by) (m), with a quick accept.
 
-    ``reach[c]`` (cells) is a lower bound on the distance from the centre of free cell ``c`` to any non-free
+    ``reach[c]`` (cells, float32) is a lower bound on the distance from the centre of free cell ``c`` to any non-free
     cell, less its distance from the centre for a point in it (:func:`_reach_at`), so a piece of the segment no longer than the ``reach`` of its two ends' cells together lies in two
     discs touching no non-free cell.  When the segment, or its halves, quarters or eighths (at least 4 cells
     long) are all covered so, every cell the exact test would look at is free; otherwise the exact test decides.
@@ -376,7 +376,7 @@ def warm() -> None:
     if _warm:
         return
     free = np.ones(4, dtype=np.uint8)
-    reach = np.ones(4)
+    reach = np.ones(4, dtype=np.float32)  # the dtype of _Kernels.reach: one compiled signature
     pts = np.array([[0.5, 0.5], [1.5, 1.5], [0.5, 1.5]])
     args = (free, 2, 2, 1.0, 2.0, 2.0)
     points_free(*args, pts)

@@ -59,7 +59,8 @@ class _Kernels:
         # per cell, a lower bound (cells) on the distance from its centre to any non-free cell (outside the
         # field counts as non-free): the centre-to-centre distance less a half-diagonal
         centres = ndimage.distance_transform_edt(np.pad(space.free, 1, constant_values=False))[1:-1, 1:-1]
-        self.reach = np.ascontiguousarray((centres - (math.sqrt(0.5) + 1e-6)).ravel(), dtype=float)
+        # (float32: half the memory; the 1e-3 cell margin exceeds its rounding below 8000 cells)
+        self.reach = np.ascontiguousarray((centres - (math.sqrt(0.5) + 1e-3)).ravel(), dtype=np.float32)
         self.size = np.array([space.env.width, space.env.height])
 
     def is_free(self, pts: np.ndarray) -> np.ndarray:
