@@ -1,11 +1,14 @@
-"""Probabilistic RoadMap (Kavraki et al.), vectorised.
+"""Probabilistic RoadMap (Kavraki et al.), compiled.
 
-Build: sample ``samples`` free configurations in batches, join each to its
-``k`` nearest neighbours (``scipy.spatial.cKDTree``; PRM*'s ``e (1 + 1/2) ln n``
-with ``prm_star``), collision-check every candidate edge at once against the
-configuration space, and keep the free ones as a sparse graph.  Query: add
-start and goal the same way and take the shortest path with
-``scipy.sparse.csgraph.dijkstra``.  With ``grow`` (the default) a roadmap
+Build: sample ``samples`` free configurations in vectorised batches, join each
+to its ``k`` nearest neighbours (PRM*'s ``e (1 + 1/2) ln n`` with
+``prm_star``), collision-check the candidate edges with the exact segment test
+and keep the free ones.  Query: join start and goal the same way and take the
+shortest path with Dijkstra.  Neighbours, edge checks and the query are numba
+kernels (:mod:`planners._roadmap`): at the paper's 180 x 180 grids the former
+``cKDTree`` / ``np.unique`` / ``scipy.sparse.csgraph.dijkstra`` pipeline spent
+most of its time in per-call overhead, and the kernels give the same roadmap
+and path for a seed.  With ``grow`` (the default) a roadmap
 that does not connect start and goal doubles (new samples from the same
 seeded stream, each joined to its nearest among all nodes) until it does or
 ``max_samples`` or ``time_budget_s`` runs out; without it the roadmap has
@@ -24,9 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
-from scipy.spatial import cKDTree
+from scipy import ndimage
 
 from .base import Param, Planner
 from .errors import NoPathFound
@@ -41,18 +42,67 @@ class Roadmap:
 
     nodes: np.ndarray
     edges: np.ndarray
-    tree: cKDTree
+
+
+class _Kernels:
+    """The compiled kernels of :mod:`planners._roadmap` bound to one configuration space (made once per space)."""
+
+    def __init__(self, space: ConfigSpace) -> None:
+        from . import _roadmap  # numba loads with it
+
+        _roadmap.warm()
+        ny, nx = space.free.shape
+        self.mod = _roadmap
+        self.args = (np.ascontiguousarray(space.free.ravel(), dtype=np.uint8), nx, ny, 1.0 / space.resolution,
+                     float(space.env.width), float(space.env.height))
+        self.free_fraction = max(float(space.free.mean()), 1e-3)
+        # per cell, a lower bound (cells) on the distance from its centre to any non-free cell (outside the
+        # field counts as non-free): the centre-to-centre distance less a half-diagonal
+        centres = ndimage.distance_transform_edt(np.pad(space.free, 1, constant_values=False))[1:-1, 1:-1]
+        # (float32: half the memory; the 1e-3 cell margin exceeds its rounding below 8000 cells)
+        self.reach = np.ascontiguousarray((centres - (math.sqrt(0.5) + 1e-3)).ravel(), dtype=np.float32)
+        self.size = np.array([space.env.width, space.env.height])
+
+    def is_free(self, pts: np.ndarray) -> np.ndarray:
+        """``ConfigSpace.is_free`` of ``(N, 2)`` points (m), compiled: ``(N,)`` bool."""
+        return self.mod.points_free(*self.args, pts)
+
+    def knn_edges(self, nodes: np.ndarray, first: int, k: int) -> np.ndarray:
+        """Free edges ``(E, 2)`` (i < j) joining ``nodes[first:]`` to their ``k`` nearest among all ``nodes``
+        (themselves excepted)."""
+        nodes = np.ascontiguousarray(nodes, dtype=float)
+        nb = self.mod.knn(nodes, len(nodes), nodes[first:], k + 1, *self.args[4:])  # +1: a node's nearest is itself
+        return self.mod.free_knn_edges(*self.args, self.reach, nodes, nb, first)
+
+    def query(self, nodes: np.ndarray, edges: np.ndarray, start: np.ndarray, goal: np.ndarray,
+              k: int) -> np.ndarray | None:
+        """The shortest roadmap path start -> goal ``(N, 2)`` (m), start and goal joined to their ``k`` nearest
+        nodes and each other; None when they do not connect."""
+        nodes = np.ascontiguousarray(nodes, dtype=float)
+        order = self.mod.query_path(*self.args, self.reach, nodes, np.ascontiguousarray(edges, dtype=np.int64),
+                                    float(start[0]), float(start[1]), float(goal[0]), float(goal[1]), k)
+        if len(order) == 0:
+            return None
+        return np.vstack([nodes, np.array([start[:2], goal[:2]], dtype=float)])[order]
+
+
+def _kernels(space: ConfigSpace) -> _Kernels:
+    """The space's :class:`_Kernels`, made once per space."""
+    kern = space.__dict__.get("_prm_kernels")
+    if kern is None:
+        kern = _Kernels(space)
+        object.__setattr__(space, "_prm_kernels", kern)
+    return kern
 
 
 def sample_free(space: ConfigSpace, n: int, rng: np.random.Generator) -> np.ndarray:
     """``n`` uniformly distributed free points (m), drawn in vectorised batches."""
-    free_fraction = max(float(space.free.mean()), 1e-3)
+    kern = _kernels(space)
     out: list[np.ndarray] = []
     have = 0
-    size = np.array([space.env.width, space.env.height])
     for _ in range(100):
-        batch = rng.random((int(1.3 * (n - have) / free_fraction) + 16, 2)) * size
-        batch = batch[space.is_free(batch)]
+        batch = rng.random((int(1.3 * (n - have) / kern.free_fraction) + 16, 2)) * kern.size
+        batch = batch[kern.is_free(batch)]
         out.append(batch)
         have += len(batch)
         if have >= n:
@@ -60,45 +110,11 @@ def sample_free(space: ConfigSpace, n: int, rng: np.random.Generator) -> np.ndar
     raise NoPathFound("could not sample free configurations: the free space is almost empty")
 
 
-def _segment_test(space: ConfigSpace) -> Any:
-    """The space's compiled segment test (:class:`planners._segment.SegmentTest`), made once per space."""
-    test = space.__dict__.get("_segment_test")
-    if test is None:
-        from ._segment import SegmentTest  # numba loads with it
-
-        test = SegmentTest(space)
-        object.__setattr__(space, "_segment_test", test)
-    return test
-
-
-def _free_edges(space: ConfigSpace, pts: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """The ``pairs`` of ``pts`` whose segments are free (the exact test of ``ConfigSpace.segments_free``)."""
-    if len(pairs) == 0:
-        return pairs
-    return pairs[_segment_test(space).segments(pts[pairs[:, 0]], pts[pairs[:, 1]])]
-
-
-def _knn_pairs(tree: cKDTree, query: np.ndarray, k: int, offset: int = 0) -> np.ndarray:
-    """Unique index pairs (i, j), i < j, joining ``query`` points (indexed from ``offset``) to k neighbours."""
-    k = min(k, tree.n)
-    _, nb = tree.query(query, k=k)
-    nb = np.asarray(nb).reshape(len(query), k)
-    src = np.repeat(np.arange(len(query)) + offset, k)
-    pairs = np.column_stack([src, nb.ravel()])
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    pairs.sort(axis=1)
-    n = int(pairs.max()) + 1 if len(pairs) else 1
-    keys = np.unique(pairs[:, 0] * n + pairs[:, 1])  # 1-D keys: much faster than unique(axis=0)
-    return np.column_stack([keys // n, keys % n])
-
-
 def build_roadmap(space: ConfigSpace, samples: int, k: int, seed: int) -> Roadmap:
     """Sample ``samples`` free nodes and connect each to its ``k`` nearest free-edge neighbours."""
     rng = np.random.default_rng(seed)
     nodes = sample_free(space, samples, rng)
-    tree = cKDTree(nodes)
-    pairs = _knn_pairs(tree, nodes, k + 1)  # +1: the nearest of a node is itself
-    return Roadmap(nodes, _free_edges(space, nodes, pairs), tree)
+    return Roadmap(nodes, _kernels(space).knn_edges(nodes, 0, k))
 
 
 def prm_star_k(n: int) -> int:
@@ -123,9 +139,8 @@ class _Growing:
         new = sample_free(space, n - have, self.rng)
         nodes = np.vstack([self.nodes, new]) if have else new
         kk = prm_star_k(n) if star else k
-        pairs = _knn_pairs(cKDTree(nodes), new, kk + 1, offset=have)
         self.nodes = nodes
-        self.edges = np.vstack([self.edges, _free_edges(space, nodes, pairs)])
+        self.edges = np.vstack([self.edges, _kernels(space).knn_edges(nodes, have, kk)])
         self.sizes.append(n)
 
     def stage(self, s: int) -> tuple[np.ndarray, np.ndarray]:
@@ -185,23 +200,7 @@ class PRMPlanner(Planner):
     def _query(space: ConfigSpace, nodes: np.ndarray, edges: np.ndarray, start: np.ndarray, goal: np.ndarray,
                k: int) -> np.ndarray | None:
         """The shortest roadmap path start -> goal ``(N, 2)`` (m), or None when they do not connect."""
-        m = len(nodes)
-        ends = np.array([start[:2], goal[:2]])
-        pts = np.vstack([nodes, ends])
-        # start/goal join their k nearest roadmap nodes, and each other directly
-        query_pairs = np.vstack([_knn_pairs(cKDTree(nodes), ends, k, offset=m), [[m, m + 1]]])
-        edges = np.vstack([edges, _free_edges(space, pts, query_pairs)])
-        w = np.hypot(*(pts[edges[:, 0]] - pts[edges[:, 1]]).T)
-        # zero-length edges would vanish from a sparse matrix; keep them tiny instead
-        w = np.maximum(w, 1e-12)
-        graph = coo_matrix((w, (edges[:, 0], edges[:, 1])), shape=(m + 2, m + 2)).tocsr()
-        dist, pred = dijkstra(graph, directed=False, indices=m, return_predecessors=True)
-        if not math.isfinite(dist[m + 1]):
-            return None
-        order = [m + 1]
-        while order[-1] != m:  # a loop over the path's nodes only
-            order.append(int(pred[order[-1]]))
-        return pts[order[::-1]]
+        return _kernels(space).query(nodes, edges, start, goal, k)
 
     def solve(
         self, space: ConfigSpace, start: np.ndarray, goal: np.ndarray, params: dict[str, Any], seed: int
@@ -220,6 +219,7 @@ class PRMPlanner(Planner):
                 )
             info = {"roadmap_nodes": len(rm.nodes), "roadmap_edges": len(rm.edges), "roadmap_cached": cached}
             return path, info
+        _kernels(space)  # made (and numba loaded) once per space: not part of the time budget
         t0 = time.perf_counter()
         g, cached = self._growing(space, samples, k, star, seed)
         s = 0
