@@ -48,7 +48,7 @@ class _Kernels:
     """The compiled kernels of :mod:`planners._roadmap` bound to one configuration space (made once per space)."""
 
     def __init__(self, space: ConfigSpace) -> None:
-        from . import _roadmap  # numba loads with it
+        import planners._roadmap as _roadmap  # numba loads with it
 
         _roadmap.warm()
         ny, nx = space.free.shape
