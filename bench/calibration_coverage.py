@@ -2,10 +2,14 @@
 runs emulated with them (seeded), fitted back; per parameter the share of cases whose reported interval
 contains the true value, and the replay error (the fitted profile re-simulated against the runs, cm RMS).
 
-    python bench/calibration_coverage.py --seeds 1-5            # JSON on stdout
+    python bench/calibration_coverage.py --seeds 1-5 --workers 1           # JSON on stdout
+    python bench/calibration_coverage.py --rescore RESULT.json --refits 4  # the same cases, intervals again
 
 A case is one variant and one emulation seed: six runs of about 10 s on three-corner paths
-(tests/test_calibration.py's :func:`emulated_runs`), each with its own seed.
+(tests/test_calibration.py's :func:`emulated_runs`), each with its own seed.  Each case keeps the fit's own
+values, the bootstrap over runs' scatter and the parametric bootstrap's refits, so ``--rescore`` recomputes the
+intervals (:func:`robot_agent.engine.calibration.uncertainty`) from them without fitting again (from the first
+``--refits`` refits: those a run with that many refits draws, the same seeds in the same order).
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import argparse
 import json
 import os
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
@@ -24,7 +29,7 @@ import numpy as np
 
 from contract.overrides import apply_overrides
 from contract.robot_profile import load_profile
-from robot_agent.engine.calibration import FITTED, RecordedRun, calibrate
+from robot_agent.engine.calibration import _REFITS, FITTED, RecordedRun, calibrate, uncertainty
 from robot_agent.engine.headless import simulate_run
 
 #: the noise study's variants (docs/fidelity.md, "twb study noise") and the shipped robot
@@ -56,18 +61,34 @@ def emulated_runs(profile: dict[str, Any], seed: int, n: int = 6) -> list[Record
     return runs
 
 
-def case(job: tuple[str, int]) -> dict[str, Any]:
-    """One variant and seed: the true values, the fitted values and intervals, which intervals cover."""
-    variant, seed = job
+def case(job: tuple[str, int, int]) -> dict[str, Any]:
+    """One variant, seed and number of refits: the true values, the fitted values and intervals, which intervals
+    cover, and what they were computed from (the fit's values, the scatter, the refits)."""
+    variant, seed, refits = job
     truth = apply_overrides(load_profile("bebot"), VARIANTS[variant])
-    cal = calibrate(emulated_runs(truth, seed), "bebot", seed=seed)
-    true = {k: float(truth["field"][k]) for k in FITTED}
-    out: dict[str, Any] = {"variant": variant, "seed": seed, "replay_cm_rms": round(cal.rms_m * 100, 3), "params": {}}
+    t0 = time.perf_counter()
+    cal = calibrate(emulated_runs(truth, seed), "bebot", seed=seed, refits=refits)
+    out: dict[str, Any] = {"variant": variant, "seed": seed, "replay_cm_rms": round(cal.rms_m * 100, 3),
+                           "calibrate_s": round(time.perf_counter() - t0, 1), "params": {}}
+    for j, k in enumerate(FITTED):
+        out["params"][k] = {"true": float(truth["field"][k]), "fit": cal.fitted[k], "scatter": cal.scatter[k],
+                            "refits": [float(x) for x in cal.refits[:, j]]}
+    return score(out)
+
+
+def score(c: dict[str, Any]) -> dict[str, Any]:
+    """Case ``c`` with its values, intervals and coverage computed (again) from its fit, scatter and refits."""
+    p = c["params"]
+    refits = np.array([p[k]["refits"] for k in FITTED]).T.reshape(-1, len(FITTED))
+    u = uncertainty({k: p[k]["fit"] for k in FITTED}, {k: p[k]["scatter"] for k in FITTED}, refits)
     for k in FITTED:
-        lo, hi = cal.interval.get(k, (None, None))
-        covered = None if lo is None else bool(lo <= true[k] <= hi)
-        out["params"][k] = {"true": true[k], "fitted": cal.values[k], "interval": [lo, hi], "covered": covered}
-    return out
+        lo, hi = u["interval"].get(k, (None, None))
+        w = u["withheld"].get(k)
+        p[k].update({"fitted": u["values"][k], "interval": [lo, hi],
+                     "covered": None if lo is None else bool(lo <= p[k]["true"] <= hi),
+                     "no_interval": u["no_interval"].get(k), "withheld_interval": w,
+                     "withheld_covered": None if w is None else bool(w[0] <= p[k]["true"] <= w[1])})
+    return c
 
 
 def _seeds(text: str) -> list[int]:
@@ -81,18 +102,37 @@ def _seeds(text: str) -> list[int]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="1-5")
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--refits", type=int, default=_REFITS, help="the parametric bootstrap's refits per case")
+    ap.add_argument("--rescore", help="a result JSON of this script: its cases' intervals computed again")
     a = ap.parse_args()
-    jobs = [(v, s) for v in VARIANTS for s in _seeds(a.seeds)]
-    with ProcessPoolExecutor(a.workers) as ex:
-        cases = list(ex.map(case, jobs))
+    if a.rescore:
+        with open(a.rescore) as fh:
+            cases = json.load(fh)["cases"]
+        for c in cases:  # the first --refits refits: those calibrate(..., refits=N) draws (the same seeds, in order)
+            for p in c["params"].values():
+                p["refits"] = p["refits"][:a.refits]
+        cases = [score(c) for c in cases]
+    else:
+        jobs = [(v, s, a.refits) for v in VARIANTS for s in _seeds(a.seeds)]
+        if a.workers > 1:
+            with ProcessPoolExecutor(a.workers) as ex:
+                cases = list(ex.map(case, jobs))
+        else:
+            cases = []
+            for job in jobs:
+                cases.append(case(job))
+                print(f"{job[0]}, seed {job[1]}: {cases[-1]['calibrate_s']} s", file=sys.stderr, flush=True)
     coverage = {}
     for k in FITTED:
         flags = [c["params"][k]["covered"] for c in cases if c["params"][k]["covered"] is not None]
+        held = [c["params"][k]["withheld_covered"] for c in cases if c["params"][k]["withheld_covered"] is not None]
         coverage[k] = {"covered": sum(flags), "cases": len(flags),
-                       "without_interval": sum(c["params"][k]["covered"] is None for c in cases)}
+                       "without_interval": sum(c["params"][k]["covered"] is None for c in cases),
+                       "withheld_interval_covered": sum(held)}
     reported = [c["params"][k]["covered"] for c in cases for k in FITTED if c["params"][k]["covered"] is not None]
-    print(json.dumps({"coverage": coverage, "intervals_covering": f"{sum(reported)}/{len(reported)}",
+    print(json.dumps({"date": time.strftime("%Y-%m-%d", time.gmtime()), "command": " ".join(["python", *sys.argv]),
+                      "refits": a.refits, "coverage": coverage, "intervals_covering": f"{sum(reported)}/{len(reported)}",
                       "replay_cm_rms": {v: [c["replay_cm_rms"] for c in cases if c["variant"] == v] for v in VARIANTS},
                       "cases": cases}, indent=1))
 

@@ -117,14 +117,17 @@ def calibrate(
     figure: Annotated[Optional[Path], typer.Option("--figure", help="Figure of tracked vs re-simulated paths (default: RUNS/calibration.png).")] = None,
     profile: Annotated[str, typer.Option("--profile", help="The robot profile fitted (its other values are kept).")] = "bebot",
     variant: Annotated[Optional[str], typer.Option("--variant", help="Only the field runs of this profile variant (a noise study's label).")] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the fit's simulations and bootstrap.", min=0)] = 0,
+    seed: Annotated[int, typer.Option(help="Seed of the fit's simulations, bootstraps and emulated runs.", min=0)] = 0,
+    refits: Annotated[Optional[int], typer.Option("--refits", help="Refits of the parametric bootstrap (default 4; 0: no intervals).", min=0)] = None,
 ) -> None:
     """Fit the field parameters of a robot profile (motor time constant, track gains and bias, wheel noise,
     tracker latency and noise) to the completed field runs of a study; writes the fitted profile with each
-    value's 95 % bootstrap interval over the runs and a figure of tracked against re-simulated paths (docs/fidelity.md, "Calibration")."""
+    value's bias-corrected estimate and 95 % interval (a parametric bootstrap: runs emulated with the fitted profile,
+    fitted again; no interval where that does not cover the truth on the validation cases) and a figure of tracked
+    against re-simulated paths (docs/fidelity.md, "Calibration")."""
     from client_sdk.study import load_study
     from contract.robot_profile import profile_names
-    from robot_agent.engine.calibration import FITTED
+    from robot_agent.engine.calibration import _REFITS, FITTED, METHOD
     from robot_agent.engine.calibration import calibrate as fit
 
     if profile not in profile_names():
@@ -137,17 +140,21 @@ def calibrate(
     if len(recorded) < 2:
         fail(f"{runs}: {len(recorded)} completed field run(s){f' of variant {variant!r}' if variant else ''}; "
              "calibration needs at least 2")
-    cal = fit(recorded, profile, seed=seed)
+    refits = _REFITS if refits is None else refits
+    cal = fit(recorded, profile, seed=seed, refits=refits)
     result = dict(cal.profile)
     result["calibration"] = {
         "runs": len(recorded), "study": data.spec.name, "variant": variant, "seed": seed,
         "rms_residual_m": round(cal.rms_m, 6),
         "replay_error_cm_rms": round(cal.rms_m * 100, 4),
+        "refits": refits,
         "values": {k: round(cal.values[k], 6) for k in FITTED},
-        "std_error": {k: round(cal.std[k], 6) for k in FITTED if math.isfinite(cal.std[k])},
+        "fitted": {k: round(cal.fitted[k], 6) for k in FITTED},
+        "bias": {k: round(cal.bias[k], 6) for k in FITTED if math.isfinite(cal.bias.get(k, math.nan))},
+        "std_error": {k: round(cal.std[k], 6) for k in cal.interval if math.isfinite(cal.std[k])},
         "interval_95": {k: [round(lo, 6), round(hi, 6)] for k, (lo, hi) in cal.interval.items()},
-        "method": "95 % intervals: a bootstrap over runs (runs sharing a seed resampled together); "
-                  "robot_agent/engine/calibration.py; docs/fidelity.md#calibration",
+        "no_interval": dict(cal.no_interval),
+        "method": METHOD + "; robot_agent/engine/calibration.py; docs/fidelity.md#calibration",
     }
     out = out or runs / "calibrated-profile.json"
     out.write_text(json.dumps(result, indent=1) + "\n")
@@ -156,9 +163,8 @@ def calibrate(
     width = max(len(k) for k in FITTED)
     for k in FITTED:
         lo_hi = cal.interval.get(k)
-        where = f"  [{lo_hi[0]:.4g}, {lo_hi[1]:.4g}]" if lo_hi else ""
+        where = f"  [{lo_hi[0]:.4g}, {lo_hi[1]:.4g}]" if lo_hi else f"  ({cal.no_interval.get(k, 'no interval')})"
         typer.echo(f"{k:<{width}}  {cal.values[k]:.4g}{where}")
-    typer.echo("[95 % interval: a bootstrap over the runs; it covers run-to-run scatter, not a model's misfit "
-               "(docs/fidelity.md#calibration)]")
+    typer.echo(f"[{METHOD} (docs/fidelity.md#calibration)]")
     typer.echo(f"{len(recorded)} runs, replay error (fitted profile re-simulated against the runs) "
                f"{cal.rms_m * 100:.2f} cm RMS; profile {out}, figure {figure}")
