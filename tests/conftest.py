@@ -69,8 +69,8 @@ MARKED_FIXTURES = {"browser": "browser", "postgres": "postgres", "ray": "ray", "
 #: ``-n 2 --dist loadfile --no-loadscope-reorder``: without that flag xdist sorts modules by test count instead)
 LONGEST_FIRST = ("test_api_fuzz", "test_testbed", "test_lifecycle", "test_controller_programs", "test_study",
                  "test_ray", "test_postgres", "test_dashboard", "test_uploads", "test_agent_hosts",
-                 "test_lockstep_programs", "test_docs_commands", "test_dashboard_newuser", "test_controller_flood",
-                 "test_per_run_plans", "test_fleet_rest", "test_study_fleet", "test_security")
+                 "test_calibration", "test_lockstep_programs", "test_docs_commands", "test_dashboard_newuser", "test_controller_flood",
+                 "test_per_run_plans", "test_world_studies", "test_fleet_rest", "test_study_fleet", "test_security")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
