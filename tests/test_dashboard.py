@@ -25,6 +25,7 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-backg
 OUTPUT = Path(os.environ.get("TWB_TEST_OUTPUT") or Path(__file__).parent / "output") / "dashboard"
 ROOT = Path(__file__).resolve().parents[1]
 LAPTOP = {"width": 1366, "height": 900}
+EXPECT_TIMEOUT_MS = 30_000
 TABLET = {"width": 768, "height": 1024}
 
 ROBOT_RGB = (0xFF, 0x6D, 0x00)
@@ -69,7 +70,12 @@ def browser(request):
         pytest.skip(reason)
     # the server starts before the browser and stops after it (no open event stream to wait for)
     request.getfixturevalue("testbed")
-    from playwright.sync_api import sync_playwright
+    from playwright.sync_api import expect, sync_playwright
+
+    # what a page shows after a request the server computes (a comparison's bootstrap, a study's figures) can
+    # take seconds on a loaded 2-core machine: assertions wait up to 30 s, not Playwright's 5 s (a passing
+    # assertion returns as soon as it holds)
+    expect.set_options(timeout=EXPECT_TIMEOUT_MS)
 
     OUTPUT.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as pw:
