@@ -29,7 +29,7 @@ import numpy as np
 
 from contract.overrides import apply_overrides
 from contract.robot_profile import load_profile
-from robot_agent.engine.calibration import _REFITS, FITTED, RecordedRun, calibrate, uncertainty
+from robot_agent.engine.calibration import REFITS, FITTED, RecordedRun, calibrate, uncertainty
 from robot_agent.engine.headless import simulate_run
 
 #: the noise study's variants (docs/fidelity.md, "twb study noise") and the shipped robot
@@ -103,7 +103,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="1-5")
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--refits", type=int, default=_REFITS, help="the parametric bootstrap's refits per case")
+    ap.add_argument("--refits", type=int, default=REFITS, help="the parametric bootstrap's refits per case")
     ap.add_argument("--rescore", help="a result JSON of this script: its cases' intervals computed again")
     a = ap.parse_args()
     if a.rescore:

@@ -15,7 +15,7 @@ from .core.security import Principal
 from .errors import NotFound
 from .models import Environment, Experiment, Program, Run
 
-__all__ = ["environment_named", "event_for", "owned", "visible_environments"]
+__all__ = ["environment_named", "event_for", "hidden_subfield_runs", "owned", "visible_environments"]
 
 Row = TypeVar("Row", Experiment, Program, Run)
 
@@ -55,6 +55,15 @@ def visible_environments(user: Principal) -> ColumnElement[bool]:
     return or_(Environment.builtin.is_(True), Environment.owner_id == user.id)
 
 
+def hidden_subfield_runs(user: Principal, owner_id: Optional[int], last_owner_id: Optional[int]) -> dict[str, None]:
+    """The run fields of a sub-field ``user`` may not see, set to None: its current run (``run_id``, of
+    ``owner_id``) and its last run since the start (``last_run_id``, of ``last_owner_id``) unless they are the
+    user's; admins see both."""
+    if user.is_admin:
+        return {}
+    return {k: None for k, owner in (("run_id", owner_id), ("last_run_id", last_owner_id)) if owner != user.id}
+
+
 def event_for(user: Principal, event: dict[str, Any]) -> Optional[dict[str, Any]]:
     """A live event as ``user`` may see it (None: not at all); admins see everything.
 
@@ -71,8 +80,8 @@ def event_for(user: Principal, event: dict[str, Any]) -> Optional[dict[str, Any]
         return event if mine else None
     shown = {k: v for k, v in event.items() if k not in ("owner_id", "last_owner_id")}
     if kind == "subfield":
-        hide = {k: None for k, its in (("run_id", mine), ("last_run_id", event.get("last_owner_id") == user.id))
-                if not its and shown["subfield"].get(k) is not None}
+        hide = {k: v for k, v in hidden_subfield_runs(user, owner, event.get("last_owner_id")).items()
+                if shown["subfield"].get(k) is not None}
         if hide:
             shown["subfield"] = {**shown["subfield"], **hide}
     return shown

@@ -197,7 +197,8 @@ class FieldState:
         state, environment, run_id = str(slot.state), slot.environment, slot.run_id
         robot_id = robot.robot_id if robot else None
         self._broker.publish({"type": "subfield", "owner_id": self.subfield_owner.get(k),
-                              "last_owner_id": self.last_owner.get(k), "subfield": self.subfield_view(k).model_dump(mode="json")})
+                              "last_owner_id": self.last_owner.get(k),
+                              "subfield": self.subfield_view(k).model_dump(mode="json")})
 
         def save() -> None:
             with self._sessions.begin() as s:

@@ -87,8 +87,7 @@ class PoseRouter:
         t, x, y, a = pose
         ox, oy = self._origin_of(robot_id)
         self._last_pose[robot_id] = [t, x + ox, y + oy, a]
-        self._broker.publish({"type": "pose", "robot_id": robot_id, "run_id": None, "owner_id": None,
-                              "t": t, "x": x + ox, "y": y + oy, "theta": a})
+        self._publish(robot_id, None, t, x + ox, y + oy, a)
 
     async def wait_for_time(self, robot_id: str, t: float, timeout_s: float) -> bool:
         """Wait until a pose of ``robot_id`` at experiment time >= ``t`` has arrived (or time out)."""
@@ -156,14 +155,17 @@ class PoseRouter:
         now = time.monotonic()
         if force or now - self._last_live.get(robot_id, 0.0) >= _LIVE_INTERVAL_S:
             self._last_live[robot_id] = now
-            event = {
-                "type": "pose", "robot_id": robot_id, "run_id": w.run_id if w else None,
-                "owner_id": w.owner_id if w else None, "t": t_last, "x": x_last + ox, "y": y_last + oy,
-                "theta": a_last,
-            }
-            if member is not None:
-                event["robot"] = member
-            self._broker.publish(event)
+            self._publish(robot_id, w, t_last, x_last + ox, y_last + oy, a_last, member)
+
+    def _publish(self, robot_id: str, w: Optional[_Window], t: float, x: float, y: float, theta: float,
+                 member: Optional[int] = None) -> None:
+        """A live ``pose`` event: ``robot_id`` at (x, y, theta) (field frame; m, rad) at experiment time ``t``
+        (s), of the run of window ``w`` (None: no run's); ``member`` a fleet member's index."""
+        event = {"type": "pose", "robot_id": robot_id, "run_id": w.run_id if w else None,
+                 "owner_id": w.owner_id if w else None, "t": t, "x": x, "y": y, "theta": theta}
+        if member is not None:
+            event["robot"] = member
+        self._broker.publish(event)
 
 
 def parse_batch(raw: bytes) -> tuple[str, np.ndarray, int]:

@@ -127,7 +127,7 @@ def calibrate(
     against re-simulated paths (docs/fidelity.md, "Calibration")."""
     from client_sdk.study import load_study
     from contract.robot_profile import profile_names
-    from robot_agent.engine.calibration import _REFITS, FITTED, METHOD
+    from robot_agent.engine.calibration import REFITS, FITTED, METHOD
     from robot_agent.engine.calibration import calibrate as fit
 
     if profile not in profile_names():
@@ -140,7 +140,7 @@ def calibrate(
     if len(recorded) < 2:
         fail(f"{runs}: {len(recorded)} completed field run(s){f' of variant {variant!r}' if variant else ''}; "
              "calibration needs at least 2")
-    refits = _REFITS if refits is None else refits
+    refits = REFITS if refits is None else refits
     cal = fit(recorded, profile, seed=seed, refits=refits)
     result = dict(cal.profile)
     result["calibration"] = {

@@ -22,7 +22,7 @@ The field robot's effects (docs/fidelity.md, "The emulated field robot") are fit
 
 Uncertainties: a **parametric bootstrap** around the fit (Efron and Tibshirani 1993, ch. 6 and 10.2; Davison and
 Hinkley 1997, ch. 2.4 and 5.2), which reproduces the estimator's own bias (slip read as lag, driving read as
-jitter, gains absorbing slip) as well as its scatter.  ``refits`` times (:data:`_REFITS`) every recorded run's path
+jitter, gains absorbing slip) as well as its scatter.  ``refits`` times (:data:`REFITS`) every recorded run's path
 is driven again by the emulated field robot with the fitted profile and every noise on (:func:`emulate`: new seeds,
 one per group of runs; new track gains drawn from the fitted mean and spread), and the new runs are fitted again
 from the same starting profile.  With the refits' mean m and standard deviation s_p, and s_r the standard
@@ -67,7 +67,7 @@ from contract.robot_profile import DEFAULT_PROFILE, load_profile
 
 from .headless import simulate_run
 
-__all__ = ["FITTED", "METHOD", "NO_INTERVAL", "Calibration", "RecordedRun", "calibrate", "emulate", "resimulate", "uncertainty"]
+__all__ = ["FITTED", "METHOD", "NO_INTERVAL", "REFITS", "Calibration", "RecordedRun", "calibrate", "emulate", "resimulate", "uncertainty"]
 
 #: the field parameters :func:`calibrate` fits
 FITTED = ("motor_time_constant_s", "wheel_gain_mean", "wheel_bias_sigma", "wheel_noise_rel", "wheel_noise_abs_m_s",
@@ -78,7 +78,7 @@ _MAX_LATENCY_STEPS = 15
 _INCREMENT_S = 0.2  # the wheel-noise statistic's time step
 _REPLICATES = 4  # simulated copies of each run per wheel-noise candidate
 _BOOTSTRAP = 400
-_REFITS = 4  # the parametric bootstrap's refits
+REFITS = 4  # the parametric bootstrap's refits
 #: parameters reported without an interval, and why: the interval of the module docstring did not cover the truth
 #: in ~90 % of the validation cases (bench/calibration_coverage.py, 4 refits: tuning seeds 1-5, held-out seeds 6-10;
 #: docs/fidelity.md, "Calibration")
@@ -403,7 +403,7 @@ def _parametric(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mappi
 
 
 def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DEFAULT_PROFILE, *,
-              seed: int = 0, refits: int = _REFITS) -> Calibration:
+              seed: int = 0, refits: int = REFITS) -> Calibration:
     """Fit :data:`FITTED` of ``profile`` (a shipped name or a profile dict: its other values are kept, and are
     the starting point) to the recorded field ``runs`` (at least 2); ``seed`` seeds the simulations of stage 3,
     the bootstraps and the emulated runs; ``refits`` is the parametric bootstrap's number of refits (0: none,

@@ -7,6 +7,7 @@ from typing import Optional
 import anyio
 from fastapi import APIRouter, Request
 
+from ...access import hidden_subfield_runs
 from ...errors import Forbidden, NotFound
 from ...schemas import Page, RobotPublic, RobotRegister, SubfieldPublic, TrackerBatch, TrackerBatchResult
 from ...tracking import parse_batch
@@ -20,15 +21,8 @@ router = APIRouter(tags=["field"], responses=AUTHENTICATED)
 async def list_subfields(user: CurrentUser, testbed: TestbedDep) -> Page[SubfieldPublic]:
     """The four 1.8 m sub-fields: state, environment built, robot, current and last run (if they are yours)."""
     field = testbed.field
-
-    def shown(v: SubfieldPublic) -> SubfieldPublic:
-        if user.is_admin:
-            return v
-        hide = {k: None for k, owner in (("run_id", field.subfield_owner.get(v.id)),
-                                         ("last_run_id", field.last_owner.get(v.id))) if owner != user.id}
-        return v.model_copy(update=hide) if hide else v
-
-    data = [shown(v) for v in field.subfield_views()]
+    data = [v.model_copy(update=hidden_subfield_runs(user, field.subfield_owner.get(v.id), field.last_owner.get(v.id)))
+            for v in field.subfield_views()]
     return Page(data=data, count=len(data))
 
 

@@ -40,6 +40,7 @@ export class Store extends EventTarget {
     // its obstacle robots' tracks [{radius, poses}] field frame, or null}
     this.traces = new Map();
     this.subfieldRun = new Map(); // sub-field id -> its latest run since the testbed started (that the user may see)
+    this.traceAsked = new Set(); // ended runs whose stored trace was asked for once (noteSubfieldRuns)
     // when an event last told a run's or a sub-field's state (performance.now()): an API answer asked for
     // before that is older than what the dashboard shows, and does not overwrite it
     this.runToldAt = new Map();
@@ -313,8 +314,8 @@ export class Store extends EventTarget {
     for (const id of [sf.last_run_id, sf.run_id]) {
       if (id == null || (this.subfieldRun.get(sf.id) ?? -1) > id) continue;
       this.subfieldRun.set(sf.id, id);
-      if (id !== sf.run_id && !this.traces.has(id) && !this.traceAsked?.has(id)) {
-        (this.traceAsked ||= new Set()).add(id);
+      if (id !== sf.run_id && !this.traces.has(id) && !this.traceAsked.has(id)) {
+        this.traceAsked.add(id);
         this.loadTrace(id).catch((err) => this.failed(err, "Poses"));
       }
     }
