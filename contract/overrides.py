@@ -33,6 +33,7 @@ OVERRIDE_LIMITS: dict[str, tuple[float, float]] = {
     "wheel_gain_mean": (0.1, 2.0),
     "wheel_bias_sigma": (0.0, 0.5),
     "dead_band_m_s": (0.0, 0.1),
+    "track_width_factor": (1.0, 3.0),
 }
 _UNITS = {"hz": "Hz", "s": "s", "m": "m", "rad": "rad", "prob": "probability", "m_s": "m/s"}
 

@@ -10,7 +10,7 @@ present, finite and positive where it must be.  All values are SI units
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any, Mapping
 
 from .robot_profile import DEFAULT_PROFILE, load_profile
@@ -23,6 +23,8 @@ def _section(cls: type, data: Mapping[str, Any], where: str) -> Any:
     values = {}
     for f in fields(cls):
         if f.name not in data:
+            if f.metadata.get("optional"):
+                continue
             raise ValueError(f"profile {where}: missing `{f.name}`")
         v = data[f.name]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
@@ -73,6 +75,8 @@ class FieldParams:
     wheel_gain_mean: float = 0.0
     wheel_bias_sigma: float = 0.0
     dead_band_m_s: float = 0.0
+    #: skid steering (optional in a profile; 1: the tracks turn the robot as their kinematics say)
+    track_width_factor: float = field(default=1.0, metadata={"optional": True})
 
 
 @dataclass(frozen=True)
@@ -122,6 +126,9 @@ class RobotParams:
             raise ValueError(f"profile {name}: control and camera rates must be >= 1 Hz")
         if fld.tracker_dropout_prob >= 1:
             raise ValueError(f"profile {name}: `field.tracker_dropout_prob` must be < 1")
+        if fld.track_width_factor < 1:
+            raise ValueError(f"profile {name}: `field.track_width_factor` must be >= 1 (1: no skid), got "
+                             f"{fld.track_width_factor!r}")
         if fld.tracker_bias_xy_m > 0 and fld.tracker_bias_length_m <= 0:
             raise ValueError(f"profile {name}: `field.tracker_bias_length_m` must be > 0 with a tracker bias")
         return cls(name=name, platform=str(profile.get("platform", name)), controller=ctrl, field=fld,

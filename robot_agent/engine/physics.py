@@ -69,6 +69,7 @@ class FieldGains(NamedTuple):
     predict: int  #: steps over which the localisation projects each fix forward (latency compensation)
     lead: float  #: how far ahead (s) of its belief the controller's pose is predicted
     slip_rho: float  #: per-step autocorrelation of the track slip (exp(-dt / wheel_noise_corr_s); 0: white)
+    turn_base: float  #: the track width the robot really turns with (m): wheel_base x track_width_factor (skid)
 
 
 def field_gains(p: RobotParams) -> FieldGains:
@@ -81,7 +82,8 @@ def field_gains(p: RobotParams) -> FieldGains:
                       f.wheel_noise_rel, f.wheel_noise_abs_m_s, f.wheel_gain_mean, f.wheel_bias_sigma,
                       f.dead_band_m_s, p.max_accel_m_s2 * p.dt, alpha, p.dt, f.tracker_bias_xy_m, k,
                       int(round(f.latency_compensation_s / p.dt)), f.control_lead_s,
-                      math.exp(-p.dt / f.wheel_noise_corr_s) if f.wheel_noise_corr_s > 0 else 0.0)
+                      math.exp(-p.dt / f.wheel_noise_corr_s) if f.wheel_noise_corr_s > 0 else 0.0,
+                      p.wheel_base_m * f.track_width_factor)
 
 
 IDEAL, FIELD = 0, 1  #: which physics the compiled loop applies to a fleet (``Emulated.kind``)
@@ -263,10 +265,12 @@ def field_actuate(i: int, v: float, w: float, pose: np.ndarray, tracks: np.ndarr
                   noise: np.ndarray, ring_pos: np.ndarray, odo: np.ndarray, odo_ring: np.ndarray,
                   fg: FieldGains) -> None:
     """Robot ``i``'s tracks follow commands ``(v, w)`` for one step and move it (in place); its
-    odometry model follows the same commands (:func:`odometry`)."""
+    odometry model follows the same commands (:func:`odometry`).  The commands become track speeds over
+    the nominal ``wheel_base`` (what the robot's software knows); the tracks turn the robot over
+    ``turn_base``: a skid-steered robot turns slower than its track speeds say (``track_width_factor``)."""
     left, right = body_to_tracks(v, w, fg.wheel_base)
     tracks[i, 0] = _track(tracks[i, 0], left, gain[i, 0], noise[i, 0], fg)
     tracks[i, 1] = _track(tracks[i, 1], right, gain[i, 1], noise[i, 1], fg)
-    bv, bw = tracks_to_body(tracks[i, 0], tracks[i, 1], fg.wheel_base)
+    bv, bw = tracks_to_body(tracks[i, 0], tracks[i, 1], fg.turn_base)
     pose[i, 0], pose[i, 1], pose[i, 2] = unicycle_step(pose[i, 0], pose[i, 1], pose[i, 2], bv, bw, fg.dt)
     odometry(i, v, w, ring_pos[i] - 1, odo, odo_ring, fg)

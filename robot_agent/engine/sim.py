@@ -297,11 +297,11 @@ class SimCore:
 
     def moving(self, i: int) -> bool:
         """Whether robot ``i`` follows a path or drives in velocity mode (state MOVING)."""
-        return int(self.state[i]) == _MOVING
+        return self.state.item(i) == _MOVING
 
     def driving(self, i: int) -> bool:
         """Whether robot ``i`` is in velocity mode (:meth:`drive`)."""
-        return int(self.state[i]) == _MOVING and int(self.cid[i]) == DIRECT
+        return self.state.item(i) == _MOVING and self.cid.item(i) == DIRECT
 
     def stop(self, i: int) -> SimEvent | None:
         """Stop robot ``i``'s path now; returns its ``FAIL,STOPPED`` event if it was moving."""
