@@ -113,6 +113,8 @@ class Phases:
 
     def __init__(self, names: list[str]) -> None:
         self.runs: dict[str, list[dict]] = {name: [] for name in names}
+        #: the machine's speed, once per round (:func:`bench._common.machine_reference_s`, s)
+        self.reference: list[float] = []
 
     def share(self, name: str) -> list[float]:
         """Phase ``name``'s share of one core, per round."""

@@ -25,6 +25,31 @@ def postgres(work: Path):  # type: ignore[no-untyped-def]
     return PostgresServer(work / "pg")
 
 
+def _reference_workload() -> None:
+    """A fixed piece of the work a robot host does per line: protocol lines formatted and parsed, small arrays."""
+    import numpy as np
+
+    acc = np.zeros(3)
+    for i in range(60_000):
+        line = f"PO,{i * 0.5:.1f},{i * 0.25:.1f},{i % 360:.1f},{i * 0.02:.3f}"
+        _, x, y, a, t = line.split(",")
+        acc += (float(x), float(y), float(a))
+    np.linalg.norm(acc)
+
+
+def machine_reference_s(repeat: int = 5) -> float:
+    """This machine's speed now: the median CPU time (s, of this process) of a fixed workload, ``repeat`` times.
+
+    A benchmark that measures CPU shares over days (a process's share of one core is the machine's speed as much
+    as the code's) reports it beside them: a share divided by it is comparable between machines and days."""
+    times = []
+    for _ in range(repeat):
+        c0 = time.process_time()
+        _reference_workload()
+        times.append(time.process_time() - c0)
+    return statistics.median(times)
+
+
 def time_once(fn: Callable[[], Any]) -> float:
     """Wall time (s) of one call of ``fn``."""
     t0 = time.perf_counter()

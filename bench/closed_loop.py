@@ -16,7 +16,9 @@ first version of this benchmark look hung).  The host's CPU (user + system, from
   the tracker's rate too.
 
 Prints JSON: the host's share of one core per phase (medians), ratios to the baselines (medians over
-rounds) and the closed loop's cost over idle (target for 64 robots: at most 10% of a core).
+rounds), the closed loop's cost over idle (target for 64 robots: at most 10% of a core) and the machine's
+speed (``machine_reference``: the CPU seconds of a fixed workload, measured in every round while nothing moves;
+the cost divided by it, ``reference_workloads_per_s``, compares between days and machines).
 
     python bench/closed_loop.py [--robots 64] [--seconds 8] [--rounds 3] [--clock lockstep|free]
 
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import statistics
 import sys
 from pathlib import Path
 
@@ -37,7 +40,7 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 from bench._agent_proc import AgentProcess  # noqa: E402
 from bench._clients import (  # noqa: E402
     Counts, Phases, RobotClient, ask_all, close_all, connect_all, cpu_window, live_arguments)
-from bench._common import report  # noqa: E402
+from bench._common import machine_reference_s, report  # noqa: E402
 
 CENTRE_MM = (1800.0, 1800.0)  #: where the gripper puts every robot (mm, its frame: the middle of the field)
 SQUARE_MM = 300.0  #: half the side of the square the robots drive around (mm)
@@ -86,10 +89,12 @@ async def _measure(host: AgentProcess, seconds: float, rounds: int) -> Phases:
     square = ";".join(f"{x:.0f},{y:.0f},0" for x, y in CORNERS_MM * 3)
     phases = Phases(["idle", "paths", "closed_loop"])
     runs = phases.runs
+    reference = phases.reference
     try:
         for _ in range(rounds):
             await asyncio.sleep(1.0)  # the robots coast to a stop
             runs["idle"].append(await cpu_window(host, counts, seconds))
+            reference.append(machine_reference_s())  # nothing moves meanwhile
             await ask_all(clients, f"T,T,P,{square}", "OK,P")
             await asyncio.sleep(1.0)  # every robot under way
             runs["paths"].append(await cpu_window(host, counts, seconds))
@@ -119,9 +124,12 @@ def main() -> None:
     results = phases.rows("idle", robots=args.robots)
     results[-1]["ratio_to_paths"] = phases.ratio("closed_loop", "paths")
     cost = phases.diff("closed_loop", "idle")
+    ref = statistics.median(phases.reference)
+    results.append({"name": "machine_reference", "cpu_s": round(ref, 4),
+                    "per_round": [round(r, 4) for r in phases.reference]})
     results.append({"name": "closed_loop_cost", "robots": args.robots, "core_share": round(cost, 4),
                     "over_paths": round(phases.diff("closed_loop", "paths"), 4), "target": TARGET,
-                    "met": cost <= TARGET})
+                    "met": cost <= TARGET, "reference_workloads_per_s": round(cost / ref, 3)})
     report("closed_loop", results, seconds=args.seconds, rounds=args.rounds, time_scale=1.0, backend="field",
            clock=args.clock)
 
