@@ -395,6 +395,16 @@ def corners(data: StudyData) -> dict[str, dict[str, float]]:
     return out
 
 
+def failures(data: StudyData) -> dict[str, dict[str, int]]:
+    """Per planner and mode, how many runs failed, by reason (``collision``, ``stalled``, ``planning failed: …``)."""
+    out: dict[str, dict[str, int]] = {}
+    for r in data.rows:
+        if r["status"] != "completed":
+            kinds = out.setdefault(f"{r['planner']}/{r['mode']}", {})
+            kinds[r["error"]] = kinds.get(r["error"], 0) + 1
+    return out
+
+
 def _one(job: tuple[str, int, dict[str, float], bool]) -> dict[str, Any]:
     kind, seed, overrides, truth = job
     data = {"paper": paper, "varied": varied, "generated": generated}[kind](seed, overrides, truth)
@@ -404,7 +414,7 @@ def _one(job: tuple[str, int, dict[str, float], bool]) -> dict[str, Any]:
                                      and n["prm_twb_smoothness_ratio"] < n["prm_sim_smoothness_ratio"])
     return {"seed": seed, "held": {f.key: f.held for f in found}, "details": {f.key: f.detail for f in found},
             "prm_kappa_ratio_field_below_sim": strict,
-            "means": means(data), "corners": corners(data)}
+            "means": means(data), "corners": corners(data), "failures": failures(data)}
 
 
 def run_many(kind: str, seeds: list[int], overrides: Optional[dict[str, float]] = None, workers: int = 2,
@@ -418,7 +428,8 @@ def run_many(kind: str, seeds: list[int], overrides: Optional[dict[str, float]] 
 
 
 def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
-    """Held-counts per finding, the failing seeds, the means over seeds and the computed paths' corners."""
+    """Held-counts per finding, the failing seeds, the means over seeds, the computed paths' corners and the failed
+    runs by reason (summed over the seeds)."""
     keys = list(results[0]["held"])
     held = {k: sum(bool(r["held"][k]) for r in results) for k in keys}
     avg: dict[str, dict[str, float]] = {}
@@ -429,9 +440,14 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
     shape = {p: {k: round(float(np.mean([r["corners"][p][k] for r in results if p in r["corners"]])), 2)
                  for k in results[0]["corners"][p]} for p in results[0]["corners"]}  # the seeds' mean
     strict = sum(bool(r.get("prm_kappa_ratio_field_below_sim")) for r in results)
+    failed: dict[str, dict[str, int]] = {}
+    for r in results:
+        for g, kinds in r["failures"].items():
+            for kind, n in kinds.items():
+                failed.setdefault(g, {})[kind] = failed.get(g, {}).get(kind, 0) + n
     return {"seeds": [r["seed"] for r in results], "held": held, "prm_kappa_ratio_field_below_sim": strict,
             "failing": {s: f for s, f in failing.items() if f},
-            "means": avg, "computed_paths": shape}
+            "means": avg, "computed_paths": shape, "failed_runs": failed}
 
 
 #: one change at a time: (label, profile overrides); from the field robot before this work (e2c6fc3), then

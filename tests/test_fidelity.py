@@ -105,6 +105,12 @@ def test_offline_a_planning_failure_fails_the_experiment_as_the_testbed_does():
     assert [(r["mode"], r["status"], r["error"]) for r in data.rows] == [("sim", "failed", exp["error"]),
                                                                          ("twb", "failed", exp["error"])] * 2
     assert [f.held for f in paper_findings(data)] == [None] * len(FINDINGS)
+    # the bench counts the failed runs by reason, per planner and mode, and sums them over seeds
+    kinds = {"fmm/sim": {exp["error"]: 2}, "fmm/twb": {exp["error"]: 2}}
+    assert _bench().failures(data) == kinds
+    seed = {"seed": 0, "held": {}, "details": {}, "means": {}, "corners": {}, "failures": kinds}
+    summary = _bench().summarize([seed, {**seed, "seed": 1}])
+    assert summary["failed_runs"] == {"fmm/sim": {exp["error"]: 4}, "fmm/twb": {exp["error"]: 4}}
 
 
 def test_offline_a_randomised_planner_fails_the_repetitions_its_seeds_find_no_path_for():
