@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import difflib
 import json
 import math
 import os
@@ -127,11 +128,18 @@ def random_plans(env_data: dict[str, Any], n: int, seed: int, min_dist: float = 
 
 
 def profile_with(overrides: Optional[dict[str, float]] = None, name: str = "bebot") -> dict[str, Any]:
-    """The profile ``name`` with ``{"section.key": value}`` overrides."""
+    """The profile ``name`` with ``{"section.key": value}`` overrides; ``ValueError`` naming a key the profile
+    does not have (a misspelt one would otherwise change nothing)."""
     prof = copy.deepcopy(load_profile(name))
     for k, v in (overrides or {}).items():
         section, _, key = k.rpartition(".")
-        (prof[section] if section else prof)[key] = v
+        target = prof.get(section) if section else prof
+        if not isinstance(target, dict) or key not in target:
+            known = [f"{s}.{q}" for s, sec in prof.items() if isinstance(sec, dict) and s != "notes" for q in sec]
+            known += [q for q, val in prof.items() if not isinstance(val, dict)]
+            close = difflib.get_close_matches(k, known, n=1)
+            raise ValueError(f"profile {name} has no parameter {k!r}" + (f" (did you mean {close[0]}?)" if close else ""))
+        target[key] = v
     return prof
 
 
@@ -551,6 +559,10 @@ def main() -> None:
         print(json.dumps(ablate(_seeds(a.seeds), a.workers), indent=1))
         return
     ov = {**(MAIN if a.main else {}), **_overrides(a.set)}
+    try:
+        profile_with(ov)
+    except ValueError as exc:
+        ap.error(str(exc))
     print(json.dumps(summarize(run_many(a.what, _seeds(a.seeds), ov, a.workers, a.truth)), indent=1))
 
 

@@ -91,6 +91,10 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], help="profile change section.key=value")
     args = ap.parse_args()
     overrides = fidelity._overrides(args.set)
+    try:
+        fidelity.profile_with(overrides)
+    except ValueError as exc:
+        ap.error(str(exc))
     report("fidelity_corners", measure(fidelity._seeds(args.seeds), args.near, overrides), seeds=args.seeds,
            near_m=args.near, overrides=overrides)
 

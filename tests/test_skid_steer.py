@@ -84,3 +84,14 @@ def test_an_override_outside_its_range_is_refused():
     assert check_overrides({"track_width_factor": 1.3}) == {"track_width_factor": 1.3}
     with pytest.raises(OverrideError, match=r"profile_overrides.track_width_factor must be a number in \[1, 3\]"):
         check_overrides({"track_width_factor": 0.5})
+
+
+def test_the_benches_refuse_a_misspelt_profile_change():
+    """``bench/fidelity.py --set`` with a key the profile lacks would change nothing: it is refused, naming the
+    closest key."""
+    with pytest.raises(ValueError, match=r"profile bebot has no parameter 'field.track_widht_factor' \(did you mean "
+                                         r"field.track_width_factor\?\)"):
+        profile_with({"field.track_widht_factor": 1.3})
+    with pytest.raises(ValueError, match="no parameter 'gripper2.seconds_per_block'"):
+        profile_with({"gripper2.seconds_per_block": 1.0})
+    assert profile_with({"max_accel_m_s2": 0.4})["max_accel_m_s2"] == 0.4
