@@ -145,14 +145,23 @@ def _quiet_profile(base: Mapping[str, Any], tau: float, latency: float) -> dict[
     return apply_overrides(base, {**_QUIET, "motor_time_constant_s": tau, "tracker_latency_s": latency})
 
 
-def _simulate(run: RecordedRun, profile: Mapping[str, Any], gains: tuple[float, float], seed: int) -> np.ndarray:
-    """Tracker poses ``(M, 4)`` of ``run`` driven by the field robot of ``profile`` with track ``gains``, t from
-    the path's start."""
+def _drive(run: RecordedRun, profile: Mapping[str, Any], seed: int,
+           gains: tuple[float, float] | None = None) -> tuple[str, np.ndarray]:
+    """``run``'s path driven by the field robot of ``profile`` with run seed ``seed`` (and track ``gains``, else
+    drawn from the seed), for up to three times the recorded run's duration: how it ended and its tracker poses
+    ``(M, 4)``, t from the path's start (s; the poses before it included)."""
     duration = float(run.poses[-1, 0]) if len(run.poses) else 60.0
     out = simulate_run(run.path, run.start, seed=seed, blocks=run.blocks, backend="field", profile=dict(profile),
                        area=run.area, max_s=3.0 * duration + 20.0, track_gains=gains)
     poses = out.poses.copy()
     poses[:, 0] -= out.t_start or 0.0
+    return out.outcome, poses
+
+
+def _simulate(run: RecordedRun, profile: Mapping[str, Any], gains: tuple[float, float], seed: int) -> np.ndarray:
+    """Tracker poses ``(M, 4)`` of ``run`` driven by the field robot of ``profile`` with track ``gains``, t from
+    the path's start."""
+    poses = _drive(run, profile, seed, gains)[1]
     return poses[poses[:, 0] >= -1e-9]
 
 
@@ -375,13 +384,9 @@ def _clipped(base: Mapping[str, Any], values: Mapping[str, float]) -> dict[str, 
 def emulate(run: RecordedRun, profile: Mapping[str, Any], seed: int) -> RecordedRun | None:
     """``run``'s path driven by the field robot of ``profile`` with every noise on (track gains drawn from ``seed``):
     a new recorded run like it, or None if it does not complete."""
-    duration = float(run.poses[-1, 0]) if len(run.poses) else 60.0
-    out = simulate_run(run.path, run.start, seed=seed, blocks=run.blocks, backend="field", profile=dict(profile),
-                       area=run.area, max_s=3.0 * duration + 20.0)
-    if out.outcome != "DONE":
+    outcome, poses = _drive(run, profile, seed)
+    if outcome != "DONE":
         return None
-    poses = out.poses.copy()
-    poses[:, 0] -= out.t_start or 0.0
     poses = poses[poses[:, 0] >= 0]
     return RecordedRun(run.path, run.start, poses, run.blocks, run.area, run.name, run.group) if len(poses) >= 10 else None
 
