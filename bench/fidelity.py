@@ -143,6 +143,15 @@ def profile_with(overrides: Optional[dict[str, float]] = None, name: str = "bebo
     return prof
 
 
+def one_robot_core(env_data: dict[str, Any], backend: str, params: Any) -> SimCore:
+    """A simulation core of one robot (``params``, on ``backend``) on a sub-field holding ``env_data``'s blocks."""
+    sizes, world_of, origin, area = field_layout(1, "separate")
+    world = World(sizes, world_of, origin, area, params.collision_radius_m)
+    blocks = np.array([[b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)] for b in env_data["blocks"]])
+    world.set_blocks(0, blocks.reshape(-1, 5))
+    return SimCore(params, make_backend(backend, 1, params), world)
+
+
 def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backend: str, seed: int, params: Any,
           truth: bool = False, controller: Any = None
           ) -> tuple[np.ndarray, Optional[float], Optional[float], str, Optional[np.ndarray]]:
@@ -153,11 +162,7 @@ def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backen
     reason, and with ``truth`` the true poses ``(M, 4)`` of every step (one compiled step per call:
     slower).
     """
-    sizes, world_of, origin, area = field_layout(1, "separate")
-    world = World(sizes, world_of, origin, area, params.collision_radius_m)
-    blocks = np.array([[b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)] for b in env_data["blocks"]])
-    world.set_blocks(0, blocks.reshape(-1, 5))
-    core = SimCore(params, make_backend(backend, 1, params), world)
+    core = one_robot_core(env_data, backend, params)
     core.place(0, tuple(start))
     core.set_path(0, path, path_key(seed), controller)
     t0 = t1 = None
@@ -451,8 +456,9 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
     failed: dict[str, dict[str, int]] = {}
     for r in results:
         for g, kinds in r["failures"].items():
+            tally = failed.setdefault(g, {})
             for kind, n in kinds.items():
-                failed.setdefault(g, {})[kind] = failed.get(g, {}).get(kind, 0) + n
+                tally[kind] = tally.get(kind, 0) + n
     return {"seeds": [r["seed"] for r in results], "held": held, "prm_kappa_ratio_field_below_sim": strict,
             "failing": {s: f for s, f in failing.items() if f},
             "means": avg, "computed_paths": shape, "failed_runs": failed}

@@ -16,6 +16,7 @@ planned κ' (rad), and the runs counted (completed ones only).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 
@@ -29,14 +30,15 @@ from bench._common import report  # noqa: E402
 from contract.params import robot_params  # noqa: E402
 from contract.protocol import decode_path, encode_path  # noqa: E402
 from planners import PlanningError, parse_environment, plan_path  # noqa: E402
-from planners.metrics import smoothness, smoothness_polyline, turning_angles  # noqa: E402
+from planners.metrics import smoothness_polyline, turning_angles  # noqa: E402
 
 CORNER_RAD = np.radians(15.0)  #: a plan's turn above this is a corner
 
 
 def split_turning(driven: np.ndarray, corners: np.ndarray, near_m: float) -> tuple[float, float, int]:
     """Sums of squared turning angles (rad²) of ``driven``'s κ' resampling within ``near_m`` of any of
-    ``corners`` ``(K, 2)`` (m) and elsewhere, and how many angles there are."""
+    ``corners`` ``(K, 2)`` (m) and elsewhere, and how many angles there are (κ' is the root of the two sums
+    over it)."""
     poly = smoothness_polyline(driven)
     a = turning_angles(poly)
     pts = poly[1:1 + len(a)]
@@ -65,15 +67,18 @@ def measure(seeds: list[int], near_m: float, overrides: dict[str, float]) -> lis
                     plan = np.round(r.path, 6)
                     wire = decode_path(encode_path(plan))
                     pv = smoothness_polyline(plan[:, :2])
-                    corners = pv[1:-1][turning_angles(pv) > CORNER_RAD]
+                    pa = turning_angles(pv)
+                    corners = pv[1:-1][pa > CORNER_RAD]
+                    planned_kappa = float(np.sqrt(np.mean(pa * pa))) if len(pa) else 0.0  # smoothness(plan)
                     for mode, backend in fidelity.BACKEND.items():
                         poses, t0, t1, end, _ = fidelity.drive(env_data, wire, prob["start"], backend, 1000 + seed,
                                                                params)
                         if end != "DONE":
                             continue
                         q = poses[(poses[:, 0] >= t0) & (poses[:, 0] <= t1), 1:3]
-                        acc.setdefault((planner, mode), []).append(
-                            (*split_turning(q, corners, near_m), smoothness(q), smoothness(plan[:, :2])))
+                        near, elsewhere, n = split_turning(q, corners, near_m)
+                        kappa = math.sqrt((near + elsewhere) / n) if n else 0.0  # smoothness(q), from its angles
+                        acc.setdefault((planner, mode), []).append((near, elsewhere, n, kappa, planned_kappa))
     rows = []
     for (planner, mode), v in sorted(acc.items()):
         a = np.array(v)

@@ -12,16 +12,12 @@ import math
 import numpy as np
 import pytest
 
-from bench.fidelity import drive, profile_with
-from contract.frames import field_layout
+from bench.fidelity import drive, one_robot_core, profile_with
 from contract.overrides import OverrideError, check_overrides
 from contract.params import robot_params
 from contract.robot_profile import load_profile
 from planners.metrics import path_length, smoothness
-from robot_agent.engine.backends import make_backend
 from robot_agent.engine.noise import path_key
-from robot_agent.engine.sim import SimCore
-from robot_agent.engine.world import World
 
 OPEN_FIELD = {"name": "open", "blocks": []}
 
@@ -29,11 +25,7 @@ OPEN_FIELD = {"name": "open", "blocks": []}
 def _turned(factor: float, seconds: float = 2.0) -> tuple[float, float]:
     """Heading turned (rad, unwrapped) and distance driven (m) by a field robot commanded 0.1 m/s and
     1 rad/s in velocity mode for ``seconds``, with the shipped BeBot's noise and ``track_width_factor``."""
-    params = robot_params(profile_with({"field.track_width_factor": factor}))
-    sizes, world_of, origin, area = field_layout(1, "separate")
-    world = World(sizes, world_of, origin, area, params.collision_radius_m)
-    world.set_blocks(0, np.zeros((0, 5)))
-    core = SimCore(params, make_backend("field", 1, params), world)
+    core = one_robot_core(OPEN_FIELD, "field", robot_params(profile_with({"field.track_width_factor": factor})))
     core.place(0, (0.9, 0.9, 0.0))
     turned, last, xy = 0.0, 0.0, []
     for _ in range(round(seconds / core.dt)):
