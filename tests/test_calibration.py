@@ -66,13 +66,13 @@ def _fitted():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="since issue 33 (the BeBot's tracks accelerate at 0.3 m/s², its motors lag 0.25 "
-                   "s, also the fit's starting point) the fit reads these runs' lag as 0.26-0.28 s for a true 0.2 s; "
-                   "from a 0.12 s start 0.16 s, with 0.4 m/s² 0.26 s: the lag fit depends on its start "
-                   "(docs/fidelity.md, Calibration)")
+@pytest.mark.xfail(strict=True, reason="the fit reads these runs' lag 9-30 % long (0.22-0.26 s for a true 0.2 s, "
+                   "emulation seeds 1-5; seed 3: 0.238 s) and their wheel noise -26 ... +30 % (seed 3: 0.156 for "
+                   "0.12): the noise-free re-simulation reads slip as lag, which the lag's interval covers "
+                   "(test_calibration_intervals_cover_the_truth; docs/fidelity.md, Calibration)")
 def test_calibration_recovers_the_motor_lag_and_the_wheel_noise():
-    """The wheel noise is matched by simulations with the fitted lag: with the lag 0.28 s it comes out 0.163 for
-    0.12 (+35 %, tolerance 30 %)."""
+    """The wheel noise is matched by simulations with the fitted lag: with the lag 0.238 s it comes out 0.156 for
+    0.12 (+30.2 %, tolerance 30 %)."""
     for key in LAG_AND_NOISE:
         _, tol = TOLERANCE[key]
         assert abs(_fitted().values[key] / TRUE[key] - 1) <= tol, key
@@ -112,6 +112,19 @@ def test_calibration_intervals_cover_the_truth():
         if lo > 0:  # centred on the bias-corrected value (the fit's minus the refits' mean shift), unless clipped at 0
             assert (lo + hi) / 2 == pytest.approx(cal.fitted[key] - cal.bias[key])
     assert cal.values == cal.fitted  # the profile keeps the fit's values
+
+
+@pytest.mark.slow
+def test_the_lag_fit_does_not_depend_on_where_it_starts():
+    """Runs of a robot whose motors lag 0.4 s, fitted from the shipped profile (0.25 s) and from one of 0.12 s: both
+    find the lag within 10 %, the same to 0.02 s (a local fit from 0.25 s alone read it as 0.26 s: the cost is rough
+    in the lag at a control step's scale; stage 1 profiles the lag on a grid first)."""
+    truth = apply_overrides(load_profile("bebot"), {"motor_time_constant_s": 0.4})
+    runs = emulated_runs(truth, seed=2)
+    found = [calibrate(runs, apply_overrides(load_profile("bebot"), {"motor_time_constant_s": start}), seed=0,
+                       refits=0).values["motor_time_constant_s"] for start in (0.25, 0.12)]
+    assert all(abs(tau / 0.4 - 1) < 0.1 for tau in found), found
+    assert abs(found[0] - found[1]) < 0.02, found
 
 
 def test_uncertainty_corrects_the_bias_and_widens_with_few_refits():
