@@ -128,8 +128,8 @@ BUILTINS: dict[str, ControllerSpec] = {s.name: s for s in (
                    "autonomous mobile robot'", (
                        Param("speed_m_s", "m/s", 0.15, 0.01, 1.0, "reference speed v_r"),
                        Param("k_x_1_s", "1/s", 3.0, 0.0, 50.0, "gain on the along-track error"),
-                       Param("k_y_1_m2", "1/m^2", 400.0, 0.0, 10000.0, "gain on the cross-track error"),
-                       Param("k_theta_1_m", "1/m", 40.0, 0.0, 1000.0, "gain on the heading error"),
+                       Param("k_y_1_m2", "1/m^2", 900.0, 0.0, 10000.0, "gain on the cross-track error"),
+                       Param("k_theta_1_m", "1/m", 60.0, 0.0, 1000.0, "gain on the heading error"),
                        Param("max_lead_m", "m", 0.03, 0.005, 1.0, "the reference waits while it is this far ahead "
                              "of the robot's projection"),
                        Param("rotate_to_heading_rad", "rad", 0.5, 0.1, math.pi,

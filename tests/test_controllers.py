@@ -77,18 +77,38 @@ def _cross_track(poses: np.ndarray, path: np.ndarray) -> np.ndarray:
     return np.linalg.norm(poses[:, None, :2] - (a + t[..., None] * ab), axis=2).min(1)
 
 
+@pytest.fixture(scope="module")
+def testbed_problems() -> dict:
+    """The paper environments' plans with FMM paths planned as the testbed plans them: for the robot radius plus
+    its planning margin (0.045 + 0.02 m; server settings ``robot_radius_m``, ``planning_margin_m``)."""
+    out = {}
+    for name in ("room", "blocks"):
+        env = load_environment(name)
+        for plan in env.plans:
+            r = plan_path(env, plan.start, plan.goal, "fmm", robot_radius=0.065, seed=1)
+            out[f"{name}/{plan.name}"] = (env, plan, np.round(r.path, 6))
+    return out
+
+
+#: the largest distance (m) from the path each backend's robot may stray, over every run (2026-11-28, seeds 0-19 of
+#: the four plans: on the field the schema's worst 4.4 cm, Kanayama's 3.8; in simulation the schema's 2.7 cm)
+CROSS_TRACK_BOUND = {"ideal": 0.035, "field": 0.05}
+
+
 @pytest.mark.parametrize("backend", ["ideal", "field"])
 @pytest.mark.parametrize("controller", CONTROLLERS)
-def test_every_controller_reaches_the_goal_on_the_paper_environments(problems, controller, backend):
-    if (controller, backend) == ("kanayama", "field"):
-        pytest.xfail("since issue 33 (the BeBot's motors lag 0.25 s, its tracks accelerate at 0.3 m/s²) Kanayama's "
-                     "controller with its default gains collides on blocks/A on the field: not yet retuned")
-    for key, problem in problems.items():
-        run = _run(problem, backend, controller)
-        goal = problem[1].goal
-        assert run.outcome == "DONE", (key, run.outcome)
-        assert math.hypot(run.poses[-1, 1] - goal[0], run.poses[-1, 2] - goal[1]) < 0.03
-        assert _cross_track(run.poses[:, 1:], problem[2]).max() < 0.035, key
+def test_every_controller_reaches_the_goal_on_the_paper_environments(testbed_problems, controller, backend):
+    """Ten seeds of each plan (the field's track gains, slip and tracker noise differ), paths planned with the
+    testbed's margin: every run reaches its goal within 3 cm, without touching a block.  (On paths planned for
+    the bare radius, which graze the blocks, every controller collides on the field: 14-39 of 80 runs.)"""
+    for key, (env, plan, path) in testbed_problems.items():
+        for seed in range(10):
+            run = simulate_run(path, plan.start, seed=seed, blocks=block_tuples(env.to_dict()), backend=backend,
+                               area=(env.width, env.height), controller=controller, profile="bebot")
+            goal = plan.goal
+            assert run.outcome == "DONE", (key, seed, run.outcome)
+            assert math.hypot(run.poses[-1, 1] - goal[0], run.poses[-1, 2] - goal[1]) < 0.03, (key, seed)
+            assert _cross_track(run.poses[:, 1:], path).max() < CROSS_TRACK_BOUND[backend], (key, seed)
 
 
 def _corner_cut(controller: str, **params) -> float:

@@ -178,7 +178,12 @@ def kanayama(x: float, y: float, th: float, dt: float, path: np.ndarray, mem: np
     error it turns on the spot first).  Once the reference has reached the end the
     robot drives to the last point (a pursuit of it), where the follower's arrival takes over."""
     v_r, kx, ky, kth, lead = min(params[0], max_speed), params[1], params[2], params[3], params[4]
+    last = len(path) - 1
     seg, frac = int(mem[0]), mem[1]
+    # the reference slows on the approach as the other followers do (arrival: gain x distance to the last point,
+    # once the path ends within v_r / gain of the projection), or lagging motors carry the robot past the goal
+    if arrive_gain > 0.0 and along(path, seg, frac, v_r / arrive_gain)[4]:
+        v_r = min(v_r, max(arrive_gain * math.hypot(path[last, 0] - x, path[last, 1] - y), min_speed))
     rseg, rfrac = int(mem[2]), mem[3]
     if rseg < seg or (rseg == seg and rfrac < frac):
         rseg, rfrac = seg, frac
@@ -188,7 +193,6 @@ def kanayama(x: float, y: float, th: float, dt: float, path: np.ndarray, mem: np
     if nseg > lseg or (nseg == lseg and nfrac > lfrac):
         nseg, nfrac, rx, ry, end = along(path, seg, frac, lead)
     mem[2], mem[3] = nseg, nfrac
-    last = len(path) - 1
     if end and math.hypot(path[last, 0] - rx, path[last, 1] - ry) < 1e-9:
         gx, gy = path[last, 0], path[last, 1]
         err = wrap_angle(math.atan2(gy - y, gx - x) - th)
