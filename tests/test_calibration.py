@@ -12,7 +12,6 @@ import pytest
 from PIL import Image
 
 from robot_agent.engine.calibration import FITTED, NO_INTERVAL, RecordedRun, calibrate, uncertainty
-from robot_agent.engine.headless import simulate_run
 from contract.overrides import apply_overrides
 from contract.params import robot_params
 from contract.robot_profile import load_profile
@@ -33,21 +32,10 @@ TOLERANCE = {"motor_time_constant_s": ("rel", 0.2), "wheel_gain_mean": ("abs", 0
 
 
 def emulated_runs(profile: dict, seed: int, n: int = 6) -> list[RecordedRun]:
-    """``n`` runs of about 10 s on a sub-field: three-corner paths, each with its own seed (its own track gains)."""
-    rng = np.random.default_rng(seed)
-    runs = []
-    for k in range(n):
-        start = np.array([0.3, 0.3 + 0.2 * k])
-        corners = [start + [0.5, rng.uniform(-0.2, 0.2)], start + [0.9, rng.uniform(0.2, 0.5)],
-                   start + [1.2, rng.uniform(-0.1, 0.3)]]
-        path = np.clip(np.array([[*start, 0.0], *[[*p, 0.0] for p in corners]]), 0.15, 1.65)
-        path[:, 2] = 0.0
-        out = simulate_run(path, (*path[0, :2], 0.0), seed=seed * 100 + k, backend="field", profile=profile,
-                           area=(1.8, 1.8))
-        assert out.outcome == "DONE"
-        poses = out.poses.copy()
-        poses[:, 0] -= out.t_start
-        runs.append(RecordedRun(path, (*path[0, :2], 0.0), poses[poses[:, 0] >= 0], (), (1.8, 1.8), f"run {k}"))
+    """``n`` runs of about 10 s on three-corner paths, each with its own seed: the validation cases of
+    ``bench/calibration_coverage.py`` (which skips a run that does not complete; here every one must)."""
+    runs = _bench("calibration_coverage").emulated_runs(profile, seed, n)
+    assert len(runs) == n
     return runs
 
 
@@ -149,13 +137,14 @@ def test_calibration_needs_runs():
         calibrate([], "bebot")
 
 
-def _bench():
+def _bench(module: str = "fidelity"):
+    """``bench/<module>.py``, imported (the repository's root on the path)."""
+    import importlib
+
     root = str(Path(__file__).resolve().parents[1])
     if root not in sys.path:
         sys.path.insert(0, root)
-    import bench.fidelity
-
-    return bench.fidelity
+    return importlib.import_module(f"bench.{module}")
 
 
 @pytest.mark.slow
