@@ -12,7 +12,7 @@ it used to be fixed per-call overhead of general-purpose routines: ``cKDTree.que
 - :func:`free_knn_edges`: the unique pairs ``(i, j)``, ``i < j``, of each query point and its neighbours,
   kept where the exact segment test (:func:`planners._segment.segment_free`) passes;
 - :func:`query_path`: start and goal joined to their ``k`` nearest nodes and each other, then Dijkstra with a
-  binary heap over the undirected roadmap, stopping when the goal is settled.
+  binary heap (:mod:`heapq`) over the undirected roadmap, stopping when the goal is settled.
 
 The neighbour sets, the edges and the shortest path are those of the former scipy pipeline (distances are
 the same floating-point expressions; only exact ties, of probability zero for sampled points, could order
@@ -21,6 +21,7 @@ differently).  Imported lazily (numba loads with it).
 
 from __future__ import annotations
 
+import heapq
 import math
 
 import numpy as np
@@ -293,41 +294,15 @@ def query_path(free, nx, ny, inv_h, width, height, reach, nodes, edges, sx, sy, 
         adj[fill[v]] = u
         wt[fill[v]] = w
         fill[v] += 1
-    # Dijkstra from the start with a binary heap (lazy deletion), stopping at the goal
+    # Dijkstra from the start with a binary heap (heapq, lazy deletion), stopping at the goal
     dist = np.full(n, np.inf)
     pred = np.full(n, -1, dtype=np.int64)
     done = np.zeros(n, dtype=np.bool_)
-    cap = ptr[n] + 1
-    hd = np.empty(cap)
-    hv = np.empty(cap, dtype=np.int64)
-    size = 0
     dist[m] = 0.0
-    hd[0] = 0.0
-    hv[0] = m
-    size = 1
+    heap = [(0.0, m)]
     goal = m + 1
-    while size > 0:
-        d = hd[0]
-        u = hv[0]
-        size -= 1
-        if size > 0:  # move the last entry to the root and sift it down
-            ld = hd[size]
-            lv = hv[size]
-            i = 0
-            while True:
-                c = 2 * i + 1
-                if c >= size:
-                    break
-                if c + 1 < size and hd[c + 1] < hd[c]:
-                    c += 1
-                if hd[c] < ld:
-                    hd[i] = hd[c]
-                    hv[i] = hv[c]
-                    i = c
-                else:
-                    break
-            hd[i] = ld
-            hv[i] = lv
+    while len(heap) > 0:
+        d, u = heapq.heappop(heap)
         if done[u]:
             continue
         done[u] = True
@@ -339,18 +314,7 @@ def query_path(free, nx, ny, inv_h, width, height, reach, nodes, edges, sx, sy, 
             if nd < dist[v]:
                 dist[v] = nd
                 pred[v] = u
-                i = size  # push and sift up
-                size += 1
-                while i > 0:
-                    p = (i - 1) // 2
-                    if hd[p] > nd:
-                        hd[i] = hd[p]
-                        hv[i] = hv[p]
-                        i = p
-                    else:
-                        break
-                hd[i] = nd
-                hv[i] = v
+                heapq.heappush(heap, (nd, v))
     if not done[goal]:
         return np.empty(0, dtype=np.int64)
     length = 1
