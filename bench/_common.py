@@ -8,7 +8,7 @@ import statistics
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 
 def postgres(work: Path):  # type: ignore[no-untyped-def]
@@ -91,3 +91,21 @@ def report(name: str, results: list[dict[str, Any]], **extra: Any) -> None:
     }
     json.dump(doc, sys.stdout, indent=1)
     sys.stdout.write("\n")
+
+
+def seed_list(text: str) -> list[int]:
+    """Seeds from a command line's ``"0-19"``, ``"1,4,7"`` or ``"0-3,10"``."""
+    out: list[int] = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b or a) + 1))
+    return out
+
+
+def key_values(items: Iterable[str]) -> dict[str, float]:
+    """``{"key": value}`` from a command line's ``key=value`` items (``--set``)."""
+    out = {}
+    for item in items:
+        k, _, v = item.partition("=")
+        out[k] = float(v)
+    return out

@@ -29,6 +29,7 @@ import numpy as np
 
 from contract.overrides import apply_overrides
 from contract.robot_profile import load_profile
+from bench._common import seed_list
 from robot_agent.engine.calibration import REFITS, FITTED, RecordedRun, calibrate, uncertainty
 from robot_agent.engine.headless import simulate_run
 
@@ -94,14 +95,6 @@ def score(c: dict[str, Any]) -> dict[str, Any]:
     return c
 
 
-def _seeds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out += list(range(int(a), int(b or a) + 1))
-    return out
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="1-5")
@@ -119,7 +112,7 @@ def main() -> None:
                 p["refits"] = p["refits"][:a.refits]
         cases = [score(c) for c in cases]
     else:
-        jobs = [(v, s, a.refits) for v in a.variant or VARIANTS for s in _seeds(a.seeds)]
+        jobs = [(v, s, a.refits) for v in a.variant or VARIANTS for s in seed_list(a.seeds)]
         if a.workers > 1:
             with ProcessPoolExecutor(a.workers) as ex:
                 cases = list(ex.map(case, jobs))

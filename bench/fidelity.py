@@ -31,7 +31,7 @@ import math
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any, Iterable, Optional
+from typing import Any, Optional
 
 if __package__ in (None, ""):  # run as a script: bench/ must not shadow the project's packages
     sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -55,6 +55,7 @@ from robot_agent.engine.sim import SimCore, State  # noqa: E402
 from robot_agent.engine.world import World  # noqa: E402
 from robot_agent.engine.jobs import measure_run  # noqa: E402
 from robot_agent.engine.run_data import compare_runs  # noqa: E402
+from bench._common import key_values, seed_list  # noqa: E402
 from server.store.experiments import planner_seed, run_seed  # noqa: E402
 
 ROBOT_RADIUS, PLANNING_MARGIN = 0.045, 0.02  # the testbed's defaults (server/core/settings.py)
@@ -504,22 +505,6 @@ def ablate(seeds: list[int], workers: int) -> list[dict[str, Any]]:
 # ---------------------------------------------------------------- command line
 
 
-def _seeds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out += list(range(int(a), int(b or a) + 1))
-    return out
-
-
-def _overrides(items: Iterable[str]) -> dict[str, float]:
-    out = {}
-    for item in items:
-        k, _, v = item.partition("=")
-        out[k] = float(v)
-    return out
-
-
 def _predictivity(seed: int) -> list[dict[str, Any]]:
     from client_sdk.study import predictivity, predictivity_spec
 
@@ -559,17 +544,17 @@ def main() -> None:
     ap.add_argument("--figure", help="predictivity: write the first seed's figure here")
     a = ap.parse_args()
     if a.what == "predictivity":
-        print(json.dumps(predictivity_many(_seeds(a.seeds), a.workers, a.figure), indent=1))
+        print(json.dumps(predictivity_many(seed_list(a.seeds), a.workers, a.figure), indent=1))
         return
     if a.what == "ablate":
-        print(json.dumps(ablate(_seeds(a.seeds), a.workers), indent=1))
+        print(json.dumps(ablate(seed_list(a.seeds), a.workers), indent=1))
         return
-    ov = {**(MAIN if a.main else {}), **_overrides(a.set)}
+    ov = {**(MAIN if a.main else {}), **key_values(a.set)}
     try:
         profile_with(ov)
     except ValueError as exc:
         ap.error(str(exc))
-    print(json.dumps(summarize(run_many(a.what, _seeds(a.seeds), ov, a.workers, a.truth)), indent=1))
+    print(json.dumps(summarize(run_many(a.what, seed_list(a.seeds), ov, a.workers, a.truth)), indent=1))
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 import numpy as np  # noqa: E402
 
 from bench import fidelity  # noqa: E402
-from bench._common import report  # noqa: E402
+from bench._common import key_values, report, seed_list  # noqa: E402
 from contract.params import robot_params  # noqa: E402
 from contract.protocol import decode_path, encode_path  # noqa: E402
 from planners import PlanningError, parse_environment, plan_path  # noqa: E402
@@ -95,12 +95,12 @@ def main() -> None:
     ap.add_argument("--near", type=float, default=0.15, help="distance (m) from a corner that counts as near it")
     ap.add_argument("--set", action="append", default=[], help="profile change section.key=value")
     args = ap.parse_args()
-    overrides = fidelity._overrides(args.set)
+    overrides = key_values(args.set)
     try:
         fidelity.profile_with(overrides)
     except ValueError as exc:
         ap.error(str(exc))
-    report("fidelity_corners", measure(fidelity._seeds(args.seeds), args.near, overrides), seeds=args.seeds,
+    report("fidelity_corners", measure(seed_list(args.seeds), args.near, overrides), seeds=args.seeds,
            near_m=args.near, overrides=overrides)
 
 
