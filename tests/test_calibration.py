@@ -159,6 +159,9 @@ def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
     assert r.returncode == 0, r.stderr
     assert "3 runs, replay error (fitted profile re-simulated against the runs)" in r.stdout and " cm RMS" in r.stdout
     assert "[95 % interval: the fit's bias and scatter from a parametric bootstrap" in r.stdout
+    # progress on stderr: the fit, then each refit
+    assert "calibrating 3 runs: the fit, then 4 refit(s)" in r.stderr and "  fit done after " in r.stderr
+    assert r.stderr.index("  refit 3/4 done after ") < r.stderr.index("  refit 4/4 done after ")
     assert "tracker_latency_s" in r.stdout and "(no interval: the latency is a 20 ms grid step" in r.stdout
     prof = json.loads((tmp_path / "calibrated-profile.json").read_text())
     assert set(prof["calibration"]["values"]) == set(FITTED) and prof["calibration"]["runs"] == 3

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
@@ -141,7 +142,14 @@ def calibrate(
         fail(f"{runs}: {len(recorded)} completed field run(s){f' of variant {variant!r}' if variant else ''}; "
              "calibration needs at least 2")
     refits = REFITS if refits is None else refits
-    cal = fit(recorded, profile, seed=seed, refits=refits)
+    started = time.monotonic()
+    typer.echo(f"calibrating {len(recorded)} runs: the fit, then {refits} refit(s) of runs emulated with it, each about "
+               "as long", err=True)
+
+    def progress(step: str) -> None:
+        typer.echo(f"  {step} done after {time.monotonic() - started:.0f} s", err=True)
+
+    cal = fit(recorded, profile, seed=seed, refits=refits, progress=progress)
     result = dict(cal.profile)
     result["calibration"] = {
         "runs": len(recorded), "study": data.spec.name, "variant": variant, "seed": seed,

@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -444,11 +444,12 @@ def emulate(run: RecordedRun, profile: Mapping[str, Any], seed: int) -> Recorded
 
 
 def _parametric(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mapping[str, Any], n: int,
-                rng: np.random.Generator) -> np.ndarray:
+                rng: np.random.Generator, progress: Callable[[str], None] | None = None) -> np.ndarray:
     """``n`` refits (rows; columns :data:`FITTED`, SI units) of runs emulated like ``runs`` (their paths, a new seed
-    per group of runs) with the ``fitted`` profile, each fitted from ``base`` as the runs were."""
+    per group of runs) with the ``fitted`` profile, each fitted from ``base`` as the runs were; ``progress`` is
+    told ``"refit i/n"`` after each."""
     out = []
-    for _ in range(n):
+    for i in range(n):
         seeds: dict[str, int] = {}
         new = [emulate(run, fitted, seeds.setdefault(run.group or f"#{i}", int(rng.integers(1, 2**31))))
                for i, run in enumerate(runs)]
@@ -456,15 +457,18 @@ def _parametric(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mappi
         if len(new) >= 2:
             v = _fit(new, base, int(rng.integers(0, 2**31)), bootstrap=False).values
             out.append([v[k] for k in FITTED])
+        if progress is not None:
+            progress(f"refit {i + 1}/{n}")
     return np.array(out).reshape(-1, len(FITTED))
 
 
 def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DEFAULT_PROFILE, *,
-              seed: int = 0, refits: int = REFITS) -> Calibration:
+              seed: int = 0, refits: int = REFITS, progress: Callable[[str], None] | None = None) -> Calibration:
     """Fit :data:`FITTED` of ``profile`` (a shipped name or a profile dict: its other values are kept, and are
     the starting point) to the recorded field ``runs`` (at least 2); ``seed`` seeds the simulations of stage 3,
     the bootstraps and the emulated runs; ``refits`` is the parametric bootstrap's number of refits (0: none,
-    and no intervals).  See the module docstring for the method."""
+    and no intervals); ``progress``, if given, is told ``"fit"`` when the fit is done and ``"refit i/n"`` after
+    each refit (each takes about as long as the fit).  See the module docstring for the method."""
     if len(runs) < 2:
         raise ValueError("calibration needs at least 2 recorded runs")
     for r in runs:
@@ -472,8 +476,10 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
             raise ValueError(f"run {r.name or '?'} has {len(r.poses)} tracked poses: too few to calibrate")
     base = load_profile(profile) if isinstance(profile, str) else dict(profile)
     fit = _fit(runs, base, seed)
+    if progress is not None:
+        progress("fit")
     rng = np.random.default_rng([seed, 1])
-    par = _parametric(runs, base, fit.profile, refits, rng)
+    par = _parametric(runs, base, fit.profile, refits, rng, progress)
     scatter = {k: float(np.std(v, ddof=1)) if len(v) > 1 else float("nan") for k, v in fit.boot.items()}
     u = uncertainty(fit.values, scatter, par)
     return Calibration(u["values"], u["std"], _clipped(base, u["values"]), fit.gains, fit.resimulated, fit.rms_m,
