@@ -41,7 +41,6 @@ import numpy as np  # noqa: E402
 from client_sdk.study import PlanSpec, StudyData, StudySpec, paper_findings, paper_spec, study_planner_seed  # noqa: E402
 from client_sdk.study._collect import flat_metrics  # noqa: E402
 from contract.controller_specs import select  # noqa: E402
-from contract.frames import field_layout  # noqa: E402
 from contract.params import robot_params  # noqa: E402
 from contract.protocol import decode_path, encode_path  # noqa: E402
 from contract.vocabulary import run_outcome  # noqa: E402
@@ -49,10 +48,9 @@ from contract.robot_profile import load_profile  # noqa: E402
 from planners import (PlanningError, distance_to_obstacles, get_planner, load_environment,  # noqa: E402
                       parse_environment, plan_path)
 from planners.metrics import path_length, smoothness, turning_angles  # noqa: E402
-from robot_agent.engine.backends import make_backend  # noqa: E402
+from robot_agent.engine.cores import layout_core  # noqa: E402
 from robot_agent.engine.noise import path_key  # noqa: E402
 from robot_agent.engine.sim import SimCore, State  # noqa: E402
-from robot_agent.engine.world import World  # noqa: E402
 from robot_agent.engine.jobs import measure_run  # noqa: E402
 from robot_agent.engine.run_data import compare_runs  # noqa: E402
 from bench._common import key_values, seed_list  # noqa: E402
@@ -146,11 +144,10 @@ def profile_with(overrides: Optional[dict[str, float]] = None, name: str = "bebo
 
 def one_robot_core(env_data: dict[str, Any], backend: str, params: Any) -> SimCore:
     """A simulation core of one robot (``params``, on ``backend``) on a sub-field holding ``env_data``'s blocks."""
-    sizes, world_of, origin, area = field_layout(1, "separate")
-    world = World(sizes, world_of, origin, area, params.collision_radius_m)
+    core = layout_core(params, backend)
     blocks = np.array([[b["x"], b["y"], b["w"], b["h"], b.get("angle", 0.0)] for b in env_data["blocks"]])
-    world.set_blocks(0, blocks.reshape(-1, 5))
-    return SimCore(params, make_backend(backend, 1, params), world)
+    core.world.set_blocks(0, blocks.reshape(-1, 5))
+    return core
 
 
 def drive(env_data: dict[str, Any], path: np.ndarray, start: list[float], backend: str, seed: int, params: Any,

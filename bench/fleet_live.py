@@ -72,19 +72,16 @@ def step_costs(robots: int, counts: tuple[int, ...], steps: int = 50, runs: int 
     """The simulation's cost per control step (s) of ``robots`` field robots driving the square, each with
     ``n`` moving obstacles for every ``n`` in ``counts`` (set in the world directly: the protocol stops at
     8), one step per call as at time scale 1, tracker poses logged; interleaved, ``counts[0]`` the baseline."""
-    from contract.frames import field_layout
     from contract.params import robot_params
-    from robot_agent.engine.backends import make_backend
+    from robot_agent.engine.cores import layout_core
     from robot_agent.engine.noise import path_key
     from robot_agent.engine.sim import SimCore
-    from robot_agent.engine.world import World
 
     p = robot_params()
     path = np.array(square_path(laps=8 + steps * (runs + 1) * len(counts) // 300))
     tasks = {}
     for n in counts:
-        sizes, world_of, origin, area = field_layout(robots, "separate", (FIELD_M, FIELD_M))
-        core = SimCore(p, make_backend("field", robots, p), World(sizes, world_of, origin, area, p.collision_radius_m))
+        core = layout_core(p, "field", robots, "separate", (FIELD_M, FIELD_M))
         discs = [(np.array(par), np.array(ends)) for par, ends in obstacles(n)]
         for i in range(robots):
             core.place(i, (*CENTRE_M, 0.0))

@@ -36,14 +36,12 @@ if __package__ in (None, ""):  # run as a script: bench/ must not shadow the pro
 import numpy as np  # noqa: E402
 
 from bench._common import interleaved, report  # noqa: E402
-from contract.frames import field_layout  # noqa: E402
 from contract.params import robot_params  # noqa: E402
 from contract.protocol import encode_path  # noqa: E402
 from planners import load_environment  # noqa: E402
-from robot_agent.engine.backends import make_backend  # noqa: E402
+from robot_agent.engine.cores import layout_core  # noqa: E402
 from robot_agent.engine.noise import path_key  # noqa: E402
 from robot_agent.engine.sim import SimCore, State  # noqa: E402
-from robot_agent.engine.world import World  # noqa: E402
 from robot_agent.host import AgentHost  # noqa: E402
 from robot_agent.host.sinks import CsvTrackerSink  # noqa: E402
 
@@ -80,9 +78,7 @@ def numpy_unicycle_step(pose: np.ndarray, vw: np.ndarray, dt: float) -> None:
 def busy_core(n: int, backend: str, steps: int = 0) -> SimCore:
     """``n`` robots each in its own room, all following a loop long enough for ``steps`` steps."""
     params = robot_params("bebot")
-    sizes, world_of, origin, area = field_layout(n, "separate")
-    core = SimCore(params, make_backend(backend, n, params), World(sizes, world_of, origin, area,
-                                                                 params.collision_radius_m))
+    core = layout_core(params, backend, n)
     path = loop_path(max(50, steps // 300))  # one loop takes about 450 steps
     blocks = room_blocks()
     for i in range(n):

@@ -15,6 +15,7 @@ import pytest
 import robot_agent
 from robot_agent.engine import follower as fl
 from robot_agent.engine.backends import Backend, make_backend
+from robot_agent.engine.cores import layout_core
 from robot_agent.engine.kinematics import body_to_tracks, tracks_to_body, unicycle_step, wrap_angle
 from robot_agent.engine.noise import normals, path_key, uniforms
 from contract.params import robot_params
@@ -183,8 +184,7 @@ def test_world_collisions_blocks_walls_robots_and_frames():
 
 
 def _core(backend: str, n: int = 1) -> SimCore:
-    sizes, world_of, origin, area = field_layout(n, "separate")
-    return SimCore(P, make_backend(backend, n, P), World(sizes, world_of, origin, area, P.collision_radius_m))
+    return layout_core(P, backend, n)
 
 
 def _drive(core: SimCore, steps: int = 20000) -> list:

@@ -17,14 +17,13 @@ from agent_support import CORNERS, densify
 from client_sdk.study import FINDINGS, StudyData, StudySpec, findings_markdown, paper_findings, write_findings
 from planners.metrics import path_length, smoothness
 from robot_agent.engine.backends import FieldBackend, make_backend
-from contract.frames import field_layout
+from robot_agent.engine.cores import layout_core
 from robot_agent.engine.kinematics import tracks_to_body, unicycle_step
 from robot_agent.engine.noise import path_key
 from contract.params import robot_params
 from robot_agent.engine.physics import tracker_bias
 from contract.robot_profile import load_profile
 from robot_agent.engine.sim import SimCore, State
-from robot_agent.engine.world import World
 
 P = robot_params()
 ROOT = Path(__file__).resolve().parent.parent
@@ -439,8 +438,7 @@ def test_a_robot_at_rest_is_measured_with_a_fixed_error_and_a_small_jitter():
 
 
 def _core(backend: str) -> SimCore:
-    sizes, world_of, origin, area = field_layout(1, "separate")
-    return SimCore(P, make_backend(backend, 1, P), World(sizes, world_of, origin, area, P.collision_radius_m))
+    return layout_core(P, backend)
 
 
 def _drive(backend: str, path: np.ndarray, seed: int) -> np.ndarray:

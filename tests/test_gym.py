@@ -21,13 +21,10 @@ gymnasium = pytest.importorskip("gymnasium")
 
 from gymnasium.utils.env_checker import check_env
 
-from contract.frames import field_layout
 from contract.params import robot_params
 from contract.protocol import encode_build, encode_place
 from planners.environment import load_environment
-from robot_agent.engine.backends import make_backend
-from robot_agent.engine.sim import SimCore
-from robot_agent.engine.world import World
+from robot_agent.engine.cores import layout_core
 from robot_agent.gym import ENV_IDS, register_envs
 from robot_agent.gym.envs import NavigationEnv, NavigationVectorEnv
 from robot_agent.gym.maps import build_map
@@ -89,8 +86,7 @@ def engine_run(env: NavigationEnv, actions: list[np.ndarray]) -> list[tuple[np.n
     fleet = env.fleet
     nav = fleet.maps[int(fleet.map_of[0])]
     p = robot_params("bebot")
-    core = SimCore(p, make_backend(fleet.backend, 1, p), World(*field_layout(1, "separate", nav.size),
-                                                                 p.collision_radius_m))
+    core = layout_core(p, fleet.backend, 1, "separate", nav.size)
     core.world.set_blocks(0, nav.blocks)
     start = env.start
     core.place(0, (float(start[0]), float(start[1]), float(start[2])))

@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 
 from contract.controller_specs import select
-from contract.frames import FIELD_SIZE, field_layout
+from contract.frames import FIELD_SIZE
 from contract.params import robot_params
 from contract.protocol import (
     BuildCommand,
@@ -32,11 +32,10 @@ from contract.protocol import (
 )
 from contract.robot_profile import DEFAULT_PROFILE
 
-from .backends import make_backend
+from .cores import layout_core
 from .movers import mover_tracks
 from .noise import path_key
-from .sim import SimCore, SimEvent
-from .world import World
+from .sim import SimEvent
 
 __all__ = ["HeadlessRun", "PlacementRefused", "simulate_run"]
 
@@ -95,10 +94,9 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
     controller choice."""
     chosen = select(controller, controller_params)
     params = robot_params(profile)
-    sizes, world_of, origin, areas = field_layout(1, "separate", area)
-    world = World(sizes, world_of, origin, areas, params.collision_radius_m)
-    core = SimCore(params, make_backend(backend, 1, params), world, log_poses=True)
-    size = (float(areas[0][0]), float(areas[0][1]))
+    core = layout_core(params, backend, 1, "separate", area)
+    world = core.world
+    size = (float(core.world.area[0, 0]), float(core.world.area[0, 1]))
     built = parse_command(encode_build(blocks), field_size=size)
     placed = parse_command(encode_place(start), field_size=size)
     sent = parse_command(encode_path(path), field_size=size)
