@@ -31,16 +31,21 @@ SCHEMA_BEFORE = {
 L_PATH = densify([(0.3, 0.3), (1.2, 0.3), (1.2, 1.2)], step=0.1)
 
 
-@pytest.fixture(scope="module")
-def problems() -> dict:
-    """The paper environments' plans with their FMM paths."""
+def _paper_problems(robot_radius: float) -> dict:
+    """The paper environments' plans with their FMM paths, planned for ``robot_radius`` (m)."""
     out = {}
     for name in ("room", "blocks"):
         env = load_environment(name)
         for plan in env.plans:
-            r = plan_path(env, plan.start, plan.goal, "fmm", robot_radius=0.045, seed=1)
+            r = plan_path(env, plan.start, plan.goal, "fmm", robot_radius=robot_radius, seed=1)
             out[f"{name}/{plan.name}"] = (env, plan, np.round(r.path, 6))
     return out
+
+
+@pytest.fixture(scope="module")
+def problems() -> dict:
+    """The paper environments' plans with their FMM paths (for the bare robot radius)."""
+    return _paper_problems(0.045)
 
 
 def _bebot_before_issue_33() -> dict:
@@ -52,9 +57,10 @@ def _bebot_before_issue_33() -> dict:
     return prof
 
 
-def _run(problem, backend: str, controller: str | None = None, profile: dict | str = "bebot", **params):
+def _run(problem, backend: str, controller: str | None = None, profile: dict | str = "bebot", seed: int = 5,
+         **params):
     env, plan, path = problem
-    return simulate_run(path, plan.start, seed=5, blocks=block_tuples(env.to_dict()), backend=backend,
+    return simulate_run(path, plan.start, seed=seed, blocks=block_tuples(env.to_dict()), backend=backend,
                         area=(env.width, env.height), controller=controller, controller_params=params,
                         profile=profile)
 
@@ -81,13 +87,7 @@ def _cross_track(poses: np.ndarray, path: np.ndarray) -> np.ndarray:
 def testbed_problems() -> dict:
     """The paper environments' plans with FMM paths planned as the testbed plans them: for the robot radius plus
     its planning margin (0.045 + 0.02 m; server settings ``robot_radius_m``, ``planning_margin_m``)."""
-    out = {}
-    for name in ("room", "blocks"):
-        env = load_environment(name)
-        for plan in env.plans:
-            r = plan_path(env, plan.start, plan.goal, "fmm", robot_radius=0.065, seed=1)
-            out[f"{name}/{plan.name}"] = (env, plan, np.round(r.path, 6))
-    return out
+    return _paper_problems(0.065)
 
 
 #: the largest distance (m) from the path each backend's robot may stray, over every run (2026-11-28, seeds 0-19 of
@@ -103,8 +103,7 @@ def test_every_controller_reaches_the_goal_on_the_paper_environments(testbed_pro
     the bare radius, which graze the blocks, every controller collides on the field: 14-39 of 80 runs.)"""
     for key, (env, plan, path) in testbed_problems.items():
         for seed in range(10):
-            run = simulate_run(path, plan.start, seed=seed, blocks=block_tuples(env.to_dict()), backend=backend,
-                               area=(env.width, env.height), controller=controller, profile="bebot")
+            run = _run((env, plan, path), backend, controller, seed=seed)
             goal = plan.goal
             assert run.outcome == "DONE", (key, seed, run.outcome)
             assert math.hypot(run.poses[-1, 1] - goal[0], run.poses[-1, 2] - goal[1]) < 0.03, (key, seed)
