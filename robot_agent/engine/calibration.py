@@ -231,17 +231,14 @@ def _profile_lag(runs: Sequence[RecordedRun], base: Mapping[str, Any], latency: 
     point (a parabola through the least and its neighbours), and the gains ``(R, 2)`` at the grid's least: stage
     1's starting point, whatever the profile's lag (the cost is rough at the scale of a control step, so a local
     fit stays near where it starts).  The grid is walked upwards until the cost has risen three times."""
-    gains = np.full((len(runs), 2), g0)
+    gains = [np.full((len(runs), 2), g0)]  # the start, then the gains at each grid lag
     costs: list[float] = []
-    best: tuple[float, np.ndarray] = (math.inf, gains)
     for tau in _LAG_GRID:
         quiet = _quiet_profile(base, float(tau), latency)
-        fits = [_run_gains(run, quiet, g) for run, g in zip(runs, gains)]
-        gains = np.array([g for g, _ in fits])
+        fits = [_run_gains(run, quiet, g) for run, g in zip(runs, gains[-1])]
+        gains.append(np.array([g for g, _ in fits]))
         costs.append(sum(c for _, c in fits))
-        if costs[-1] < best[0]:
-            best = (costs[-1], gains)
-        elif len(costs) - 1 - int(np.argmin(costs)) >= 3:
+        if len(costs) - 1 - int(np.argmin(costs)) >= 3:
             break
     k = int(np.argmin(costs))
     tau = float(_LAG_GRID[k])
@@ -253,7 +250,7 @@ def _profile_lag(runs: Sequence[RecordedRun], base: Mapping[str, Any], latency: 
         den = (x1 - x0) * (c1 - c2) - (x1 - x2) * (c1 - c0)
         if den != 0:
             tau = float(min(max(x1 - 0.5 * num / den, x0), x2))
-    return tau, best[1]
+    return tau, gains[k + 1]
 
 
 def _latency_costs(runs: Sequence[RecordedRun], base: Mapping[str, Any], x: np.ndarray, dt: float) -> np.ndarray:
