@@ -43,6 +43,14 @@ VARIANTS: dict[str, dict[str, float]] = {
     # localisation still compensates)
     "latency 0.16 s": {"tracker_latency_s": 0.16},
 }
+#: tests/test_calibration.py's validation profile: every fitted value away from the shipped one (the fit's start)
+TEST_TRUTH = {"motor_time_constant_s": 0.2, "wheel_gain_mean": 0.85, "wheel_bias_sigma": 0.04, "wheel_noise_rel": 0.12,
+              "wheel_noise_abs_m_s": 0.006, "tracker_latency_s": 0.14, "tracker_noise_xy_m": 0.0008,
+              "tracker_noise_theta_rad": 0.01}
+#: calibration models slip as white (drawn afresh every control step); the shipped BeBot's slip is correlated over
+#: 0.1 s since issue 33, which the fit reads partly as motor lag (0.32 s for 0.2 s on the test's runs:
+#: docs/fidelity.md, "Calibration"), so the test's runs are emulated with white slip
+WHITE_SLIP = {"wheel_noise_corr_s": 0.0}
 
 
 def emulated_runs(profile: dict[str, Any], seed: int, n: int = 6) -> list[RecordedRun]:

@@ -22,15 +22,13 @@ import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
 from bench._common import seed_list  # noqa: E402
-from bench.calibration_coverage import emulated_runs  # noqa: E402
+from bench.calibration_coverage import TEST_TRUTH, WHITE_SLIP, emulated_runs  # noqa: E402
 from contract.overrides import apply_overrides  # noqa: E402
 from contract.robot_profile import load_profile  # noqa: E402
 from robot_agent.engine import calibration as cal  # noqa: E402
 
-#: tests/test_calibration.py's validation profile (TRUE, with white slip)
-TRUTH = {"motor_time_constant_s": 0.2, "wheel_gain_mean": 0.85, "wheel_bias_sigma": 0.04, "wheel_noise_rel": 0.12,
-         "wheel_noise_abs_m_s": 0.006, "tracker_latency_s": 0.14, "tracker_noise_xy_m": 0.0008,
-         "tracker_noise_theta_rad": 0.01, "wheel_noise_corr_s": 0.0}
+#: tests/test_calibration.py's validation profile, with white slip
+TRUTH = {**TEST_TRUTH, **WHITE_SLIP}
 LAGS = np.round(np.arange(0.1, 0.351, 0.025), 3)
 
 
@@ -67,7 +65,7 @@ def main() -> None:
     ap.add_argument("--replicates", type=int, default=8, help="noisy re-simulations averaged per run")
     a = ap.parse_args()
     truth = apply_overrides(load_profile("bebot"), TRUTH)
-    base = apply_overrides(load_profile("bebot"), {"wheel_noise_corr_s": 0.0})
+    base = apply_overrides(load_profile("bebot"), WHITE_SLIP)
     out = []
     for seed in seed_list(a.seeds):
         runs = emulated_runs(truth, seed)

@@ -17,14 +17,21 @@ from contract.params import robot_params
 from contract.robot_profile import load_profile
 from sdk_helpers import invoke
 
-#: the profile the runs are emulated with: every fitted value away from the shipped one (the fit's start)
-TRUE = {"motor_time_constant_s": 0.2, "wheel_gain_mean": 0.85, "wheel_bias_sigma": 0.04, "wheel_noise_rel": 0.12,
-        "wheel_noise_abs_m_s": 0.006, "tracker_latency_s": 0.14, "tracker_noise_xy_m": 0.0008,
-        "tracker_noise_theta_rad": 0.01}
-#: calibration models slip as white (drawn afresh every control step); the shipped BeBot's slip is correlated over
-#: 0.1 s since issue 33, which the fit reads partly as motor lag (0.32 s for 0.2 s on these runs: docs/fidelity.md,
-#: "Calibration"), so the runs are emulated with white slip
-WHITE_SLIP = {"wheel_noise_corr_s": 0.0}
+
+def _bench(module: str = "fidelity"):
+    """``bench/<module>.py``, imported (the repository's root on the path)."""
+    import importlib
+
+    root = str(Path(__file__).resolve().parents[1])
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    return importlib.import_module(f"bench.{module}")
+
+
+#: the profile the runs are emulated with (every fitted value away from the shipped one, the fit's start), and the
+#: white slip they are emulated with: bench/calibration_coverage.py's TEST_TRUTH and WHITE_SLIP
+TRUE = _bench("calibration_coverage").TEST_TRUTH
+WHITE_SLIP = _bench("calibration_coverage").WHITE_SLIP
 #: docs/fidelity.md, "Calibration": relative (rel) or absolute (abs) tolerances of six 10 s runs
 TOLERANCE = {"motor_time_constant_s": ("rel", 0.2), "wheel_gain_mean": ("abs", 0.04), "wheel_bias_sigma": ("abs", 0.02),
              "wheel_noise_rel": ("rel", 0.3), "wheel_noise_abs_m_s": ("rel", 0.3), "tracker_latency_s": ("abs", 0.041),
@@ -135,16 +142,6 @@ def test_uncertainty_corrects_the_bias_and_widens_with_few_refits():
 def test_calibration_needs_runs():
     with pytest.raises(ValueError, match="at least 2"):
         calibrate([], "bebot")
-
-
-def _bench(module: str = "fidelity"):
-    """``bench/<module>.py``, imported (the repository's root on the path)."""
-    import importlib
-
-    root = str(Path(__file__).resolve().parents[1])
-    if root not in sys.path:
-        sys.path.insert(0, root)
-    return importlib.import_module(f"bench.{module}")
 
 
 @pytest.mark.slow
