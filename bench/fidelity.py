@@ -12,6 +12,7 @@ checks it as it checks a study the testbed ran (and the numbers are the same:
     python bench/fidelity.py paper --seeds 0-19            # held-counts of the nine findings, means
     python bench/fidelity.py varied --seeds 0-19           # on corridors, clutter, an open field, a zig-zag
     python bench/fidelity.py generated --seeds 0-19        # random blocks and walls, new ones per seed
+    python bench/fidelity.py varied --plans 6              # 6 start/goal pairs per environment instead of 3
     python bench/fidelity.py paper --set field.tracker_latency_s=0   # with a profile change
     python bench/fidelity.py paper --main                  # the field robot as it was on e2c6fc3
     python bench/fidelity.py ablate --seeds 0-9            # one change at a time, driven and logged paths
@@ -416,22 +417,25 @@ def failures(data: StudyData) -> dict[str, dict[str, int]]:
     return out
 
 
-def _one(job: tuple[str, int, dict[str, float], bool]) -> dict[str, Any]:
-    kind, seed, overrides, truth = job
-    data = {"paper": paper, "varied": varied, "generated": generated}[kind](seed, overrides, truth)
+def _one(job: tuple[str, int, dict[str, float], bool, int]) -> dict[str, Any]:
+    kind, seed, overrides, truth, plans = job
+    data = paper(seed, overrides, truth) if kind == "paper" else \
+        {"varied": varied, "generated": generated}[kind](seed, overrides, truth, plans)
     found = paper_findings(data)
     n = next(f.numbers for f in found if f.key == "field_ratios_worse")
     strict = None if not n else bool(n.get("prm_twb_smoothness_ratio") is not None
                                      and n["prm_twb_smoothness_ratio"] < n["prm_sim_smoothness_ratio"])
-    return {"seed": seed, "held": {f.key: f.held for f in found}, "details": {f.key: f.detail for f in found},
+    return {"seed": seed, "runs": len(data.rows), "held": {f.key: f.held for f in found},
+            "details": {f.key: f.detail for f in found},
             "prm_kappa_ratio_field_below_sim": strict,
             "means": means(data), "corners": corners(data), "failures": failures(data)}
 
 
 def run_many(kind: str, seeds: list[int], overrides: Optional[dict[str, float]] = None, workers: int = 2,
-             truth: bool = False) -> list[dict[str, Any]]:
-    """:func:`paper` or :func:`varied` for every seed (in ``workers`` processes): findings and means."""
-    jobs = [(kind, s, dict(overrides or {}), truth) for s in seeds]
+             truth: bool = False, plans: int = 3) -> list[dict[str, Any]]:
+    """:func:`paper`, :func:`varied` or :func:`generated` (``plans`` start/goal pairs per environment) for every
+    seed (in ``workers`` processes): findings and means."""
+    jobs = [(kind, s, dict(overrides or {}), truth, plans) for s in seeds]
     if workers <= 1:
         return [_one(j) for j in jobs]
     with ProcessPoolExecutor(workers) as ex:
@@ -457,7 +461,7 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
             tally = failed.setdefault(g, {})
             for kind, n in kinds.items():
                 tally[kind] = tally.get(kind, 0) + n
-    return {"seeds": [r["seed"] for r in results], "held": held, "prm_kappa_ratio_field_below_sim": strict,
+    return {"seeds": [r["seed"] for r in results], "runs_per_seed": [r["runs"] for r in results], "held": held, "prm_kappa_ratio_field_below_sim": strict,
             "failing": {s: f for s, f in failing.items() if f},
             "means": avg, "computed_paths": shape, "failed_runs": failed}
 
@@ -537,6 +541,9 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], help="profile change section.key=value")
     ap.add_argument("--main", action="store_true", help="the field robot as on e2c6fc3 (before this work)")
     ap.add_argument("--truth", action="store_true", help="also the true (driven) paths' ratios (slower)")
+    ap.add_argument("--plans", type=int, default=3,
+                    help="varied, generated: random start/goal pairs per environment (each seed's study has 4 x PLANS "
+                         "and 2 x PLANS problems)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--figure", help="predictivity: write the first seed's figure here")
     a = ap.parse_args()
@@ -551,7 +558,9 @@ def main() -> None:
         profile_with(ov)
     except ValueError as exc:
         ap.error(str(exc))
-    print(json.dumps(summarize(run_many(a.what, seed_list(a.seeds), ov, a.workers, a.truth)), indent=1))
+    if a.plans < 1:
+        ap.error("--plans must be at least 1")
+    print(json.dumps(summarize(run_many(a.what, seed_list(a.seeds), ov, a.workers, a.truth, a.plans)), indent=1))
 
 
 if __name__ == "__main__":

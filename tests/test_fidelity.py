@@ -148,6 +148,23 @@ def test_offline_varied_environments_and_their_random_problems():
         for plan in plans:
             assert math.dist(plan["start"][:2], plan["goal"][:2]) >= 0.9
     assert [e["name"] for e in fid.varied_environments()] == ["corridors", "clutter", "open", "zigzag"]
+    # more pairs per environment (bench/fidelity.py --plans) keep the first ones: a larger study adds problems
+    env = fid.generated_environments(4)[0]
+    assert fid.random_plans(env, 6, seed=7)[:3] == fid.random_plans(env, 3, seed=7)
+
+
+def test_fidelity_bench_takes_the_number_of_problems_per_environment():
+    """``--plans`` reaches the study (one start/goal pair per generated environment: 2 problems x 3 planners x 2
+    repetitions x 2 modes = 24 runs), and a number below 1 is refused before anything runs."""
+    import subprocess
+
+    script = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "fidelity.py"), "generated"]
+    out = subprocess.run([*script, "--seeds", "3", "--plans", "1", "--workers", "1"], capture_output=True, text=True,
+                         check=True)
+    summary = json.loads(out.stdout)
+    assert summary["seeds"] == [3] and summary["runs_per_seed"] == [24] and set(summary["held"]) == set(FINDINGS)
+    bad = subprocess.run([*script, "--plans", "0"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "--plans must be at least 1" in bad.stderr
 
 
 # ---------------------------------------------------------------- the checks, on synthetic data
