@@ -4,7 +4,13 @@ run's track gains fitted at each lag: against the noise-free re-simulation (what
 mean of ``--replicates`` re-simulations with the true wheel noise on (a simulated likelihood; the same random
 numbers at every lag).  Prints JSON: the lag of least cost of each, and the costs.
 
+With ``--own-estimates`` the simulated likelihood is what calibration itself could compute: the lag profiled
+around the fit's lag (0.6 to 1.1 times it) at the fit's latency, with the fit's wheel noise, every run's gains
+fitted at each lag from the fit's; against the fit's own lag and wheel noise.
+
     python bench/calibration_lag_bias.py --seeds 1,3 --replicates 8
+    python bench/calibration_lag_bias.py --seeds 1-5 --replicates 8 --own-estimates
+    python bench/calibration_lag_bias.py --seeds 1-5 --own-estimates --variant all   # the coverage bench's runs
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
 from bench._common import seed_list  # noqa: E402
-from bench.calibration_coverage import TEST_TRUTH, WHITE_SLIP, emulated_runs  # noqa: E402
+from bench.calibration_coverage import TEST_TRUTH, VARIANTS, WHITE_SLIP, emulated_runs  # noqa: E402
 from contract.overrides import apply_overrides  # noqa: E402
 from contract.robot_profile import load_profile  # noqa: E402
 from robot_agent.engine import calibration as cal  # noqa: E402
@@ -41,15 +47,19 @@ def residual(run: cal.RecordedRun, profile: dict, gains: np.ndarray, seeds: list
     return np.column_stack([run.poses[:, 1] - x, run.poses[:, 2] - y]).ravel()
 
 
-def lag_profile(runs: list[cal.RecordedRun], base: dict, replicates: int) -> list[float]:
-    """Summed squared residual (m^2) at each of :data:`LAGS`, gains fitted per run; ``replicates`` 0: noise-free."""
+def lag_profile(runs: list[cal.RecordedRun], base: dict, replicates: int, lags: np.ndarray = LAGS,
+                latency: float = TRUTH["tracker_latency_s"], noise: dict | None = None,
+                gains0: list[np.ndarray] | None = None) -> list[float]:
+    """Summed squared residual (m^2) at each of ``lags``, gains fitted per run (from ``gains0``); ``replicates`` 0:
+    noise-free; the wheel ``noise`` of the re-simulations, by default the true one."""
     seeds = [1000 + k for k in range(replicates)] or [0]
-    gains = [np.array([0.85, 0.85]) for _ in runs]
+    gains = [g.copy() for g in gains0] if gains0 is not None else [np.array([0.85, 0.85]) for _ in runs]
+    noise = noise or {k: TRUTH[k] for k in ("wheel_noise_rel", "wheel_noise_abs_m_s")}
     costs = []
-    for tau in LAGS:
-        prof = cal._quiet_profile(base, float(tau), TRUTH["tracker_latency_s"])
+    for tau in lags:
+        prof = cal._quiet_profile(base, float(tau), latency)
         if replicates:
-            prof = apply_overrides(prof, {k: TRUTH[k] for k in ("wheel_noise_rel", "wheel_noise_abs_m_s")})
+            prof = apply_overrides(prof, noise)
         total = 0.0
         for i, run in enumerate(runs):
             r = least_squares(lambda g: residual(run, prof, g, seeds), gains[i], bounds=([0.3] * 2, [1.7] * 2),
@@ -59,16 +69,58 @@ def lag_profile(runs: list[cal.RecordedRun], base: dict, replicates: int) -> lis
     return costs
 
 
+def own_estimates(runs: list[cal.RecordedRun], base: dict, seed: int, replicates: int, truth: dict) -> dict:
+    """The fit (no bootstrap) of ``runs`` (emulated with the field values ``truth``), then the lag profiled against ``replicates`` noisy re-simulations with the fit's
+    latency and wheel noise around the fit's lag: the lag of least cost (a parabola through it and its neighbours)
+    and the costs (relative to the least)."""
+    t0 = time.perf_counter()
+    fit = cal._fit(runs, base, 0, bootstrap=False)
+    v = fit.values
+    t1 = time.perf_counter()
+    lags = np.round(v["motor_time_constant_s"] * np.arange(0.6, 1.101, 0.05), 4)
+    noise = {k: v[k] for k in ("wheel_noise_rel", "wheel_noise_abs_m_s")}
+    costs = np.array(lag_profile(runs, base, replicates, lags, v["tracker_latency_s"], noise, list(fit.gains)))
+    k = int(np.argmin(costs))
+    lag = float(lags[k])
+    if 0 < k < len(lags) - 1:  # evenly spaced: the vertex of the parabola through the least and its neighbours
+        c0, c1, c2 = costs[k - 1:k + 2]
+        den = c0 - 2 * c1 + c2
+        lag += 0.5 * float(c0 - c2) / float(den) * float(lags[1] - lags[0]) if den > 0 else 0.0
+    return {"seed": seed, "true_lag_s": truth["motor_time_constant_s"], "true_wheel_noise_rel": truth["wheel_noise_rel"],
+            "fit": {"lag_s": round(v["motor_time_constant_s"], 4), "wheel_noise_rel": round(v["wheel_noise_rel"], 4),
+                    "tracker_latency_s": v["tracker_latency_s"], "seconds": round(t1 - t0, 1)},
+            f"mean_of_{replicates}_noisy_own_estimates": {
+                "least_cost_lag_s": round(lag, 4), "costs": dict(zip(lags.tolist(), np.round(costs / costs.min(), 4).tolist())),
+                "seconds": round(time.perf_counter() - t1, 1)}}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="1,3", help="emulation seeds of the validation runs")
     ap.add_argument("--replicates", type=int, default=8, help="noisy re-simulations averaged per run")
+    ap.add_argument("--own-estimates", action="store_true",
+                    help="profile around the fit's lag with the fit's latency and wheel noise (what calibration knows)")
+    ap.add_argument("--variant", choices=["all", *VARIANTS],
+                    help="with --own-estimates: the coverage bench's runs of this variant (all: each) instead of the test's")
     a = ap.parse_args()
+    if a.variant and not a.own_estimates:
+        ap.error("--variant needs --own-estimates")
     truth = apply_overrides(load_profile("bebot"), TRUTH)
     base = apply_overrides(load_profile("bebot"), WHITE_SLIP)
     out = []
-    for seed in seed_list(a.seeds):
+    if a.variant:
+        for name in VARIANTS if a.variant == "all" else [a.variant]:
+            prof = apply_overrides(load_profile("bebot"), VARIANTS[name])
+            for seed in seed_list(a.seeds):
+                row = own_estimates(emulated_runs(prof, seed), load_profile("bebot"), seed, a.replicates, prof["field"])
+                out.append({"variant": name, **row})
+                print(f"{name}, seed {seed}: done", file=sys.stderr, flush=True)
+    for seed in [] if a.variant else seed_list(a.seeds):
         runs = emulated_runs(truth, seed)
+        if a.own_estimates:
+            out.append(own_estimates(runs, base, seed, a.replicates, truth["field"]))
+            print(f"seed {seed}: done", file=sys.stderr, flush=True)
+            continue
         row: dict = {"seed": seed, "true_lag_s": TRUTH["motor_time_constant_s"]}
         for name, k in (("noise_free", 0), (f"mean_of_{a.replicates}_noisy", a.replicates)):
             t0 = time.perf_counter()
