@@ -93,8 +93,8 @@ def test_calibration_recovers_a_known_profile():
 
 @pytest.mark.slow
 def test_calibration_intervals_cover_the_truth():
-    """The validation case's 95 % intervals (parametric bootstrap, four refits, seeded) contain the true values; the
-    parameters of NO_INTERVAL have none, and say why."""
+    """The validation case's 95 % intervals (parametric bootstrap, four refits, seeded; the latency's widened by
+    its test inversion) contain the true values; the parameters of NO_INTERVAL have none, and say why."""
     cal = _fitted()
     assert cal.refits.shape == (4, len(FITTED))
     for key in FITTED:
@@ -104,8 +104,15 @@ def test_calibration_intervals_cover_the_truth():
         lo, hi = cal.interval[key]
         assert lo <= TRUE[key] <= hi, (key, lo, hi, cal.values[key])
         assert hi - lo < 4 * abs(cal.values[key]) + 0.05, (key, lo, hi)  # not so wide that it says nothing
-        if lo > 0:  # centred on the bias-corrected value (the fit's minus the refits' mean shift), unless clipped at 0
-            assert (lo + hi) / 2 == pytest.approx(cal.fitted[key] - cal.bias[key])
+        centre = cal.fitted[key] - cal.bias[key]  # the bias-corrected value: the fit's minus the refits' mean shift
+        if key == "tracker_latency_s":  # the inversion only widens it
+            assert lo <= centre <= hi and hi - lo > 0.06, (lo, hi, centre)
+        elif lo > 0:  # centred on it, unless clipped at 0
+            assert (lo + hi) / 2 == pytest.approx(centre)
+    # the inversion's candidates: 0.04 and 0.08 s either side of the fitted latency, each read again
+    lat = cal.fitted["tracker_latency_s"]
+    assert sorted(cal.latency_inversion) == pytest.approx([lat - 0.08, lat - 0.04, lat + 0.04, lat + 0.08])
+    assert all(0 <= v <= 0.3 for v in cal.latency_inversion.values())
     assert cal.values == cal.fitted  # the profile keeps the fit's values
 
 
@@ -134,9 +141,30 @@ def test_uncertainty_corrects_the_bias_and_widens_with_few_refits():
     half = 3.182446 * np.hypot(max(s, 0.01), s / 2)
     assert u["bias"][k] == pytest.approx(0.1) and u["values"][k] == 0.3
     assert u["interval"][k] == pytest.approx((0.2 - half, 0.2 + half), rel=1e-5)
-    assert set(u["interval"]) == set(FITTED) - set(NO_INTERVAL) and set(u["no_interval"]) == set(NO_INTERVAL)
+    # the latency needs its test inversion for an interval
+    assert set(u["interval"]) == set(FITTED) - {"tracker_latency_s"} - set(NO_INTERVAL)
+    assert u["no_interval"]["tracker_latency_s"].startswith("no interval: without the latency's test inversion")
     u = uncertainty(fitted, scatter, np.zeros((0, len(FITTED))))
     assert not u["interval"] and set(u["no_interval"]) == set(FITTED)
+
+
+def test_the_latency_interval_takes_in_every_latency_whose_reading_would_be_the_fits():
+    """Fit 0.1 s, refits at 0.1 read 0.1 on average; runs emulated at 0.02, 0.06, 0.14 and 0.18 s read 0.06, 0.08,
+    0.11 and 0.16 s.  With a standard error 0.01 (scatter 0.01, refits' spread 0) the allowance is
+    t(0.975, 3) x 0.01 = 0.0318 s: the expected reading (interpolated every 5 ms) is within it from 0.04 s (0.07)
+    to 0.155 s (0.12875; 0.0325 and 0.035 away one step further out), so the interval is [0.04, 0.155] s, wider than
+    the bias-corrected 0.1 +- 0.032 s."""
+    fitted = {k: 0.1 for k in FITTED}
+    scatter = {k: 0.01 for k in FITTED}
+    refits = np.full((4, len(FITTED)), 0.1)
+    inversion = {0.02: 0.06, 0.06: 0.08, 0.14: 0.11, 0.18: 0.16}
+    u = uncertainty(fitted, scatter, refits, inversion)
+    lo, hi = u["interval"]["tracker_latency_s"]
+    assert (lo, hi) == pytest.approx((0.04, 0.155))
+    assert u["interval"]["wheel_bias_sigma"] == pytest.approx((0.1 - 0.0318245, 0.1 + 0.0318245), rel=1e-5)  # not widened
+    # a reading that never comes near the fit's leaves the bias-corrected interval as it is
+    u = uncertainty(fitted, scatter, refits, {0.02: 0.2, 0.18: 0.3})
+    assert u["interval"]["tracker_latency_s"] == pytest.approx((0.1 - 0.0318245, 0.1 + 0.0318245), rel=1e-5)
 
 
 def test_calibration_needs_runs():
@@ -159,7 +187,9 @@ def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
     # progress on stderr: the fit, then each refit
     assert "calibrating 3 runs: the fit, then 4 refit(s)" in r.stderr and "  fit done after " in r.stderr
     assert r.stderr.index("  refit 3/4 done after ") < r.stderr.index("  refit 4/4 done after ")
-    assert "tracker_latency_s" in r.stdout and "(no interval: the latency is a 20 ms grid step" in r.stdout
+    assert "then up to 4 latency checks" in r.stderr and "  latency check 4/4 done after " in r.stderr
+    assert r.stderr.index("  refit 4/4 done after ") < r.stderr.index("  latency check 1/4 done after ")
+    assert "tracker_latency_s" in r.stdout and "no interval" not in r.stdout
     prof = json.loads((tmp_path / "calibrated-profile.json").read_text())
     assert set(prof["calibration"]["values"]) == set(FITTED) and prof["calibration"]["runs"] == 3
     assert set(prof["calibration"]["interval_95"]) == set(FITTED) - set(NO_INTERVAL)

@@ -40,6 +40,17 @@ motor lag, the wheel noise and the latency farther.  A parameter whose interval 
 of the validation cases (:data:`NO_INTERVAL`; docs/fidelity.md, "Calibration") is reported with the fit's value
 and no interval, with the reason.
 
+The tracker latency's fit leans to the profile's latency (the one stage 1 starts from, and the one the robot
+compensates): for a true 0.16 s it reads 0.10-0.14 s.  Refits around a reading of 0.1 s cannot show that pull,
+which vanishes there, so the latency's interval is also a **test inversion** (Neyman's construction, on a few
+points): runs are emulated with the fitted profile at latencies :data:`INVERSION_OFFSETS` away from the fit's
+and stage 1 reads their latency (:func:`_latency_inversion`; its own random numbers, so the refits do not
+change); the expected reading is interpolated between those latencies and the fit's own (its refits' mean), and
+the interval is widened to every latency whose expected reading lies within t(0.975, B - 1) times the standard
+error of the fit's (the standard error above combined with one refit's scatter, as each point is one refit)
+(:func:`_inverted`).  The latency is weakly seen in the tracked positions (it acts only through the
+localisation's compensation of it), so this interval is wide: about 0.16 s.
+
 The bootstrap over runs (resampling whole runs keeps the correlation of the residuals along a run; runs that share
 a seed are resampled together), :data:`_BOOTSTRAP` resamples, re-estimates every parameter from the runs it drew:
 
@@ -85,19 +96,17 @@ _INCREMENT_S = 0.2  # the wheel-noise statistic's time step
 _REPLICATES = 4  # simulated copies of each run per wheel-noise candidate
 _BOOTSTRAP = 400
 REFITS = 4  # the parametric bootstrap's refits
+#: the latencies (s) relative to the fit's at which :func:`_latency_inversion` emulates runs
+INVERSION_OFFSETS = (-0.08, -0.04, 0.04, 0.08)
 #: parameters reported without an interval, and why: the interval of the module docstring did not cover the truth
 #: in ~90 % of the validation cases (bench/calibration_coverage.py, 4 refits: tuning seeds 1-5, held-out seeds 6-10;
-#: docs/fidelity.md, "Calibration")
-NO_INTERVAL = {
-    "tracker_latency_s": "no interval: the latency is a 20 ms grid step and its fit leans to the profile's latency "
-                         "(the one the robot compensates): for a true 0.16 s it reads 0.10-0.14 s, and the interval "
-                         "covered the truth in 8 of 10 such validation cases (38 of 40 where the truth is the "
-                         "profile's)",
-}
+#: docs/fidelity.md, "Calibration"); none since the latency's test inversion (2026-11-28)
+NO_INTERVAL: dict[str, str] = {}
 #: what the intervals are, in one line (twb calibrate prints it, the profile's calibration block keeps it)
 METHOD = ("95 % interval: the fit's bias and scatter from a parametric bootstrap (runs emulated like these with the "
           "fitted profile, fitted again) and a bootstrap over the runs; centred on the bias-corrected value "
-          "(value minus bias), the value itself is the fit's")
+          "(value minus bias), the value itself is the fit's; the tracker latency's widened by a test inversion (runs "
+          "emulated at latencies 0.04 and 0.08 s either side of the fit's, read again)")
 
 
 @dataclass(frozen=True)
@@ -143,6 +152,8 @@ class Calibration:
     scatter: dict[str, float] = field(default_factory=dict)
     #: why a parameter has no interval (parameter -> reason)
     no_interval: dict[str, str] = field(default_factory=dict)
+    #: the latency's test inversion: candidate latency -> the latency stage 1 read from runs emulated with it (s)
+    latency_inversion: dict[float, float] = field(default_factory=dict)
 
 
 def _quiet_profile(base: Mapping[str, Any], tau: float, latency: float) -> dict[str, Any]:
@@ -344,17 +355,26 @@ class _Fit:
     costs: dict[float, float]
 
 
+def _stage1_latency(runs: Sequence[RecordedRun], base: Mapping[str, Any]) -> tuple[Any, np.ndarray, float]:
+    """Stage 1 up to the latency: the lag (profiled, then with the gains) at ``base``'s latency, then each run's
+    cost at every latency of the control grid ``(latencies, runs)`` (m^2) with that lag and those gains, and the
+    latency of least summed cost (s)."""
+    f0 = base["field"]
+    dt = 1.0 / base["controller"]["control_rate_hz"]
+    tau0, g0 = _profile_lag(runs, base, f0["tracker_latency_s"], f0["wheel_gain_mean"])
+    res = _fit_tracks(runs, base, f0["tracker_latency_s"], np.r_[tau0, g0.ravel()])
+    run_costs = _latency_costs(runs, base, res.x, dt)
+    return res, run_costs, round(int(np.argmin(run_costs.sum(axis=1))) * dt, 6)
+
+
 def _fit(runs: Sequence[RecordedRun], base: dict[str, Any], seed: int, bootstrap: bool = True) -> _Fit:
     """The three stages of the module docstring on ``runs`` from the values of ``base``; with ``bootstrap`` the
     bootstrap over runs too.  ``seed`` seeds stage 3's simulations and the bootstrap."""
     f0 = base["field"]
     dt = 1.0 / base["controller"]["control_rate_hz"]
-    # stage 1: lag (profiled, then with the gains) at the profile's latency, the latency over the grid, again there
-    tau0, g0 = _profile_lag(runs, base, f0["tracker_latency_s"], f0["wheel_gain_mean"])
-    res = _fit_tracks(runs, base, f0["tracker_latency_s"], np.r_[tau0, g0.ravel()])
-    run_costs = _latency_costs(runs, base, res.x, dt)  # per grid step and run: its sum of squares
+    # stage 1: the latency (:func:`_stage1_latency`), then the lag and the gains again at it
+    res, run_costs, latency = _stage1_latency(runs, base)
     costs = {round(d * dt, 6): float(c) for d, c in enumerate(run_costs.sum(axis=1))}
-    latency = min(costs, key=lambda k: costs[k])
     res = _fit_tracks(runs, base, latency, res.x)
     tau = float(res.x[0])
     gains = res.x[1:].reshape(-1, 2)
@@ -440,6 +460,15 @@ def emulate(run: RecordedRun, profile: Mapping[str, Any], seed: int) -> Recorded
     return RecordedRun(run.path, run.start, poses, run.blocks, run.area, run.name, run.group) if len(poses) >= 10 else None
 
 
+def _emulated(runs: Sequence[RecordedRun], profile: Mapping[str, Any], rng: np.random.Generator) -> list[RecordedRun]:
+    """``runs``' paths driven again by the field robot of ``profile`` (:func:`emulate`), a new seed per group of runs;
+    the runs that completed."""
+    seeds: dict[str, int] = {}
+    new = [emulate(run, profile, seeds.setdefault(run.group or f"#{i}", int(rng.integers(1, 2**31))))
+           for i, run in enumerate(runs)]
+    return [r for r in new if r is not None]
+
+
 def _parametric(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mapping[str, Any], n: int,
                 rng: np.random.Generator, progress: Callable[[str], None] | None = None) -> np.ndarray:
     """``n`` refits (rows; columns :data:`FITTED`, SI units) of runs emulated like ``runs`` (their paths, a new seed
@@ -447,10 +476,7 @@ def _parametric(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mappi
     told ``"refit i/n"`` after each."""
     out = []
     for i in range(n):
-        seeds: dict[str, int] = {}
-        new = [emulate(run, fitted, seeds.setdefault(run.group or f"#{i}", int(rng.integers(1, 2**31))))
-               for i, run in enumerate(runs)]
-        new = [r for r in new if r is not None]
+        new = _emulated(runs, fitted, rng)
         if len(new) >= 2:
             v = _fit(new, base, int(rng.integers(0, 2**31)), bootstrap=False).values
             out.append([v[k] for k in FITTED])
@@ -459,13 +485,33 @@ def _parametric(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mappi
     return np.array(out).reshape(-1, len(FITTED))
 
 
+def _latency_inversion(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mapping[str, Any],
+                       rng: np.random.Generator, progress: Callable[[str], None] | None = None) -> dict[float, float]:
+    """The latency stage 1 reads (s) from runs emulated like ``runs`` with the ``fitted`` profile but each latency
+    of the fit's + :data:`INVERSION_OFFSETS` on the grid (candidate -> reading): where the fit's reading is
+    pulled, and how far, when the truth is elsewhere (:func:`uncertainty`); ``progress`` is told
+    ``"latency check i/k"`` after each."""
+    latency = float(fitted["field"]["tracker_latency_s"])
+    top = _MAX_LATENCY_STEPS / base["controller"]["control_rate_hz"]
+    candidates = [round(latency + d, 6) for d in INVERSION_OFFSETS if 0.0 <= latency + d <= top + 1e-9]
+    out = {}
+    for i, cand in enumerate(candidates):
+        new = _emulated(runs, apply_overrides(fitted, {"tracker_latency_s": cand}), rng)
+        if len(new) >= 2:
+            out[cand] = _stage1_latency(new, base)[2]
+        if progress is not None:
+            progress(f"latency check {i + 1}/{len(candidates)}")
+    return out
+
+
 def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DEFAULT_PROFILE, *,
               seed: int = 0, refits: int = REFITS, progress: Callable[[str], None] | None = None) -> Calibration:
     """Fit :data:`FITTED` of ``profile`` (a shipped name or a profile dict: its other values are kept, and are
     the starting point) to the recorded field ``runs`` (at least 2); ``seed`` seeds the simulations of stage 3,
     the bootstraps and the emulated runs; ``refits`` is the parametric bootstrap's number of refits (0: none,
-    and no intervals); ``progress``, if given, is told ``"fit"`` when the fit is done and ``"refit i/n"`` after
-    each refit (each takes about as long as the fit).  See the module docstring for the method."""
+    and no intervals); ``progress``, if given, is told ``"fit"`` when the fit is done, ``"refit i/n"`` after
+    each refit (each takes about as long as the fit) and ``"latency check i/k"`` after each of the latency's
+    test inversion (about half as long).  See the module docstring for the method."""
     if len(runs) < 2:
         raise ValueError("calibration needs at least 2 recorded runs")
     for r in runs:
@@ -477,17 +523,23 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
         progress("fit")
     rng = np.random.default_rng([seed, 1])
     par = _parametric(runs, base, fit.profile, refits, rng, progress)
+    # its own random numbers: the refits above stay those of a calibration without it
+    inversion = _latency_inversion(runs, base, fit.profile, np.random.default_rng([seed, 2]), progress) \
+        if len(par) >= 2 else {}
     scatter = {k: float(np.std(v, ddof=1)) if len(v) > 1 else float("nan") for k, v in fit.boot.items()}
-    u = uncertainty(fit.values, scatter, par)
+    u = uncertainty(fit.values, scatter, par, inversion)
     return Calibration(u["values"], u["std"], _clipped(base, u["values"]), fit.gains, fit.resimulated, fit.rms_m,
                        fit.costs, u["interval"], fitted=dict(fit.values), refits=par, bias=u["bias"],
-                       scatter=scatter, no_interval=u["no_interval"])
+                       scatter=scatter, no_interval=u["no_interval"], latency_inversion=inversion)
 
 
-def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refits: np.ndarray) -> dict[str, Any]:
+def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refits: np.ndarray,
+                inversion: Mapping[float, float] | None = None) -> dict[str, Any]:
     """Reported values (the fit's), standard errors, biases, 95 % intervals (bias-corrected), reasons for none and
-    the intervals withheld (:data:`NO_INTERVAL`: the same construction, for validation), from the fit's values ``fitted``, the bootstrap over runs' standard deviations ``scatter`` and the parametric
-    bootstrap's ``refits`` ``(B, 8)`` (SI units; the module docstring says how)."""
+    the intervals withheld (:data:`NO_INTERVAL`: the same construction, for validation), from the fit's values
+    ``fitted``, the bootstrap over runs' standard deviations ``scatter``, the parametric bootstrap's ``refits``
+    ``(B, 8)`` and the latency's test ``inversion`` (candidate latency -> reading; without it the latency has no
+    interval) (SI units; the module docstring says how)."""
     values, std, interval, bias, reasons, withheld = dict(fitted), {}, {}, {}, {}, {}
     for j, k in enumerate(FITTED):
         th = refits[:, j]
@@ -500,9 +552,15 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
         s_par = float(th.std(ddof=1))
         std[k] = math.sqrt(max(scatter[k], s_par) ** 2 + s_par ** 2 / len(th))
         centre = fitted[k] - bias[k]
-        half = float(student_t.ppf(0.975, len(th) - 1)) * std[k]
+        t_q = float(student_t.ppf(0.975, len(th) - 1))
+        ends = (centre - t_q * std[k], centre + t_q * std[k])
+        if k == "tracker_latency_s":
+            if not inversion:
+                reasons[k] = "no interval: without the latency's test inversion (refits 0, or runs that did not complete)"
+                continue
+            ends = _inverted(fitted[k], float(th.mean()), inversion, t_q * math.hypot(std[k], s_par), ends)
         lo, hi = OVERRIDE_LIMITS[k]  # a spread or noise is not negative
-        ends = (min(max(centre - half, lo), hi), min(max(centre + half, lo), hi))
+        ends = (min(max(ends[0], lo), hi), min(max(ends[1], lo), hi))
         if k in NO_INTERVAL:
             reasons[k] = NO_INTERVAL[k]
             withheld[k] = ends
@@ -511,3 +569,15 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
     return {"values": values, "std": std, "interval": interval, "bias": bias, "no_interval": reasons,
             "withheld": withheld}
 
+
+def _inverted(fit: float, at_fit: float, inversion: Mapping[float, float], within: float,
+              ends: tuple[float, float]) -> tuple[float, float]:
+    """The latency's interval (s): ``ends`` (the bias-corrected one) widened to every latency whose expected
+    reading lies ``within`` of the ``fit``'s.  The expected reading is interpolated (5 ms steps) between the
+    test ``inversion``'s candidates and the fit's own latency, whose refits read ``at_fit`` on average."""
+    points = {fit: at_fit, **{float(c): float(r) for c, r in inversion.items()}}
+    xs = np.array(sorted(points))
+    grid = np.arange(xs[0], xs[-1] + 1e-9, 0.005)
+    reading = np.interp(grid, xs, [points[x] for x in xs])
+    ok = grid[np.abs(reading - fit) <= within]
+    return (min(ends[0], float(ok.min())), max(ends[1], float(ok.max()))) if len(ok) else ends
