@@ -107,9 +107,10 @@ def test_offline_a_planning_failure_fails_the_experiment_as_the_testbed_does():
     # the bench counts the failed runs by reason, per planner and mode, and sums them over seeds
     kinds = {"fmm/sim": {exp["error"]: 2}, "fmm/twb": {exp["error"]: 2}}
     assert _bench().failures(data) == kinds
-    seed = {"seed": 0, "held": {}, "details": {}, "means": {}, "corners": {}, "failures": kinds}
+    seed = {"seed": 0, "runs": len(data.rows), "held": {}, "details": {}, "means": {}, "corners": {}, "failures": kinds}
     summary = _bench().summarize([seed, {**seed, "seed": 1}])
     assert summary["failed_runs"] == {"fmm/sim": {exp["error"]: 4}, "fmm/twb": {exp["error"]: 4}}
+    assert summary["runs_per_seed"] == [4, 4]
 
 
 def test_offline_a_randomised_planner_fails_the_repetitions_its_seeds_find_no_path_for():

@@ -556,7 +556,7 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
         ends = (centre - t_q * std[k], centre + t_q * std[k])
         if k == "tracker_latency_s":
             if not inversion:
-                reasons[k] = "no interval: without the latency's test inversion (refits 0, or runs that did not complete)"
+                reasons[k] = "no interval: without the latency's test inversion (its emulated runs did not complete)"
                 continue
             ends = _inverted(fitted[k], float(th.mean()), inversion, t_q * math.hypot(std[k], s_par), ends)
         lo, hi = OVERRIDE_LIMITS[k]  # a spread or noise is not negative
