@@ -70,9 +70,9 @@ def lag_profile(runs: list[cal.RecordedRun], base: dict, replicates: int, lags: 
 
 
 def own_estimates(runs: list[cal.RecordedRun], base: dict, seed: int, replicates: int, truth: dict) -> dict:
-    """The fit (no bootstrap) of ``runs`` (emulated with the field values ``truth``), then the lag profiled against ``replicates`` noisy re-simulations with the fit's
-    latency and wheel noise around the fit's lag: the lag of least cost (a parabola through it and its neighbours)
-    and the costs (relative to the least)."""
+    """The fit (no bootstrap) of ``runs`` (emulated with the field values ``truth``), then the lag profiled against
+    ``replicates`` noisy re-simulations with the fit's latency and wheel noise around the fit's lag: the lag of
+    least cost (a parabola through it and its neighbours) and the costs (relative to the least)."""
     t0 = time.perf_counter()
     fit = cal._fit(runs, base, 0, bootstrap=False)
     v = fit.values
@@ -80,12 +80,7 @@ def own_estimates(runs: list[cal.RecordedRun], base: dict, seed: int, replicates
     lags = np.round(v["motor_time_constant_s"] * np.arange(0.6, 1.101, 0.05), 4)
     noise = {k: v[k] for k in ("wheel_noise_rel", "wheel_noise_abs_m_s")}
     costs = np.array(lag_profile(runs, base, replicates, lags, v["tracker_latency_s"], noise, list(fit.gains)))
-    k = int(np.argmin(costs))
-    lag = float(lags[k])
-    if 0 < k < len(lags) - 1:  # evenly spaced: the vertex of the parabola through the least and its neighbours
-        c0, c1, c2 = costs[k - 1:k + 2]
-        den = c0 - 2 * c1 + c2
-        lag += 0.5 * float(c0 - c2) / float(den) * float(lags[1] - lags[0]) if den > 0 else 0.0
+    lag = cal._least_on_grid(lags, costs)
     return {"seed": seed, "true_lag_s": truth["motor_time_constant_s"], "true_wheel_noise_rel": truth["wheel_noise_rel"],
             "fit": {"lag_s": round(v["motor_time_constant_s"], 4), "wheel_noise_rel": round(v["wheel_noise_rel"], 4),
                     "tracker_latency_s": v["tracker_latency_s"], "seconds": round(t1 - t0, 1)},
@@ -105,30 +100,27 @@ def main() -> None:
     a = ap.parse_args()
     if a.variant and not a.own_estimates:
         ap.error("--variant needs --own-estimates")
-    truth = apply_overrides(load_profile("bebot"), TRUTH)
-    base = apply_overrides(load_profile("bebot"), WHITE_SLIP)
-    out = []
+    # (label, the profile the runs are emulated with, the profile the fit starts from)
     if a.variant:
-        for name in VARIANTS if a.variant == "all" else [a.variant]:
-            prof = apply_overrides(load_profile("bebot"), VARIANTS[name])
-            for seed in seed_list(a.seeds):
-                row = own_estimates(emulated_runs(prof, seed), load_profile("bebot"), seed, a.replicates, prof["field"])
-                out.append({"variant": name, **row})
-                print(f"{name}, seed {seed}: done", file=sys.stderr, flush=True)
-    for seed in [] if a.variant else seed_list(a.seeds):
-        runs = emulated_runs(truth, seed)
-        if a.own_estimates:
-            out.append(own_estimates(runs, base, seed, a.replicates, truth["field"]))
-            print(f"seed {seed}: done", file=sys.stderr, flush=True)
-            continue
-        row: dict = {"seed": seed, "true_lag_s": TRUTH["motor_time_constant_s"]}
-        for name, k in (("noise_free", 0), (f"mean_of_{a.replicates}_noisy", a.replicates)):
-            t0 = time.perf_counter()
-            costs = lag_profile(runs, base, k)
-            row[name] = {"least_cost_lag_s": float(LAGS[int(np.argmin(costs))]), "costs": dict(zip(LAGS.tolist(), costs)),
-                         "seconds": round(time.perf_counter() - t0, 1)}
-        out.append(row)
-        print(f"seed {seed}: done", file=sys.stderr, flush=True)
+        sets = [(name, apply_overrides(load_profile("bebot"), VARIANTS[name]), load_profile("bebot"))
+                for name in (VARIANTS if a.variant == "all" else [a.variant])]
+    else:
+        sets = [(None, apply_overrides(load_profile("bebot"), TRUTH), apply_overrides(load_profile("bebot"), WHITE_SLIP))]
+    out = []
+    for label, truth, base in sets:
+        for seed in seed_list(a.seeds):
+            runs = emulated_runs(truth, seed)
+            if a.own_estimates:
+                row = own_estimates(runs, base, seed, a.replicates, truth["field"])
+            else:
+                row = {"seed": seed, "true_lag_s": TRUTH["motor_time_constant_s"]}
+                for name, k in (("noise_free", 0), (f"mean_of_{a.replicates}_noisy", a.replicates)):
+                    t0 = time.perf_counter()
+                    costs = lag_profile(runs, base, k)
+                    row[name] = {"least_cost_lag_s": float(LAGS[int(np.argmin(costs))]),
+                                 "costs": dict(zip(LAGS.tolist(), costs)), "seconds": round(time.perf_counter() - t0, 1)}
+            out.append(row if label is None else {"variant": label, **row})
+            print(f"{label + ', ' if label else ''}seed {seed}: done", file=sys.stderr, flush=True)
     print(json.dumps({"date": time.strftime("%Y-%m-%d", time.gmtime()), "command": " ".join(["python", *sys.argv]),
                       "cases": out}, indent=1))
 

@@ -461,8 +461,8 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
             tally = failed.setdefault(g, {})
             for kind, n in kinds.items():
                 tally[kind] = tally.get(kind, 0) + n
-    return {"seeds": [r["seed"] for r in results], "runs_per_seed": [r["runs"] for r in results], "held": held, "prm_kappa_ratio_field_below_sim": strict,
-            "failing": {s: f for s, f in failing.items() if f},
+    return {"seeds": [r["seed"] for r in results], "runs_per_seed": [r["runs"] for r in results], "held": held,
+            "prm_kappa_ratio_field_below_sim": strict, "failing": {s: f for s, f in failing.items() if f},
             "means": avg, "computed_paths": shape, "failed_runs": failed}
 
 

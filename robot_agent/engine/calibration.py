@@ -252,16 +252,20 @@ def _profile_lag(runs: Sequence[RecordedRun], base: Mapping[str, Any], latency: 
         if len(costs) - 1 - int(np.argmin(costs)) >= 3:
             break
     k = int(np.argmin(costs))
-    tau = float(_LAG_GRID[k])
-    if 0 < k < len(costs) - 1:
-        c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
-        x0, x1, x2 = _LAG_GRID[k - 1:k + 2]
-        # the vertex of the parabola through three points (the grid is not evenly spaced everywhere)
-        num = (x1 - x0) ** 2 * (c1 - c2) - (x1 - x2) ** 2 * (c1 - c0)
-        den = (x1 - x0) * (c1 - c2) - (x1 - x2) * (c1 - c0)
-        if den != 0:
-            tau = float(min(max(x1 - 0.5 * num / den, x0), x2))
-    return tau, gains[k + 1]
+    return _least_on_grid(_LAG_GRID[:len(costs)], costs), gains[k + 1]
+
+
+def _least_on_grid(xs: Sequence[float] | np.ndarray, costs: Sequence[float] | np.ndarray) -> float:
+    """Where ``costs`` (at the increasing ``xs``, evenly spaced or not) is least: the vertex of the parabola
+    through the least grid point and its neighbours, within them; the grid point itself at either end."""
+    k = int(np.argmin(costs))
+    if not 0 < k < len(costs) - 1:
+        return float(xs[k])
+    c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
+    x0, x1, x2 = xs[k - 1], xs[k], xs[k + 1]
+    num = (x1 - x0) ** 2 * (c1 - c2) - (x1 - x2) ** 2 * (c1 - c0)
+    den = (x1 - x0) * (c1 - c2) - (x1 - x2) * (c1 - c0)
+    return float(min(max(x1 - 0.5 * num / den, x0), x2)) if den != 0 else float(x1)
 
 
 def _latency_costs(runs: Sequence[RecordedRun], base: Mapping[str, Any], x: np.ndarray, dt: float) -> np.ndarray:

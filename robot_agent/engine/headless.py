@@ -96,7 +96,7 @@ def simulate_run(path: Sequence[Sequence[float]] | np.ndarray, start: Sequence[f
     params = robot_params(profile)
     core = layout_core(params, backend, 1, "separate", area)
     world = core.world
-    size = (float(core.world.area[0, 0]), float(core.world.area[0, 1]))
+    size = (float(world.area[0, 0]), float(world.area[0, 1]))
     built = parse_command(encode_build(blocks), field_size=size)
     placed = parse_command(encode_place(start), field_size=size)
     sent = parse_command(encode_path(path), field_size=size)
