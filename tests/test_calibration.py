@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from robot_agent.engine.calibration import FITTED, NO_INTERVAL, RecordedRun, calibrate, uncertainty
+from robot_agent.engine.calibration import (FITTED, INVERSION_STEP, NO_INTERVAL, RecordedRun, calibrate,
+                                           inversion_readings, uncertainty)
 from contract.overrides import apply_overrides
 from contract.params import robot_params
 from contract.robot_profile import load_profile
@@ -109,9 +110,13 @@ def test_calibration_intervals_cover_the_truth():
             assert lo <= centre <= hi and hi - lo > 0.06, (lo, hi, centre)
         elif lo > 0:  # centred on it, unless clipped at 0
             assert (lo + hi) / 2 == pytest.approx(centre)
-    # the inversion's candidates: 0.04 and 0.08 s either side of the fitted latency, each read again
+    # the inversion's candidates: 0.04 and 0.08 s either side of the fitted latency, each read again, and on in
+    # 0.04 s steps on a side whose outermost reading was still near the fit's
     lat = cal.fitted["tracker_latency_s"]
-    assert sorted(cal.latency_inversion) == pytest.approx([lat - 0.08, lat - 0.04, lat + 0.04, lat + 0.08])
+    tried = sorted(cal.latency_inversion)
+    assert [c for c in tried if abs(c - lat) < 0.081] == pytest.approx([lat - 0.08, lat - 0.04, lat + 0.04, lat + 0.08])
+    assert np.diff([c for c in tried if c > lat]) == pytest.approx(INVERSION_STEP)
+    assert np.diff([c for c in tried if c < lat]) == pytest.approx(INVERSION_STEP)
     assert all(0 <= v <= 0.3 for v in cal.latency_inversion.values())
     assert cal.values == cal.fitted  # the profile keeps the fit's values
 
@@ -167,6 +172,28 @@ def test_the_latency_interval_takes_in_every_latency_whose_reading_would_be_the_
     assert u["interval"]["tracker_latency_s"] == pytest.approx((0.1 - 0.0318245, 0.1 + 0.0318245), rel=1e-5)
 
 
+def test_the_latency_inversion_steps_out_while_the_outermost_reading_is_still_the_fits():
+    """Fit 0.14 s, band 0.03 s, grid 0-0.3 s.  A flat reading (0.14 everywhere: a true 0.25 s reads 0.12-0.16 s)
+    steps out on both sides to the grid's ends, so the interval takes in 0.25 s; a steep one (reading = latency)
+    stops at the four candidates; a side whose runs do not complete stops there."""
+    asked: list[float] = []
+
+    def flat(c: float) -> float:
+        asked.append(c)
+        return 0.14
+
+    got = inversion_readings(flat, 0.14, 0.03, 0.3)
+    assert sorted(got) == pytest.approx([0.02, 0.06, 0.1, 0.18, 0.22, 0.26, 0.3])  # 0.02 - 0.04 is off the grid
+    assert asked[:4] == pytest.approx([0.06, 0.1, 0.18, 0.22])  # the four first, then the steps
+    u = uncertainty({k: 0.14 for k in FITTED}, {k: 0.01 for k in FITTED}, np.full((4, len(FITTED)), 0.14), got)
+    lo, hi = u["interval"]["tracker_latency_s"]
+    assert lo == pytest.approx(0.02) and hi == pytest.approx(0.3) and lo <= 0.25 <= hi
+    assert sorted(inversion_readings(lambda c: c, 0.14, 0.03, 0.3)) == pytest.approx([0.06, 0.1, 0.18, 0.22])
+    # above 0.2 s the emulated runs fail: that side stops at its last reading
+    got = inversion_readings(lambda c: 0.14 if c < 0.2 else None, 0.14, 0.03, 0.3)
+    assert sorted(got) == pytest.approx([0.02, 0.06, 0.1, 0.18])
+
+
 def test_calibration_needs_runs():
     with pytest.raises(ValueError, match="at least 2"):
         calibrate([], "bebot")
@@ -187,7 +214,8 @@ def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
     # progress on stderr: the fit, then each refit
     assert "calibrating 3 runs: the fit, then 4 refit(s)" in r.stderr and "  fit done after " in r.stderr
     assert r.stderr.index("  refit 3/4 done after ") < r.stderr.index("  refit 4/4 done after ")
-    assert "then up to 4 latency checks" in r.stderr and "  latency check 4/4 done after " in r.stderr
+    assert "then 4 latency checks (more while the latency's interval is still open)" in r.stderr
+    assert "  latency check 4/4 done after " in r.stderr
     assert r.stderr.index("  refit 4/4 done after ") < r.stderr.index("  latency check 1/4 done after ")
     assert "tracker_latency_s" in r.stdout and "no interval" not in r.stdout
     prof = json.loads((tmp_path / "calibrated-profile.json").read_text())

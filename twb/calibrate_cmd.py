@@ -144,7 +144,7 @@ def calibrate(
     refits = REFITS if refits is None else refits
     started = time.monotonic()
     typer.echo(f"calibrating {len(recorded)} runs: the fit, then {refits} refit(s) of runs emulated with it, each about "
-               "as long" + (", then up to 4 latency checks, each about half as long" if refits >= 2 else ""), err=True)
+               "as long" + (", then 4 latency checks (more while the latency's interval is still open), each about half as long" if refits >= 2 else ""), err=True)
 
     def progress(step: str) -> None:
         typer.echo(f"  {step} done after {time.monotonic() - started:.0f} s", err=True)

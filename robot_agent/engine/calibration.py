@@ -45,7 +45,9 @@ compensates): for a true 0.16 s it reads 0.10-0.14 s.  Refits around a reading o
 which vanishes there, so the latency's interval is also a **test inversion** (Neyman's construction, on a few
 points): runs are emulated with the fitted profile at latencies :data:`INVERSION_OFFSETS` away from the fit's
 and stage 1 reads their latency (:func:`_latency_inversion`; its own random numbers, so the refits do not
-change); the expected reading is interpolated between those latencies and the fit's own (its refits' mean), and
+change); while the outermost latency on a side still reads within that side's acceptance band (below), it steps
+out by :data:`INVERSION_STEP` to the grid's end, so that the band is closed by a latency outside it rather than by
+the last candidate (a true 0.25 s reads 0.12-0.16 s); the expected reading is interpolated between those latencies and the fit's own (its refits' mean), and
 the interval is widened to every latency whose expected reading lies within t(0.975, B - 1) times the standard
 error of the fit's (the standard error above combined with one refit's scatter, as each point is one refit)
 (:func:`_inverted`).  The latency is weakly seen in the tracked positions (it acts only through the
@@ -98,6 +100,8 @@ _BOOTSTRAP = 400
 REFITS = 4  # the parametric bootstrap's refits
 #: the latencies (s) relative to the fit's at which :func:`_latency_inversion` emulates runs
 INVERSION_OFFSETS = (-0.08, -0.04, 0.04, 0.08)
+#: the step (s) by which :func:`_latency_inversion` goes on beyond them while the outermost reading is accepted
+INVERSION_STEP = 0.04
 #: parameters reported without an interval, and why: the interval of the module docstring did not cover the truth
 #: in ~90 % of the validation cases (bench/calibration_coverage.py, 4 refits: tuning seeds 1-5, held-out seeds 6-10;
 #: docs/fidelity.md, "Calibration"); none since the latency's test inversion (2026-11-28)
@@ -106,7 +110,8 @@ NO_INTERVAL: dict[str, str] = {}
 METHOD = ("95 % interval: the fit's bias and scatter from a parametric bootstrap (runs emulated like these with the "
           "fitted profile, fitted again) and a bootstrap over the runs; centred on the bias-corrected value "
           "(value minus bias), the value itself is the fit's; the tracker latency's widened by a test inversion (runs "
-          "emulated at latencies 0.04 and 0.08 s either side of the fit's, read again)")
+          "emulated at latencies 0.04 and 0.08 s either side of the fit's, and on in 0.04 s steps while still "
+          "consistent, read again)")
 
 
 @dataclass(frozen=True)
@@ -490,21 +495,55 @@ def _parametric(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mappi
 
 
 def _latency_inversion(runs: Sequence[RecordedRun], base: dict[str, Any], fitted: Mapping[str, Any],
-                       rng: np.random.Generator, progress: Callable[[str], None] | None = None) -> dict[float, float]:
-    """The latency stage 1 reads (s) from runs emulated like ``runs`` with the ``fitted`` profile but each latency
-    of the fit's + :data:`INVERSION_OFFSETS` on the grid (candidate -> reading): where the fit's reading is
-    pulled, and how far, when the truth is elsewhere (:func:`uncertainty`); ``progress`` is told
-    ``"latency check i/k"`` after each."""
-    latency = float(fitted["field"]["tracker_latency_s"])
-    top = _MAX_LATENCY_STEPS / base["controller"]["control_rate_hz"]
-    candidates = [round(latency + d, 6) for d in INVERSION_OFFSETS if 0.0 <= latency + d <= top + 1e-9]
-    out = {}
-    for i, cand in enumerate(candidates):
+                       rng: np.random.Generator, within: float = math.inf,
+                       progress: Callable[[str], None] | None = None) -> dict[float, float]:
+    """The latency stage 1 reads (s) from runs emulated like ``runs`` with the ``fitted`` profile but the latency
+    of each candidate of :func:`inversion_readings` (candidate -> reading): where the fit's reading is pulled,
+    and how far, when the truth is elsewhere (:func:`uncertainty`).  ``progress`` is told ``"latency check i/k"``
+    after each of the first k, ``"latency check i (stepping out)"`` after each further one."""
+    k = len(INVERSION_OFFSETS)
+
+    def read(cand: float) -> float | None:
         new = _emulated(runs, apply_overrides(fitted, {"tracker_latency_s": cand}), rng)
-        if len(new) >= 2:
-            out[cand] = _stage1_latency(new, base)[2]
+        reading = _stage1_latency(new, base)[2] if len(new) >= 2 else None
         if progress is not None:
-            progress(f"latency check {i + 1}/{len(candidates)}")
+            i = len(done) + 1
+            progress(f"latency check {i}/{k}" if i <= k else f"latency check {i} (stepping out)")
+        done.append(cand)
+        return reading
+
+    done: list[float] = []
+    return inversion_readings(read, float(fitted["field"]["tracker_latency_s"]), within,
+                                _MAX_LATENCY_STEPS / base["controller"]["control_rate_hz"])
+
+
+def inversion_readings(read: Callable[[float], float | None], latency: float, within: float,
+                         top: float) -> dict[float, float]:
+    """The latency test inversion's readings (candidate s -> reading s; ``read`` gives one, None if its runs did not
+    complete): the fit's ``latency`` + each of :data:`INVERSION_OFFSETS` within [0, ``top``]; then, on each side,
+    while the outermost candidate's reading lies ``within`` (s) of ``latency``, the next one
+    :data:`INVERSION_STEP` further out, up to the grid's ends.  The band is so closed by a latency read outside it
+    (or by the grid's end), not by the last candidate."""
+    def on_grid(c: float) -> bool:
+        return -1e-9 <= c <= top + 1e-9
+
+    out: dict[float, float] = {}
+
+    def take(cand: float) -> bool:
+        reading = read(max(cand, 0.0))
+        if reading is not None:
+            out[cand] = reading
+        return reading is not None
+
+    for d in INVERSION_OFFSETS:
+        if on_grid(latency + d):
+            take(round(latency + d, 6))
+    for side in (-1.0, 1.0):
+        edge = max((c for c in out if side * (c - latency) > 0), key=lambda c: side * c, default=None)
+        while edge is not None and abs(out[edge] - latency) <= within and on_grid(edge + side * INVERSION_STEP):
+            edge = round(edge + side * INVERSION_STEP, 6)
+            if not take(edge):
+                break
     return out
 
 
@@ -527,10 +566,12 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
         progress("fit")
     rng = np.random.default_rng([seed, 1])
     par = _parametric(runs, base, fit.profile, refits, rng, progress)
-    # its own random numbers: the refits above stay those of a calibration without it
-    inversion = _latency_inversion(runs, base, fit.profile, np.random.default_rng([seed, 2]), progress) \
-        if len(par) >= 2 else {}
     scatter = {k: float(np.std(v, ddof=1)) if len(v) > 1 else float("nan") for k, v in fit.boot.items()}
+    lat = FITTED.index("tracker_latency_s")
+    # its own random numbers: the refits above stay those of a calibration without it
+    inversion = _latency_inversion(runs, base, fit.profile, np.random.default_rng([seed, 2]),
+                                   _band(scatter["tracker_latency_s"], par[:, lat]), progress) \
+        if len(par) >= 2 and math.isfinite(scatter["tracker_latency_s"]) else {}
     u = uncertainty(fit.values, scatter, par, inversion)
     return Calibration(u["values"], u["std"], _clipped(base, u["values"]), fit.gains, fit.resimulated, fit.rms_m,
                        fit.costs, u["interval"], fitted=dict(fit.values), refits=par, bias=u["bias"],
@@ -553,16 +594,14 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
             reasons[k] = "no interval: fewer than 2 refits or groups of runs"
             continue
         bias[k] = float(th.mean() - fitted[k])
-        s_par = float(th.std(ddof=1))
-        std[k] = math.sqrt(max(scatter[k], s_par) ** 2 + s_par ** 2 / len(th))
+        std[k], t_q = _standard_error(scatter[k], th)
         centre = fitted[k] - bias[k]
-        t_q = float(student_t.ppf(0.975, len(th) - 1))
         ends = (centre - t_q * std[k], centre + t_q * std[k])
         if k == "tracker_latency_s":
             if not inversion:
                 reasons[k] = "no interval: without the latency's test inversion (its emulated runs did not complete)"
                 continue
-            ends = _inverted(fitted[k], float(th.mean()), inversion, t_q * math.hypot(std[k], s_par), ends)
+            ends = _inverted(fitted[k], float(th.mean()), inversion, _band(scatter[k], th), ends)
         lo, hi = OVERRIDE_LIMITS[k]  # a spread or noise is not negative
         ends = (min(max(ends[0], lo), hi), min(max(ends[1], lo), hi))
         if k in NO_INTERVAL:
@@ -572,6 +611,20 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
             interval[k] = ends
     return {"values": values, "std": std, "interval": interval, "bias": bias, "no_interval": reasons,
             "withheld": withheld}
+
+
+def _standard_error(scatter: float, th: np.ndarray) -> tuple[float, float]:
+    """A parameter's standard error from the bootstrap over runs' standard deviation ``scatter`` and its refits
+    ``th`` (see the module docstring), and the t quantile (0.975, B - 1) its interval uses."""
+    s_par = float(th.std(ddof=1))
+    return math.sqrt(max(scatter, s_par) ** 2 + s_par ** 2 / len(th)), float(student_t.ppf(0.975, len(th) - 1))
+
+
+def _band(scatter: float, th: np.ndarray) -> float:
+    """The latency's acceptance half-width (s) in its test inversion: t times the fit's standard error combined
+    with one refit's scatter (each candidate's reading is one refit)."""
+    std, t_q = _standard_error(scatter, th)
+    return t_q * math.hypot(std, float(th.std(ddof=1)))
 
 
 def _inverted(fit: float, at_fit: float, inversion: Mapping[float, float], within: float,
