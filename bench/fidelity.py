@@ -13,6 +13,7 @@ checks it as it checks a study the testbed ran (and the numbers are the same:
     python bench/fidelity.py varied --seeds 0-19           # on corridors, clutter, an open field, a zig-zag
     python bench/fidelity.py generated --seeds 0-19        # random blocks and walls, new ones per seed
     python bench/fidelity.py varied --plans 6              # 6 start/goal pairs per environment instead of 3
+    python bench/fidelity.py generated --planner fm2.round=3   # with a planner parameter (FM²'s corners cut)
     python bench/fidelity.py paper --set field.tracker_latency_s=0   # with a profile change
     python bench/fidelity.py paper --main                  # the field robot as it was on e2c6fc3
     python bench/fidelity.py ablate --seeds 0-9            # one change at a time, driven and logged paths
@@ -302,18 +303,29 @@ def _planning_failed(data: StudyData, spec: StudySpec, ident: dict[str, Any], pl
                              "runs": runs})
 
 
-def paper(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False) -> StudyData:
-    """The paper's 48 runs with study seed ``seed``, offline."""
-    return study_data(StudySpec.from_json({**paper_spec().to_json(), "seed": seed}, "paper"), overrides, truth)
+def with_params(planners: list[Any], planner_params: Optional[dict[str, dict[str, Any]]]) -> list[Any]:
+    """A study's ``planners`` entries with ``planner_params`` (planner name -> its parameters) given to the named
+    ones, each still labelled by its name (so tables and findings read ``fm2`` as before)."""
+    pp = planner_params or {}
+    return [{"name": p, "params": dict(pp[p]), "label": p} if isinstance(p, str) and p in pp else p for p in planners]
+
+
+def paper(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False,
+          planner_params: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
+    """The paper's 48 runs with study seed ``seed``, offline (``planner_params``: :func:`with_params`)."""
+    spec = paper_spec().to_json()
+    spec = {**spec, "planners": with_params(spec["planners"], planner_params), "seed": seed}
+    return study_data(StudySpec.from_json(spec, "paper"), overrides, truth)
 
 
 def varied(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False,
-           plans_per_env: int = 3) -> StudyData:
+           plans_per_env: int = 3, planner_params: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
     """:func:`varied_environments`, ``plans_per_env`` random start/goal pairs each (drawn from ``seed``),
-    FMM, FM² and PRM, 2 repetitions: 144 runs."""
+    FMM, FM² and PRM (``planner_params``: :func:`with_params`), 2 repetitions: 144 runs."""
     datas = []
     for i, env in enumerate(varied_environments()):
-        spec = StudySpec.from_json({"name": "varied", "environments": [env], "planners": list(PLANNERS),
+        spec = StudySpec.from_json({"name": "varied", "environments": [env],
+                                    "planners": with_params(list(PLANNERS), planner_params),
                                     "plans": random_plans(env, plans_per_env, seed * 1000 + i),
                                     "repetitions": 2, "seed": seed}, "varied")
         datas.append(study_data(spec, overrides, truth))
@@ -321,12 +333,13 @@ def varied(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool 
 
 
 def generated(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False,
-              plans_per_env: int = 3) -> StudyData:
+              plans_per_env: int = 3, planner_params: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
     """:func:`generated_environments` of ``seed``, ``plans_per_env`` random start/goal pairs each, FMM, FM² and
-    PRM, 2 repetitions: 72 runs."""
+    PRM (``planner_params``: :func:`with_params`), 2 repetitions: 72 runs."""
     datas = []
     for i, env in enumerate(generated_environments(seed)):
-        spec = StudySpec.from_json({"name": "generated", "environments": [env], "planners": list(PLANNERS),
+        spec = StudySpec.from_json({"name": "generated", "environments": [env],
+                                    "planners": with_params(list(PLANNERS), planner_params),
                                     "plans": random_plans(env, plans_per_env, seed * 1000 + 500 + i),
                                     "repetitions": 2, "seed": seed}, "generated")
         datas.append(study_data(spec, overrides, truth))
@@ -417,10 +430,10 @@ def failures(data: StudyData) -> dict[str, dict[str, int]]:
     return out
 
 
-def _one(job: tuple[str, int, dict[str, float], bool, int]) -> dict[str, Any]:
-    kind, seed, overrides, truth, plans = job
-    data = paper(seed, overrides, truth) if kind == "paper" else \
-        {"varied": varied, "generated": generated}[kind](seed, overrides, truth, plans)
+def _one(job: tuple[str, int, dict[str, float], bool, int, dict[str, dict[str, Any]]]) -> dict[str, Any]:
+    kind, seed, overrides, truth, plans, planner_params = job
+    data = paper(seed, overrides, truth, planner_params) if kind == "paper" else \
+        {"varied": varied, "generated": generated}[kind](seed, overrides, truth, plans, planner_params)
     found = paper_findings(data)
     n = next(f.numbers for f in found if f.key == "field_ratios_worse")
     strict = None if not n else bool(n.get("prm_twb_smoothness_ratio") is not None
@@ -432,10 +445,11 @@ def _one(job: tuple[str, int, dict[str, float], bool, int]) -> dict[str, Any]:
 
 
 def run_many(kind: str, seeds: list[int], overrides: Optional[dict[str, float]] = None, workers: int = 2,
-             truth: bool = False, plans: int = 3) -> list[dict[str, Any]]:
-    """:func:`paper`, :func:`varied` or :func:`generated` (``plans`` start/goal pairs per environment) for every
-    seed (in ``workers`` processes): findings and means."""
-    jobs = [(kind, s, dict(overrides or {}), truth, plans) for s in seeds]
+             truth: bool = False, plans: int = 3,
+             planner_params: Optional[dict[str, dict[str, Any]]] = None) -> list[dict[str, Any]]:
+    """:func:`paper`, :func:`varied` or :func:`generated` (``plans`` start/goal pairs per environment; the planners'
+    ``planner_params``) for every seed (in ``workers`` processes): findings and means."""
+    jobs = [(kind, s, dict(overrides or {}), truth, plans, dict(planner_params or {})) for s in seeds]
     if workers <= 1:
         return [_one(j) for j in jobs]
     with ProcessPoolExecutor(workers) as ex:
@@ -544,6 +558,8 @@ def main() -> None:
     ap.add_argument("--plans", type=int, default=3,
                     help="varied, generated: random start/goal pairs per environment (each seed's study has 4 x PLANS "
                          "and 2 x PLANS problems)")
+    ap.add_argument("--planner", action="append", default=[], metavar="NAME.KEY=VALUE",
+                    help="paper, varied, generated: a planner parameter (fm2.round=3), the planner still named NAME")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--figure", help="predictivity: write the first seed's figure here")
     a = ap.parse_args()
@@ -560,7 +576,21 @@ def main() -> None:
         ap.error(str(exc))
     if a.plans < 1:
         ap.error("--plans must be at least 1")
-    print(json.dumps(summarize(run_many(a.what, seed_list(a.seeds), ov, a.workers, a.truth, a.plans)), indent=1))
+    pp: dict[str, dict[str, Any]] = {}
+    for item in a.planner:
+        key, _, value = item.partition("=")
+        name, _, param = key.partition(".")
+        if name not in PLANNERS or not param or not value:
+            ap.error(f"--planner {item}: expected NAME.KEY=VALUE with NAME one of {', '.join(PLANNERS)}")
+        pp.setdefault(name, {})[param] = json.loads(value) if value.lstrip("-").replace(".", "", 1).isdigit() \
+            else value
+    for name, params in pp.items():
+        try:
+            get_planner(name).validate_params(params)
+        except (PlanningError, ValueError) as exc:
+            ap.error(str(exc))
+    out = summarize(run_many(a.what, seed_list(a.seeds), ov, a.workers, a.truth, a.plans, pp))
+    print(json.dumps({**out, **({"planner_params": pp} if pp else {})}, indent=1))
 
 
 if __name__ == "__main__":

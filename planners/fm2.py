@@ -7,7 +7,8 @@ keeps away from obstacles where there is room and stays smooth.  As for FMM,
 the front is marched only as far as the query needs
 (:func:`planners.fast_marching.plan`).  The descent is smoothed
 (:func:`smooth_descent`) and then straightened inside the band of clearance it
-keeps (:func:`band_shortcut`).
+keeps (:func:`band_shortcut`); on request (``round``) the straightened path's corners are
+cut (:func:`round_corners`).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from .geometry import block_arrays, distance_to_obstacles
 from .grid import ConfigSpace
 from .postprocess import simplify
 
-__all__ = ["FM2Planner", "band_shortcut", "smooth_descent", "speed_map"]
+__all__ = ["FM2Planner", "band_shortcut", "round_corners", "smooth_descent", "speed_map"]
 
 #: the furthest (in corners of the simplified descent) a chord of :func:`band_shortcut` reaches ahead
 SHORTCUT_WINDOW = 64
@@ -92,6 +93,26 @@ def band_shortcut(space: ConfigSpace, path: np.ndarray, tolerance: float) -> tup
     return corners[keep], n - len(keep)
 
 
+def round_corners(space: ConfigSpace, path: np.ndarray, passes: int) -> tuple[np.ndarray, int]:
+    """``path`` ``(N, 2)`` (m) with its corners cut, ``passes`` times (Chaikin: every segment replaced by the points
+    at its quarter and three quarters, the ends kept), a pass kept only if every new segment is free (exact
+    segment test): a polyline's corners become curves of a few centimetres' radius that keep near the chords.
+    Returns the path and how many passes were refused (collision)."""
+    p = np.asarray(path, dtype=float)[:, :2]
+    for k in range(passes):
+        if len(p) < 3:
+            return p, 0
+        a, b = p[:-1], p[1:]
+        cut = np.empty((2 * len(a), 2))
+        cut[0::2] = 0.75 * a + 0.25 * b
+        cut[1::2] = 0.25 * a + 0.75 * b
+        new = np.vstack([p[:1], cut[1:-1], p[-1:]])
+        if not space.segments_free(new[:-1], new[1:]).all():
+            return p, passes - k
+        p = new
+    return p, 0
+
+
 def speed_map(space: ConfigSpace, saturation: float, min_speed: float = 0.01) -> np.ndarray:
     """FM² speed (normalised to [0, 1]) of every cell from the Euclidean distance transform."""
     margin = space.grid.clearance - space.radius
@@ -112,6 +133,9 @@ class FM2Planner(Planner):
               type="integer"),
         Param("shortcut", "", True, None, None, "replace runs of the smoothed descent by chords that keep the "
               "clearance it has at their ends (false: the smoothed descent)", type="boolean"),
+        Param("round", "passes", 0, 0, 6, "corner-cutting passes over the result (Chaikin; each kept only if the "
+              "path stays free): the straightened path's corners become short curves (0: its polyline)",
+              type="integer"),
     )
 
     def solve(
@@ -123,4 +147,6 @@ class FM2Planner(Planner):
             path, info["smooth_refused"] = smooth_descent(space, path, params["smooth"])
         if params["shortcut"]:
             path, info["shortcut_cut"] = band_shortcut(space, path, SHORTCUT_TOLERANCE * space.resolution)
+        if params["round"]:
+            path, info["round_refused"] = round_corners(space, path, params["round"])
         return path, info

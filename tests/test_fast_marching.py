@@ -22,7 +22,7 @@ from planners import (
     plan_path,
 )
 from planners.fast_marching import FrontMarch, descend, plan, travel_time
-from planners.fm2 import SHORTCUT_TOLERANCE, band_shortcut, smooth_descent, speed_map
+from planners.fm2 import SHORTCUT_TOLERANCE, band_shortcut, round_corners, smooth_descent, speed_map
 
 REL = 1e-9
 
@@ -243,6 +243,31 @@ def test_the_planners_give_the_paths_of_the_full_field():
                 want = band_shortcut(space, want, SHORTCUT_TOLERANCE * space.resolution)[0]
             assert np.array_equal(got, want)
             assert info["cells_accepted"] > 0
+
+
+def test_fm2_can_cut_the_corners_of_its_straightened_path():
+    """``round``: each Chaikin pass halves a corner's largest turn and keeps the ends; a pass that would cross a
+    block is refused, the path then kept as it was; the planner reports the refusals."""
+    open_space = config_space(parse_environment({"name": "open", "size": [1.0, 1.0], "blocks": []}),
+                              DEFAULT_ROBOT_RADIUS, 0.01)
+    corner = np.array([[0.2, 0.2], [0.7, 0.2], [0.7, 0.7]])  # a right angle
+    got, refused = round_corners(open_space, corner, 3)
+    assert refused == 0 and len(got) == 10  # points: 3 -> 4 -> 6 -> 10
+    assert np.array_equal(got[0], corner[0]) and np.array_equal(got[-1], corner[-1])
+    turn = np.degrees(np.abs(np.diff(np.unwrap(np.arctan2(*np.diff(got, axis=0).T[::-1])))))
+    assert turn.max() < 90 / 4 and turn.sum() == pytest.approx(90)
+    # a block just inside the corner (its corner 1.5 cm beyond the robot's radius from both legs): cutting the
+    # corner would cross it, so nothing is cut
+    blocked = config_space(parse_environment({"name": "b", "size": [1.0, 1.0],
+                                              "blocks": [{"x": 0.5, "y": 0.3, "w": 0.08, "h": 0.08}]}),
+                           DEFAULT_ROBOT_RADIUS, 0.01)
+    path = np.array([[0.2, 0.2], [0.6, 0.2], [0.6, 0.6]])
+    assert blocked.segments_free(path[:-1], path[1:]).all()
+    got, refused = round_corners(blocked, path, 2)
+    assert refused == 2 and np.array_equal(got, path)
+    info = get_planner("fm2").solve(open_space, np.array([0.2, 0.2]), np.array([0.8, 0.8]),
+                                    get_planner("fm2").validate_params({"round": 2}), 0)[1]
+    assert info["round_refused"] == 0
 
 
 # --- unreachable goals --------------------------------------------------------------------------------------

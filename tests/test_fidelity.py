@@ -156,16 +156,25 @@ def test_offline_varied_environments_and_their_random_problems():
 
 def test_fidelity_bench_takes_the_number_of_problems_per_environment():
     """``--plans`` reaches the study (one start/goal pair per generated environment: 2 problems x 3 planners x 2
-    repetitions x 2 modes = 24 runs), and a number below 1 is refused before anything runs."""
+    repetitions x 2 modes = 24 runs), and so does ``--planner`` (FM²'s corners cut: its computed paths' corners
+    differ from those of the same study without, the other planners' do not); a number of plans below 1 and a
+    planner parameter the planner does not have are refused before anything runs."""
     import subprocess
 
     script = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "fidelity.py"), "generated"]
-    out = subprocess.run([*script, "--seeds", "3", "--plans", "1", "--workers", "1"], capture_output=True, text=True,
-                         check=True)
+    out = subprocess.run([*script, "--seeds", "3", "--plans", "1", "--workers", "1", "--planner", "fm2.round=3"],
+                         capture_output=True, text=True, check=True)
     summary = json.loads(out.stdout)
     assert summary["seeds"] == [3] and summary["runs_per_seed"] == [24] and set(summary["held"]) == set(FINDINGS)
+    assert summary["planner_params"] == {"fm2": {"round": 3}}
+    plain = {p: {k: round(v, 2) for k, v in c.items()}
+             for p, c in _bench().corners(_bench().generated(3, plans_per_env=1)).items()}
+    assert summary["computed_paths"]["fm2"] != plain["fm2"]
+    assert {p: summary["computed_paths"][p] for p in ("fmm", "prm")} == {p: plain[p] for p in ("fmm", "prm")}
     bad = subprocess.run([*script, "--plans", "0"], capture_output=True, text=True)
     assert bad.returncode == 2 and "--plans must be at least 1" in bad.stderr
+    bad = subprocess.run([*script, "--planner", "fm2.rounds=3"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "planner 'fm2' has no parameter 'rounds'" in bad.stderr
 
 
 # ---------------------------------------------------------------- the checks, on synthetic data
