@@ -188,7 +188,11 @@ def test_the_latency_inversion_steps_out_while_the_outermost_reading_is_still_th
     u = uncertainty({k: 0.14 for k in FITTED}, {k: 0.01 for k in FITTED}, np.full((4, len(FITTED)), 0.14), got)
     lo, hi = u["interval"]["tracker_latency_s"]
     assert lo == pytest.approx(0.02) and hi == pytest.approx(0.3) and lo <= 0.25 <= hi
-    assert sorted(inversion_readings(lambda c: c, 0.14, 0.03, 0.3)) == pytest.approx([0.06, 0.1, 0.18, 0.22])
+    assert u["notes"]["tracker_latency_s"].startswith("open above: runs emulated at 0.30 s, the latency grid's end")
+    steep = inversion_readings(lambda c: c, 0.14, 0.03, 0.3)
+    assert sorted(steep) == pytest.approx([0.06, 0.1, 0.18, 0.22])
+    u = uncertainty({k: 0.14 for k in FITTED}, {k: 0.01 for k in FITTED}, np.full((4, len(FITTED)), 0.14), steep)
+    assert u["interval"]["tracker_latency_s"][1] < 0.22 and not u["notes"]  # bounded by a latency read outside
     # above 0.2 s the emulated runs fail: that side stops at its last reading
     got = inversion_readings(lambda c: 0.14 if c < 0.2 else None, 0.14, 0.03, 0.3)
     assert sorted(got) == pytest.approx([0.02, 0.06, 0.1, 0.18])
@@ -221,6 +225,10 @@ def test_twb_calibrate_on_a_study_directory(capsys, monkeypatch, tmp_path):
     prof = json.loads((tmp_path / "calibrated-profile.json").read_text())
     assert set(prof["calibration"]["values"]) == set(FITTED) and prof["calibration"]["runs"] == 3
     assert set(prof["calibration"]["interval_95"]) == set(FITTED) - set(NO_INTERVAL)
+    # an interval open at the latency grid's end says so, on its line and in the profile
+    assert set(prof["calibration"]["interval_notes"]) <= {"tracker_latency_s"}
+    assert all(line.startswith("tracker_latency_s") for line in r.stdout.splitlines() if "(open above:" in line)
+    assert ("(open above:" in r.stdout) == bool(prof["calibration"]["interval_notes"])
     assert prof["calibration"]["no_interval"] == NO_INTERVAL and prof["calibration"]["refits"] == 4
     assert prof["field"]["motor_time_constant_s"] == pytest.approx(prof["calibration"]["values"]["motor_time_constant_s"],
                                                                    abs=1e-6)

@@ -162,6 +162,7 @@ def calibrate(
         "std_error": {k: round(cal.std[k], 6) for k in cal.interval if math.isfinite(cal.std[k])},
         "interval_95": {k: [round(lo, 6), round(hi, 6)] for k, (lo, hi) in cal.interval.items()},
         "no_interval": dict(cal.no_interval),
+        "interval_notes": dict(cal.interval_notes),
         "method": METHOD + "; robot_agent/engine/calibration.py; docs/fidelity.md#calibration",
     }
     out = out or runs / "calibrated-profile.json"
@@ -172,6 +173,7 @@ def calibrate(
     for k in FITTED:
         lo_hi = cal.interval.get(k)
         where = f"  [{lo_hi[0]:.4g}, {lo_hi[1]:.4g}]" if lo_hi else f"  ({cal.no_interval.get(k, 'no interval')})"
+        where += f"  ({cal.interval_notes[k]})" if k in cal.interval_notes else ""
         typer.echo(f"{k:<{width}}  {cal.values[k]:.4g}{where}")
     typer.echo(f"[{METHOD} (docs/fidelity.md#calibration)]")
     typer.echo(f"{len(recorded)} runs, replay error (fitted profile re-simulated against the runs) "

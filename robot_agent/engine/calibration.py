@@ -45,13 +45,15 @@ compensates): for a true 0.16 s it reads 0.10-0.14 s.  Refits around a reading o
 which vanishes there, so the latency's interval is also a **test inversion** (Neyman's construction, on a few
 points): runs are emulated with the fitted profile at latencies :data:`INVERSION_OFFSETS` away from the fit's
 and stage 1 reads their latency (:func:`_latency_inversion`; its own random numbers, so the refits do not
-change); while the outermost latency on a side still reads within that side's acceptance band (below), it steps
-out by :data:`INVERSION_STEP` to the grid's end, so that the band is closed by a latency outside it rather than by
-the last candidate (a true 0.25 s reads 0.12-0.16 s); the expected reading is interpolated between those latencies and the fit's own (its refits' mean), and
-the interval is widened to every latency whose expected reading lies within t(0.975, B - 1) times the standard
-error of the fit's (the standard error above combined with one refit's scatter, as each point is one refit)
-(:func:`_inverted`).  The latency is weakly seen in the tracked positions (it acts only through the
-localisation's compensation of it), so this interval is wide: about 0.16 s.
+change); while the outermost latency on a side still reads within the acceptance band (below), it steps out by
+:data:`INVERSION_STEP`, up to the grid's ends, so that the interval is closed by a latency read otherwise rather
+than by the last candidate (a true 0.25 s reads 0.12-0.16 s).  The expected reading is interpolated between those
+latencies and the fit's own (its refits' mean), and the interval is widened to every latency whose expected
+reading lies within t(0.975, B - 1) times the standard error of the fit's (the standard error above combined
+with one refit's scatter, as each point is one refit) (:func:`_inverted`).  The latency is weakly seen in the
+tracked positions (it acts only through the localisation's compensation of it), so this interval is wide: a
+median 0.255 s on the validation cases, a third of them open up to the grid's end (``Calibration.interval_notes``
+says so).
 
 The bootstrap over runs (resampling whole runs keeps the correlation of the residuals along a run; runs that share
 a seed are resampled together), :data:`_BOOTSTRAP` resamples, re-estimates every parameter from the runs it drew:
@@ -159,6 +161,8 @@ class Calibration:
     no_interval: dict[str, str] = field(default_factory=dict)
     #: the latency's test inversion: candidate latency -> the latency stage 1 read from runs emulated with it (s)
     latency_inversion: dict[float, float] = field(default_factory=dict)
+    #: what an interval's end means where it is not a bound the runs set (parameter -> note)
+    interval_notes: dict[str, str] = field(default_factory=dict)
 
 
 def _quiet_profile(base: Mapping[str, Any], tau: float, latency: float) -> dict[str, Any]:
@@ -575,7 +579,8 @@ def calibrate(runs: Sequence[RecordedRun], profile: str | Mapping[str, Any] = DE
     u = uncertainty(fit.values, scatter, par, inversion)
     return Calibration(u["values"], u["std"], _clipped(base, u["values"]), fit.gains, fit.resimulated, fit.rms_m,
                        fit.costs, u["interval"], fitted=dict(fit.values), refits=par, bias=u["bias"],
-                       scatter=scatter, no_interval=u["no_interval"], latency_inversion=inversion)
+                       scatter=scatter, no_interval=u["no_interval"], latency_inversion=inversion,
+                       interval_notes=u["notes"])
 
 
 def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refits: np.ndarray,
@@ -584,8 +589,9 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
     the intervals withheld (:data:`NO_INTERVAL`: the same construction, for validation), from the fit's values
     ``fitted``, the bootstrap over runs' standard deviations ``scatter``, the parametric bootstrap's ``refits``
     ``(B, 8)`` and the latency's test ``inversion`` (candidate latency -> reading; without it the latency has no
-    interval) (SI units; the module docstring says how)."""
-    values, std, interval, bias, reasons, withheld = dict(fitted), {}, {}, {}, {}, {}
+    interval) (SI units; the module docstring says how).  ``notes`` says where the latency's interval is open above:
+    the highest latency its inversion tried (the grid's end) still read like the fit."""
+    values, std, interval, bias, reasons, withheld, notes = dict(fitted), {}, {}, {}, {}, {}, {}
     for j, k in enumerate(FITTED):
         th = refits[:, j]
         if len(th) < 2 or not math.isfinite(scatter.get(k, float("nan"))):
@@ -602,6 +608,10 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
                 reasons[k] = "no interval: without the latency's test inversion (its emulated runs did not complete)"
                 continue
             ends = _inverted(fitted[k], float(th.mean()), inversion, _band(scatter[k], th), ends)
+            top = max(inversion)
+            if top > fitted[k] and abs(inversion[top] - fitted[k]) <= _band(scatter[k], th):
+                notes[k] = (f"open above: runs emulated at {top:.2f} s, the latency grid's end, read like these; "
+                            "the tracked positions do not bound the latency there")
         lo, hi = OVERRIDE_LIMITS[k]  # a spread or noise is not negative
         ends = (min(max(ends[0], lo), hi), min(max(ends[1], lo), hi))
         if k in NO_INTERVAL:
@@ -610,7 +620,7 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
         else:
             interval[k] = ends
     return {"values": values, "std": std, "interval": interval, "bias": bias, "no_interval": reasons,
-            "withheld": withheld}
+            "withheld": withheld, "notes": notes}
 
 
 def _standard_error(scatter: float, th: np.ndarray) -> tuple[float, float]:
