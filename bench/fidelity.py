@@ -582,8 +582,11 @@ def main() -> None:
         name, _, param = key.partition(".")
         if name not in PLANNERS or not param or not value:
             ap.error(f"--planner {item}: expected NAME.KEY=VALUE with NAME one of {', '.join(PLANNERS)}")
-        pp.setdefault(name, {})[param] = json.loads(value) if value.lstrip("-").replace(".", "", 1).isdigit() \
-            else value
+        try:
+            parsed = json.loads(value)  # numbers and true/false; anything else is a string
+        except json.JSONDecodeError:
+            parsed = value
+        pp.setdefault(name, {})[param] = parsed
     for name, params in pp.items():
         try:
             get_planner(name).validate_params(params)

@@ -143,8 +143,9 @@ def calibrate(
              "calibration needs at least 2")
     refits = REFITS if refits is None else refits
     started = time.monotonic()
+    checks = ", then 4 latency checks (more while the latency's interval is still open), each about half as long"
     typer.echo(f"calibrating {len(recorded)} runs: the fit, then {refits} refit(s) of runs emulated with it, each about "
-               "as long" + (", then 4 latency checks (more while the latency's interval is still open), each about half as long" if refits >= 2 else ""), err=True)
+               "as long" + (checks if refits >= 2 else ""), err=True)
 
     def progress(step: str) -> None:
         typer.echo(f"  {step} done after {time.monotonic() - started:.0f} s", err=True)

@@ -71,6 +71,7 @@ known profiles (docs/fidelity.md, "Calibration").
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
@@ -506,23 +507,22 @@ def _latency_inversion(runs: Sequence[RecordedRun], base: dict[str, Any], fitted
     and how far, when the truth is elsewhere (:func:`uncertainty`).  ``progress`` is told ``"latency check i/k"``
     after each of the first k, ``"latency check i (stepping out)"`` after each further one."""
     k = len(INVERSION_OFFSETS)
+    checks = itertools.count(1)
 
     def read(cand: float) -> float | None:
         new = _emulated(runs, apply_overrides(fitted, {"tracker_latency_s": cand}), rng)
         reading = _stage1_latency(new, base)[2] if len(new) >= 2 else None
         if progress is not None:
-            i = len(done) + 1
+            i = next(checks)
             progress(f"latency check {i}/{k}" if i <= k else f"latency check {i} (stepping out)")
-        done.append(cand)
         return reading
 
-    done: list[float] = []
     return inversion_readings(read, float(fitted["field"]["tracker_latency_s"]), within,
-                                _MAX_LATENCY_STEPS / base["controller"]["control_rate_hz"])
+                              _MAX_LATENCY_STEPS / base["controller"]["control_rate_hz"])
 
 
 def inversion_readings(read: Callable[[float], float | None], latency: float, within: float,
-                         top: float) -> dict[float, float]:
+                       top: float) -> dict[float, float]:
     """The latency test inversion's readings (candidate s -> reading s; ``read`` gives one, None if its runs did not
     complete): the fit's ``latency`` + each of :data:`INVERSION_OFFSETS` within [0, ``top``]; then, on each side,
     while the outermost candidate's reading lies ``within`` (s) of ``latency``, the next one
@@ -544,7 +544,7 @@ def inversion_readings(read: Callable[[float], float | None], latency: float, wi
             take(round(latency + d, 6))
     for side in (-1.0, 1.0):
         edge = max((c for c in out if side * (c - latency) > 0), key=lambda c: side * c, default=None)
-        while edge is not None and abs(out[edge] - latency) <= within and on_grid(edge + side * INVERSION_STEP):
+        while edge is not None and _accepted(out[edge], latency, within) and on_grid(edge + side * INVERSION_STEP):
             edge = round(edge + side * INVERSION_STEP, 6)
             if not take(edge):
                 break
@@ -607,9 +607,10 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
             if not inversion:
                 reasons[k] = "no interval: without the latency's test inversion (its emulated runs did not complete)"
                 continue
-            ends = _inverted(fitted[k], float(th.mean()), inversion, _band(scatter[k], th), ends)
+            band = _band(scatter[k], th)
+            ends = _inverted(fitted[k], float(th.mean()), inversion, band, ends)
             top = max(inversion)
-            if top > fitted[k] and abs(inversion[top] - fitted[k]) <= _band(scatter[k], th):
+            if top > fitted[k] and _accepted(inversion[top], fitted[k], band):
                 notes[k] = (f"open above: runs emulated at {top:.2f} s, the latency grid's end, read like these; "
                             "the tracked positions do not bound the latency there")
         lo, hi = OVERRIDE_LIMITS[k]  # a spread or noise is not negative
@@ -637,6 +638,12 @@ def _band(scatter: float, th: np.ndarray) -> float:
     return t_q * math.hypot(std, float(th.std(ddof=1)))
 
 
+def _accepted(reading: float | np.ndarray, fit: float, within: float) -> bool | np.ndarray:
+    """Whether a latency whose (expected) ``reading`` (s) this is lies in the test inversion's acceptance band:
+    ``within`` (s) of the ``fit``'s."""
+    return np.abs(reading - fit) <= within
+
+
 def _inverted(fit: float, at_fit: float, inversion: Mapping[float, float], within: float,
               ends: tuple[float, float]) -> tuple[float, float]:
     """The latency's interval (s): ``ends`` (the bias-corrected one) widened to every latency whose expected
@@ -646,5 +653,5 @@ def _inverted(fit: float, at_fit: float, inversion: Mapping[float, float], withi
     xs = np.array(sorted(points))
     grid = np.arange(xs[0], xs[-1] + 1e-9, 0.005)
     reading = np.interp(grid, xs, [points[x] for x in xs])
-    ok = grid[np.abs(reading - fit) <= within]
+    ok = grid[_accepted(reading, fit, within)]
     return (min(ends[0], float(ok.min())), max(ends[1], float(ok.max()))) if len(ok) else ends
