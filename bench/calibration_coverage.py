@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -84,7 +85,8 @@ def case(job: tuple[str, int, int]) -> dict[str, Any]:
     cal = calibrate(emulated_runs(truth, seed), "bebot", seed=seed, refits=refits)
     out: dict[str, Any] = {"variant": variant, "seed": seed, "replay_cm_rms": round(cal.rms_m * 100, 3),
                            "calibrate_s": round(time.perf_counter() - t0, 1), "params": {},
-                           "latency_inversion": {str(k): v for k, v in cal.latency_inversion.items()}}
+                           "latency_inversion": {str(k): v if math.isfinite(v) else None  # None: its runs failed
+                                                 for k, v in cal.latency_inversion.items()}}
     for j, k in enumerate(FITTED):
         out["params"][k] = {"true": float(truth["field"][k]), "fit": cal.fitted[k], "scatter": cal.scatter[k],
                             "refits": [float(x) for x in cal.refits[:, j]]}
@@ -95,7 +97,7 @@ def score(c: dict[str, Any]) -> dict[str, Any]:
     """Case ``c`` with its values, intervals and coverage computed (again) from its fit, scatter and refits."""
     p = c["params"]
     refits = np.array([p[k]["refits"] for k in FITTED]).T.reshape(-1, len(FITTED))
-    inversion = {float(k): v for k, v in c.get("latency_inversion", {}).items()}
+    inversion = {float(k): math.nan if v is None else v for k, v in c.get("latency_inversion", {}).items()}
     u = uncertainty({k: p[k]["fit"] for k in FITTED}, {k: p[k]["scatter"] for k in FITTED}, refits, inversion)
     for k in FITTED:
         lo, hi = u["interval"].get(k, (None, None))

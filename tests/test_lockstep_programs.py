@@ -1,11 +1,13 @@
 """Lockstep through the whole testbed: the example P-controller program (uploaded, sandboxed, relayed) drives
-the same seed's job at time scale 1, 5 and max on real `twb up` processes; the robot's clock waits for its
-answer to every pose, so the runs' poses are the same, and each run says how its clock ran."""
+the same seed's job at time scale 1, 5 and max on real `twb up` processes, all three at once (each one's host
+is loaded by the others); the robot's clock waits for its answer to every pose, so the runs' poses are the
+same, and each run says how its clock ran."""
 
 from __future__ import annotations
 
 import base64
 import random
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -47,9 +49,11 @@ def drive(tmp_path: Path, scale: str) -> tuple[dict, dict[str, np.ndarray]]:
     return exp, poses
 
 
-@pytest.mark.slow  # three real testbeds, one after the other
+@pytest.mark.slow  # three real testbeds at once
 def test_a_controller_program_gives_the_same_poses_at_time_scale_1_5_and_max(tmp_path):
-    runs = {scale: drive(tmp_path, scale) for scale in ("1", "5", "max")}
+    scales = ("1", "5", "max")
+    with ThreadPoolExecutor(len(scales)) as pool:
+        runs = dict(zip(scales, pool.map(lambda scale: drive(tmp_path, scale), scales)))
     for scale, (exp, _) in runs.items():
         assert exp["status"] == "completed", (scale, exp.get("error"), [r["error"] for r in exp["runs"]])
         assert {(r["clock"], r["time_scale"]) for r in exp["runs"]} == {("lockstep", None if scale == "max"

@@ -160,7 +160,8 @@ class Calibration:
     scatter: dict[str, float] = field(default_factory=dict)
     #: why a parameter has no interval (parameter -> reason)
     no_interval: dict[str, str] = field(default_factory=dict)
-    #: the latency's test inversion: candidate latency -> the latency stage 1 read from runs emulated with it (s)
+    #: the latency's test inversion: candidate latency -> the latency stage 1 read from runs emulated with it (s;
+    #: NaN: fewer than two of those runs completed)
     latency_inversion: dict[float, float] = field(default_factory=dict)
     #: what an interval's end means where it is not a bound the runs set (parameter -> note)
     interval_notes: dict[str, str] = field(default_factory=dict)
@@ -524,10 +525,10 @@ def _latency_inversion(runs: Sequence[RecordedRun], base: dict[str, Any], fitted
 def inversion_readings(read: Callable[[float], float | None], latency: float, within: float,
                        top: float) -> dict[float, float]:
     """The latency test inversion's readings (candidate s -> reading s; ``read`` gives one, None if its runs did not
-    complete): the fit's ``latency`` + each of :data:`INVERSION_OFFSETS` within [0, ``top``]; then, on each side,
-    while the outermost candidate's reading lies ``within`` (s) of ``latency``, the next one
-    :data:`INVERSION_STEP` further out, up to the grid's ends.  The band is so closed by a latency read outside it
-    (or by the grid's end), not by the last candidate."""
+    complete: NaN here): the fit's ``latency`` + each of :data:`INVERSION_OFFSETS` within [0, ``top``]; then, on
+    each side, while the outermost candidate's reading lies ``within`` (s) of ``latency``, the next one
+    :data:`INVERSION_STEP` further out, up to the grid's ends.  The band is so closed by a latency read outside it,
+    by one whose runs did not complete (the recorded ones did) or by the grid's end, not by the last candidate."""
     def on_grid(c: float) -> bool:
         return -1e-9 <= c <= top + 1e-9
 
@@ -535,8 +536,7 @@ def inversion_readings(read: Callable[[float], float | None], latency: float, wi
 
     def take(cand: float) -> bool:
         reading = read(max(cand, 0.0))
-        if reading is not None:
-            out[cand] = reading
+        out[cand] = math.nan if reading is None else reading
         return reading is not None
 
     for d in INVERSION_OFFSETS:
@@ -604,15 +604,13 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
         centre = fitted[k] - bias[k]
         ends = (centre - t_q * std[k], centre + t_q * std[k])
         if k == "tracker_latency_s":
-            if not inversion:
+            read = {c: r for c, r in (inversion or {}).items() if math.isfinite(r)}
+            if not read:
                 reasons[k] = "no interval: without the latency's test inversion (its emulated runs did not complete)"
                 continue
             band = _band(scatter[k], th)
-            ends = _inverted(fitted[k], float(th.mean()), inversion, band, ends)
-            top = max(inversion)
-            if top > fitted[k] and _accepted(inversion[top], fitted[k], band):
-                notes[k] = (f"open above: runs emulated at {top:.2f} s, the latency grid's end, read like these; "
-                            "the tracked positions do not bound the latency there")
+            ends = _inverted(fitted[k], float(th.mean()), read, band, ends)
+            notes.update(_open_above(fitted[k], inversion, band))
         lo, hi = OVERRIDE_LIMITS[k]  # a spread or noise is not negative
         ends = (min(max(ends[0], lo), hi), min(max(ends[1], lo), hi))
         if k in NO_INTERVAL:
@@ -622,6 +620,24 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
             interval[k] = ends
     return {"values": values, "std": std, "interval": interval, "bias": bias, "no_interval": reasons,
             "withheld": withheld, "notes": notes}
+
+
+def _open_above(fit: float, inversion: Mapping[float, float], within: float) -> dict[str, str]:
+    """The latency interval's note (:func:`uncertainty`) where the highest latency the test ``inversion`` read (s)
+    still read like the ``fit``'s: the interval ends there because the grid does, or because the runs emulated
+    one step higher did not complete, not because the tracked positions read otherwise."""
+    read = [c for c, r in inversion.items() if math.isfinite(r)]
+    top = max(read)
+    if top <= fit or not _accepted(inversion[top], fit, within):
+        return {}
+    failed = [c for c, r in inversion.items() if not math.isfinite(r) and c > top]
+    if failed:
+        why = (f"runs emulated at {top:.2f} s read like these, and at {min(failed):.2f} s they did not complete "
+               "(the recorded ones did); only that bounds the latency above")
+    else:
+        why = (f"runs emulated at {top:.2f} s, the latency grid's end, read like these; the tracked positions do not "
+               "bound the latency there")
+    return {"tracker_latency_s": "open above: " + why}
 
 
 def _standard_error(scatter: float, th: np.ndarray) -> tuple[float, float]:
