@@ -326,6 +326,24 @@ def test_findings_need_their_planners_and_modes():
     assert all(v is None for v in _held(failed).values())
 
 
+def test_findings_compare_the_modes_on_the_same_paths():
+    """PRM's experiment B has a second repetition with a much longer path (a randomised planner plans each its own)
+    whose field run failed: its simulated run is left out too, so the field's mean path is not the shorter for
+    having lost a long path (unpaired, T 2.121 m < S 2.771 m and claim 17 would fail)."""
+    data = _study()
+    twins = [dict(r, run_id=100 + r["run_id"], repetition=2, planned_length_m=4.2,
+                  length_m=r["length_ratio"] * 4.2) for r in data.rows if r["planner"] == "prm" and r["plan"] == "B"]
+    for r in twins:
+        if r["mode"] == "twb":
+            r["status"] = "failed"
+    data.rows += twins
+    by = {f.key: f for f in paper_findings(data)}
+    assert by["field_paths_longer"].held is True
+    assert by["field_paths_longer"].numbers["prm_twb_length_m"] == pytest.approx(2.1 * 1.01)
+    assert by["field_paths_longer"].numbers["prm_sim_length_m"] == pytest.approx(2.1 * 0.99)
+    assert all(f.held for f in by.values()), [(f.key, f.detail) for f in by.values() if not f.held]
+
+
 def test_findings_files(tmp_path):
     data = _study(_set("prm", "twb", length_ratio=1.17))
     found = write_findings(data, tmp_path)

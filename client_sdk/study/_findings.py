@@ -5,7 +5,8 @@ PRM compute with what a simulated robot (S) and the Teleworkbench's real robots
 (T) drove, and the two drives with each other (ST).  :func:`paper_findings`
 turns every claim of the results section into a check (:data:`FINDINGS`, in the
 order of the paper's text: the computed paths, then claims 1-8 of issue 33).  Each compares per-planner means over the
-study's completed runs (the bars of Fig. 6 and 7) with a stated threshold, and
+study's completed runs (the bars of Fig. 6 and 7), paired across modes (a repetition whose run failed in one mode
+is left out of every mode's mean: the modes are compared on the same computed paths), with a stated threshold, and
 comes back with the numbers behind it and whether it held.  It is a pure
 function of a :class:`~client_sdk.study.StudyData`, so a study directory is
 enough, offline.  docs/fidelity.md explains each check and the mechanism of the
@@ -128,10 +129,22 @@ def _r(x: Optional[float], digits: int = 5) -> Optional[float]:
 
 
 class _Means:
-    """Per-planner means of a study's completed runs."""
+    """Per-planner means of a study's completed runs, paired: a repetition counts only where it completed in every
+    mode its experiment ran (the same computed path driven in simulation and on the field), so that a run failing
+    in one mode does not take its path out of that mode's mean alone (a randomised planner's paths differ per
+    repetition; the failed runs are the study's outcomes, not these means')."""
 
     def __init__(self, data: StudyData) -> None:
-        self.done = [r for r in data.rows if r.get("status") == "completed"]
+        ran: dict[Any, set[str]] = {}
+        completed: dict[tuple[Any, Any], set[str]] = {}
+        for r in data.rows:
+            ran.setdefault(r["experiment_id"], set()).add(r["mode"])
+            if r.get("status") == "completed":
+                completed.setdefault((r["experiment_id"], r.get("repetition")), set()).add(r["mode"])
+        self.done = [r for r in data.rows if r.get("status") == "completed"
+                     and completed[(r["experiment_id"], r.get("repetition"))] >= ran[r["experiment_id"]]]
+        #: completed runs left out because their twin in another mode did not complete
+        self.unpaired = sum(r.get("status") == "completed" for r in data.rows) - len(self.done)
         self.direct = data.direct
 
     def runs(self, planner: str, mode: str) -> list[dict[str, Any]]:
