@@ -128,7 +128,7 @@ def calibrate(
     against re-simulated paths (docs/fidelity.md, "Calibration")."""
     from client_sdk.study import load_study
     from contract.robot_profile import profile_names
-    from robot_agent.engine.calibration import REFITS, FITTED, METHOD
+    from robot_agent.engine.calibration import FITTED, INVERSION_OFFSETS, METHOD, REFITS
     from robot_agent.engine.calibration import calibrate as fit
 
     if profile not in profile_names():
@@ -143,7 +143,8 @@ def calibrate(
              "calibration needs at least 2")
     refits = REFITS if refits is None else refits
     started = time.monotonic()
-    checks = ", then 4 latency checks (more while the latency's interval is still open), each about half as long"
+    checks = (f", then {len(INVERSION_OFFSETS)} latency checks (more while the latency's interval is still open), each "
+              "about half as long")
     typer.echo(f"calibrating {len(recorded)} runs: the fit, then {refits} refit(s) of runs emulated with it, each about "
                "as long" + (checks if refits >= 2 else ""), err=True)
 

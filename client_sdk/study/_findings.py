@@ -143,8 +143,6 @@ class _Means:
                 completed.setdefault((r["experiment_id"], r.get("repetition")), set()).add(r["mode"])
         self.done = [r for r in data.rows if r.get("status") == "completed"
                      and completed[(r["experiment_id"], r.get("repetition"))] >= ran[r["experiment_id"]]]
-        #: completed runs left out because their twin in another mode did not complete
-        self.unpaired = sum(r.get("status") == "completed" for r in data.rows) - len(self.done)
         self.direct = data.direct
 
     def runs(self, planner: str, mode: str) -> list[dict[str, Any]]:

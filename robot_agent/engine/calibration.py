@@ -610,7 +610,7 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
                 continue
             band = _band(scatter[k], th)
             ends = _inverted(fitted[k], float(th.mean()), read, band, ends)
-            notes.update(_open_above(fitted[k], inversion, band))
+            notes.update(_open_above(fitted[k], read, [c for c in inversion if c not in read], band))
         lo, hi = OVERRIDE_LIMITS[k]  # a spread or noise is not negative
         ends = (min(max(ends[0], lo), hi), min(max(ends[1], lo), hi))
         if k in NO_INTERVAL:
@@ -622,15 +622,15 @@ def uncertainty(fitted: Mapping[str, float], scatter: Mapping[str, float], refit
             "withheld": withheld, "notes": notes}
 
 
-def _open_above(fit: float, inversion: Mapping[float, float], within: float) -> dict[str, str]:
-    """The latency interval's note (:func:`uncertainty`) where the highest latency the test ``inversion`` read (s)
-    still read like the ``fit``'s: the interval ends there because the grid does, or because the runs emulated
-    one step higher did not complete, not because the tracked positions read otherwise."""
-    read = [c for c, r in inversion.items() if math.isfinite(r)]
+def _open_above(fit: float, read: Mapping[float, float], failed: Sequence[float], within: float) -> dict[str, str]:
+    """The latency interval's note (:func:`uncertainty`) where the highest latency the test inversion ``read``
+    (candidate s -> reading s) still read like the ``fit``'s: the interval ends there because the grid does, or
+    because the runs emulated one step higher (among the ``failed`` candidates) did not complete, not because the
+    tracked positions read otherwise."""
     top = max(read)
-    if top <= fit or not _accepted(inversion[top], fit, within):
+    if top <= fit or not _accepted(read[top], fit, within):
         return {}
-    failed = [c for c, r in inversion.items() if not math.isfinite(r) and c > top]
+    failed = [c for c in failed if c > top]
     if failed:
         why = (f"runs emulated at {top:.2f} s read like these, and at {min(failed):.2f} s they did not complete "
                "(the recorded ones did); only that bounds the latency above")
