@@ -7,8 +7,9 @@ keeps away from obstacles where there is room and stays smooth.  As for FMM,
 the front is marched only as far as the query needs
 (:func:`planners.fast_marching.plan`).  The descent is smoothed
 (:func:`smooth_descent`) and then straightened inside the band of clearance it
-keeps (:func:`band_shortcut`); on request (``round``) the straightened path's corners are
-cut (:func:`round_corners`).
+keeps (:func:`band_shortcut`); then the straightened path's corners are cut (``round``,
+three passes by default; :func:`round_corners`), so the path is the smooth curve FM² is
+known for rather than a polyline with corners.
 """
 
 from __future__ import annotations
@@ -133,7 +134,7 @@ class FM2Planner(Planner):
               type="integer"),
         Param("shortcut", "", True, None, None, "replace runs of the smoothed descent by chords that keep the "
               "clearance it has at their ends (false: the smoothed descent)", type="boolean"),
-        Param("round", "passes", 0, 0, 6, "corner-cutting passes over the result (Chaikin; each kept only if the "
+        Param("round", "passes", 3, 0, 6, "corner-cutting passes over the result (Chaikin; each kept only if the "
               "path stays free): the straightened path's corners become short curves (0: its polyline)",
               type="integer"),
     )

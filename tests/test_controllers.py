@@ -49,11 +49,11 @@ def problems() -> dict:
 
 
 def _bebot_before_issue_33() -> dict:
-    """The BeBot before issue 33 (motors lag 0.12 s, tracks accelerate at 0.4 m/s², white slip): the field
+    """The BeBot before issue 33 (motors lag 0.12 s, tracks accelerate at 0.4 m/s², white slip, no skid): the field
     robot :data:`SCHEMA_BEFORE` was recorded with; the field code gives its runs bit for bit."""
     prof = load_profile("bebot")
     prof["max_accel_m_s2"] = 0.4
-    prof["field"].update(motor_time_constant_s=0.12, wheel_noise_corr_s=0.0)
+    prof["field"].update(motor_time_constant_s=0.12, wheel_noise_corr_s=0.0, track_width_factor=1.0)
     return prof
 
 

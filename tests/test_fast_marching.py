@@ -238,9 +238,10 @@ def test_the_planners_give_the_paths_of_the_full_field():
             speed = speed_map(space, params["saturation"], params["min_speed"]) if name == "fm2" else None
             got, info = impl.solve(space, s.copy(), g.copy(), params, 0)
             want = full_path(space, s, g, speed)[0]
-            if name == "fm2":  # FM² smooths its descent (the same descent, the same passes) and straightens it
-                want = smooth_descent(space, want, params["smooth"])[0]
+            if name == "fm2":  # FM² smooths its descent (the same descent, the same passes), straightens it and
+                want = smooth_descent(space, want, params["smooth"])[0]  # cuts its corners
                 want = band_shortcut(space, want, SHORTCUT_TOLERANCE * space.resolution)[0]
+                want = round_corners(space, want, params["round"])[0]
             assert np.array_equal(got, want)
             assert info["cells_accepted"] > 0
 

@@ -70,14 +70,15 @@ def test_a_reduced_study_checks_every_claim_as_the_offline_runs_do(twb, tmp_path
             assert float(row[key]) == pytest.approx(mine[key], rel=1e-4, abs=1e-6), (_run_key(row), key)
 
 
-def test_the_paper_study_holds_every_claim_but_the_one_seed_0_misses():
-    """The paper's study (48 runs) offline with seed 0: 17 of the 18 checks hold, as measured for docs/fidelity.md
-    (each claim holds in at least 18 of the seeds 0-19). Seed 0's one miss is claim 8: the field adds 5.1, 5.6 and
-    3.2 mm of mean deviation to FMM, FM² and PRM, a spread of 2.4 mm against the check's 0.5 x 4.6 mm."""
+def test_the_paper_study_holds_every_claim_on_seed_0_and_seed_2_misses_one():
+    """The paper's study (48 runs) offline: with seed 0 all 18 checks hold, as measured for docs/fidelity.md
+    (each claim holds in at least 18 of the seeds 0-19). Seed 2 misses one, claim 12, by a hair: the field
+    changes FMM's κ' ratio by 0.068 and PRM's by 0.069, so PRM's is not the least difference."""
     found = paper_findings(_bench().paper(0))
     assert len(found) == len(FINDINGS)
-    missed = {f.key: f.detail for f in found if not f.held}
-    assert set(missed) == {"deviation_gap_constant"}, missed
+    assert not {f.key: f.detail for f in found if not f.held}
+    missed = {f.key: f.detail for f in paper_findings(_bench().paper(2)) if not f.held}
+    assert set(missed) == {"prm_least_smoothness_difference"}, missed
 
 
 def _run_key(row: dict) -> tuple:
@@ -156,17 +157,17 @@ def test_offline_varied_environments_and_their_random_problems():
 
 def test_fidelity_bench_takes_the_number_of_problems_per_environment():
     """``--plans`` reaches the study (one start/goal pair per generated environment: 2 problems x 3 planners x 2
-    repetitions x 2 modes = 24 runs), and so does ``--planner`` (FM²'s corners cut: its computed paths' corners
-    differ from those of the same study without, the other planners' do not); a number of plans below 1 and a
+    repetitions x 2 modes = 24 runs), and so does ``--planner`` (FM²'s corners not cut: its computed paths' corners
+    differ from those of the same study at FM²'s defaults, the other planners' do not); a number of plans below 1 and a
     planner parameter the planner does not have are refused before anything runs."""
     import subprocess
 
     script = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "fidelity.py"), "generated"]
-    out = subprocess.run([*script, "--seeds", "3", "--plans", "1", "--workers", "1", "--planner", "fm2.round=3"],
+    out = subprocess.run([*script, "--seeds", "3", "--plans", "1", "--workers", "1", "--planner", "fm2.round=0"],
                          capture_output=True, text=True, check=True)
     summary = json.loads(out.stdout)
     assert summary["seeds"] == [3] and summary["runs_per_seed"] == [24] and set(summary["held"]) == set(FINDINGS)
-    assert summary["planner_params"] == {"fm2": {"round": 3}}
+    assert summary["planner_params"] == {"fm2": {"round": 0}}
     plain = {p: {k: round(v, 2) for k, v in c.items()}
              for p, c in _bench().corners(_bench().generated(3, plans_per_env=1)).items()}
     assert summary["computed_paths"]["fm2"] != plain["fm2"]
@@ -363,11 +364,12 @@ def test_findings_files(tmp_path):
 
 
 def _exact_profile(**field) -> dict:
-    """The BeBot whose tracks do exactly what its odometry model says (unit gains, no slip noise)
+    """The BeBot whose tracks do exactly what its odometry model says (unit gains, no slip noise, no skid)
     and whose tracker is exact: only the latency, the lag and the acceleration limit are left."""
     prof = load_profile("bebot")
     prof["field"].update(wheel_gain_mean=1.0, wheel_bias_sigma=0.0, wheel_noise_rel=0.0, wheel_noise_abs_m_s=0.0,
-                         tracker_noise_xy_m=0.0, tracker_noise_theta_rad=0.0, tracker_bias_xy_m=0.0, **field)
+                         tracker_noise_xy_m=0.0, tracker_noise_theta_rad=0.0, tracker_bias_xy_m=0.0,
+                         track_width_factor=1.0, **field)
     return prof
 
 
@@ -513,16 +515,18 @@ def _zigzag(corners: int = 6, leg: float = 0.2, turn_deg: float = 60.0) -> np.nd
 
 def test_the_field_robot_cannot_follow_sharp_corners_and_overshoots_them():
     """On 60° corners both robots drive smoother than the path (κ' 0.49); the field robot, whose motors lag
-    0.25 s behind a lead tuned for 0.12 s and whose tracks accelerate at 0.3 m/s², overshoots each corner: a path
-    1.5-4 % longer than the ideal robot's and as smooth (before issue 33 it cut them: 5 % smoother, as long)."""
+    0.25 s behind a lead tuned for 0.12 s, whose tracks accelerate at 0.3 m/s² and skid (it turns 1 / 1.15 as fast
+    as its tracks say), overshoots each corner: seeds 0-3 drive a path 4-6 % longer than the ideal robot's, κ'
+    within 4-8 % of it (without the skid: 1.5-4 % longer, as smooth; before issue 33 it cut them: 5 % smoother,
+    as long)."""
     path = _zigzag()
     ideal = _drive("ideal", path, 0)[:, 1:3]
     assert smoothness(ideal) < 0.7 * smoothness(path[:, :2])  # the follower's switch radius cuts corners
     for seed in range(4):
         field = _drive("field", path, seed)[:, 1:3]
-        assert smoothness(field) < 0.75 * smoothness(path[:, :2]), seed
+        assert smoothness(field) < 0.8 * smoothness(path[:, :2]), seed
         assert abs(smoothness(field) / smoothness(ideal) - 1) < 0.1, seed
-        assert 1.015 < path_length(field) / path_length(ideal) < 1.05, seed
+        assert 1.03 < path_length(field) / path_length(ideal) < 1.08, seed
 
 
 def test_the_ideal_robot_is_unchanged():

@@ -39,8 +39,9 @@ def test_an_obstacle_robot_lags_its_exact_track_but_stays_close_and_replays_exac
     got = mover_tracks(obstacles, 12345, P, 40.0)[0]
     exact = positions([MovingObstacle(0.04, tuple(map(tuple, L_TRACK)), 0.1, repeat, 1.0)], got[:, 0])[0]
     off = np.hypot(*(got[:, 1:3] - exact).T)
-    # lag, corners: a few cm; up to 7 cm where pingpong turns back (the tracks reverse at 0.3 m/s², lagging 0.25 s)
-    assert 0.003 < off.mean() < 0.03 and off.max() < 0.08, (off.mean(), off.max())
+    # lag, corners: a few cm; up to 8 cm where pingpong turns back (the tracks reverse at 0.3 m/s², lagging 0.25 s,
+    # and skid slows the turn: 7 cm without it)
+    assert 0.003 < off.mean() < 0.03 and off.max() < 0.09, (off.mean(), off.max())
     assert len(got) > 0.9 * 40 * P.field.camera_rate_hz  # the tracker's poses at its rate, a few dropped
     again = mover_tracks(obstacles, 12345, P, 40.0)[0]
     assert np.array_equal(got, again)
@@ -88,11 +89,12 @@ def _digest(runs) -> str:  # type: ignore[no-untyped-def]
 def test_simulation_is_unchanged_bit_for_bit():
     """The exact discs of a simulation, and field runs without moving obstacles, give main's numbers before
     obstacle robots came (digests taken there, same seeds).  The field run is the BeBot of then (issue 33 made
-    its motors lag 0.25 s, its tracks accelerate at 0.3 m/s², its slip correlated over 0.1 s): with those three
-    values back, the field code gives the same poses bit for bit (white slip is ``wheel_noise_corr_s`` 0)."""
+    its motors lag 0.25 s, its tracks accelerate at 0.3 m/s², its slip correlated over 0.1 s, its tracks skid):
+    with those four values back, the field code gives the same poses bit for bit (white slip is
+    ``wheel_noise_corr_s`` 0, no skid ``track_width_factor`` 1)."""
     then = load_profile("bebot")
     then["max_accel_m_s2"] = 0.4
-    then["field"].update(motor_time_constant_s=0.12, wheel_noise_corr_s=0.0)
+    then["field"].update(motor_time_constant_s=0.12, wheel_noise_corr_s=0.0, track_width_factor=1.0)
     moving = [([0.04, 0.1, 0.0, 0.0], [[0.9, 0.9], [0.9, 0.1]]),
               ([0.05, 0.15, 1.0, 0.5], [[0.3, 1.5], [1.5, 1.5], [1.5, 0.8]]),
               ([0.03, 0.05, 2.0, 1.0], [[0.2, 1.0], [1.6, 1.0]])]

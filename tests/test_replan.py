@@ -47,7 +47,9 @@ def test_without_replanning_a_robot_hits_the_disc_and_with_it_reaches_the_goal(f
     run = drive(fmm_path, backend, controller=controller, replan=1)
     replans = [e for e in run.events if e.kind == "REPLAN"]
     assert run.outcome == "DONE" and run.obstacle is None
-    assert replans and all(e.index > 1 for e in replans) and all(e.seconds > 0 for e in replans)
+    # the first replan comes while it drives the planned path; a later one may come on a new path's first leg,
+    # where the disc crosses it again (the skid-steered field robot turning slower: RPP replans 5 times)
+    assert replans and replans[0].index > 1 and all(e.seconds > 0 for e in replans)
     assert np.hypot(*(run.poses[-1, 1:3] - PLAN.goal[:2])) < 0.05
     gaps = obstacle_gaps(CROSSING, run.poses[:, 1:3], run.poses[:, 0] - run.t_start, 0.04)
     assert gaps.min() > 0.0
