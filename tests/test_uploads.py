@@ -13,12 +13,15 @@ import os
 import random
 import re
 import shutil
+import signal
 import subprocess
 import time
 from pathlib import Path
 
 import pytest
 
+from server.sandbox import cgroups, explain
+from server.sandbox.outcome import memory_full
 from servers import Process, wait_for
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "uploads.md"
@@ -247,7 +250,65 @@ def test_the_failures_ran_beside_good_jobs_within_their_limits(batch):
     bomb = batch["done"]["memory_bomb"]["planning_info"]["program"]
     if bomb["isolation"]["memory_limit"] == "cgroup":  # the kernel's count of all its processes
         assert bomb["memory_peak_kib"] <= 160 << 10
+        # its counters say its own memory filled the limit: had its CPU limit ended it first, the memory limit
+        # would still be the reason (test_a_program_at_its_memory_limit_ended_by_cpu_fails_by_memory)
+        assert memory_full(bomb, {"memory_bytes": 160 << 20}), bomb
     assert sandbox_processes() == []
+
+
+#: the batch's limits, as a job has them (bytes, s)
+JOB_LIMITS = {"wall_s": 5, "cpu_s": 1, "memory_bytes": 160 << 20, "processes": 12, "file_bytes": 1 << 20}
+MEMORY_REASON = r"^program memory limit: .* 160 MiB"  # memory_bomb's
+CPU_REASON = r"^program CPU limit: .* 1 s of CPU"  # cpu_loop's
+
+
+@pytest.mark.parametrize("counters, reason", [
+    # the memory bomb, ended by RLIMIT_CPU (SIGXCPU) before the out-of-memory killer came, as it once was under
+    # load (the kernel reclaims at the limit in the program's own time): at its limit, no page cache left
+    ({"signal": signal.SIGXCPU, "cpu_s": 1.02, "memory_peak_kib": 160 << 10, "memory_oom_kills": 0,
+      "memory_limit_hits": 0, "memory_cache_kib": 4}, MEMORY_REASON),
+    # ... by the hard CPU limit (SIGKILL), a cgroup v2 counting the charges that met memory.max
+    ({"signal": signal.SIGKILL, "cpu_s": 2.0, "memory_peak_kib": (160 << 10) - 100, "memory_oom_kills": 0,
+      "memory_limit_hits": 37, "memory_cache_kib": 300}, MEMORY_REASON),
+    # read a 300 MiB file (the limit full of page cache), then looped: measured on this machine's cgroup v1
+    ({"signal": signal.SIGXCPU, "cpu_s": 1.01, "memory_peak_kib": 163816, "memory_oom_kills": 0,
+      "memory_limit_hits": 0, "memory_cache_kib": 157772}, CPU_REASON),
+    ({"signal": signal.SIGXCPU, "cpu_s": 1.0, "memory_peak_kib": 9000, "memory_oom_kills": 0,
+      "memory_limit_hits": 0, "memory_cache_kib": 0}, CPU_REASON),
+    ({"signal": signal.SIGXCPU, "cpu_s": 1.0, "memory_peak_kib": None, "memory_oom_kills": None,
+      "memory_limit_hits": None, "memory_cache_kib": None}, CPU_REASON),  # no cgroup
+    ({"signal": signal.SIGKILL, "cpu_s": 0.1, "memory_peak_kib": 160 << 10, "memory_oom_kills": 1,
+      "memory_limit_hits": 0, "memory_cache_kib": 0}, MEMORY_REASON + r" .* and was killed$"),
+])
+def test_a_program_at_its_memory_limit_ended_by_cpu_fails_by_memory(counters, reason):
+    """The reason follows the cgroup's counters, not only the signal: a program whose own memory filled its
+    limit fails by the memory limit even when its CPU limit ended it first."""
+    r = {"exit_code": None, "path": None, "stderr": "", "procs_max": 1, **counters}
+    assert re.search(reason, explain(r, JOB_LIMITS)), explain(r, JOB_LIMITS)
+
+
+@pytest.mark.parametrize("version, files, hits, cache, peak", [
+    (2, {"memory.events": "low 0\nhigh 0\nmax 12\noom 1\noom_kill 1\noom_group_kill 1\n",
+         "memory.stat": "anon 1000\nfile 9000\nactive_file 4096\ninactive_file 8192\nshmem 4096\n",
+         "memory.peak": "167772160\n"}, 12, 12288, 167772160),
+    (1, {"memory.failcnt": "3\n", "memory.max_usage_in_bytes": "167772160\n",
+         "memory.stat": "cache 12288\nrss 0\nshmem 0\ninactive_file 8192\nactive_file 4096\n"
+                        "total_inactive_file 8192\n"}, 3, 12288, 167772160),
+    (2, {}, 0, None, None),  # files missing: nothing known
+])
+def test_the_cgroup_counters_the_reason_needs(tmp_path, version, files, hits, cache, peak):
+    (tmp_path / "cg").mkdir()
+    for name, text in files.items():
+        (tmp_path / "cg" / name).write_text(text)
+    parent = os.open(tmp_path, os.O_RDONLY | os.O_DIRECTORY)
+    fd = os.open(tmp_path / "cg", os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        node = cgroups._Node(parent, fd, "cg")
+        cg = (cgroups.CgroupV2 if version == 2 else cgroups.CgroupV1)(node, None)
+        assert (cg.limit_hits(), cg.page_cache_bytes(), cg.peak_bytes()) == (hits, cache, peak)
+    finally:
+        os.close(fd)
+        os.close(parent)
 
 
 def test_uploads_are_owner_only(testbed, client, batch):

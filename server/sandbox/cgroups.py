@@ -63,6 +63,8 @@ class ProgramCgroup:
     #: (file, key) of the count of out-of-memory kills, and the file of the peak memory (bytes)
     OOM_EVENTS: ClassVar[tuple[str, str]]
     PEAK: ClassVar[str]
+    #: (file, key) of the count of charges that met the memory limit (key None: the file is the number)
+    LIMIT_EVENTS: ClassVar[tuple[str, Optional[str]]]
 
     def __init__(self, memory: _Node, pids: Optional[_Node]) -> None:
         self.memory = memory
@@ -82,6 +84,28 @@ class ProgramCgroup:
     def oom_kills(self) -> int:
         """Processes the kernel killed because the program used all its memory."""
         return _key(self.memory.fd, *self.OOM_EVENTS)
+
+    def limit_hits(self) -> int:
+        """Times the program's memory reached its limit (the kernel then reclaims, and kills if it cannot).
+
+        v2 ``memory.events`` ``max``; v1 ``memory.failcnt`` (some kernels keep it at 0: the peak tells then).
+        """
+        name, key = self.LIMIT_EVENTS
+        if key is not None:
+            return _key(self.memory.fd, name, key)
+        try:
+            return int(_read(self.memory.fd, name))
+        except (OSError, ValueError):
+            return 0
+
+    def page_cache_bytes(self) -> Optional[int]:
+        """The page cache of files charged to the program now (bytes; not tmpfs: without swap the kernel cannot
+        reclaim that); None if unknown.  Its processes gone, what is left is what it had read or written."""
+        try:
+            stat = dict(line.split(" ", 1) for line in _read(self.memory.fd, "memory.stat").splitlines())
+            return int(stat["active_file"]) + int(stat["inactive_file"])
+        except (OSError, ValueError, KeyError):
+            return None
 
     def fork_refusals(self) -> int:
         """Forks refused because the program had all its processes (0 without the pids controller)."""
@@ -141,6 +165,7 @@ class CgroupV2(ProgramCgroup):
     version = 2
     OOM_EVENTS = ("memory.events", "oom_kill")
     PEAK = "memory.peak"
+    LIMIT_EVENTS = ("memory.events", "max")
 
     def kill_all(self) -> None:
         try:
@@ -156,6 +181,7 @@ class CgroupV1(ProgramCgroup):
     version = 1
     OOM_EVENTS = ("memory.oom_control", "oom_kill")
     PEAK = "memory.max_usage_in_bytes"
+    LIMIT_EVENTS = ("memory.failcnt", None)
 
 
 def create(memory_bytes: int, processes: int) -> ProgramCgroup:

@@ -8,7 +8,7 @@ from typing import Any, Optional
 
 from .program import ProgramSpec
 
-__all__ = ["ProgramOutcome", "explain", "explain_controller", "explain_fleet", "robots_phrase",
+__all__ = ["ProgramOutcome", "explain", "explain_controller", "explain_fleet", "memory_full", "robots_phrase",
            "to_controller_outcome", "to_outcome"]
 
 _FORK_SIGNS = ("Resource temporarily unavailable", "BlockingIOError", "fork: retry", "Cannot fork",
@@ -126,10 +126,39 @@ def _limit_reason(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
     if any(x in err for x in _MEMORY_SIGNS):
         return f"program memory limit: it ran out of its {mib} MiB of memory"
     if sig == signal.SIGXCPU or (sig == signal.SIGKILL and (r.get("cpu_s") or 0) >= limits["cpu_s"] - 0.5):
+        if memory_full(r, limits):  # both: the memory limit first (see memory_full)
+            return (f"program memory limit: it used all of its {mib} MiB of memory (all its processes together) "
+                    f"and was ended by its CPU limit ({limits['cpu_s']} s) at that limit")
         return f"program CPU limit: it used more than {limits['cpu_s']} s of CPU time"
     if sig == signal.SIGXFSZ:
         return f"program file size limit: it wrote a file larger than {limits['file_bytes'] >> 20} MiB"
     return None
+
+
+#: how far below its memory limit a program's peak still counts as at the limit (bytes): the kernel charges
+#: memory to a cgroup in batches of up to 64 pages
+AT_LIMIT_BYTES = 256 << 10
+
+
+def memory_full(r: dict[str, Any], limits: dict[str, Any]) -> bool:
+    """Whether the program's own memory filled its limit, though the kernel did not kill it (with a cgroup).
+
+    At the limit the kernel first reclaims what it can (page cache of files),
+    in the program's own time, and kills only when that fails; a program
+    whose memory is its own up to the limit may run out of CPU time there
+    first (``RLIMIT_CPU`` counts that system time too), and then the memory
+    limit is the cause.  So: its charges met the limit, or its peak got
+    there; and page cache (what of it is still charged when the program has
+    ended, ``memory_cache_kib``) was less than an eighth of the limit: a
+    program that merely read files larger than its limit fills it with cache
+    the kernel drops at little cost, and its CPU limit is the cause.
+    """
+    limit, peak = int(limits["memory_bytes"]), r.get("memory_peak_kib")
+    if not r.get("memory_limit_hits") and (peak is None or (peak << 10) < limit - AT_LIMIT_BYTES):
+        return False
+    cache = r.get("memory_cache_kib")
+    own = (limit if peak is None else peak << 10) - (0 if cache is None else cache << 10)
+    return own > limit - limit // 8
 
 
 def explain_controller(r: dict[str, Any], limits: dict[str, Any]) -> Optional[str]:
@@ -182,6 +211,7 @@ def _info(spec: ProgramSpec, r: dict[str, Any]) -> dict[str, Any]:
         "id": spec.id, "name": spec.name, "exit_code": r.get("exit_code"), "signal": r.get("signal"),
         "timed_out": r.get("timed_out", False), "wall_s": r.get("wall_s"), "cpu_s": r.get("cpu_s"),
         "max_rss_kib": r.get("max_rss_kib"), "memory_peak_kib": r.get("memory_peak_kib"),
+        "memory_limit_hits": r.get("memory_limit_hits"), "memory_cache_kib": r.get("memory_cache_kib"),
         "processes_max": r.get("procs_max"),
         "stdout_dropped_bytes": r.get("stdout_dropped", 0), "stderr_dropped_bytes": r.get("stderr_dropped", 0),
         "isolation": {"namespaces": iso.get("namespaces", []), "user_namespace": iso.get("user_namespace", False),

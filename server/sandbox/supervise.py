@@ -89,7 +89,8 @@ def blank_result() -> dict[str, Any]:
             "robot_port": None, "path": None, "path_at_s": None, "connected": False, "port_log": [], "refused": [],
             "port_unlogged": 0, "run_ended": None, "ports": [],
             "wall_s": 0.0, "cpu_s": 0.0, "max_rss_kib": 0, "memory_peak_kib": None, "memory_oom_kills": None,
-            "fork_refusals": None, "stdout": "", "stderr": "", "stdout_dropped": 0, "stderr_dropped": 0}
+            "memory_limit_hits": None, "memory_cache_kib": None, "fork_refusals": None,
+            "stdout": "", "stderr": "", "stdout_dropped": 0, "stderr_dropped": 0}
 
 
 def supervise(job: dict[str, Any], iso: dict[str, Any], *, cgroup: Optional[ProgramCgroup],
@@ -472,6 +473,7 @@ def report(prog: Program, *, ended_itself: bool, wall_s: float, cgroup: Optional
         else (rc, None) if rc >= 0 else (None, -rc)
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
     peak = cgroup.peak_bytes() if cgroup is not None else None
+    cache = cgroup.page_cache_bytes() if cgroup is not None else None  # its processes are gone: what they left
     ports = [{"robot_port": p.number, "path": p.robot.path, "path_at_s": p.robot.path_at,
               "connected": p.robot.connected, "port_log": p.robot.log, "refused": p.robot.refused,
               "port_unlogged": p.robot.unlogged} for p in prog.ports]
@@ -482,6 +484,8 @@ def report(prog: Program, *, ended_itself: bool, wall_s: float, cgroup: Optional
         "wall_s": round(wall_s, 3), "cpu_s": round(ru.ru_utime + ru.ru_stime, 3), "max_rss_kib": ru.ru_maxrss,
         "memory_peak_kib": None if peak is None else peak >> 10,
         "memory_oom_kills": cgroup.oom_kills() if cgroup is not None else None,
+        "memory_limit_hits": cgroup.limit_hits() if cgroup is not None else None,
+        "memory_cache_kib": None if cache is None else cache >> 10,
         "fork_refusals": cgroup.fork_refusals() if cgroup is not None else None,
         "stdout": prog.out["stdout"].decode("utf-8", "replace"), "stderr": prog.out["stderr"].decode("utf-8", "replace"),
         "stdout_dropped": prog.dropped["stdout"], "stderr_dropped": prog.dropped["stderr"],
