@@ -323,9 +323,11 @@ def paper(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool =
 
 
 def varied(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False,
-           plans_per_env: int = PLANS_PER_ENV, planner_params: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
+           plans_per_env: int = PLANS_PER_ENV,
+           planner_params: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
     """:func:`varied_environments`, ``plans_per_env`` random start/goal pairs each (drawn from ``seed``),
-    FMM, FM² and PRM (``planner_params``: :func:`with_params`), 2 repetitions: 144 runs."""
+    FMM, FM² and PRM (``planner_params``: :func:`with_params`), 2 repetitions: 48 runs a pair (288 at the
+    default 6)."""
     datas = []
     for i, env in enumerate(varied_environments()):
         spec = StudySpec.from_json({"name": "varied", "environments": [env],
@@ -337,9 +339,10 @@ def varied(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool 
 
 
 def generated(seed: int, overrides: Optional[dict[str, float]] = None, truth: bool = False,
-              plans_per_env: int = PLANS_PER_ENV, planner_params: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
+              plans_per_env: int = PLANS_PER_ENV,
+              planner_params: Optional[dict[str, dict[str, Any]]] = None) -> StudyData:
     """:func:`generated_environments` of ``seed``, ``plans_per_env`` random start/goal pairs each, FMM, FM² and
-    PRM (``planner_params``: :func:`with_params`), 2 repetitions: 72 runs."""
+    PRM (``planner_params``: :func:`with_params`), 2 repetitions: 24 runs a pair (144 at the default 6)."""
     datas = []
     for i, env in enumerate(generated_environments(seed)):
         spec = StudySpec.from_json({"name": "generated", "environments": [env],

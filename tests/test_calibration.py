@@ -51,13 +51,19 @@ _FITTED: dict = {}
 LAG_AND_NOISE = ("motor_time_constant_s", "wheel_noise_rel", "wheel_noise_abs_m_s")
 
 
+def _calibrate_test_runs(emulation_seed: int, **kw):
+    """The calibration (seed 0) of six runs emulated with :data:`TRUE` and white slip, from the shipped profile
+    with the runs' slip model."""
+    truth = apply_overrides(load_profile("bebot"), {**TRUE, **WHITE_SLIP})
+    base = apply_overrides(load_profile("bebot"), WHITE_SLIP)  # the slip model of the runs
+    return calibrate(emulated_runs(truth, seed=emulation_seed), base, seed=0, **kw)
+
+
 def _fitted():
     """The calibration of runs emulated with :data:`TRUE` (computed once for the tests that read it; with its four
     refits of the parametric bootstrap, about 40 s)."""
     if not _FITTED:
-        truth = apply_overrides(load_profile("bebot"), {**TRUE, **WHITE_SLIP})
-        base = apply_overrides(load_profile("bebot"), WHITE_SLIP)  # the slip model of the runs
-        _FITTED["cal"] = calibrate(emulated_runs(truth, seed=3), base, seed=0)
+        _FITTED["cal"] = _calibrate_test_runs(3)
     return _FITTED["cal"]
 
 
@@ -70,9 +76,7 @@ def _fitted():
 def test_calibration_recovers_the_motor_lag_and_the_wheel_noise():
     """The runs of emulation seed 1 (seed 3's, which the other tests fit, read the lag 11 % long, within its
     tolerance, with the shipped skid; 19 % without it): the lag comes out 0.281 s for 0.2 (+40 %, tolerance 20 %)."""
-    truth = apply_overrides(load_profile("bebot"), {**TRUE, **WHITE_SLIP})
-    base = apply_overrides(load_profile("bebot"), WHITE_SLIP)
-    values = calibrate(emulated_runs(truth, seed=1), base, seed=0, refits=0).values
+    values = _calibrate_test_runs(1, refits=0).values
     for key in LAG_AND_NOISE:
         _, tol = TOLERANCE[key]
         assert abs(values[key] / TRUE[key] - 1) <= tol, key

@@ -91,21 +91,15 @@ class ProgramCgroup:
         v2 ``memory.events`` ``max``; v1 ``memory.failcnt`` (some kernels keep it at 0: the peak tells then).
         """
         name, key = self.LIMIT_EVENTS
-        if key is not None:
-            return _key(self.memory.fd, name, key)
-        try:
-            return int(_read(self.memory.fd, name))
-        except (OSError, ValueError):
-            return 0
+        return _key(self.memory.fd, name, key) if key is not None else _number(self.memory.fd, name) or 0
 
     def page_cache_bytes(self) -> Optional[int]:
         """The page cache of files charged to the program now (bytes; not tmpfs: without swap the kernel cannot
         reclaim that); None if unknown.  Its processes gone, what is left is what it had read or written."""
-        try:
-            stat = dict(line.split(" ", 1) for line in _read(self.memory.fd, "memory.stat").splitlines())
-            return int(stat["active_file"]) + int(stat["inactive_file"])
-        except (OSError, ValueError, KeyError):
+        stat = _keys(self.memory.fd, "memory.stat")
+        if stat is None or "active_file" not in stat or "inactive_file" not in stat:
             return None
+        return stat["active_file"] + stat["inactive_file"]
 
     def fork_refusals(self) -> int:
         """Forks refused because the program had all its processes (0 without the pids controller)."""
@@ -113,10 +107,7 @@ class ProgramCgroup:
 
     def peak_bytes(self) -> Optional[int]:
         """The most memory the program's processes used together (bytes, page cache included); None if unknown."""
-        try:
-            return int(_read(self.memory.fd, self.PEAK))
-        except (OSError, ValueError):
-            return None
+        return _number(self.memory.fd, self.PEAK)
 
     def kill_all(self) -> None:
         """SIGKILL every process in the cgroup, until none is left (at most about a second)."""
@@ -345,16 +336,34 @@ def _sweep(parent: int) -> None:
             pass  # not empty: not ours to judge
 
 
+def _keys(fd: int, name: str) -> Optional[dict[str, int]]:
+    """A flat-keyed cgroup file (``key value`` lines) as a dict, lines whose value is not a number left out;
+    None if it cannot be read."""
+    try:
+        text = _read(fd, name)
+    except OSError:
+        return None
+    out = {}
+    for line in text.splitlines():
+        k, _, v = line.partition(" ")
+        try:
+            out[k] = int(v)
+        except ValueError:
+            pass
+    return out
+
+
 def _key(fd: int, name: str, key: str) -> int:
     """The value of ``key`` in a flat-keyed cgroup file (``key value`` lines); 0 if absent."""
+    return (_keys(fd, name) or {}).get(key, 0)
+
+
+def _number(fd: int, name: str) -> Optional[int]:
+    """A cgroup file holding one number; None if it cannot be read or holds none."""
     try:
-        for line in _read(fd, name).splitlines():
-            k, _, v = line.partition(" ")
-            if k == key:
-                return int(v)
+        return int(_read(fd, name))
     except (OSError, ValueError):
-        pass
-    return 0
+        return None
 
 
 def _read(dirfd: int, name: str) -> str:
